@@ -1,0 +1,110 @@
+#include "vocabulary/cubemap.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace prt {
+
+namespace {
+// Antiderivative of the solid angle over the face plane z = 1: ∫∫ (1+u²+v²)^(−3/2) du dv.
+double SolidAngleCorner(double u, double v) { return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0)); }
+}  // namespace
+
+double FaceRectSolidAngle(double u0, double u1, double v0, double v1) {
+  return SolidAngleCorner(u1, v1) - SolidAngleCorner(u0, v1) - SolidAngleCorner(u1, v0) +
+         SolidAngleCorner(u0, v0);
+}
+
+CubemapLayout::CubemapLayout(int n) : n_(n) {
+  if (n < 1 || n > 256 || (n & (n - 1)) != 0) {
+    throw std::invalid_argument("cubemap resolution must be a power of two in [1, 256], got " +
+                                std::to_string(n));
+  }
+  solid_angle_.resize(face_size());
+  const double h = 2.0 / n;
+  for (int y = 0; y < n; ++y) {
+    for (int x = 0; x < n; ++x) {
+      solid_angle_[static_cast<std::size_t>(y) * n + x] =
+          FaceRectSolidAngle(-1 + h * x, -1 + h * (x + 1), -1 + h * y, -1 + h * (y + 1));
+    }
+  }
+}
+
+TexelCoord CubemapLayout::Coord(std::size_t index) const {
+  const std::size_t fs = face_size();
+  TexelCoord c;
+  c.face = static_cast<int>(index / fs);
+  const std::size_t r = index % fs;
+  c.y = static_cast<int>(r / n_);
+  c.x = static_cast<int>(r % n_);
+  return c;
+}
+
+Vec3 CubemapLayout::FacePoint(int face, double u, double v) {
+  switch (face) {
+    case 0: return {1, u, v};
+    case 1: return {-1, u, v};
+    case 2: return {u, 1, v};
+    case 3: return {u, -1, v};
+    case 4: return {u, v, 1};
+    default: return {u, v, -1};
+  }
+}
+
+Vec3 CubemapLayout::FaceDirection(int face, double u, double v) {
+  return Normalize(FacePoint(face, u, v));
+}
+
+void CubemapLayout::DirectionToFace(const Vec3& d, int& face, double& u, double& v) {
+  const double ax = std::abs(d.x), ay = std::abs(d.y), az = std::abs(d.z);
+  if (ax >= ay && ax >= az) {
+    if (ax == 0) {
+      face = 0;
+      u = v = 0;
+      return;
+    }
+    face = d.x > 0 ? 0 : 1;
+    u = d.y / ax;
+    v = d.z / ax;
+  } else if (ay >= az) {
+    face = d.y > 0 ? 2 : 3;
+    u = d.x / ay;
+    v = d.z / ay;
+  } else {
+    face = d.z > 0 ? 4 : 5;
+    u = d.x / az;
+    v = d.y / az;
+  }
+}
+
+Vec3 CubemapLayout::TexelDirection(std::size_t index, double s, double t) const {
+  const TexelCoord c = Coord(index);
+  const double h = 2.0 / n_;
+  return FaceDirection(c.face, -1 + h * (c.x + s), -1 + h * (c.y + t));
+}
+
+Vec3 CubemapLayout::TexelCenter(std::size_t index) const { return TexelDirection(index, 0.5, 0.5); }
+
+std::size_t CubemapLayout::TexelOf(const Vec3& d) const {
+  int face;
+  double u, v;
+  DirectionToFace(d, face, u, v);
+  auto cell = [&](double w) {
+    int i = static_cast<int>(std::floor((w + 1) * 0.5 * n_));
+    return i < 0 ? 0 : (i >= n_ ? n_ - 1 : i);
+  };
+  return Index(face, cell(u), cell(v));
+}
+
+bool CubemapLayout::TexelAboveHorizon(std::size_t index, const Vec3& nrm) const {
+  const TexelCoord c = Coord(index);
+  const double h = 2.0 / n_;
+  for (int k = 0; k < 4; ++k) {
+    const Vec3 p = FacePoint(c.face, -1 + h * (c.x + (k & 1)), -1 + h * (c.y + (k >> 1)));
+    if (Dot(p, nrm) > 0) return true;
+  }
+  return false;
+}
+
+}  // namespace prt
