@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs what is needed, builds, and runs prtfarm end to end on the embedded default scene
+# (the CGAL bunny on a ground plane, n = 32) with 2 MPI ranks:
+#   farm (transport + compression) → pack (.prtpack) → relit PNG images under sunrise and city.
+# Idempotent: a second run rebuilds nothing and recomputes the demo from scratch.
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+"$ROOT/scripts/install-deps.sh"
+configure_and_build
+
+OUT="${PRT_DEMO_OUT:-$ROOT/demo-out}"
+export PRT_DATA_PATH="$BUILD_DIR/data${PRT_DATA_PATH:+:$PRT_DATA_PATH}"
+RANKS="${PRT_DEMO_RANKS:-2}"
+rm -rf "$OUT/run"
+mkdir -p "$OUT"
+
+echo "== farm: mpirun -np $RANKS prt-farm (embedded default scene) =="
+mpirun -np "$RANKS" "$BUILD_DIR/farm/prt-farm" --out "$OUT/run"
+
+echo "== pack =="
+"$BUILD_DIR/packager/prt-pack" pack "$OUT/run" --out "$OUT/default.prtpack"
+"$BUILD_DIR/packager/prt-pack" inspect "$OUT/default.prtpack"
+
+echo "== relight =="
+for env in sunrise city; do
+  "$BUILD_DIR/viewer/prt-view" "$OUT/default.prtpack" --env "$BUILD_DIR/data/envmaps/$env.exr" \
+    --out "$OUT/$env.png"
+done
+
+echo
+echo "Results:"
+echo "  run folder (transport, report.json): $OUT/run"
+echo "  packed asset:                        $OUT/default.prtpack"
+for env in sunrise city; do echo "  relit image ($env):                 $OUT/$env.png"; done
