@@ -1,8 +1,8 @@
 // The scene description (a TOML file, specified in docs/scene-format.md) and the world-space
 // geometry built from it. Spatial samples are numbered in this order: the scene's meshes in the
 // order the file lists them, each mesh's vertices in its file's order, then the ground plane's
-// grid vertices (row-major, see docs/scene-format.md). Image-relighting scenes number camera
-// pixels row-major from the top-left instead.
+// grid vertices (row-major, x fastest, see docs/scene-format.md). Image-relighting scenes number
+// camera pixels row-major from the top-left instead.
 #pragma once
 
 #include <array>
@@ -18,33 +18,37 @@ namespace prt {
 
 using Rgb = std::array<float, 3>;
 
-// Fit a mesh into a box standing on the ground: its bounding box is scaled uniformly so that its
-// largest extent equals `size`, rotated so that `up_axis` becomes +Y, centred on `center` in x/z,
-// and moved so that its lowest point rests on y = ground height.
+// Fit a mesh into a box standing on the ground: the mesh is rotated so that `up_axis` becomes
+// +Y, scaled uniformly so that the largest extent of its bounding box equals `size`, and moved
+// so that the centre of the box's bottom face lies at `center` (by default the ground's centre
+// at ground height, so the mesh's lowest point rests on the ground).
 struct FitBox {
   double size = 1.0;
-  Vec3 center{0, 0, 0};
-  std::string up_axis = "+y";  // one of +x −x +y −y +z −z
+  Vec3 center{0, 0, 0};        // bottom-face centre of the fitted box
+  std::string up_axis = "+y";  // one of +x -x +y -y +z -z
 };
 
 struct MeshInstance {
   std::string name;
-  std::string path;         // resolved relative to the scene file
+  std::string path;           // as written in the scene file
+  std::string resolved_path;  // where it was found at parse time ("" if not found then)
+  int line = 0;               // line of the [[mesh]] entry, for messages
   Rgb albedo{0.8f, 0.8f, 0.8f};
   std::optional<FitBox> fit;
-  // Applied after fit, in this order: scale, rotate (degrees about x, y, z), translate.
+  // Applied after fit, in this order, about the world origin: uniform scale, rotation
+  // (degrees about x, then y, then z), translation.
   double scale = 1.0;
   Vec3 rotate_deg{0, 0, 0};
   Vec3 translate{0, 0, 0};
-  bool flip_winding = false;  // for inward-wound meshes
+  bool flip_winding = false;  // reverse triangles and negate normals (inward-wound meshes)
 };
 
 struct GroundPlane {
-  bool enabled = false;
-  double height = 0.0;          // y of the plane
-  Vec3 center{0, 0, 0};         // x and z used
-  double size = 4.0;            // side length
-  int resolution = 64;          // grid vertices per side
+  bool enabled = false;   // true when the scene has a [ground] table, unless it says otherwise
+  double height = 0.0;    // y of the plane
+  Vec3 center{0, 0, 0};   // x and z used (the file gives center = [x, z])
+  double size = 4.0;      // side length
+  int resolution = 64;    // grid vertices per side
   Rgb albedo{0.8f, 0.8f, 0.8f};
 };
 
@@ -60,33 +64,35 @@ struct Camera {
 enum class SpatialSamples { kVertices, kCameraPixels };
 
 struct SamplingSettings {
-  int rays_per_texel = 4;   // stratified jittered occlusion rays per cubemap texel
+  int rays_per_texel = 4;        // stratified jittered occlusion rays per cubemap texel
   uint64_t seed = 1;
   std::string method = "brute";  // brute | sparse
 };
 
-// Huang & Ramamoorthi 2010 parameters (the paper's values as defaults; docs/scene-format.md).
+// Huang & Ramamoorthi 2010 parameters, the paper's values as defaults (docs/scene-format.md
+// gives the section each comes from).
 struct SparseSettings {
-  double initial_fraction = 0.05;
-  double dense_budget = 0.25;
-  int iterations = 4;
-  double radius = 0.1;      // relative to the scene's bounding-box diagonal
-  int max_neighbors = 40;
-  int features = 350;       // at n = 32, scaled with n²
-  double lambda = 1e-3;
+  double initial_fraction = 0.05;  // §4.1: first iteration picks "typically 5%" at random
+  double dense_budget = 0.25;      // §7, Fig. 8/9: about 25% of vertices become dense
+  int iterations = 4;              // §4.1 "several iterations" (no number given)
+  double radius = 0.035;           // §5.3: 0.2 units on a 4-unit ground, as a fraction of the
+                                   // scene's bounding-box diagonal (0.2 / 5.7)
+  int max_neighbors = 40;          // §5.1: "usually 10–40" dense neighbours
+  int features = 350;              // §7: 350 directions at n = 32; default scales with n²
+  double lambda = 1e-3;            // L1 weight relative to λ_max = ‖2Aᵀb‖∞ (not in the paper)
   uint64_t seed = 1;
 };
 
 struct CompressionSettings {
-  std::string row_wavelet = "haar";        // haar | d4
-  std::string column_wavelet = "legall53"; // legall53 | cdf97
-  std::string scheme = "adaptive4d";       // 2d | 4d | adaptive4d
+  std::string row_wavelet = "haar";         // haar | d4
+  std::string column_wavelet = "legall53";  // legall53 | cdf97
+  std::string scheme = "adaptive4d";        // 2d | 4d | adaptive4d
   int bits = 9;
-  double keep_fraction = 0.05;             // non-linear approximation budget per column
+  double keep_fraction = 0.05;  // non-linear approximation budget per column
 };
 
 struct SceneDescription {
-  std::string file;          // the scene file itself
+  std::string file;  // the scene file itself (or the name given to ParseScene)
   std::string name = "scene";
   int cubemap_n = 32;
   SpatialSamples samples = SpatialSamples::kVertices;
@@ -96,39 +102,75 @@ struct SceneDescription {
   SamplingSettings sampling;
   SparseSettings sparse;
   CompressionSettings compression;
-  std::vector<std::string> environments;  // resolved paths, for the demo and benchmarks
+  // Environment maps for the demo and benchmarks: resolved where found at parse time, else as
+  // written (they are only checked when used: call ResolveScenePath for a precise error).
+  std::vector<std::string> environments;
+  // Folders a relative path is tried in, in order (the scene's folder, $PRT_DATA_PATH, extra
+  // folders given by the caller); after them the path is tried as given.
+  std::vector<std::string> search_dirs;
 };
 
 // Parses and validates a scene file. Unknown keys, wrong types and out-of-range values throw
-// prt::InputError naming the file and the line.
-SceneDescription LoadSceneFile(const std::string& path);
+// prt::InputError naming the file and the line. Paths resolve relative to the scene file's
+// folder, then each folder of $PRT_DATA_PATH (colon-separated), then `extra_data_dirs`, then as
+// given; files need not exist yet (BuildSceneGeometry and the users of environments check).
+SceneDescription LoadSceneFile(const std::string& path,
+                               const std::vector<std::string>& extra_data_dirs = {});
 // Same, from text (for tests and embedded scenes); `name` is used in error messages and relative
-// paths resolve against `base_dir`.
+// paths resolve against `base_dir` (may be empty), $PRT_DATA_PATH, then `extra_data_dirs`.
 SceneDescription ParseScene(const std::string& text, const std::string& name,
-                            const std::string& base_dir);
+                            const std::string& base_dir,
+                            const std::vector<std::string>& extra_data_dirs = {});
+
+// The default scene (the CGAL bunny fitted on a 64×64 ground grid under sunrise.exr and
+// city.exr, n = 32), byte-identical to scenes/default.toml, so binaries run without a file.
+const std::string& DefaultSceneText();
+// ParseScene(DefaultSceneText(), "<default scene>", "", {data_dir}): `data_dir` is the folder
+// holding meshes/ and envmaps/ (a compiled-in default, e.g. the build tree's data/).
+SceneDescription LoadDefaultScene(const std::string& data_dir);
+
+// Folders searched for a relative path: base_dir (if not empty), $PRT_DATA_PATH, extra_dirs.
+std::vector<std::string> DataSearchDirs(const std::string& base_dir,
+                                        const std::vector<std::string>& extra_dirs);
+// The first existing file among dir/path for each dir, then path as given (absolute paths only
+// as given); "" if none exists. `tried` (optional) receives every candidate looked at.
+std::string FindDataFile(const std::string& path, const std::vector<std::string>& dirs,
+                         std::vector<std::string>* tried = nullptr);
+// FindDataFile over scene.search_dirs; throws InputError naming the scene file (and `line` when
+// > 0) and listing every place it looked.
+std::string ResolveScenePath(const SceneDescription& scene, const std::string& path,
+                             int line = 0);
 
 // One world-space mesh of the scene with its material.
 struct SceneMesh {
   std::string name;
-  TriangleMesh mesh;   // world space; normals unit
+  TriangleMesh mesh;  // world space; normals unit
   Rgb albedo{0.8f, 0.8f, 0.8f};
   bool is_ground = false;
   int grid_resolution = 0;  // ground only: grid vertices per side
 };
 
 struct SceneGeometry {
-  std::vector<SceneMesh> meshes;   // scene meshes in file order, ground plane last
+  std::vector<SceneMesh> meshes;  // scene meshes in file order, ground plane last
   Vec3 bounds_min{0, 0, 0};
   Vec3 bounds_max{0, 0, 0};
   std::size_t vertex_count() const;
   double diagonal() const { return Length(bounds_max - bounds_min); }
 };
 
-// Loads every mesh, applies fit and transforms, builds the ground grid.
+// Loads every mesh, applies flip_winding, fit, then scale/rotate/translate (normals rotated
+// with the mesh), appends the ground grid last and computes the bounds. Throws InputError
+// naming the scene file, the [[mesh]] line and the mesh on failure.
 SceneGeometry BuildSceneGeometry(const SceneDescription& scene);
 
-// A regular ground grid of res×res vertices, row-major with x fastest, spanning
-// [cx − s/2, cx + s/2] × [cz − s/2, cz + s/2] at y = height, normals +Y, two triangles per cell.
+// The world transform of one instance given its mesh-space bounding box:
+// p_world = translate + R·(scale·(fit_scale·U·p + fit_offset)), n_world = normalize(R·U·n),
+// with U the rotation taking fit.up_axis to +Y (identity without fit).
+void TransformInstance(const MeshInstance& instance, TriangleMesh& mesh);
+
+// A regular ground grid of res×res vertices, row-major with x fastest (vertex iz·res + ix at
+// x = cx − s/2 + s·ix/(res−1), z = cz − s/2 + s·iz/(res−1)), at y = height, normals +Y, two
+// triangles per cell wound counter-clockwise seen from above (+Y).
 TriangleMesh MakeGroundGrid(const GroundPlane& ground);
 
 }  // namespace prt
