@@ -1,0 +1,99 @@
+// Byte layout of a .prtpack file (docs/prtpack-format.md): constants, field offsets and the
+// little-endian load/store helpers shared by the writer, the reader and the fuzz harness.
+// Internal to packager/: applications use prtpack_reader.h or prtpack.h.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+namespace prt::pack {
+
+inline constexpr std::array<uint8_t, 8> kMagic = {0x89, 'P', 'R', 'T', 'P', 'A', 'C', 'K'};
+inline constexpr uint16_t kVersionMajor = 1;
+inline constexpr uint16_t kVersionMinor = 0;
+inline constexpr uint32_t kHeaderSize = 64;
+inline constexpr uint32_t kEntrySize = 64;
+inline constexpr uint32_t kDefaultAlignment = 64;
+inline constexpr uint32_t kMaxSectionCount = 65536;
+inline constexpr uint32_t kMaxMeshNameLength = 4096;
+inline constexpr uint32_t kMaxTransportParams = 1u << 20;
+inline constexpr uint32_t kTransportHeaderSize = 40;
+inline constexpr uint32_t kBlockEntrySize = 48;
+inline constexpr uint32_t kMaterialHeaderSize = 24;
+
+// Header field offsets.
+inline constexpr std::size_t kHdrMajor = 8, kHdrMinor = 10, kHdrHeaderSize = 12,
+                             kHdrSectionCount = 16, kHdrEntrySize = 20, kHdrTableOffset = 24,
+                             kHdrFileSize = 32, kHdrAlignment = 40, kHdrFlags = 44,
+                             kHdrReserved = 48, kHdrChecksum = 56;
+// Section entry field offsets.
+inline constexpr std::size_t kSecType = 0, kSecFlags = 4, kSecCodec = 8, kSecId = 12,
+                             kSecOffset = 16, kSecStored = 24, kSecRaw = 32, kSecChecksum = 40;
+
+inline constexpr uint32_t kFlagCritical = 1u;
+inline constexpr uint32_t kMaterialFlagGround = 1u;
+
+enum class Codec : uint32_t { kNone = 0, kZstd = 1, kDraco = 2 };
+
+inline constexpr uint32_t FourCC(const char (&s)[5]) {
+  return uint32_t(uint8_t(s[0])) | uint32_t(uint8_t(s[1])) << 8 | uint32_t(uint8_t(s[2])) << 16 |
+         uint32_t(uint8_t(s[3])) << 24;
+}
+inline constexpr uint32_t kTypeMeta = FourCC("META");
+inline constexpr uint32_t kTypeMesh = FourCC("MESH");
+inline constexpr uint32_t kTypeMaterial = FourCC("MATL");
+inline constexpr uint32_t kTypeTransport = FourCC("TRNS");
+
+inline std::string FourCCString(uint32_t v) {
+  std::string s(4, ' ');
+  for (int i = 0; i < 4; ++i) {
+    const auto c = static_cast<char>((v >> (8 * i)) & 0xFF);
+    s[static_cast<std::size_t>(i)] = (c >= 32 && c < 127) ? c : '?';
+  }
+  return s;
+}
+
+// Little-endian loads and stores from unaligned byte pointers (the callers check the range).
+inline uint16_t LoadU16(const uint8_t* p) { return static_cast<uint16_t>(p[0] | p[1] << 8); }
+inline uint32_t LoadU32(const uint8_t* p) {
+  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
+inline uint64_t LoadU64(const uint8_t* p) {
+  return uint64_t(LoadU32(p)) | uint64_t(LoadU32(p + 4)) << 32;
+}
+inline float LoadF32(const uint8_t* p) {
+  const uint32_t u = LoadU32(p);
+  float f;
+  std::memcpy(&f, &u, 4);
+  return f;
+}
+inline void StoreU16(uint8_t* p, uint16_t v) {
+  p[0] = static_cast<uint8_t>(v);
+  p[1] = static_cast<uint8_t>(v >> 8);
+}
+inline void StoreU32(uint8_t* p, uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+inline void StoreU64(uint8_t* p, uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+inline void StoreF32(uint8_t* p, float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  StoreU32(p, u);
+}
+
+inline constexpr uint64_t AlignUp(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
+
+// XXH64 (seed 0) of bytes; of the header's first 56 bytes followed by the section table.
+uint64_t Checksum(const uint8_t* data, std::size_t size);
+uint64_t HeaderChecksum(const uint8_t* header, const uint8_t* table, std::size_t table_size);
+// XXH64 of a TRNS section's bytes 0..31, its parameters and its block index (the caller has
+// checked that index_offset + block_count * 48 lies inside the section).
+uint64_t TransportIndexChecksum(const uint8_t* section, std::size_t params_size,
+                                std::size_t index_offset, std::size_t block_count);
+
+}  // namespace prt::pack

@@ -1,0 +1,144 @@
+// Reader for .prtpack assets (docs/prtpack-format.md): the scene's meshes, materials, metadata
+// and compressed transport blocks. No MPI, no Embree, no Draco or zstd in this header.
+//
+// Safe on untrusted input: every offset, size, count and index is validated before use, every
+// decoded size is bounded (ReaderOptions::max_section_bytes) before anything is allocated, and
+// every failure -- truncation, corruption, an unsupported version, a malicious size -- throws
+// prt::InputError naming the file (or "<memory>") and the problem. Nothing aborts or hangs.
+//
+// Thread safety: a PackReader is immutable after Open; its const methods may run concurrently.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "vocabulary/mesh.h"
+
+namespace prt::pack {
+
+struct ReaderOptions {
+  // Largest decoded (raw) size accepted for any one section or transport block.
+  uint64_t max_section_bytes = uint64_t(2) << 30;
+};
+
+// One entry of the section table, as stored.
+struct SectionInfo {
+  std::string type;  // FourCC, e.g. "MESH" (non-printable bytes shown as '?')
+  uint32_t type_code = 0;
+  uint32_t flags = 0;
+  uint32_t codec = 0;  // 0 none, 1 zstd, 2 draco
+  uint32_t id = 0;     // mesh index for MESH and MATL
+  uint64_t offset = 0;
+  uint64_t stored_size = 0;
+  uint64_t raw_size = 0;
+  uint64_t checksum = 0;
+  bool known = false;  // a section type this reader understands
+};
+
+// A mesh as unpacked: point i is vertex i of the mesh that was packed (positions within the
+// documented quantisation), triangle i is triangle i with the same corners.
+struct UnpackedMesh {
+  std::string name;
+  std::vector<float> positions;     // 3 per vertex
+  std::vector<float> normals;       // 3 per vertex, unit within the normal quantisation
+  std::vector<uint32_t> triangles;  // 3 per triangle
+  std::array<float, 3> albedo{0.8f, 0.8f, 0.8f};
+  bool is_ground = false;
+  uint32_t grid_resolution = 0;
+  std::size_t vertex_count() const { return positions.size() / 3; }
+  std::size_t triangle_count() const { return triangles.size() / 3; }
+  // The same mesh as the vocabulary type (double positions, `source` = the pack's name).
+  TriangleMesh ToTriangleMesh() const;
+};
+
+// A mesh's material (the MATL section), readable without decoding the mesh.
+struct MeshMaterial {
+  std::string name;
+  std::array<float, 3> albedo{0.8f, 0.8f, 0.8f};
+  bool is_ground = false;
+  uint32_t grid_resolution = 0;
+};
+
+// One block of compressed transport columns as indexed in the TRNS section.
+struct TransportBlockInfo {
+  uint64_t first_column = 0;
+  uint32_t column_count = 0;
+  uint32_t codec = 0;  // 0 none, 1 zstd
+  uint64_t offset = 0;  // absolute, in the file
+  uint64_t stored_size = 0;
+  uint64_t raw_size = 0;
+  uint64_t checksum = 0;
+};
+
+// The TRNS section's global parameters and block index.
+struct TransportIndex {
+  uint32_t encoding = 0;  // the transport encoder's own format version
+  uint64_t row_count = 0;
+  uint64_t column_count = 0;
+  std::vector<uint8_t> params;  // opaque global parameters
+  std::vector<TransportBlockInfo> blocks;
+};
+
+class PackReader {
+ public:
+  // Opens a file by memory-mapping it (falls back to reading it). Validates the header, the
+  // header checksum and the section table's structure; section payloads are checked when read.
+  // Throws InputError(path, ...) on: unreadable file, bad magic, unsupported major version
+  // ("unsupported .prtpack major version N"), truncation, trailing bytes, a table entry out of
+  // range, misaligned or overlapping, an unknown critical section, wrong section multiplicity.
+  static PackReader OpenFile(const std::string& path, const ReaderOptions& options = {});
+  // Same, over a copy of `size` bytes at `data` (`name` is used in messages).
+  static PackReader OpenMemory(const void* data, std::size_t size,
+                               const std::string& name = "<memory>",
+                               const ReaderOptions& options = {});
+
+  PackReader(PackReader&&) noexcept;
+  PackReader& operator=(PackReader&&) noexcept;
+  ~PackReader();
+
+  const std::string& name() const;
+  uint16_t version_major() const;
+  uint16_t version_minor() const;
+  uint64_t file_size() const;
+  // Every section in table order, including unknown (skipped) ones.
+  const std::vector<SectionInfo>& sections() const;
+  std::size_t mesh_count() const;
+  bool has_transport() const;
+
+  // The META section's JSON text. Verifies the section checksum and the decompressed size;
+  // throws InputError if either fails or the text is not a JSON object.
+  std::string ReadMetadata() const;
+  // Mesh `i` (0 ≤ i < mesh_count()) decoded from its MESH section with its MATL material.
+  // Throws InputError on an index out of range, a checksum mismatch, counts that disagree with
+  // raw_size or exceed max_section_bytes, a Draco error, non-finite values or bad indices.
+  UnpackedMesh ReadMesh(std::size_t i) const;
+  // Mesh `i`'s material only (cheap). Same errors as ReadMesh for the MATL section.
+  MeshMaterial ReadMaterial(std::size_t i) const;
+  // The TRNS header, parameters and block index (validated: blocks contiguous in columns,
+  // inside the section, aligned, non-overlapping). Throws InputError if there is no TRNS
+  // section, its checksum fails or the index is inconsistent.
+  TransportIndex ReadTransportIndex() const;
+  // Block `b`'s bytes, decompressed and bit-identical to what the writer was given. Verifies
+  // only this block's own checksum (for streaming); throws InputError on an index out of range,
+  // checksum mismatch, a zstd frame whose content size is missing or differs from raw_size, a
+  // raw_size above max_section_bytes, or a decompression error.
+  std::vector<uint8_t> ReadTransportBlock(const TransportIndex& index, std::size_t b) const;
+  // Same, into caller memory of exactly block.raw_size bytes (`dst_size` must equal it).
+  void ReadTransportBlockInto(const TransportIndex& index, std::size_t b, void* dst,
+                              std::size_t dst_size) const;
+
+  // Checks every rule of docs/prtpack-format.md ("Verification"): every section checksum and
+  // every section decoding. Throws InputError with the first failure's reason.
+  void VerifyAll() const;
+
+ private:
+  struct Impl;
+  explicit PackReader(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace prt::pack

@@ -1,0 +1,238 @@
+// .prtpack writer (docs/prtpack-format.md): lays out the header, the section table and the
+// 64-byte-aligned sections (META, MESH/MATL per mesh, TRNS), then fills in the checksums.
+#include "packager/prtpack_writer.h"
+
+#include <zstd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "packager/draco_mesh_codec.h"
+#include "packager/prtpack_format.h"
+#include "vocabulary/errors.h"
+
+namespace prt::pack {
+namespace {
+
+struct PendingSection {
+  uint32_t type = 0;
+  uint32_t flags = 0;
+  Codec codec = Codec::kNone;
+  uint32_t id = 0;
+  uint64_t raw_size = 0;
+  std::vector<uint8_t> bytes;
+};
+
+std::vector<uint8_t> ZstdCompress(const uint8_t* data, std::size_t size, int level,
+                                  const std::string& what) {
+  std::vector<uint8_t> out(ZSTD_compressBound(size));
+  const std::size_t n = ZSTD_compress(out.data(), out.size(), data, size, level);
+  if (ZSTD_isError(n)) throw InputError(what, std::string("zstd: ") + ZSTD_getErrorName(n));
+  out.resize(n);
+  return out;
+}
+
+nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
+  Vec3 lo{std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
+          std::numeric_limits<double>::max()};
+  Vec3 hi = -lo;
+  for (const Vec3& p : m.mesh.positions) {
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  return {{"name", m.name},
+          {"vertices", m.mesh.positions.size()},
+          {"triangles", m.mesh.triangles.size()},
+          {"position_bits", o.position_bits},
+          {"normal_bits", o.normal_bits},
+          {"bbox_min", {lo.x, lo.y, lo.z}},
+          {"bbox_max", {hi.x, hi.y, hi.z}},
+          {"albedo", {m.albedo[0], m.albedo[1], m.albedo[2]}},
+          {"is_ground", m.is_ground}};
+}
+
+PendingSection MetaSection(const PackInput& input, const WriterOptions& o) {
+  nlohmann::json meta = nlohmann::json::object();
+  if (!input.metadata_json.empty()) {
+    meta = nlohmann::json::parse(input.metadata_json, nullptr, /*allow_exceptions=*/false);
+    if (meta.is_discarded() || !meta.is_object()) {
+      throw InputError("metadata", "metadata is not a JSON object");
+    }
+  }
+  meta["format"] = "prtpack";
+  meta["format_version"] = std::to_string(kVersionMajor) + "." + std::to_string(kVersionMinor);
+  meta["writer"] = "prt-pack";
+  nlohmann::json meshes = nlohmann::json::array();
+  for (const PackMeshInput& m : input.meshes) meshes.push_back(MeshSummary(m, o));
+  meta["meshes"] = std::move(meshes);
+  const std::string text = meta.dump();
+  PendingSection s;
+  s.type = kTypeMeta;
+  s.codec = Codec::kZstd;
+  s.raw_size = text.size();
+  s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(text.data()), text.size(), o.zstd_level,
+                         "metadata");
+  return s;
+}
+
+PendingSection MaterialSection(const PackMeshInput& m, uint32_t id) {
+  for (float a : m.albedo) {
+    if (!(a >= 0.0f && a <= 1.0f)) throw InputError(m.name, "albedo outside [0, 1]");
+  }
+  if (m.name.size() > kMaxMeshNameLength) throw InputError(m.name, "mesh name too long");
+  PendingSection s;
+  s.type = kTypeMaterial;
+  s.id = id;
+  s.bytes.assign(kMaterialHeaderSize + m.name.size(), 0);
+  for (int c = 0; c < 3; ++c) StoreF32(&s.bytes[std::size_t(4 * c)], m.albedo[std::size_t(c)]);
+  StoreU32(&s.bytes[12], m.is_ground ? kMaterialFlagGround : 0u);
+  StoreU32(&s.bytes[16], m.grid_resolution);
+  StoreU32(&s.bytes[20], static_cast<uint32_t>(m.name.size()));
+  std::copy(m.name.begin(), m.name.end(), s.bytes.begin() + kMaterialHeaderSize);
+  s.raw_size = s.bytes.size();
+  return s;
+}
+
+// TRNS: header, parameters, block index, then each block zstd-compressed on its own (or stored
+// as is when zstd does not shrink it), every block 64-byte aligned inside the section.
+PendingSection TransportSection(const TransportInput& t, const WriterOptions& o) {
+  if (t.params.size() > kMaxTransportParams) {
+    throw InputError("transport", "global parameters exceed 1 MiB");
+  }
+  if (t.blocks.size() > std::numeric_limits<uint32_t>::max()) {
+    throw InputError("transport", "too many blocks");
+  }
+  const uint64_t index_offset = AlignUp(kTransportHeaderSize + t.params.size(), 8);
+  const uint64_t index_end = index_offset + t.blocks.size() * kBlockEntrySize;
+  std::vector<std::vector<uint8_t>> stored(t.blocks.size());
+  std::vector<Codec> codecs(t.blocks.size(), Codec::kNone);
+  uint64_t end = AlignUp(index_end, 64);
+  std::vector<uint64_t> offsets(t.blocks.size());
+  uint64_t columns = 0;
+  for (std::size_t b = 0; b < t.blocks.size(); ++b) {
+    const TransportBlockInput& in = t.blocks[b];
+    if (in.column_count == 0) {
+      throw InputError("transport", "block " + std::to_string(b) + " has no columns");
+    }
+    if (!in.bytes.empty()) {
+      std::vector<uint8_t> z =
+          ZstdCompress(in.bytes.data(), in.bytes.size(), o.zstd_level, "transport");
+      if (z.size() < in.bytes.size()) {
+        stored[b] = std::move(z);
+        codecs[b] = Codec::kZstd;
+      }
+    }
+    if (codecs[b] == Codec::kNone) stored[b] = in.bytes;
+    offsets[b] = end;
+    end = AlignUp(end + stored[b].size(), 64);
+    columns += in.column_count;
+  }
+  PendingSection s;
+  s.type = kTypeTransport;
+  s.bytes.assign(end, 0);
+  uint8_t* p = s.bytes.data();
+  StoreU32(p + 0, t.encoding);
+  StoreU32(p + 4, static_cast<uint32_t>(t.blocks.size()));
+  StoreU64(p + 8, t.row_count);
+  StoreU64(p + 16, columns);
+  StoreU32(p + 24, static_cast<uint32_t>(t.params.size()));
+  std::copy(t.params.begin(), t.params.end(), p + kTransportHeaderSize);
+  uint64_t first = 0;
+  for (std::size_t b = 0; b < t.blocks.size(); ++b) {
+    uint8_t* e = p + index_offset + b * kBlockEntrySize;
+    StoreU64(e + 0, first);
+    StoreU32(e + 8, t.blocks[b].column_count);
+    StoreU32(e + 12, static_cast<uint32_t>(codecs[b]));
+    StoreU64(e + 16, offsets[b]);
+    StoreU64(e + 24, stored[b].size());
+    StoreU64(e + 32, t.blocks[b].bytes.size());
+    StoreU64(e + 40, Checksum(stored[b].data(), stored[b].size()));
+    std::copy(stored[b].begin(), stored[b].end(), p + offsets[b]);
+    first += t.blocks[b].column_count;
+  }
+  StoreU64(p + 32, TransportIndexChecksum(p, t.params.size(), index_offset, t.blocks.size()));
+  s.raw_size = s.bytes.size();
+  return s;
+}
+
+}  // namespace
+
+std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options) {
+  const uint32_t a = options.alignment;
+  if (a < 64 || a > 65536 || (a & (a - 1)) != 0) {
+    throw InputError("options", "alignment must be a power of two in 64..65536");
+  }
+  if (input.meshes.empty()) throw InputError("input", "a pack needs at least one mesh");
+  std::vector<PendingSection> sections;
+  sections.push_back(MetaSection(input, options));
+  for (std::size_t i = 0; i < input.meshes.size(); ++i) {
+    const PackMeshInput& m = input.meshes[i];
+    PendingSection mesh;
+    mesh.type = kTypeMesh;
+    mesh.codec = Codec::kDraco;
+    mesh.id = static_cast<uint32_t>(i);
+    mesh.bytes = EncodeMeshDraco(m.mesh, options.position_bits, options.normal_bits,
+                                 m.name.empty() ? "mesh " + std::to_string(i) : m.name);
+    mesh.raw_size = MeshRawSize(m.mesh.positions.size(), m.mesh.triangles.size());
+    sections.push_back(std::move(mesh));
+    sections.push_back(MaterialSection(m, static_cast<uint32_t>(i)));
+  }
+  if (input.transport) sections.push_back(TransportSection(*input.transport, options));
+
+  const uint64_t table_end = kHeaderSize + uint64_t(sections.size()) * kEntrySize;
+  std::vector<uint64_t> offsets(sections.size());
+  uint64_t end = AlignUp(table_end, a);
+  for (std::size_t i = 0; i < sections.size(); ++i) {
+    offsets[i] = end;
+    end = AlignUp(end + sections[i].bytes.size(), a);
+  }
+  // The file ends right after the last section (no trailing padding).
+  const uint64_t file_size = offsets.back() + sections.back().bytes.size();
+  std::vector<uint8_t> file(file_size, 0);
+  uint8_t* h = file.data();
+  std::copy(kMagic.begin(), kMagic.end(), h);
+  StoreU16(h + kHdrMajor, kVersionMajor);
+  StoreU16(h + kHdrMinor, kVersionMinor);
+  StoreU32(h + kHdrHeaderSize, kHeaderSize);
+  StoreU32(h + kHdrSectionCount, static_cast<uint32_t>(sections.size()));
+  StoreU32(h + kHdrEntrySize, kEntrySize);
+  StoreU64(h + kHdrTableOffset, kHeaderSize);
+  StoreU64(h + kHdrFileSize, file_size);
+  StoreU32(h + kHdrAlignment, a);
+  for (std::size_t i = 0; i < sections.size(); ++i) {
+    const PendingSection& s = sections[i];
+    uint8_t* e = h + kHeaderSize + i * kEntrySize;
+    StoreU32(e + kSecType, s.type);
+    StoreU32(e + kSecFlags, s.flags);
+    StoreU32(e + kSecCodec, static_cast<uint32_t>(s.codec));
+    StoreU32(e + kSecId, s.id);
+    StoreU64(e + kSecOffset, offsets[i]);
+    StoreU64(e + kSecStored, s.bytes.size());
+    StoreU64(e + kSecRaw, s.raw_size);
+    StoreU64(e + kSecChecksum, Checksum(s.bytes.data(), s.bytes.size()));
+    std::copy(s.bytes.begin(), s.bytes.end(), h + offsets[i]);
+  }
+  StoreU64(h + kHdrChecksum,
+           HeaderChecksum(h, h + kHeaderSize, std::size_t(sections.size()) * kEntrySize));
+  return file;
+}
+
+void WritePackFile(const std::string& path, const PackInput& input, const WriterOptions& options) {
+  const std::vector<uint8_t> bytes = WritePack(input, options);
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw InputError(path, "cannot open for writing");
+    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    if (!out) throw InputError(path, "write failed");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throw InputError(path, "cannot rename temporary file: " + ec.message());
+}
+
+}  // namespace prt::pack

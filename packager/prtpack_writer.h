@@ -1,0 +1,62 @@
+// Writer for .prtpack assets (docs/prtpack-format.md) from in-memory inputs: meshes, materials,
+// the farm's metadata JSON and the compressed transport's column blocks.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "vocabulary/mesh.h"
+
+namespace prt::pack {
+
+struct PackMeshInput {
+  std::string name;
+  TriangleMesh mesh;  // positions and unit normals, one per vertex; vertex order is kept
+  std::array<float, 3> albedo{0.8f, 0.8f, 0.8f};
+  bool is_ground = false;
+  uint32_t grid_resolution = 0;
+};
+
+// One block of compressed transport columns: opaque bytes from the transport encoder, which
+// must decode on their own. The packager zstd-compresses each block separately.
+struct TransportBlockInput {
+  uint32_t column_count = 0;
+  std::vector<uint8_t> bytes;
+};
+
+struct TransportInput {
+  uint32_t encoding = 0;     // the encoder's format version, stored as is
+  uint64_t row_count = 0;    // spatial samples
+  std::vector<uint8_t> params;  // opaque global parameters (≤ 1 MiB)
+  std::vector<TransportBlockInput> blocks;
+};
+
+struct PackInput {
+  // A JSON object (scene, parameters, report ...); the writer adds "format", "writer" and a
+  // per-mesh summary "meshes". Empty means {}.
+  std::string metadata_json;
+  std::vector<PackMeshInput> meshes;
+  std::optional<TransportInput> transport;
+};
+
+struct WriterOptions {
+  int position_bits = 16;  // Draco quantisation over each mesh's bounding box
+  int normal_bits = 14;    // Draco octahedral quantisation
+  int zstd_level = 19;
+  uint32_t alignment = 64;  // section alignment: power of two, 64..65536 (4096 for page mmap)
+};
+
+// Builds the whole file in memory. Throws prt::InputError (naming the mesh or "metadata") on
+// invalid inputs: metadata that is not a JSON object, no meshes, a mesh the codec rejects
+// (see draco_mesh_codec.h), a transport block with no columns, parameters over 1 MiB,
+// albedo outside [0, 1], bad options.
+std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options = {});
+// WritePack, then writes the bytes to `path` (via a temporary file renamed into place).
+// Throws InputError(path, ...) if the file cannot be written.
+void WritePackFile(const std::string& path, const PackInput& input,
+                   const WriterOptions& options = {});
+
+}  // namespace prt::pack
