@@ -1,0 +1,683 @@
+// Wavelet transforms: orthonormal Haar and Daubechies-4 (periodic) on power-of-two faces, LeGall
+// 5/3 and CDF 9/7 by lifting with whole-sample symmetric extension on any length; 1D and 2D
+// non-standard decompositions with partial depth and single steps. Conventions: wavelets.h and
+// docs/wavelets.md.
+#include "vocabulary/wavelets.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+#include "vocabulary/cubemap.h"
+
+namespace prt {
+namespace {
+
+constexpr double kSqrt2 = std::numbers::sqrt2;
+constexpr double kInvSqrt2 = 1.0 / std::numbers::sqrt2;
+
+// Daubechies-4 scaling filter h (Daubechies 1988), wavelet filter g_k = (−1)^k h_{3−k}.
+constexpr double kSqrt3 = std::numbers::sqrt3;
+constexpr double kD4H0 = (1 + kSqrt3) / (4 * std::numbers::sqrt2);
+constexpr double kD4H1 = (3 + kSqrt3) / (4 * std::numbers::sqrt2);
+constexpr double kD4H2 = (3 - kSqrt3) / (4 * std::numbers::sqrt2);
+constexpr double kD4H3 = (1 - kSqrt3) / (4 * std::numbers::sqrt2);
+constexpr double kD4G0 = kD4H3;
+constexpr double kD4G1 = -kD4H2;
+constexpr double kD4G2 = kD4H1;
+constexpr double kD4G3 = -kD4H0;
+
+// Lifting factorisations (Daubechies & Sweldens 1998; JPEG 2000 Part 1 Annex F). Steps
+// alternate: step 0 updates the odd (high) samples from their even neighbours, step 1 the even
+// (low) samples from their odd neighbours, and so on. After lifting the low band has DC gain
+// `k` and the high band Nyquist gain 2/k; the final scales make both √2.
+struct LiftingScheme {
+  int steps;
+  double coef[4];
+  double low_scale;
+  double high_scale;
+};
+constexpr double kCdf97K = 1.230174104914001;
+constexpr LiftingScheme kLeGall53Scheme{2, {-0.5, 0.25, 0, 0}, kSqrt2, kInvSqrt2};
+constexpr LiftingScheme kCdf97Scheme{
+    4,
+    {-1.586134342059924, -0.052980118572961, 0.882911075530934, 0.443506852043971},
+    kSqrt2 / kCdf97K,
+    kCdf97K / kSqrt2};
+
+const LiftingScheme& SchemeOf(WaveletFilter f) {
+  return f == WaveletFilter::kLeGall53 ? kLeGall53Scheme : kCdf97Scheme;
+}
+
+bool IsPowerOfTwo(int n) {
+  return n >= 1 && (n & (n - 1)) == 0;
+}
+
+int Log2(int n) {
+  int d = 0;
+  while ((1 << d) < n) ++d;
+  return d;
+}
+
+[[noreturn]] void Fail(const char* where, const std::string& what) {
+  throw std::invalid_argument(std::string(where) + ": " + what);
+}
+
+// ---- 1D kernels ------------------------------------------------------------------------------
+// A "line" of `len` elements; element i starts at p + i·stride and holds `width` doubles. With
+// kScalar the elements are single contiguous doubles (stride 1, width 1), which is the
+// horizontal pass; otherwise elements are rows of a region, which makes the vertical pass a
+// sequence of contiguous row operations.
+
+template <bool kScalar>
+struct Line {
+  double* p;
+  std::ptrdiff_t stride;
+  int width;
+  double* operator[](int i) const { return p + static_cast<std::ptrdiff_t>(i) * Stride(); }
+  std::ptrdiff_t Stride() const { return kScalar ? 1 : stride; }
+  int Width() const { return kScalar ? 1 : width; }
+};
+
+template <bool kScalar>
+inline void CopyElem(const Line<kScalar>& from, int i, const Line<kScalar>& to, int j) {
+  const double* a = from[i];
+  double* b = to[j];
+  for (int x = 0; x < from.Width(); ++x) b[x] = a[x];
+}
+
+template <bool kScalar>
+inline void ScaleElems(const Line<kScalar>& l, int begin, int end, double c) {
+  for (int i = begin; i < end; ++i) {
+    double* a = l[i];
+    for (int x = 0; x < l.Width(); ++x) a[x] *= c;
+  }
+}
+
+// d[n] += c·(s[n] + s[n+1]) with s[ns] ≡ s[ns−1] (symmetric extension at an even length's end).
+template <bool kScalar>
+void LiftOdd(const Line<kScalar>& s, const Line<kScalar>& d, int ns, int nd, double c) {
+  const int full = ns > nd ? nd : nd - 1;
+  const int w = s.Width();
+  for (int n = 0; n < full; ++n) {
+    double* dn = d[n];
+    const double* s0 = s[n];
+    const double* s1 = s[n + 1];
+    for (int x = 0; x < w; ++x) dn[x] += c * (s0[x] + s1[x]);
+  }
+  if (full < nd) {
+    double* dn = d[nd - 1];
+    const double* s0 = s[nd - 1];
+    for (int x = 0; x < w; ++x) dn[x] += 2 * c * s0[x];
+  }
+}
+
+// s[n] += c·(d[n−1] + d[n]) with d[−1] ≡ d[0] and d[nd] ≡ d[nd−1] (symmetric extension).
+template <bool kScalar>
+void LiftEven(const Line<kScalar>& s, const Line<kScalar>& d, int ns, int nd, double c) {
+  if (nd == 0) return;
+  const int w = s.Width();
+  {
+    double* s0 = s[0];
+    const double* d0 = d[0];
+    for (int x = 0; x < w; ++x) s0[x] += 2 * c * d0[x];
+  }
+  for (int n = 1; n < nd; ++n) {
+    double* sn = s[n];
+    const double* d0 = d[n - 1];
+    const double* d1 = d[n];
+    for (int x = 0; x < w; ++x) sn[x] += c * (d0[x] + d1[x]);
+  }
+  if (ns > nd) {
+    double* sn = s[nd];
+    const double* d0 = d[nd - 1];
+    for (int x = 0; x < w; ++x) sn[x] += 2 * c * d0[x];
+  }
+}
+
+// One analysis step of the lifting filters (Cheslack-Postava et al. §4.1: JPEG 2000's 5/3 and
+// 9/7). `in` (len elements, read only) → `out`: low at [0, ⌈len/2⌉), high after it.
+template <bool kScalar>
+void AnalyzeLifting(const LiftingScheme& ls, const Line<kScalar>& in, const Line<kScalar>& out,
+                    int len) {
+  const int ns = (len + 1) / 2;
+  const int nd = len / 2;
+  for (int j = 0; j < ns; ++j) CopyElem(in, 2 * j, out, j);
+  for (int j = 0; j < nd; ++j) CopyElem(in, 2 * j + 1, out, ns + j);
+  if (nd == 0) return;  // length 1: identity
+  const Line<kScalar> s = out;
+  const Line<kScalar> d{out[ns], out.stride, out.width};
+  for (int k = 0; k < ls.steps; ++k) {
+    if (k % 2 == 0) {
+      LiftOdd(s, d, ns, nd, ls.coef[k]);
+    } else {
+      LiftEven(s, d, ns, nd, ls.coef[k]);
+    }
+  }
+  ScaleElems(out, 0, ns, ls.low_scale);
+  ScaleElems(out, ns, len, ls.high_scale);
+}
+
+// Inverse of AnalyzeLifting: `in` (overwritten) → interleaved samples in `out`.
+template <bool kScalar>
+void SynthesizeLifting(const LiftingScheme& ls, const Line<kScalar>& in, const Line<kScalar>& out,
+                       int len) {
+  const int ns = (len + 1) / 2;
+  const int nd = len / 2;
+  if (nd > 0) {
+    ScaleElems(in, 0, ns, 1.0 / ls.low_scale);
+    ScaleElems(in, ns, len, 1.0 / ls.high_scale);
+    const Line<kScalar> s = in;
+    const Line<kScalar> d{in[ns], in.stride, in.width};
+    for (int k = ls.steps - 1; k >= 0; --k) {
+      if (k % 2 == 0) {
+        LiftOdd(s, d, ns, nd, -ls.coef[k]);
+      } else {
+        LiftEven(s, d, ns, nd, -ls.coef[k]);
+      }
+    }
+  }
+  for (int j = 0; j < ns; ++j) CopyElem(in, j, out, 2 * j);
+  for (int j = 0; j < nd; ++j) CopyElem(in, ns + j, out, 2 * j + 1);
+}
+
+// Orthonormal Haar step (Ng et al. 2003): a = (x0 + x1)/√2, d = (x0 − x1)/√2. len even.
+template <bool kScalar>
+void AnalyzeHaar(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+  const int half = len / 2;
+  const int w = in.Width();
+  for (int j = 0; j < half; ++j) {
+    const double* x0 = in[2 * j];
+    const double* x1 = in[2 * j + 1];
+    double* a = out[j];
+    double* d = out[half + j];
+    for (int x = 0; x < w; ++x) {
+      a[x] = kInvSqrt2 * (x0[x] + x1[x]);
+      d[x] = kInvSqrt2 * (x0[x] - x1[x]);
+    }
+  }
+}
+
+template <bool kScalar>
+void SynthesizeHaar(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+  const int half = len / 2;
+  const int w = in.Width();
+  for (int j = 0; j < half; ++j) {
+    const double* a = in[j];
+    const double* d = in[half + j];
+    double* x0 = out[2 * j];
+    double* x1 = out[2 * j + 1];
+    for (int x = 0; x < w; ++x) {
+      x0[x] = kInvSqrt2 * (a[x] + d[x]);
+      x1[x] = kInvSqrt2 * (a[x] - d[x]);
+    }
+  }
+}
+
+// Orthonormal Daubechies-4 step with periodic extension (Daubechies 1988):
+// a[j] = Σ_k h_k x[(2j+k) mod len], d[j] = Σ_k g_k x[(2j+k) mod len]. len even.
+template <bool kScalar>
+void AnalyzeD4(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+  const int half = len / 2;
+  const int w = in.Width();
+  for (int j = 0; j < half; ++j) {
+    const double* x0 = in[2 * j];
+    const double* x1 = in[2 * j + 1];
+    const double* x2 = in[(2 * j + 2) % len];
+    const double* x3 = in[(2 * j + 3) % len];
+    double* a = out[j];
+    double* d = out[half + j];
+    for (int x = 0; x < w; ++x) {
+      a[x] = kD4H0 * x0[x] + kD4H1 * x1[x] + kD4H2 * x2[x] + kD4H3 * x3[x];
+      d[x] = kD4G0 * x0[x] + kD4G1 * x1[x] + kD4G2 * x2[x] + kD4G3 * x3[x];
+    }
+  }
+}
+
+// x[2i] = h0 a[i] + g0 d[i] + h2 a[i−1] + g2 d[i−1],
+// x[2i+1] = h1 a[i] + g1 d[i] + h3 a[i−1] + g3 d[i−1]   (indices of a, d mod len/2).
+template <bool kScalar>
+void SynthesizeD4(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+  const int half = len / 2;
+  const int w = in.Width();
+  for (int i = 0; i < half; ++i) {
+    const int p = (i + half - 1) % half;
+    const double* a = in[i];
+    const double* d = in[half + i];
+    const double* ap = in[p];
+    const double* dp = in[half + p];
+    double* x0 = out[2 * i];
+    double* x1 = out[2 * i + 1];
+    for (int x = 0; x < w; ++x) {
+      x0[x] = kD4H0 * a[x] + kD4G0 * d[x] + kD4H2 * ap[x] + kD4G2 * dp[x];
+      x1[x] = kD4H1 * a[x] + kD4G1 * d[x] + kD4H3 * ap[x] + kD4G3 * dp[x];
+    }
+  }
+}
+
+template <bool kScalar>
+void Analyze(WaveletFilter f, const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+  switch (f) {
+    case WaveletFilter::kHaar:
+      AnalyzeHaar(in, out, len);
+      break;
+    case WaveletFilter::kDaubechies4:
+      AnalyzeD4(in, out, len);
+      break;
+    default:
+      AnalyzeLifting(SchemeOf(f), in, out, len);
+      break;
+  }
+}
+
+template <bool kScalar>
+void Synthesize(WaveletFilter f, const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+  switch (f) {
+    case WaveletFilter::kHaar:
+      SynthesizeHaar(in, out, len);
+      break;
+    case WaveletFilter::kDaubechies4:
+      SynthesizeD4(in, out, len);
+      break;
+    default:
+      SynthesizeLifting(SchemeOf(f), in, out, len);
+      break;
+  }
+}
+
+// ---- 2D steps on a double region -------------------------------------------------------------
+// `a` holds the region (row stride `stride`), `b` is scratch of the same shape. A forward step on
+// the top-left wc×hc block: rows (horizontal 1D step) then columns (vertical 1D step, done as
+// whole-row operations), the non-standard decomposition of Ng et al. 2003 / Overbeck et al.
+// 2006 §5.1. Results end in `a`.
+
+void CopyBlock(const double* from, double* to, std::ptrdiff_t stride, int wc, int hc) {
+  for (int y = 0; y < hc; ++y) {
+    std::memcpy(to + y * stride, from + y * stride, sizeof(double) * static_cast<std::size_t>(wc));
+  }
+}
+
+void ForwardStep2D(WaveletFilter f, double* a, double* b, std::ptrdiff_t stride, int wc, int hc) {
+  double* src = a;
+  if (wc >= 2) {
+    for (int y = 0; y < hc; ++y) {
+      Analyze<true>(f, {a + y * stride, 1, 1}, {b + y * stride, 1, 1}, wc);
+    }
+    src = b;
+  }
+  if (hc >= 2) {
+    double* dst = src == a ? b : a;
+    Analyze<false>(f, {src, stride, wc}, {dst, stride, wc}, hc);
+    src = dst;
+  }
+  if (src != a) CopyBlock(src, a, stride, wc, hc);
+}
+
+void InverseStep2D(WaveletFilter f, double* a, double* b, std::ptrdiff_t stride, int wc, int hc) {
+  double* src = a;
+  if (hc >= 2) {
+    Synthesize<false>(f, {a, stride, wc}, {b, stride, wc}, hc);
+    src = b;
+  }
+  if (wc >= 2) {
+    double* dst = src == a ? b : a;
+    for (int y = 0; y < hc; ++y) {
+      Synthesize<true>(f, {src + y * stride, 1, 1}, {dst + y * stride, 1, 1}, wc);
+    }
+    src = dst;
+  }
+  if (src != a) CopyBlock(src, a, stride, wc, hc);
+}
+
+void LoadBlock(const float* data, std::ptrdiff_t data_stride, double* a, std::ptrdiff_t stride,
+               int wc, int hc) {
+  for (int y = 0; y < hc; ++y) {
+    const float* row = data + y * data_stride;
+    double* out = a + y * stride;
+    for (int x = 0; x < wc; ++x) out[x] = row[x];
+  }
+}
+
+void StoreBlock(const double* a, std::ptrdiff_t stride, float* data, std::ptrdiff_t data_stride,
+                int wc, int hc) {
+  for (int y = 0; y < hc; ++y) {
+    const double* in = a + y * stride;
+    float* row = data + y * data_stride;
+    for (int x = 0; x < wc; ++x) row[x] = static_cast<float>(in[x]);
+  }
+}
+
+// ---- argument checks -------------------------------------------------------------------------
+
+int CheckedMaxDepth1D(const char* where, WaveletFilter f, int length) {
+  if (length < 1) Fail(where, "length must be at least 1, got " + std::to_string(length));
+  if (!IsLiftingFilter(f) && !IsPowerOfTwo(length)) {
+    Fail(where, std::string(WaveletFilterName(f)) + " needs a power-of-two length, got " +
+                    std::to_string(length));
+  }
+  return Log2(length);  // ⌈log2 length⌉
+}
+
+int CheckedMaxDepth2D(const char* where, WaveletFilter f, int w, int h) {
+  if (w < 1 || h < 1) {
+    Fail(where, "size must be at least 1×1, got " + std::to_string(w) + "×" + std::to_string(h));
+  }
+  if (!IsLiftingFilter(f) && (w != h || !IsPowerOfTwo(w))) {
+    Fail(where, std::string(WaveletFilterName(f)) +
+                    " needs a square power-of-two region (a cubemap face), got " +
+                    std::to_string(w) + "×" + std::to_string(h));
+  }
+  return Log2(std::max(w, h));
+}
+
+void CheckDepth(const char* where, int depth, int max_depth) {
+  if (depth < 0 || depth > max_depth) {
+    Fail(where,
+         "depth " + std::to_string(depth) + " outside [0, " + std::to_string(max_depth) + "]");
+  }
+}
+
+void CheckStep(const char* where, int step, int max_depth) {
+  if (step < 1 || step > max_depth) {
+    Fail(where, "step " + std::to_string(step) + " outside [1, " + std::to_string(max_depth) + "]");
+  }
+}
+
+std::size_t Area(int w, int h) {
+  return static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
+}
+
+}  // namespace
+
+const char* WaveletFilterName(WaveletFilter filter) {
+  switch (filter) {
+    case WaveletFilter::kHaar:
+      return "haar";
+    case WaveletFilter::kDaubechies4:
+      return "d4";
+    case WaveletFilter::kLeGall53:
+      return "legall53";
+    case WaveletFilter::kCdf97:
+      return "cdf97";
+  }
+  return "unknown";
+}
+
+bool ParseWaveletFilter(std::string_view name, WaveletFilter* filter) {
+  struct Alias {
+    const char* name;
+    WaveletFilter filter;
+  };
+  static constexpr Alias kAliases[] = {{"haar", WaveletFilter::kHaar},
+                                       {"d4", WaveletFilter::kDaubechies4},
+                                       {"daubechies4", WaveletFilter::kDaubechies4},
+                                       {"legall53", WaveletFilter::kLeGall53},
+                                       {"5/3", WaveletFilter::kLeGall53},
+                                       {"53", WaveletFilter::kLeGall53},
+                                       {"le_gall_5_3", WaveletFilter::kLeGall53},
+                                       {"cdf97", WaveletFilter::kCdf97},
+                                       {"9/7", WaveletFilter::kCdf97},
+                                       {"97", WaveletFilter::kCdf97},
+                                       {"cdf_9_7", WaveletFilter::kCdf97}};
+  for (const Alias& a : kAliases) {
+    if (name == a.name) {
+      *filter = a.filter;
+      return true;
+    }
+  }
+  return false;
+}
+
+WaveletWorkspace& ThreadWaveletWorkspace() {
+  thread_local WaveletWorkspace workspace;
+  return workspace;
+}
+
+// ---- sizes and levels ------------------------------------------------------------------------
+
+int WaveletMaxDepth(WaveletFilter filter, int length) {
+  return CheckedMaxDepth1D("WaveletMaxDepth", filter, length);
+}
+
+int WaveletMaxDepth2D(WaveletFilter filter, int width, int height) {
+  return CheckedMaxDepth2D("WaveletMaxDepth2D", filter, width, height);
+}
+
+std::vector<WaveletStep1D> WaveletSteps1D(int length, int depth) {
+  CheckDepth("WaveletSteps1D", depth,
+             CheckedMaxDepth1D("WaveletSteps1D", WaveletFilter::kLeGall53, length));
+  std::vector<WaveletStep1D> steps;
+  for (int t = 1; t <= depth; ++t) {
+    const int m = SizeAtDepth(length, t - 1);
+    steps.push_back({t, m, (m + 1) / 2, m / 2});
+  }
+  return steps;
+}
+
+std::vector<WaveletStep2D> WaveletSteps2D(int width, int height, int depth) {
+  CheckDepth("WaveletSteps2D", depth,
+             CheckedMaxDepth2D("WaveletSteps2D", WaveletFilter::kLeGall53, width, height));
+  std::vector<WaveletStep2D> steps;
+  for (int t = 1; t <= depth; ++t) {
+    const int w = SizeAtDepth(width, t - 1);
+    const int h = SizeAtDepth(height, t - 1);
+    steps.push_back({t, w, h, (w + 1) / 2, (h + 1) / 2, w / 2, h / 2});
+  }
+  return steps;
+}
+
+int CoefficientLevel1D(int length, int depth, int index) {
+  CheckDepth("CoefficientLevel1D", depth,
+             CheckedMaxDepth1D("CoefficientLevel1D", WaveletFilter::kLeGall53, length));
+  if (index < 0 || index >= length) {
+    Fail("CoefficientLevel1D",
+         "index " + std::to_string(index) + " outside [0, " + std::to_string(length) + ")");
+  }
+  if (index < SizeAtDepth(length, depth)) return 0;
+  // Detail of step t lies in [SizeAtDepth(N, t), SizeAtDepth(N, t−1)); level = k − t + 1.
+  int t = depth;
+  while (index >= SizeAtDepth(length, t - 1)) --t;
+  return depth - t + 1;
+}
+
+void CoefficientLevelMap1D(int length, int depth, std::uint8_t* levels) {
+  CheckDepth("CoefficientLevelMap1D", depth,
+             CheckedMaxDepth1D("CoefficientLevelMap1D", WaveletFilter::kLeGall53, length));
+  for (int t = 1; t <= depth; ++t) {
+    const auto level = static_cast<std::uint8_t>(depth - t + 1);
+    std::fill(levels + SizeAtDepth(length, t), levels + SizeAtDepth(length, t - 1), level);
+  }
+  std::fill(levels, levels + SizeAtDepth(length, depth), std::uint8_t{0});
+}
+
+CoefficientClass CoefficientClass2D(int width, int height, int depth, int x, int y) {
+  CheckDepth("CoefficientClass2D", depth,
+             CheckedMaxDepth2D("CoefficientClass2D", WaveletFilter::kLeGall53, width, height));
+  if (x < 0 || x >= width || y < 0 || y >= height) {
+    Fail("CoefficientClass2D", "coefficient (" + std::to_string(x) + ", " + std::to_string(y) +
+                                   ") outside " + std::to_string(width) + "×" +
+                                   std::to_string(height));
+  }
+  if (x < SizeAtDepth(width, depth) && y < SizeAtDepth(height, depth)) {
+    return {0, WaveletBand::kLL};
+  }
+  // The smallest region SizeAtDepth(·, t−1) still containing (x, y) is the one of step t.
+  int t = depth;
+  while (x >= SizeAtDepth(width, t - 1) || y >= SizeAtDepth(height, t - 1)) --t;
+  const bool high_x = x >= SizeAtDepth(width, t);
+  const bool high_y = y >= SizeAtDepth(height, t);
+  const WaveletBand band =
+      high_x ? (high_y ? WaveletBand::kHH : WaveletBand::kHL) : WaveletBand::kLH;
+  return {depth - t + 1, band};
+}
+
+void CoefficientLevelMap2D(int width, int height, int depth, std::uint8_t* levels) {
+  CheckDepth("CoefficientLevelMap2D", depth,
+             CheckedMaxDepth2D("CoefficientLevelMap2D", WaveletFilter::kLeGall53, width, height));
+  for (int t = 1; t <= depth; ++t) {
+    const auto level = static_cast<std::uint8_t>(depth - t + 1);
+    const int w0 = SizeAtDepth(width, t - 1), h0 = SizeAtDepth(height, t - 1);
+    const int w1 = SizeAtDepth(width, t), h1 = SizeAtDepth(height, t);
+    for (int y = 0; y < h0; ++y) {
+      std::uint8_t* row = levels + Area(width, y);
+      std::fill(row + (y < h1 ? w1 : 0), row + w0, level);
+    }
+  }
+  const int wk = SizeAtDepth(width, depth), hk = SizeAtDepth(height, depth);
+  for (int y = 0; y < hk; ++y) {
+    std::fill(levels + Area(width, y), levels + Area(width, y) + wk, std::uint8_t{0});
+  }
+}
+
+// ---- transforms ------------------------------------------------------------------------------
+
+void ForwardWavelet1D(WaveletFilter filter, float* data, int length, int depth,
+                      WaveletWorkspace& ws) {
+  CheckDepth("ForwardWavelet1D", depth, CheckedMaxDepth1D("ForwardWavelet1D", filter, length));
+  if (depth == 0) return;
+  const auto n = static_cast<std::size_t>(length);
+  double* a = ws.Doubles(2 * n);
+  double* b = a + n;
+  for (std::size_t i = 0; i < n; ++i) a[i] = data[i];
+  for (int t = 1; t <= depth; ++t) {
+    const int m = SizeAtDepth(length, t - 1);
+    Analyze<true>(filter, {a, 1, 1}, {b, 1, 1}, m);
+    std::memcpy(a, b, sizeof(double) * static_cast<std::size_t>(m));
+  }
+  for (std::size_t i = 0; i < n; ++i) data[i] = static_cast<float>(a[i]);
+}
+
+void InverseWavelet1D(WaveletFilter filter, float* data, int length, int depth,
+                      WaveletWorkspace& ws) {
+  CheckDepth("InverseWavelet1D", depth, CheckedMaxDepth1D("InverseWavelet1D", filter, length));
+  if (depth == 0) return;
+  const auto n = static_cast<std::size_t>(length);
+  double* a = ws.Doubles(2 * n);
+  double* b = a + n;
+  for (std::size_t i = 0; i < n; ++i) a[i] = data[i];
+  for (int t = depth; t >= 1; --t) {
+    const int m = SizeAtDepth(length, t - 1);
+    Synthesize<true>(filter, {a, 1, 1}, {b, 1, 1}, m);
+    std::memcpy(a, b, sizeof(double) * static_cast<std::size_t>(m));
+  }
+  for (std::size_t i = 0; i < n; ++i) data[i] = static_cast<float>(a[i]);
+}
+
+void ForwardWavelet2D(WaveletFilter filter, float* data, int width, int height, int depth,
+                      WaveletWorkspace& ws) {
+  CheckDepth("ForwardWavelet2D", depth,
+             CheckedMaxDepth2D("ForwardWavelet2D", filter, width, height));
+  if (depth == 0) return;
+  const std::size_t area = Area(width, height);
+  double* a = ws.Doubles(2 * area);
+  double* b = a + area;
+  LoadBlock(data, width, a, width, width, height);
+  for (int t = 1; t <= depth; ++t) {
+    ForwardStep2D(filter, a, b, width, SizeAtDepth(width, t - 1), SizeAtDepth(height, t - 1));
+  }
+  StoreBlock(a, width, data, width, width, height);
+}
+
+void InverseWavelet2D(WaveletFilter filter, float* data, int width, int height, int depth,
+                      WaveletWorkspace& ws) {
+  CheckDepth("InverseWavelet2D", depth,
+             CheckedMaxDepth2D("InverseWavelet2D", filter, width, height));
+  if (depth == 0) return;
+  const std::size_t area = Area(width, height);
+  double* a = ws.Doubles(2 * area);
+  double* b = a + area;
+  LoadBlock(data, width, a, width, width, height);
+  for (int t = depth; t >= 1; --t) {
+    InverseStep2D(filter, a, b, width, SizeAtDepth(width, t - 1), SizeAtDepth(height, t - 1));
+  }
+  StoreBlock(a, width, data, width, width, height);
+}
+
+void ForwardWavelet2DStep(WaveletFilter filter, float* data, int width, int height, int step,
+                          WaveletWorkspace& ws) {
+  CheckStep("ForwardWavelet2DStep", step,
+            CheckedMaxDepth2D("ForwardWavelet2DStep", filter, width, height));
+  const int wc = SizeAtDepth(width, step - 1), hc = SizeAtDepth(height, step - 1);
+  const std::size_t area = Area(wc, hc);
+  double* a = ws.Doubles(2 * area);
+  double* b = a + area;
+  LoadBlock(data, width, a, wc, wc, hc);
+  ForwardStep2D(filter, a, b, wc, wc, hc);
+  StoreBlock(a, wc, data, width, wc, hc);
+}
+
+void InverseWavelet2DStep(WaveletFilter filter, float* data, int width, int height, int step,
+                          WaveletWorkspace& ws) {
+  CheckStep("InverseWavelet2DStep", step,
+            CheckedMaxDepth2D("InverseWavelet2DStep", filter, width, height));
+  const int wc = SizeAtDepth(width, step - 1), hc = SizeAtDepth(height, step - 1);
+  const std::size_t area = Area(wc, hc);
+  double* a = ws.Doubles(2 * area);
+  double* b = a + area;
+  LoadBlock(data, width, a, wc, wc, hc);
+  InverseStep2D(filter, a, b, wc, wc, hc);
+  StoreBlock(a, wc, data, width, wc, hc);
+}
+
+void ForwardWaveletCubemap(WaveletFilter filter, float* data, int n, int depth,
+                           WaveletWorkspace& ws) {
+  CheckDepth("ForwardWaveletCubemap", depth,
+             CheckedMaxDepth2D("ForwardWaveletCubemap", filter, n, n));
+  for (int face = 0; face < 6; ++face) {
+    ForwardWavelet2D(filter, data + face * Area(n, n), n, n, depth, ws);
+  }
+}
+
+void InverseWaveletCubemap(WaveletFilter filter, float* data, int n, int depth,
+                           WaveletWorkspace& ws) {
+  CheckDepth("InverseWaveletCubemap", depth,
+             CheckedMaxDepth2D("InverseWaveletCubemap", filter, n, n));
+  for (int face = 0; face < 6; ++face) {
+    InverseWavelet2D(filter, data + face * Area(n, n), n, n, depth, ws);
+  }
+}
+
+// ---- Haar supports ---------------------------------------------------------------------------
+
+HaarSupport HaarCoefficientSupport(int n, int depth, int x, int y) {
+  CheckDepth("HaarCoefficientSupport", depth,
+             CheckedMaxDepth2D("HaarCoefficientSupport", WaveletFilter::kHaar, n, n));
+  const CoefficientClass c = CoefficientClass2D(n, n, depth, x, y);
+  // A scaling coefficient at depth k averages a 2^k square; a detail made by step t spans 2^t.
+  const int t = c.level == 0 ? depth : depth - c.level + 1;
+  const int side = 1 << t;
+  const int low = n >> t;  // size of the LL region after step t
+  const int ix = x >= low ? x - low : x;
+  const int iy = y >= low ? y - low : y;
+  return {ix * side, iy * side, side};
+}
+
+double HaarSupportSolidAngle(const CubemapLayout& layout, int depth, std::size_t index) {
+  const int n = layout.n();
+  if (index >= layout.texel_count()) {
+    Fail("HaarSupportSolidAngle", "coefficient index " + std::to_string(index) + " outside a " +
+                                      std::to_string(n) + "² cubemap");
+  }
+  const std::size_t r = index % layout.face_size();
+  const HaarSupport s =
+      HaarCoefficientSupport(n, depth, static_cast<int>(r % n), static_cast<int>(r / n));
+  const double h = 2.0 / n;
+  return FaceRectSolidAngle(-1 + h * s.x0, -1 + h * (s.x0 + s.side), -1 + h * s.y0,
+                            -1 + h * (s.y0 + s.side));
+}
+
+std::vector<double> HaarSupportSolidAngles(const CubemapLayout& layout, int depth) {
+  std::vector<double> out(layout.texel_count());
+  const std::size_t fs = layout.face_size();
+  for (std::size_t i = 0; i < fs; ++i) out[i] = HaarSupportSolidAngle(layout, depth, i);
+  for (int face = 1; face < 6; ++face) {
+    std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(fs),
+              out.begin() + static_cast<std::ptrdiff_t>(face * fs));
+  }
+  return out;
+}
+
+}  // namespace prt
