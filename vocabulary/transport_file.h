@@ -1,0 +1,161 @@
+// The farm's run folder as later stages read it, without MPI and without the original scene
+// files (docs/transport-format.md):
+//   run/transport.prtt   rows of the transport matrix T, one per spatial sample in global sample
+//                        order, in fixed-size blocks of rows with one XXH64 checksum per block
+//   run/geometry.prtg    the world-space meshes the samples came from (names, albedo, positions,
+//                        normals, triangles, ground grid resolution)
+//   run/scene.toml       a verbatim copy of the scene description
+// Both binary formats are little-endian; this code requires a little-endian host.
+// Readers are safe on untrusted input: every size is checked against the file before use.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "vocabulary/scene.h"
+
+namespace prt {
+
+// A failure of the operating system to create, write, sync or rename a file (disk full,
+// read-only or missing folder). Names the file and the system's reason.
+class FileIoError : public std::runtime_error {
+ public:
+  FileIoError(const std::string& file, const std::string& what)
+      : std::runtime_error(file + ": " + what), file_(file) {}
+  const std::string& file() const { return file_; }
+
+ private:
+  std::string file_;
+};
+
+// File names inside a run folder.
+inline constexpr const char* kTransportFileName = "transport.prtt";
+inline constexpr const char* kGeometryFileName = "geometry.prtg";
+inline constexpr const char* kSceneCopyFileName = "scene.toml";
+inline constexpr const char* kReportFileName = "report.json";
+
+// ---------------------------------------------------------------------------------------------
+// Blocked transport file (docs/transport-format.md).
+
+inline constexpr uint32_t kTransportFileVersion = 1;
+inline constexpr std::size_t kTransportHeaderBytes = 96;
+inline constexpr uint64_t kTransportDataAlignment = 4096;
+
+struct TransportFileInfo {
+  uint64_t rows = 0;       // spatial samples
+  uint32_t cubemap_n = 0;  // columns = 6·n² cubemap texels (vocabulary/cubemap.h order)
+  uint32_t rows_per_block = 256;
+  uint32_t rays_per_texel = 0;  // provenance only
+  uint64_t seed = 0;            // provenance only
+
+  uint64_t cols() const { return 6ull * cubemap_n * cubemap_n; }
+  uint64_t row_bytes() const { return cols() * sizeof(float); }
+  uint64_t block_count() const {
+    return rows_per_block == 0 ? 0 : (rows + rows_per_block - 1) / rows_per_block;
+  }
+  uint64_t FirstRowOfBlock(uint64_t block) const { return block * rows_per_block; }
+  uint64_t RowsInBlock(uint64_t block) const;
+  // Byte offset of the first float of row 0 (after header and checksum table, 4 KiB aligned).
+  uint64_t data_offset() const;
+  uint64_t file_bytes() const { return data_offset() + rows * row_bytes(); }
+  bool operator==(const TransportFileInfo&) const = default;
+};
+
+// Writes a transport file in place, rows in any order (the farm's checkpointed writer). The file
+// stays marked incomplete (readers refuse it) until Finalize() has computed and stored every
+// block checksum. Not thread-safe. Throws FileIoError on any system failure.
+class TransportFileWriter {
+ public:
+  // Creates or truncates `path`, sized for `info`, marked incomplete.
+  static TransportFileWriter Create(const std::string& path, const TransportFileInfo& info);
+  // Opens an existing file (complete or not) to write more rows; it is marked incomplete again.
+  // Throws InputError when its header is damaged or does not describe `info`.
+  static TransportFileWriter Reopen(const std::string& path, const TransportFileInfo& info);
+
+  TransportFileWriter(TransportFileWriter&& other) noexcept;
+  TransportFileWriter& operator=(TransportFileWriter&& other) noexcept;
+  TransportFileWriter(const TransportFileWriter&) = delete;
+  TransportFileWriter& operator=(const TransportFileWriter&) = delete;
+  ~TransportFileWriter();
+
+  const TransportFileInfo& info() const { return info_; }
+  const std::string& path() const { return path_; }
+
+  // Rows [first_row, first_row + count), count·cols floats, row-major.
+  void WriteRows(uint64_t first_row, uint64_t count, const float* rows);
+  void ReadRows(uint64_t first_row, uint64_t count, float* rows) const;
+  // Makes every written row durable (fdatasync).
+  void Sync();
+  // Reads every block back, stores its XXH64, marks the file complete and syncs it.
+  void Finalize();
+
+ private:
+  TransportFileWriter(std::string path, TransportFileInfo info, int fd);
+  void WriteHeader(bool complete, std::span<const uint64_t> checksums);
+
+  std::string path_;
+  TransportFileInfo info_;
+  int fd_ = -1;
+};
+
+// Reads a complete transport file. Construction validates magic, version, sizes and the header
+// checksum (InputError naming the file and the problem); reads verify block checksums.
+class TransportFileReader {
+ public:
+  explicit TransportFileReader(const std::string& path);
+  TransportFileReader(TransportFileReader&& other) noexcept;
+  TransportFileReader& operator=(TransportFileReader&& other) noexcept;
+  TransportFileReader(const TransportFileReader&) = delete;
+  TransportFileReader& operator=(const TransportFileReader&) = delete;
+  ~TransportFileReader();
+
+  const TransportFileInfo& info() const { return info_; }
+  uint64_t BlockChecksum(uint64_t block) const { return checksums_.at(block); }
+
+  // Block `block` (RowsInBlock(block)·cols floats) into out; throws InputError naming the block
+  // when its checksum does not match.
+  void ReadBlock(uint64_t block, std::span<float> out) const;
+  std::vector<float> ReadBlock(uint64_t block) const;
+  // Rows [first_row, first_row + count) into out (count·cols floats); every block touched is
+  // read whole and verified.
+  void ReadRows(uint64_t first_row, uint64_t count, float* out) const;
+  // Verifies every block; returns the first bad block's index, or -1 when all match.
+  int64_t FindCorruptBlock() const;
+
+ private:
+  std::string path_;
+  TransportFileInfo info_;
+  std::vector<uint64_t> checksums_;
+  int fd_ = -1;
+};
+
+// XXH64 (seed 0) of a byte range, the checksum every prtfarm file format uses.
+uint64_t Checksum64(const void* data, std::size_t bytes);
+
+// ---------------------------------------------------------------------------------------------
+// Geometry file (docs/transport-format.md, "geometry.prtg"): the SceneGeometry the samples were
+// taken from, in double precision so that any row can be recomputed bit-exactly from it.
+
+std::string SerializeSceneGeometry(const SceneGeometry& geometry);
+// `name` is used in error messages. Throws InputError on any inconsistency.
+SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name);
+void WriteSceneGeometryFile(const std::string& path, const SceneGeometry& geometry);
+SceneGeometry ReadSceneGeometryFile(const std::string& path);
+
+// ---------------------------------------------------------------------------------------------
+// Small durable-file helpers the farm and later stages share.
+
+// Writes `bytes` to path.tmp, fsyncs it, renames it over `path` and fsyncs the folder, so that
+// `path` holds either its old or its new content after a crash. Throws FileIoError.
+void WriteFileDurably(const std::string& path, std::string_view bytes);
+// Whole file as bytes; throws InputError when it cannot be read.
+std::string ReadWholeFile(const std::string& path);
+// fsync of a folder (makes renames and creations inside it durable). Throws FileIoError.
+void SyncDirectory(const std::string& dir);
+
+}  // namespace prt
