@@ -1,0 +1,300 @@
+// Column transform over the spatial domain, dequantisation and relighting from compressed
+// columns (Cheslack-Postava et al. 2008 §4.2, §4.3, §4.5 Eq. 5–8). docs/compression.md.
+#include "vocabulary/compressed_relight.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "vocabulary/errors.h"
+
+namespace prt {
+namespace {
+
+// Segment as a w×h region of the wavelet transform (a mesh is count×1).
+void SegmentShape(const SpatialSegment& s, int& w, int& h) {
+  if (s.kind == SpatialSegment::Kind::kGrid2D) {
+    w = static_cast<int>(s.width);
+    h = static_cast<int>(s.height);
+  } else {
+    w = static_cast<int>(s.count);
+    h = 1;
+  }
+}
+
+uint64_t SplitMix64(uint64_t x) {
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+}  // namespace
+
+WaveletFilter ToWaveletFilter(RowWavelet w) {
+  return w == RowWavelet::kHaar ? WaveletFilter::kHaar : WaveletFilter::kDaubechies4;
+}
+WaveletFilter ToWaveletFilter(ColumnWavelet w) {
+  return w == ColumnWavelet::kLeGall53 ? WaveletFilter::kLeGall53 : WaveletFilter::kCdf97;
+}
+
+int MaxSegmentDepth(const SpatialSegment& s) {
+  int w, h;
+  SegmentShape(s, w, h);
+  return WaveletMaxDepth2D(WaveletFilter::kLeGall53, w, h);
+}
+
+int MaxColumnDepth(const SpatialDomain& d) {
+  int m = 0;
+  for (const auto& s : d.segments) m = std::max(m, MaxSegmentDepth(s));
+  return m;
+}
+
+void SamplesToCoefficientOrder(const SpatialDomain& domain, const float* samples, float* out) {
+  std::size_t off = 0;
+  for (const auto& s : domain.segments) {
+    if (s.kind == SpatialSegment::Kind::kMesh1D && !s.order.empty()) {
+      for (uint32_t k = 0; k < s.count; ++k) out[off + k] = samples[off + s.order[k]];
+    } else {
+      std::copy(samples + off, samples + off + s.count, out + off);
+    }
+    off += s.count;
+  }
+}
+
+void CoefficientOrderToSamples(const SpatialDomain& domain, const float* coefficients, float* out) {
+  std::size_t off = 0;
+  for (const auto& s : domain.segments) {
+    if (s.kind == SpatialSegment::Kind::kMesh1D && !s.order.empty()) {
+      for (uint32_t k = 0; k < s.count; ++k) out[off + s.order[k]] = coefficients[off + k];
+    } else {
+      std::copy(coefficients + off, coefficients + off + s.count, out + off);
+    }
+    off += s.count;
+  }
+}
+
+// §4.2: each segment is transformed separately to min(depth, its maximum depth).
+void ForwardColumnTransform(const SpatialDomain& domain, ColumnWavelet wavelet, int depth,
+                            float* column) {
+  const std::size_t n = domain.sample_count();
+  std::vector<float> tmp(n);
+  SamplesToCoefficientOrder(domain, column, tmp.data());
+  std::copy(tmp.begin(), tmp.end(), column);
+  std::size_t off = 0;
+  const WaveletFilter f = ToWaveletFilter(wavelet);
+  for (const auto& s : domain.segments) {
+    int w, h;
+    SegmentShape(s, w, h);
+    const int d = std::min(depth, MaxSegmentDepth(s));
+    if (d > 0) ForwardWavelet2D(f, column + off, w, h, d);
+    off += s.count;
+  }
+}
+
+void InverseColumnTransform(const SpatialDomain& domain, ColumnWavelet wavelet, int depth,
+                            float* column) {
+  std::size_t off = 0;
+  const WaveletFilter f = ToWaveletFilter(wavelet);
+  for (const auto& s : domain.segments) {
+    int w, h;
+    SegmentShape(s, w, h);
+    const int d = std::min(depth, MaxSegmentDepth(s));
+    if (d > 0) InverseWavelet2D(f, column + off, w, h, d);
+    off += s.count;
+  }
+  const std::size_t n = domain.sample_count();
+  std::vector<float> tmp(column, column + n);
+  CoefficientOrderToSamples(domain, tmp.data(), column);
+}
+
+void InverseColumnTransformStep(const SpatialDomain& domain, ColumnWavelet wavelet, int step,
+                                float* coefficients) {
+  std::size_t off = 0;
+  const WaveletFilter f = ToWaveletFilter(wavelet);
+  for (const auto& s : domain.segments) {
+    int w, h;
+    SegmentShape(s, w, h);
+    if (step <= MaxSegmentDepth(s)) InverseWavelet2DStep(f, coefficients + off, w, h, step);
+    off += s.count;
+  }
+}
+
+void ColumnLevelMap(const SpatialDomain& domain, int depth, uint8_t* levels) {
+  std::size_t off = 0;
+  for (const auto& s : domain.segments) {
+    int w, h;
+    SegmentShape(s, w, h);
+    const int d = std::min(depth, MaxSegmentDepth(s));
+    CoefficientLevelMap2D(w, h, d, levels + off);
+    off += s.count;
+  }
+}
+
+double DitherOffset(uint64_t seed, uint32_t column, uint32_t index) {
+  const uint64_t h = SplitMix64(SplitMix64(seed ^ 0x5851f42d4c957f2dull) ^
+                                ((static_cast<uint64_t>(column) << 32) | index));
+  return static_cast<double>(h >> 11) * 0x1.0p-53 - 0.5;
+}
+
+void DequantiseColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
+                      const uint8_t* levels, float* coefficients) {
+  std::fill(coefficients, coefficients + h.sample_count, 0.0f);
+  for (std::size_t k = 0; k < c.index.size(); ++k) {
+    const uint32_t i = c.index[k];
+    coefficients[i] = static_cast<float>(DequantiseTerm(
+        c.q[k], DitherOffset(h.dither_seed, c.column, i), c.scale, h.bits, levels[i]));
+  }
+}
+
+std::vector<float> DecompressToRowWaveletBasis(const CompressedTransport& t) {
+  const auto& h = t.header;
+  const std::size_t S = h.sample_count, M = h.column_count();
+  std::vector<float> dense(S * M, 0.0f);
+  std::vector<float> col(S);
+  std::vector<uint8_t> levels(S);
+  int levels_depth = -1;
+  for (const auto& c : t.columns) {
+    if (c.depth != levels_depth) {
+      ColumnLevelMap(h.domain, c.depth, levels.data());
+      levels_depth = c.depth;
+    }
+    DequantiseColumn(h, c, levels.data(), col.data());
+    InverseColumnTransform(h.domain, h.column_wavelet, c.depth, col.data());
+    for (std::size_t s = 0; s < S; ++s) dense[s * M + c.column] = col[s];
+  }
+  return dense;
+}
+
+std::vector<float> DecompressTransport(const CompressedTransport& t) {
+  std::vector<float> dense = DecompressToRowWaveletBasis(t);
+  const int n = static_cast<int>(t.header.cubemap_n);
+  const int depth = WaveletMaxDepth(WaveletFilter::kHaar, n);
+  const std::size_t M = t.header.column_count();
+  for (std::size_t s = 0; s < t.header.sample_count; ++s)
+    InverseWaveletCubemap(ToWaveletFilter(t.header.row_wavelet), dense.data() + s * M, n, depth);
+  return dense;
+}
+
+std::vector<float> LightingToRowWaveletBasis(RowWavelet wavelet, int cubemap_n,
+                                             std::span<const float> lighting, int channels) {
+  const std::size_t M = static_cast<std::size_t>(6) * cubemap_n * cubemap_n;
+  if (channels < 1 || lighting.size() != M * static_cast<std::size_t>(channels))
+    throw std::invalid_argument("LightingToRowWaveletBasis: lighting size != channels·6n²");
+  std::vector<float> out(lighting.begin(), lighting.end());
+  const int depth = WaveletMaxDepth(WaveletFilter::kHaar, cubemap_n);
+  for (int c = 0; c < channels; ++c)
+    ForwardWaveletCubemap(ToWaveletFilter(wavelet), out.data() + c * M, cubemap_n, depth);
+  return out;
+}
+
+CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
+    : header_(t.header), max_depth_(MaxColumnDepth(t.header.domain)) {
+  ValidateHeader(header_, "CompressedRelighter");
+  const std::size_t S = header_.sample_count;
+  slot_.assign(header_.column_count(), -1);
+  index_.reserve(t.term_count());
+  value_.reserve(t.term_count());
+  std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
+  for (const auto& c : t.columns) {
+    ValidateColumn(header_, c, "CompressedRelighter");
+    if (slot_[c.column] >= 0) throw InputError("CompressedRelighter", "duplicate column");
+    auto& lv = levels[c.depth];
+    if (lv.empty()) {
+      lv.resize(S);
+      ColumnLevelMap(header_.domain, c.depth, lv.data());
+    }
+    slot_[c.column] = static_cast<int32_t>(columns_.size());
+    Column col{c.depth, static_cast<uint32_t>(index_.size()), 0};
+    for (std::size_t k = 0; k < c.index.size(); ++k) {
+      const uint32_t i = c.index[k];
+      index_.push_back(i);
+      value_.push_back(static_cast<float>(DequantiseTerm(
+          c.q[k], DitherOffset(header_.dither_seed, c.column, i), c.scale, header_.bits, lv[i])));
+    }
+    col.end = static_cast<uint32_t>(index_.size());
+    columns_.push_back(col);
+  }
+}
+
+int CompressedRelighter::ColumnDepth(uint32_t column) const {
+  if (column >= slot_.size() || slot_[column] < 0) return -1;
+  return columns_[slot_[column]].depth;
+}
+
+void CompressedRelighter::Accumulate(uint32_t column, const float* w, int channels,
+                                     std::vector<std::vector<double>>& acc) const {
+  if (column >= slot_.size()) throw std::out_of_range("CompressedRelighter: column index");
+  const int32_t s = slot_[column];
+  if (s < 0) return;
+  const Column& c = columns_[s];
+  const std::size_t S = header_.sample_count;
+  std::vector<double>& a = acc[c.depth];
+  if (a.empty()) a.assign(S * channels, 0.0);
+  for (int ch = 0; ch < channels; ++ch) {
+    const double wc = w[ch];
+    if (wc == 0.0) continue;
+    double* dst = a.data() + ch * S;
+    for (uint32_t k = c.begin; k < c.end; ++k) dst[index_[k]] += wc * value_[k];
+  }
+}
+
+// Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
+// deepest level to depth 0, then undo the Hilbert permutation.
+void CompressedRelighter::Finish(std::vector<std::vector<double>>& acc, int channels,
+                                 std::span<float> radiance) const {
+  const std::size_t S = header_.sample_count;
+  std::vector<float> x(S), tmp(S);
+  for (int ch = 0; ch < channels; ++ch) {
+    bool any = false;
+    std::fill(x.begin(), x.end(), 0.0f);
+    for (int d = max_depth_; d >= 0; --d) {
+      if (any && d < max_depth_) {
+        // x is at depth d + 1: one single inverse step brings it to depth d.
+        InverseColumnTransformStep(header_.domain, header_.column_wavelet, d + 1, x.data());
+      }
+      if (!acc[d].empty()) {
+        const double* a = acc[d].data() + ch * S;
+        for (std::size_t i = 0; i < S; ++i) x[i] = static_cast<float>(x[i] + a[i]);
+        any = true;
+      }
+    }
+    CoefficientOrderToSamples(header_.domain, x.data(), tmp.data());
+    std::copy(tmp.begin(), tmp.end(), radiance.begin() + ch * S);
+  }
+}
+
+void CompressedRelighter::Relight(std::span<const float> lighting_hat, int channels,
+                                  std::span<float> radiance) const {
+  const std::size_t S = header_.sample_count, M = header_.column_count();
+  if (channels < 1 || lighting_hat.size() != M * channels || radiance.size() != S * channels)
+    throw std::invalid_argument("CompressedRelighter::Relight: buffer sizes");
+  std::vector<std::vector<double>> acc(max_depth_ + 1);
+  std::vector<float> w(channels);
+  for (uint32_t j = 0; j < M; ++j) {
+    if (slot_[j] < 0) continue;
+    bool nz = false;
+    for (int c = 0; c < channels; ++c) {
+      w[c] = lighting_hat[c * M + j];
+      nz = nz || w[c] != 0.0f;
+    }
+    if (nz) Accumulate(j, w.data(), channels, acc);
+  }
+  Finish(acc, channels, radiance);
+}
+
+void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
+                                        std::span<const float> weights, int channels,
+                                        std::span<float> radiance) const {
+  const std::size_t S = header_.sample_count;
+  if (channels < 1 || weights.size() != columns.size() * channels ||
+      radiance.size() != S * channels)
+    throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
+  std::vector<std::vector<double>> acc(max_depth_ + 1);
+  for (std::size_t k = 0; k < columns.size(); ++k)
+    Accumulate(columns[k], weights.data() + k * channels, channels, acc);
+  Finish(acc, channels, radiance);
+}
+
+}  // namespace prt

@@ -1,0 +1,121 @@
+// What the viewer needs to use compressed transport (compressed_transport.h) without the worker:
+// the column transform over the spatial domain and its coefficient layout, the dither sequence
+// and dequantisation (Cheslack-Postava et al. 2008 §4.3), decompression to a dense T for tests,
+// and relighting B = T·L straight from the compressed columns (§4.5, Eq. 8).
+//
+// Coefficient layout of a column (docs/compression.md): the column is a vector over the spatial
+// samples in global order. Segment by segment (at its offset in the global order):
+//   mesh (kMesh1D)  values are first permuted into Hilbert order (position k holds vertex
+//                   order[k]), then transformed as a w = count, h = 1 region;
+//   grid (kGrid2D)  transformed as the w×h region in place (row-major, x fastest).
+// The transform is vocabulary/wavelets.h's 2D non-standard decomposition in Mallat layout, to
+// depth min(d, segment's maximum depth). At depth 0 the layout is the permuted samples.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "vocabulary/compressed_transport.h"
+#include "vocabulary/wavelets.h"
+
+namespace prt {
+
+WaveletFilter ToWaveletFilter(RowWavelet w);
+WaveletFilter ToWaveletFilter(ColumnWavelet w);
+
+// Largest depth of one segment / of the whole domain (the maximum over segments).
+int MaxSegmentDepth(const SpatialSegment& s);
+int MaxColumnDepth(const SpatialDomain& d);
+
+// Column in global sample order ↔ coefficient layout at `depth` (in place, `column` has
+// domain.sample_count() floats). Depth 0 only applies the Hilbert permutation.
+void ForwardColumnTransform(const SpatialDomain& domain, ColumnWavelet wavelet, int depth,
+                            float* column);
+void InverseColumnTransform(const SpatialDomain& domain, ColumnWavelet wavelet, int depth,
+                            float* column);
+// Single inverse step t (depth t → t − 1) of every segment whose maximum depth is ≥ t; the
+// S'_{l→l+1} of Eq. 5–8. Acts on the coefficient layout (no permutation).
+void InverseColumnTransformStep(const SpatialDomain& domain, ColumnWavelet wavelet, int step,
+                                float* coefficients);
+// Permutation between global sample order and depth-0 layout.
+void SamplesToCoefficientOrder(const SpatialDomain& domain, const float* samples, float* out);
+void CoefficientOrderToSamples(const SpatialDomain& domain, const float* coefficients, float* out);
+
+// levels[i] = wavelets.h level (0 = scaling … depth = finest) of coefficient i at `depth`
+// (domain.sample_count() entries). §4.3 scales the coefficient at level l by 2^l.
+void ColumnLevelMap(const SpatialDomain& domain, int depth, uint8_t* levels);
+
+// Subtractive dither offset r ∈ [−1/2, 1/2) for term `index` of column `column`: a pure hash
+// of (seed, column, index), the same in encoder and decoder.
+double DitherOffset(uint64_t seed, uint32_t column, uint32_t index);
+// Largest quantised magnitude for `bits`: A = 2^(bits−1) − 1.
+inline int QuantiserMax(int bits) {
+  return (1 << (bits - 1)) - 1;
+}
+// Value of one quantised term, undoing dither, normalisation and the 2^level scaling:
+//   c = (q − r) · scale / A / 2^level.
+inline double DequantiseTerm(int32_t q, double dither, double scale, int bits, int level) {
+  return (static_cast<double>(q) - dither) * scale / QuantiserMax(bits) /
+         static_cast<double>(uint64_t{1} << level);
+}
+// Column coefficients (coefficient layout at c.depth, sample_count floats) from a compressed
+// column. `levels` is ColumnLevelMap at c.depth.
+void DequantiseColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
+                      const uint8_t* levels, float* coefficients);
+
+// Dense T̂ (rows = samples, columns = row-wavelet coefficients, sample_count × column_count),
+// and dense T in the cubemap texel basis (inverse row transform of every row of T̂).
+std::vector<float> DecompressToRowWaveletBasis(const CompressedTransport& t);
+std::vector<float> DecompressTransport(const CompressedTransport& t);
+
+// Lighting in the row-wavelet basis: each of `channels` cubemap vectors (6n² floats each,
+// channel-major) transformed per face to full depth by the header's row wavelet. With the
+// orthonormal row filters, T·L = T̂·L̂.
+std::vector<float> LightingToRowWaveletBasis(RowWavelet wavelet, int cubemap_n,
+                                             std::span<const float> lighting, int channels);
+
+// Relighting from adaptively compressed columns (§4.5, Eq. 8). Construction dequantises every
+// term once and groups columns by depth; Relight then computes, per channel,
+//   B = Σ_l S'_{l→l−1}( Σ_{j∈N(l)} L̂_j · C_j )
+// by accumulating the lights of depth-l columns in the column-wavelet domain (double), then
+// running one single-step inverse per level from the deepest level down (one full inverse
+// transform in all, whatever the number of lights). Thread-compatible (const methods are safe
+// to call from several threads with separate outputs).
+class CompressedRelighter {
+ public:
+  explicit CompressedRelighter(const CompressedTransport& t);
+
+  const CompressedTransportHeader& header() const { return header_; }
+  std::size_t sample_count() const { return header_.sample_count; }
+  std::size_t column_count() const { return header_.column_count(); }
+  // Depth chosen for a column (0 for absent/all-zero columns); -1 when absent.
+  int ColumnDepth(uint32_t column) const;
+
+  // Dense lighting in the row-wavelet basis: lighting_hat = channels × column_count floats,
+  // radiance = channels × sample_count floats (channel-major), B = T̂·L̂ per channel.
+  void Relight(std::span<const float> lighting_hat, int channels, std::span<float> radiance) const;
+  // Sparse lighting (a non-linear lighting approximation): terms (columns[k], weights[k·channels
+  // + c]); columns need not be sorted; duplicates add.
+  void RelightSparse(std::span<const uint32_t> columns, std::span<const float> weights,
+                     int channels, std::span<float> radiance) const;
+
+ private:
+  struct Column {
+    uint8_t depth;
+    uint32_t begin, end;  // range in index_/value_
+  };
+  void Accumulate(uint32_t column, const float* w, int channels,
+                  std::vector<std::vector<double>>& acc) const;
+  void Finish(std::vector<std::vector<double>>& acc, int channels, std::span<float> radiance) const;
+
+  CompressedTransportHeader header_;
+  int max_depth_ = 0;
+  std::vector<int32_t> slot_;  // column → index into columns_, or −1
+  std::vector<Column> columns_;
+  std::vector<uint32_t> index_;
+  std::vector<float> value_;
+};
+
+}  // namespace prt

@@ -1,0 +1,508 @@
+// Data structures and binary encoding of compressed transport (docs/compression.md).
+// Decoders are safe on untrusted input: every read is bounds-checked, every count is checked
+// against what the remaining bytes can hold before anything is allocated.
+#include "vocabulary/compressed_transport.h"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+
+#include "vocabulary/compressed_relight.h"
+#include "vocabulary/errors.h"
+
+namespace prt {
+namespace {
+
+constexpr char kHeaderMagic[8] = {'P', 'R', 'T', 'C', 'T', 'H', 'D', '1'};
+constexpr char kBlockMagic[4] = {'P', 'C', 'B', '1'};
+constexpr char kFileMagic[8] = {'P', 'R', 'T', 'C', 'T', 'F', 'L', '1'};
+constexpr uint32_t kFormatVersion = 1;
+constexpr uint32_t kMaxSamples = 1u << 30;
+
+class Writer {
+ public:
+  void U8(uint8_t v) { out_.push_back(v); }
+  void U32(uint32_t v) {
+    for (int i = 0; i < 4; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  }
+  void U64(uint64_t v) {
+    for (int i = 0; i < 8; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
+  }
+  void F32(float v) {
+    uint32_t u;
+    std::memcpy(&u, &v, 4);
+    U32(u);
+  }
+  void F64(double v) {
+    uint64_t u;
+    std::memcpy(&u, &v, 8);
+    U64(u);
+  }
+  void Varint(uint64_t v) {
+    while (v >= 0x80) {
+      out_.push_back(static_cast<uint8_t>(v | 0x80));
+      v >>= 7;
+    }
+    out_.push_back(static_cast<uint8_t>(v));
+  }
+  void Bytes(const void* p, std::size_t n) {
+    const auto* b = static_cast<const uint8_t*>(p);
+    out_.insert(out_.end(), b, b + n);
+  }
+  // Packs `bits`-bit two's complement fields, little-endian bit order, padded to a byte.
+  void PackedSigned(const std::vector<int32_t>& q, int bits) {
+    uint64_t acc = 0;
+    int filled = 0;
+    const uint64_t mask = (uint64_t{1} << bits) - 1;
+    for (int32_t v : q) {
+      acc |= (static_cast<uint64_t>(static_cast<int64_t>(v)) & mask) << filled;
+      filled += bits;
+      while (filled >= 8) {
+        out_.push_back(static_cast<uint8_t>(acc));
+        acc >>= 8;
+        filled -= 8;
+      }
+    }
+    if (filled > 0) out_.push_back(static_cast<uint8_t>(acc));
+  }
+  std::vector<uint8_t>& out() { return out_; }
+
+ private:
+  std::vector<uint8_t> out_;
+};
+
+class Reader {
+ public:
+  Reader(std::span<const uint8_t> b, const std::string& name) : b_(b), name_(name) {}
+  [[noreturn]] void Fail(const std::string& what) const {
+    throw InputError(name_, what + " (at byte " + std::to_string(pos_) + ")");
+  }
+  std::size_t remaining() const { return b_.size() - pos_; }
+  std::size_t pos() const { return pos_; }
+  void Need(std::size_t n, const char* what) const {
+    if (remaining() < n) Fail(std::string("truncated: ") + what);
+  }
+  uint8_t U8(const char* what) {
+    Need(1, what);
+    return b_[pos_++];
+  }
+  uint32_t U32(const char* what) {
+    Need(4, what);
+    uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= static_cast<uint32_t>(b_[pos_ + i]) << (8 * i);
+    pos_ += 4;
+    return v;
+  }
+  uint64_t U64(const char* what) {
+    Need(8, what);
+    uint64_t v = 0;
+    for (int i = 0; i < 8; ++i) v |= static_cast<uint64_t>(b_[pos_ + i]) << (8 * i);
+    pos_ += 8;
+    return v;
+  }
+  float F32(const char* what) {
+    const uint32_t u = U32(what);
+    float f;
+    std::memcpy(&f, &u, 4);
+    return f;
+  }
+  double F64(const char* what) {
+    const uint64_t u = U64(what);
+    double d;
+    std::memcpy(&d, &u, 8);
+    return d;
+  }
+  // LEB128, at most 5 bytes, value must fit 32 bits.
+  uint32_t Varint32(const char* what) {
+    uint64_t v = 0;
+    for (int i = 0; i < 5; ++i) {
+      const uint8_t byte = U8(what);
+      v |= static_cast<uint64_t>(byte & 0x7f) << (7 * i);
+      if ((byte & 0x80) == 0) {
+        if (v > std::numeric_limits<uint32_t>::max()) Fail(std::string("varint overflow: ") + what);
+        return static_cast<uint32_t>(v);
+      }
+    }
+    Fail(std::string("varint too long: ") + what);
+  }
+  void Magic(const char* m, std::size_t n, const char* what) {
+    Need(n, what);
+    if (std::memcmp(b_.data() + pos_, m, n) != 0) Fail(std::string("bad magic: ") + what);
+    pos_ += n;
+  }
+  std::vector<int32_t> PackedSigned(std::size_t count, int bits, const char* what) {
+    const std::size_t nbytes = (count * static_cast<std::size_t>(bits) + 7) / 8;
+    Need(nbytes, what);
+    std::vector<int32_t> q(count);
+    uint64_t acc = 0;
+    int filled = 0;
+    std::size_t p = pos_;
+    const uint64_t mask = (uint64_t{1} << bits) - 1;
+    for (std::size_t k = 0; k < count; ++k) {
+      while (filled < bits) {
+        acc |= static_cast<uint64_t>(b_[p++]) << filled;
+        filled += 8;
+      }
+      uint64_t u = acc & mask;
+      acc >>= bits;
+      filled -= bits;
+      int64_t v = static_cast<int64_t>(u);
+      if (u >> (bits - 1)) v -= static_cast<int64_t>(uint64_t{1} << bits);  // sign extend
+      q[k] = static_cast<int32_t>(v);
+    }
+    pos_ += nbytes;
+    return q;
+  }
+
+ private:
+  std::span<const uint8_t> b_;
+  const std::string& name_;
+  std::size_t pos_ = 0;
+};
+
+int MaxQ(int bits) {
+  return (1 << (bits - 1)) - 1;
+}
+
+}  // namespace
+
+RowWavelet ParseRowWavelet(const std::string& s, const std::string& file) {
+  if (s == "haar") return RowWavelet::kHaar;
+  if (s == "d4") return RowWavelet::kD4;
+  throw InputError(file, "unknown row wavelet '" + s + "' (expected haar or d4)");
+}
+ColumnWavelet ParseColumnWavelet(const std::string& s, const std::string& file) {
+  if (s == "legall53") return ColumnWavelet::kLeGall53;
+  if (s == "cdf97") return ColumnWavelet::kCdf97;
+  throw InputError(file, "unknown column wavelet '" + s + "' (expected legall53 or cdf97)");
+}
+CompressionScheme ParseCompressionScheme(const std::string& s, const std::string& file) {
+  if (s == "2d") return CompressionScheme::k2D;
+  if (s == "4d") return CompressionScheme::k4D;
+  if (s == "adaptive4d") return CompressionScheme::kAdaptive4D;
+  throw InputError(file, "unknown compression scheme '" + s + "' (expected 2d, 4d or adaptive4d)");
+}
+const char* ToString(RowWavelet w) {
+  return w == RowWavelet::kHaar ? "haar" : "d4";
+}
+const char* ToString(ColumnWavelet w) {
+  return w == ColumnWavelet::kLeGall53 ? "legall53" : "cdf97";
+}
+const char* ToString(CompressionScheme s) {
+  switch (s) {
+    case CompressionScheme::k2D:
+      return "2d";
+    case CompressionScheme::k4D:
+      return "4d";
+    case CompressionScheme::kAdaptive4D:
+      return "adaptive4d";
+  }
+  return "?";
+}
+
+std::size_t SpatialDomain::sample_count() const {
+  std::size_t n = 0;
+  for (const auto& s : segments) n += s.count;
+  return n;
+}
+
+std::size_t CompressedTransport::term_count() const {
+  std::size_t n = 0;
+  for (const auto& c : columns) n += c.index.size();
+  return n;
+}
+
+void ValidateHeader(const CompressedTransportHeader& h, const std::string& name) {
+  const uint32_t n = h.cubemap_n;
+  if (n == 0 || n > 256 || (n & (n - 1)) != 0)
+    throw InputError(name,
+                     "cubemap size " + std::to_string(n) + " is not a power of two in [1,256]");
+  if (h.sample_count == 0 || h.sample_count > kMaxSamples)
+    throw InputError(name, "sample count " + std::to_string(h.sample_count) + " out of range");
+  if (static_cast<uint8_t>(h.row_wavelet) > 1) throw InputError(name, "unknown row wavelet id");
+  if (static_cast<uint8_t>(h.column_wavelet) > 1)
+    throw InputError(name, "unknown column wavelet id");
+  if (static_cast<uint8_t>(h.scheme) > 2) throw InputError(name, "unknown compression scheme id");
+  if (h.bits < 2 || h.bits > 24)
+    throw InputError(name, "quantiser bits " + std::to_string(h.bits) + " not in [2,24]");
+  if (!std::isfinite(h.keep_fraction) || h.keep_fraction < 0 || h.keep_fraction > 1)
+    throw InputError(name, "keep fraction not in [0,1]");
+  if (h.terms_per_column > h.sample_count)
+    throw InputError(name, "terms per column exceeds the sample count");
+  if (h.domain.segments.empty()) throw InputError(name, "spatial domain has no segments");
+  uint64_t total = 0;
+  for (std::size_t i = 0; i < h.domain.segments.size(); ++i) {
+    const SpatialSegment& s = h.domain.segments[i];
+    const std::string where = "segment " + std::to_string(i) + ": ";
+    if (s.count == 0) throw InputError(name, where + "empty");
+    total += s.count;
+    if (s.kind == SpatialSegment::Kind::kGrid2D) {
+      if (s.width == 0 || s.height == 0 || static_cast<uint64_t>(s.width) * s.height != s.count)
+        throw InputError(name, where + "grid width·height != count");
+      if (!s.order.empty()) throw InputError(name, where + "grid with a vertex order");
+    } else if (s.kind == SpatialSegment::Kind::kMesh1D) {
+      if (!s.order.empty()) {
+        if (s.order.size() != s.count) throw InputError(name, where + "order size != count");
+        std::vector<uint8_t> seen(s.count, 0);
+        for (uint32_t v : s.order) {
+          if (v >= s.count || seen[v]) throw InputError(name, where + "order is not a permutation");
+          seen[v] = 1;
+        }
+      }
+    } else {
+      throw InputError(name, where + "unknown segment kind");
+    }
+  }
+  if (total != h.sample_count)
+    throw InputError(name, "segments cover " + std::to_string(total) + " samples, header says " +
+                               std::to_string(h.sample_count));
+}
+
+void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
+                    const std::string& name) {
+  const std::string where = "column " + std::to_string(c.column) + ": ";
+  if (c.column >= h.column_count()) throw InputError(name, where + "column index out of range");
+  if (c.depth > MaxColumnDepth(h.domain))
+    throw InputError(name, where + "depth " + std::to_string(c.depth) + " exceeds the maximum");
+  if (c.index.size() != c.q.size()) throw InputError(name, where + "index/value count mismatch");
+  if (c.index.empty()) throw InputError(name, where + "empty column stored");
+  if (c.index.size() > h.sample_count) throw InputError(name, where + "more terms than samples");
+  if (!std::isfinite(c.scale) || !(c.scale > 0)) throw InputError(name, where + "bad scale");
+  const int maxq = MaxQ(h.bits);
+  for (std::size_t k = 0; k < c.index.size(); ++k) {
+    if (c.index[k] >= h.sample_count) throw InputError(name, where + "index out of range");
+    if (k > 0 && c.index[k] <= c.index[k - 1])
+      throw InputError(name, where + "indices not strictly increasing");
+    if (c.q[k] == 0 || c.q[k] > maxq || c.q[k] < -maxq)
+      throw InputError(name, where + "quantised value out of range");
+  }
+}
+
+// Header layout: magic "PRTCTHD1", u32 version, u32 n, u32 samples, u8 row wavelet,
+// u8 column wavelet, u8 scheme, u8 bits, f64 keep fraction, u32 terms per column, u64 seed,
+// u32 segment count, then per segment: u8 kind, u32 count, u32 width, u32 height,
+// u8 has_order, [count × u32 order].
+std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
+  ValidateHeader(h, "EncodeHeader");
+  Writer w;
+  w.Bytes(kHeaderMagic, 8);
+  w.U32(kFormatVersion);
+  w.U32(h.cubemap_n);
+  w.U32(h.sample_count);
+  w.U8(static_cast<uint8_t>(h.row_wavelet));
+  w.U8(static_cast<uint8_t>(h.column_wavelet));
+  w.U8(static_cast<uint8_t>(h.scheme));
+  w.U8(h.bits);
+  w.F64(h.keep_fraction);
+  w.U32(h.terms_per_column);
+  w.U64(h.dither_seed);
+  w.U32(static_cast<uint32_t>(h.domain.segments.size()));
+  for (const auto& s : h.domain.segments) {
+    w.U8(static_cast<uint8_t>(s.kind));
+    w.U32(s.count);
+    w.U32(s.width);
+    w.U32(s.height);
+    w.U8(s.order.empty() ? 0 : 1);
+    for (uint32_t v : s.order) w.U32(v);
+  }
+  return std::move(w.out());
+}
+
+namespace {
+CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
+  CompressedTransportHeader h;
+  r.Magic(kHeaderMagic, 8, "header magic");
+  const uint32_t version = r.U32("version");
+  if (version != kFormatVersion)
+    r.Fail("unsupported compressed-transport version " + std::to_string(version));
+  h.cubemap_n = r.U32("cubemap size");
+  h.sample_count = r.U32("sample count");
+  const uint8_t rw = r.U8("row wavelet");
+  const uint8_t cw = r.U8("column wavelet");
+  const uint8_t sc = r.U8("scheme");
+  if (rw > 1) r.Fail("unknown row wavelet id " + std::to_string(rw));
+  if (cw > 1) r.Fail("unknown column wavelet id " + std::to_string(cw));
+  if (sc > 2) r.Fail("unknown scheme id " + std::to_string(sc));
+  h.row_wavelet = static_cast<RowWavelet>(rw);
+  h.column_wavelet = static_cast<ColumnWavelet>(cw);
+  h.scheme = static_cast<CompressionScheme>(sc);
+  h.bits = r.U8("bits");
+  h.keep_fraction = r.F64("keep fraction");
+  h.terms_per_column = r.U32("terms per column");
+  h.dither_seed = r.U64("dither seed");
+  const uint32_t nseg = r.U32("segment count");
+  // Every segment takes at least 14 bytes: bound the count before allocating.
+  if (nseg == 0 || nseg > r.remaining() / 14) r.Fail("segment count " + std::to_string(nseg));
+  h.domain.segments.resize(nseg);
+  for (auto& s : h.domain.segments) {
+    const uint8_t kind = r.U8("segment kind");
+    if (kind > 1) r.Fail("unknown segment kind " + std::to_string(kind));
+    s.kind = static_cast<SpatialSegment::Kind>(kind);
+    s.count = r.U32("segment count");
+    s.width = r.U32("segment width");
+    s.height = r.U32("segment height");
+    const uint8_t has_order = r.U8("segment order flag");
+    if (has_order > 1) r.Fail("bad order flag");
+    if (has_order) {
+      if (s.count > kMaxSamples || s.count > r.remaining() / 4) r.Fail("truncated vertex order");
+      s.order.resize(s.count);
+      for (auto& v : s.order) v = r.U32("vertex order");
+    }
+  }
+  ValidateHeader(h, name);
+  return h;
+}
+
+void WriteBlock(Writer& w, const CompressedTransportHeader& h, const CompressedColumnBlock& block) {
+  if (static_cast<uint64_t>(block.first_column) + block.column_span > h.column_count())
+    throw InputError("EncodeColumnBlock", "block column range exceeds the column count");
+  w.Bytes(kBlockMagic, 4);
+  w.U32(block.first_column);
+  w.U32(block.column_span);
+  w.U32(static_cast<uint32_t>(block.columns.size()));
+  uint32_t prev = block.first_column;
+  bool first = true;
+  for (const auto& c : block.columns) {
+    ValidateColumn(h, c, "EncodeColumnBlock");
+    if (c.column < block.first_column || c.column >= block.first_column + block.column_span ||
+        (!first && c.column <= prev))
+      throw InputError("EncodeColumnBlock", "columns not sorted inside the block range");
+    w.Varint(c.column - (first ? block.first_column : prev + 1));
+    prev = c.column;
+    first = false;
+    w.U8(c.depth);
+    w.F32(c.scale);
+    w.Varint(c.index.size());
+    uint32_t pi = 0;
+    for (std::size_t k = 0; k < c.index.size(); ++k) {
+      w.Varint(k == 0 ? c.index[0] : c.index[k] - pi - 1);
+      pi = c.index[k];
+    }
+    w.PackedSigned(c.q, h.bits);
+  }
+}
+
+CompressedColumnBlock ReadBlock(Reader& r, const CompressedTransportHeader& h,
+                                const std::string& name) {
+  CompressedColumnBlock b;
+  r.Magic(kBlockMagic, 4, "block magic");
+  b.first_column = r.U32("first column");
+  b.column_span = r.U32("column span");
+  if (static_cast<uint64_t>(b.first_column) + b.column_span > h.column_count())
+    r.Fail("block column range exceeds the column count");
+  const uint32_t ncols = r.U32("column count");
+  // Each stored column takes at least 8 bytes (delta, depth, scale, count, one index, one value).
+  if (ncols > b.column_span || ncols > r.remaining() / 8)
+    r.Fail("stored column count " + std::to_string(ncols) + " impossible");
+  b.columns.resize(ncols);
+  uint64_t next = b.first_column;
+  for (auto& c : b.columns) {
+    const uint64_t col = next + r.Varint32("column delta");
+    if (col >= static_cast<uint64_t>(b.first_column) + b.column_span)
+      r.Fail("column outside the block range");
+    c.column = static_cast<uint32_t>(col);
+    next = col + 1;
+    c.depth = r.U8("depth");
+    c.scale = r.F32("scale");
+    const uint32_t nterms = r.Varint32("term count");
+    // Every term costs at least one index byte: never allocate beyond the input.
+    if (nterms == 0 || nterms > h.sample_count || nterms > r.remaining())
+      r.Fail("term count " + std::to_string(nterms) + " impossible");
+    c.index.resize(nterms);
+    uint64_t idx = 0;
+    for (uint32_t k = 0; k < nterms; ++k) {
+      const uint64_t d = r.Varint32("index delta");
+      idx = (k == 0) ? d : idx + 1 + d;
+      if (idx >= h.sample_count) r.Fail("coefficient index out of range");
+      c.index[k] = static_cast<uint32_t>(idx);
+    }
+    c.q = r.PackedSigned(nterms, h.bits, "quantised values");
+    ValidateColumn(h, c, name);
+  }
+  return b;
+}
+}  // namespace
+
+CompressedTransportHeader DecodeHeader(std::span<const uint8_t> bytes, const std::string& name) {
+  Reader r(bytes, name);
+  CompressedTransportHeader h = ReadHeader(r, name);
+  if (r.remaining() != 0) r.Fail("trailing bytes after header");
+  return h;
+}
+
+std::vector<uint8_t> EncodeColumnBlock(const CompressedTransportHeader& h,
+                                       const CompressedColumnBlock& block) {
+  Writer w;
+  WriteBlock(w, h, block);
+  return std::move(w.out());
+}
+
+CompressedColumnBlock DecodeColumnBlock(const CompressedTransportHeader& h,
+                                        std::span<const uint8_t> bytes, const std::string& name) {
+  Reader r(bytes, name);
+  CompressedColumnBlock b = ReadBlock(r, h, name);
+  if (r.remaining() != 0) r.Fail("trailing bytes after column block");
+  return b;
+}
+
+// File layout: magic "PRTCTFL1", u32 header bytes, header, u32 block count, then per block
+// u32 block bytes and the block.
+std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
+                                               uint32_t columns_per_block) {
+  if (columns_per_block == 0) columns_per_block = 1;
+  const std::vector<uint8_t> head = EncodeHeader(t.header);
+  Writer w;
+  w.Bytes(kFileMagic, 8);
+  w.U32(static_cast<uint32_t>(head.size()));
+  w.Bytes(head.data(), head.size());
+  const uint32_t ncol = t.header.column_count();
+  const uint32_t nblocks = (ncol + columns_per_block - 1) / columns_per_block;
+  w.U32(nblocks);
+  std::size_t k = 0;
+  for (uint32_t b = 0; b < nblocks; ++b) {
+    CompressedColumnBlock block;
+    block.first_column = b * columns_per_block;
+    block.column_span = std::min(columns_per_block, ncol - block.first_column);
+    while (k < t.columns.size() && t.columns[k].column < block.first_column + block.column_span) {
+      block.columns.push_back(t.columns[k++]);
+    }
+    const std::vector<uint8_t> bytes = EncodeColumnBlock(t.header, block);
+    w.U32(static_cast<uint32_t>(bytes.size()));
+    w.Bytes(bytes.data(), bytes.size());
+  }
+  if (k != t.columns.size())
+    throw InputError("EncodeCompressedTransport", "columns not sorted or out of range");
+  return std::move(w.out());
+}
+
+CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
+                                              const std::string& name) {
+  Reader r(bytes, name);
+  r.Magic(kFileMagic, 8, "file magic");
+  const uint32_t hsize = r.U32("header size");
+  r.Need(hsize, "header");
+  CompressedTransport t;
+  t.header = DecodeHeader(bytes.subspan(r.pos(), hsize), name);
+  Reader r2(bytes.subspan(r.pos() + hsize), name);
+  const uint32_t nblocks = r2.U32("block count");
+  if (nblocks > t.header.column_count() || nblocks > r2.remaining() / 16)
+    r2.Fail("block count " + std::to_string(nblocks) + " impossible");
+  std::size_t off = r.pos() + hsize + 4;
+  uint64_t next_column = 0;
+  for (uint32_t b = 0; b < nblocks; ++b) {
+    Reader rs(bytes.subspan(off), name);
+    const uint32_t bsize = rs.U32("block size");
+    rs.Need(bsize, "column block");
+    CompressedColumnBlock block = DecodeColumnBlock(t.header, bytes.subspan(off + 4, bsize), name);
+    if (block.first_column != next_column) rs.Fail("column blocks not contiguous");
+    next_column = static_cast<uint64_t>(block.first_column) + block.column_span;
+    for (auto& c : block.columns) t.columns.push_back(std::move(c));
+    off += 4 + static_cast<std::size_t>(bsize);
+  }
+  if (next_column != t.header.column_count()) r.Fail("column blocks do not cover every column");
+  if (off != bytes.size()) r.Fail("trailing bytes after the last column block");
+  return t;
+}
+
+}  // namespace prt

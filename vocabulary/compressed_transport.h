@@ -1,0 +1,121 @@
+// Compressed light transport: the adaptive 4D wavelet form of the transport matrix T
+// (Cheslack-Postava et al. 2008, §4) that the farm writes, the packager ships and the viewer
+// relights from. Format and algorithm: docs/compression.md.
+//
+// T has one row per spatial sample and one column per cubemap texel (6·n·n, cubemap.h order).
+// Rows are 2D wavelet transformed per cubemap face (§4.1), so column j holds, for every spatial
+// sample, the coefficient of row-wavelet basis function j. Each column is then a function over
+// the spatial domain and is wavelet transformed to its own depth (§4.2), non-linearly
+// approximated, scaled by 2^l per column level l, normalised and dither-quantised (§4.3).
+//
+// The spatial domain is a list of segments in the global sample order (scene.h): a mesh is a 1D
+// signal along the Hilbert order of its vertices, a ground grid or an image is a 2D w×h grid.
+// Each segment is transformed on its own; a column's depth is clamped to each segment's maximum.
+//
+// Decoders here are safe on untrusted input: every count, index and enum is validated, and no
+// allocation exceeds what the bytes read can describe. They throw prt::InputError naming `name`.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace prt {
+
+enum class RowWavelet : uint8_t { kHaar = 0, kD4 = 1 };
+enum class ColumnWavelet : uint8_t { kLeGall53 = 0, kCdf97 = 1 };
+// k2D: row transform only, per-row non-linear approximation (Ng et al. 2003).
+// k4D: every column transformed to full depth. kAdaptive4D: per-column depth (§4.2).
+enum class CompressionScheme : uint8_t { k2D = 0, k4D = 1, kAdaptive4D = 2 };
+
+// Parses "haar"|"d4", "legall53"|"cdf97", "2d"|"4d"|"adaptive4d" (scene.h CompressionSettings);
+// throws prt::InputError(file, ...) on anything else.
+RowWavelet ParseRowWavelet(const std::string& s, const std::string& file);
+ColumnWavelet ParseColumnWavelet(const std::string& s, const std::string& file);
+CompressionScheme ParseCompressionScheme(const std::string& s, const std::string& file);
+const char* ToString(RowWavelet w);
+const char* ToString(ColumnWavelet w);
+const char* ToString(CompressionScheme s);
+
+// One piece of the spatial domain: `count` consecutive spatial samples of the global order.
+struct SpatialSegment {
+  enum class Kind : uint8_t { kMesh1D = 0, kGrid2D = 1 };
+  Kind kind = Kind::kMesh1D;
+  uint32_t count = 0;
+  uint32_t width = 0;   // kGrid2D: samples per row (x fastest); width·height == count
+  uint32_t height = 0;  // kGrid2D
+  // kMesh1D: order[k] = local index (0..count) of the vertex at Hilbert position k; a
+  // permutation. Empty means identity. Unused for kGrid2D.
+  std::vector<uint32_t> order;
+};
+
+struct SpatialDomain {
+  std::vector<SpatialSegment> segments;
+  std::size_t sample_count() const;
+};
+
+// Everything a decoder needs besides the columns.
+struct CompressedTransportHeader {
+  uint32_t cubemap_n = 32;
+  uint32_t sample_count = 0;  // rows of T; must equal domain.sample_count()
+  RowWavelet row_wavelet = RowWavelet::kHaar;
+  ColumnWavelet column_wavelet = ColumnWavelet::kLeGall53;
+  CompressionScheme scheme = CompressionScheme::kAdaptive4D;
+  uint8_t bits = 9;               // quantiser bits, [2, 24]
+  double keep_fraction = 0.05;    // non-linear approximation budget (docs/compression.md)
+  uint32_t terms_per_column = 0;  // the per-column budget actually used (0: 2D scheme)
+  uint64_t dither_seed = 1;       // subtractive dither sequence (compressed_relight.h)
+  SpatialDomain domain;
+
+  uint32_t column_count() const { return 6u * cubemap_n * cubemap_n; }
+};
+
+// One compressed column: the kept coefficients of column `column` after its column transform to
+// `depth`, in the coefficient layout of compressed_relight.h. Value k is
+//   c = (q[k] − r(seed, column, index[k])) · scale / (2^(bits−1) − 1) / 2^level(index[k]).
+// An all-zero column is not stored at all.
+struct CompressedColumn {
+  uint32_t column = 0;
+  uint8_t depth = 0;
+  float scale = 0;              // per-column normalisation: max |2^l c| over kept terms
+  std::vector<uint32_t> index;  // strictly increasing, < sample_count
+  std::vector<int32_t> q;       // non-zero, |q| ≤ 2^(bits−1) − 1
+};
+
+// A contiguous range of columns [first_column, first_column + column_span), of which only the
+// non-zero ones are stored, sorted by column.
+struct CompressedColumnBlock {
+  uint32_t first_column = 0;
+  uint32_t column_span = 0;
+  std::vector<CompressedColumn> columns;
+};
+
+struct CompressedTransport {
+  CompressedTransportHeader header;
+  std::vector<CompressedColumn> columns;  // sorted by column, all-zero columns absent
+  std::size_t term_count() const;
+};
+
+// Throws prt::InputError(name, ...) if the header is inconsistent (see docs/compression.md).
+void ValidateHeader(const CompressedTransportHeader& h, const std::string& name);
+// Throws if a column breaks any rule above for header h (index order, bounds, q range, depth).
+void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
+                    const std::string& name);
+
+// Binary encodings (little-endian; docs/compression.md). Encoders validate what they write.
+std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h);
+CompressedTransportHeader DecodeHeader(std::span<const uint8_t> bytes, const std::string& name);
+std::vector<uint8_t> EncodeColumnBlock(const CompressedTransportHeader& h,
+                                       const CompressedColumnBlock& block);
+CompressedColumnBlock DecodeColumnBlock(const CompressedTransportHeader& h,
+                                        std::span<const uint8_t> bytes, const std::string& name);
+
+// Whole compressed transport: header, then blocks of `columns_per_block` columns each.
+std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
+                                               uint32_t columns_per_block = 1024);
+CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
+                                              const std::string& name);
+
+}  // namespace prt

@@ -1,0 +1,102 @@
+// Adaptive-depth column transform (Cheslack-Postava et al. 2008 §4.2, §4.4).
+#include "worker/adaptive_column_transform.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "vocabulary/compressed_relight.h"
+#include "vocabulary/wavelets.h"
+
+namespace prt {
+
+ApproximationEnergy MeasureApproximation(const float* c, std::size_t n, std::size_t budget) {
+  thread_local std::vector<double> sq;
+  sq.clear();
+  ApproximationEnergy e;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double v = static_cast<double>(c[i]) * c[i];
+    if (v > 0) {
+      sq.push_back(v);
+      e.total += v;
+    }
+  }
+  if (sq.size() <= budget) {
+    e.kept = e.total;
+    e.terms = static_cast<uint32_t>(sq.size());
+    e.keeps_all = true;
+    return e;
+  }
+  std::nth_element(sq.begin(), sq.begin() + budget, sq.end(), std::greater<double>());
+  for (std::size_t k = 0; k < budget; ++k) e.kept += sq[k];
+  e.terms = static_cast<uint32_t>(budget);
+  return e;
+}
+
+std::vector<uint32_t> LargestTerms(const float* c, std::size_t n, std::size_t budget) {
+  std::vector<uint32_t> idx;
+  for (std::size_t i = 0; i < n; ++i)
+    if (c[i] != 0.0f) idx.push_back(static_cast<uint32_t>(i));
+  if (idx.size() > budget) {
+    std::nth_element(idx.begin(), idx.begin() + budget, idx.end(), [c](uint32_t a, uint32_t b) {
+      const float fa = std::fabs(c[a]), fb = std::fabs(c[b]);
+      return fa > fb || (fa == fb && a < b);
+    });
+    idx.resize(budget);
+  }
+  std::sort(idx.begin(), idx.end());
+  return idx;
+}
+
+int PickDepth(std::span<const ApproximationEnergy> per_depth) {
+  int best = -1;
+  // Depths that keep all the energy: the fewest terms (then the shallowest) wins.
+  for (std::size_t d = 0; d < per_depth.size(); ++d) {
+    if (!per_depth[d].keeps_all) continue;
+    if (best < 0 || per_depth[d].terms < per_depth[best].terms) best = static_cast<int>(d);
+  }
+  if (best >= 0) return best;
+  // Otherwise the largest kept fraction of the energy (then the shallowest).
+  best = 0;
+  for (std::size_t d = 1; d < per_depth.size(); ++d)
+    if (per_depth[d].kept_fraction() > per_depth[best].kept_fraction()) best = static_cast<int>(d);
+  return best;
+}
+
+int TransformColumnAdaptive(const SpatialDomain& domain, ColumnWavelet wavelet, std::size_t budget,
+                            float* column, std::vector<ApproximationEnergy>* per_depth) {
+  const std::size_t n = domain.sample_count();
+  const int max_depth = MaxColumnDepth(domain);
+  const WaveletFilter f = ToWaveletFilter(wavelet);
+  thread_local std::vector<float> work, best;
+  work.resize(n);
+  best.resize(n);
+  SamplesToCoefficientOrder(domain, column, work.data());
+  std::vector<ApproximationEnergy> measured;
+  measured.reserve(max_depth + 1);
+  measured.push_back(MeasureApproximation(work.data(), n, budget));
+  std::copy(work.begin(), work.end(), best.begin());
+  int chosen = 0;
+  for (int t = 1; t <= max_depth; ++t) {
+    // One more forward step on every segment deep enough for it.
+    std::size_t off = 0;
+    for (const auto& s : domain.segments) {
+      const bool grid = s.kind == SpatialSegment::Kind::kGrid2D;
+      const int w = grid ? static_cast<int>(s.width) : static_cast<int>(s.count);
+      const int h = grid ? static_cast<int>(s.height) : 1;
+      if (t <= MaxSegmentDepth(s)) ForwardWavelet2DStep(f, work.data() + off, w, h, t);
+      off += s.count;
+    }
+    measured.push_back(MeasureApproximation(work.data(), n, budget));
+    const int pick = PickDepth(measured);
+    if (pick != chosen) {
+      chosen = pick;
+      std::copy(work.begin(), work.end(), best.begin());
+    }
+  }
+  std::copy(best.begin(), best.end(), column);
+  if (per_depth) *per_depth = std::move(measured);
+  return chosen;
+}
+
+}  // namespace prt

@@ -1,0 +1,104 @@
+// Hilbert order of mesh vertices and the spatial domain of a scene (docs/compression.md).
+#include "worker/column_order.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+
+namespace prt {
+
+// Skilling 2004: transform axes to the "transposed" Hilbert index, then interleave its bits
+// (most significant first, x before y before z).
+uint64_t HilbertIndex3D(uint32_t x, uint32_t y, uint32_t z, int bits) {
+  if (bits < 1 || bits > 21) throw std::invalid_argument("HilbertIndex3D: bits not in [1,21]");
+  uint32_t X[3] = {x, y, z};
+  const uint32_t M = 1u << (bits - 1);
+  for (uint32_t Q = M; Q > 1; Q >>= 1) {  // inverse undo
+    const uint32_t P = Q - 1;
+    for (int i = 0; i < 3; ++i) {
+      if (X[i] & Q) {
+        X[0] ^= P;
+      } else {
+        const uint32_t t = (X[0] ^ X[i]) & P;
+        X[0] ^= t;
+        X[i] ^= t;
+      }
+    }
+  }
+  for (int i = 1; i < 3; ++i) X[i] ^= X[i - 1];  // Gray encode
+  uint32_t t = 0;
+  for (uint32_t Q = M; Q > 1; Q >>= 1)
+    if (X[2] & Q) t ^= Q - 1;
+  for (auto& v : X) v ^= t;
+  uint64_t h = 0;
+  for (int b = bits - 1; b >= 0; --b)
+    for (int i = 0; i < 3; ++i) h = (h << 1) | ((X[i] >> b) & 1u);
+  return h;
+}
+
+std::vector<uint32_t> HilbertOrder(std::span<const Vec3> positions, int bits) {
+  const std::size_t n = positions.size();
+  std::vector<uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  if (n < 2) return order;
+  Vec3 lo = positions[0], hi = positions[0];
+  for (const Vec3& p : positions) {
+    if (!IsFinite(p)) throw std::invalid_argument("HilbertOrder: non-finite position");
+    lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+    hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+  }
+  // One scale for all axes keeps the curve's cells cubes.
+  const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  const double cells = static_cast<double>((1u << bits) - 1);
+  const double s = extent > 0 ? cells / extent : 0.0;
+  auto q = [&](double v, double o) {
+    return static_cast<uint32_t>(std::clamp(std::floor((v - o) * s + 0.5), 0.0, cells));
+  };
+  std::vector<uint64_t> key(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3& p = positions[i];
+    key[i] = HilbertIndex3D(q(p.x, lo.x), q(p.y, lo.y), q(p.z, lo.z), bits);
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
+  return order;
+}
+
+SpatialSegment MeshSegment(std::span<const Vec3> positions) {
+  SpatialSegment s;
+  s.kind = SpatialSegment::Kind::kMesh1D;
+  s.count = static_cast<uint32_t>(positions.size());
+  s.order = HilbertOrder(positions);
+  return s;
+}
+
+SpatialSegment GridSegment(uint32_t width, uint32_t height) {
+  SpatialSegment s;
+  s.kind = SpatialSegment::Kind::kGrid2D;
+  s.count = width * height;
+  s.width = width;
+  s.height = height;
+  return s;
+}
+
+SpatialDomain SpatialDomainOf(const SceneGeometry& geometry) {
+  SpatialDomain d;
+  for (const SceneMesh& m : geometry.meshes) {
+    const uint32_t r = static_cast<uint32_t>(m.grid_resolution);
+    if (m.is_ground && r > 0 && static_cast<std::size_t>(r) * r == m.mesh.positions.size()) {
+      d.segments.push_back(GridSegment(r, r));
+    } else if (!m.mesh.positions.empty()) {
+      d.segments.push_back(MeshSegment(m.mesh.positions));
+    }
+  }
+  return d;
+}
+
+SpatialDomain ImageDomain(uint32_t width, uint32_t height) {
+  SpatialDomain d;
+  d.segments.push_back(GridSegment(width, height));
+  return d;
+}
+
+}  // namespace prt
