@@ -1,0 +1,256 @@
+// Software z-buffer rasteriser: near-plane clipping (Sutherland–Hodgman against one plane), edge
+// functions with the top-left fill rule, perspective-correct interpolation (attributes a/z and 1/z
+// are affine in screen space; Heckbert & Moreton 1991), z-test on view depth.
+#include "viewer/rasterizer.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+namespace prt {
+
+CameraProjection::CameraProjection(const Camera& camera)
+    : eye_(camera.eye), width_(camera.width), height_(camera.height) {
+  if (camera.width <= 0 || camera.height <= 0) {
+    throw std::invalid_argument("Camera: non-positive image size");
+  }
+  if (!(camera.fov_deg > 0.0 && camera.fov_deg < 180.0)) {
+    throw std::invalid_argument("Camera: vertical fov must lie in (0, 180) degrees");
+  }
+  forward_ = Normalize(camera.target - camera.eye);
+  right_ = Normalize(Cross(forward_, camera.up));
+  if (Length(forward_) == 0.0 || Length(right_) == 0.0 || !IsFinite(forward_) ||
+      !IsFinite(right_)) {
+    throw std::invalid_argument("Camera: eye equals target or up is parallel to the view");
+  }
+  up_ = Cross(right_, forward_);
+  tan_half_ = std::tan(camera.fov_deg * std::numbers::pi / 360.0);
+  aspect_ = static_cast<double>(width_) / height_;
+}
+
+Vec3 CameraProjection::PixelDirection(double px, double py) const {
+  const double sx = (2.0 * px / width_ - 1.0) * aspect_ * tan_half_;
+  const double sy = (1.0 - 2.0 * py / height_) * tan_half_;
+  return Normalize(forward_ + sx * right_ + sy * up_);
+}
+
+Vec3 CameraProjection::ToView(const Vec3& p) const {
+  const Vec3 d = p - eye_;
+  return {Dot(d, right_), Dot(d, up_), Dot(d, forward_)};
+}
+
+void CameraProjection::ViewToPixel(const Vec3& v, double& px, double& py) const {
+  px = (v.x / (v.z * aspect_ * tan_half_) + 1.0) * 0.5 * width_;
+  py = (1.0 - v.y / (v.z * tan_half_)) * 0.5 * height_;
+}
+
+namespace {
+
+struct ClipVertex {
+  Vec3 view;
+  std::array<double, 3> rgb;
+};
+
+// A clipped triangle in screen space, ready for scan conversion.
+struct ScreenTriangle {
+  double px[3], py[3];
+  double inv_z[3];
+  double rgb_over_z[3][3];
+  int32_t id = -1;  // −1: empty slot
+  int ymin = 0, ymax = -1, xmin = 0, xmax = -1;
+};
+
+ClipVertex Lerp(const ClipVertex& a, const ClipVertex& b, double t) {
+  ClipVertex r;
+  r.view = a.view + (b.view - a.view) * t;
+  for (int c = 0; c < 3; ++c) r.rgb[c] = a.rgb[c] + (b.rgb[c] - a.rgb[c]) * t;
+  return r;
+}
+
+// Keeps the part of a triangle with view z ≥ near: 0, 3 or 4 vertices.
+int ClipNear(const ClipVertex in[3], double near, ClipVertex out[4]) {
+  int n = 0;
+  for (int i = 0; i < 3; ++i) {
+    const ClipVertex& a = in[i];
+    const ClipVertex& b = in[(i + 1) % 3];
+    const bool ina = a.view.z >= near, inb = b.view.z >= near;
+    if (ina) out[n++] = a;
+    if (ina != inb) out[n++] = Lerp(a, b, (near - a.view.z) / (b.view.z - a.view.z));
+  }
+  return n;
+}
+
+bool SetupTriangle(const CameraProjection& cam, const ClipVertex& a, const ClipVertex& b,
+                   const ClipVertex& c, int32_t id, ScreenTriangle& t) {
+  const ClipVertex* v[3] = {&a, &b, &c};
+  double xmin = std::numeric_limits<double>::infinity(), xmax = -xmin, ymin = xmin, ymax = -xmin;
+  for (int i = 0; i < 3; ++i) {
+    cam.ViewToPixel(v[i]->view, t.px[i], t.py[i]);
+    t.inv_z[i] = 1.0 / v[i]->view.z;
+    for (int ch = 0; ch < 3; ++ch) t.rgb_over_z[i][ch] = v[i]->rgb[ch] * t.inv_z[i];
+    xmin = std::min(xmin, t.px[i]);
+    xmax = std::max(xmax, t.px[i]);
+    ymin = std::min(ymin, t.py[i]);
+    ymax = std::max(ymax, t.py[i]);
+  }
+  if (!std::isfinite(xmin + xmax + ymin + ymax)) return false;
+  // Pixel centres x + ½ inside [xmin, xmax].
+  // Clamped in double first so that a huge projected triangle cannot overflow an int.
+  const double w = cam.width(), h = cam.height();
+  t.xmin = static_cast<int>(std::ceil(std::clamp(xmin - 0.5, 0.0, w)));
+  t.xmax = static_cast<int>(std::floor(std::clamp(xmax - 0.5, -1.0, w - 1.0)));
+  t.ymin = static_cast<int>(std::ceil(std::clamp(ymin - 0.5, 0.0, h)));
+  t.ymax = static_cast<int>(std::floor(std::clamp(ymax - 0.5, -1.0, h - 1.0)));
+  t.id = id;
+  return t.xmin <= t.xmax && t.ymin <= t.ymax;
+}
+
+// Edge function of the edge a→b at p: positive on one side, zero on the line.
+inline double Edge(double ax, double ay, double bx, double by, double px, double py) {
+  return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
+}
+
+// Top-left rule: a pixel centre exactly on an edge belongs to the triangle whose interior lies to
+// its right (+x) or, for a horizontal edge, below it (+y). `nx, ny` is the inward edge normal.
+inline bool OwnsEdge(double nx, double ny) {
+  return nx > 0.0 || (nx == 0.0 && ny > 0.0);
+}
+
+void DrawTriangle(const ScreenTriangle& t, int row0, int row1, int width, RasterImage& img) {
+  const int y0 = std::max(row0, t.ymin), y1 = std::min(row1 - 1, t.ymax);
+  if (y0 > y1) return;
+  const double area = Edge(t.px[0], t.py[0], t.px[1], t.py[1], t.px[2], t.py[2]);
+  if (area == 0.0 || !std::isfinite(area)) return;
+  const double s = area > 0.0 ? 1.0 : -1.0;
+  // Edge i is opposite vertex i: (1→2), (2→0), (0→1).
+  const int ea[3] = {1, 2, 0}, eb[3] = {2, 0, 1};
+  bool owns[3];
+  for (int i = 0; i < 3; ++i) {
+    const double dx = t.px[eb[i]] - t.px[ea[i]], dy = t.py[eb[i]] - t.py[ea[i]];
+    owns[i] = OwnsEdge(-s * dy, s * dx);
+  }
+  const double inv_area = 1.0 / area;
+  for (int y = y0; y <= y1; ++y) {
+    const double py = y + 0.5;
+    for (int x = t.xmin; x <= t.xmax; ++x) {
+      const double px = x + 0.5;
+      double w[3];
+      bool inside = true;
+      for (int i = 0; i < 3; ++i) {
+        w[i] = s * Edge(t.px[ea[i]], t.py[ea[i]], t.px[eb[i]], t.py[eb[i]], px, py);
+        if (w[i] < 0.0 || (w[i] == 0.0 && !owns[i])) {
+          inside = false;
+          break;
+        }
+      }
+      if (!inside) continue;
+      // Screen-space barycentrics; 1/z and rgb/z are affine in screen space.
+      double b[3];
+      for (int i = 0; i < 3; ++i) b[i] = s * w[i] * inv_area;
+      const double inv_z = b[0] * t.inv_z[0] + b[1] * t.inv_z[1] + b[2] * t.inv_z[2];
+      if (!(inv_z > 0.0)) continue;
+      const double z = 1.0 / inv_z;
+      const std::size_t p = static_cast<std::size_t>(y) * width + x;
+      if (!(z < img.depth[p])) continue;
+      img.depth[p] = static_cast<float>(z);
+      img.triangle[p] = t.id;
+      for (int c = 0; c < 3; ++c) {
+        const double v =
+            (b[0] * t.rgb_over_z[0][c] + b[1] * t.rgb_over_z[1][c] + b[2] * t.rgb_over_z[2][c]) * z;
+        img.rgb[3 * p + c] = std::isfinite(v) ? static_cast<float>(v) : 0.0f;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> positions,
+                               std::span<const std::array<uint32_t, 3>> triangles,
+                               std::span<const float> vertex_rgb, const RasterOptions& options) {
+  const CameraProjection cam(camera);
+  if (vertex_rgb.size() != 3 * positions.size()) {
+    throw std::invalid_argument("RasterizeTriangles: " + std::to_string(vertex_rgb.size()) +
+                                " colour values for " + std::to_string(positions.size()) +
+                                " vertices");
+  }
+  for (std::size_t i = 0; i < triangles.size(); ++i) {
+    for (uint32_t v : triangles[i]) {
+      if (v >= positions.size()) {
+        throw std::invalid_argument("RasterizeTriangles: triangle " + std::to_string(i) +
+                                    " has vertex index " + std::to_string(v) + " out of range");
+      }
+    }
+  }
+  const double near = options.near > 0.0 ? options.near : 1e-3;
+  // Clip and project every triangle (at most two screen triangles each).
+  std::vector<ScreenTriangle> screen(2 * triangles.size());
+  tbb::parallel_for(std::size_t{0}, triangles.size(), [&](std::size_t i) {
+    ClipVertex in[3];
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = triangles[i][k];
+      in[k].view = cam.ToView(positions[v]);
+      for (int c = 0; c < 3; ++c) in[k].rgb[c] = vertex_rgb[3 * static_cast<std::size_t>(v) + c];
+    }
+    ClipVertex out[4];
+    const int n = ClipNear(in, near, out);
+    const auto id = static_cast<int32_t>(i);
+    if (n >= 3 && !SetupTriangle(cam, out[0], out[1], out[2], id, screen[2 * i])) {
+      screen[2 * i].id = -1;
+    }
+    if (n == 4 && !SetupTriangle(cam, out[0], out[2], out[3], id, screen[2 * i + 1])) {
+      screen[2 * i + 1].id = -1;
+    }
+  });
+
+  RasterImage img;
+  img.width = camera.width;
+  img.height = camera.height;
+  const std::size_t pixels = static_cast<std::size_t>(img.width) * img.height;
+  img.rgb.assign(3 * pixels, 0.0f);
+  img.depth.assign(pixels, std::numeric_limits<float>::max());
+  img.triangle.assign(pixels, -1);
+
+  constexpr int kBandRows = 16;
+  const int bands = (img.height + kBandRows - 1) / kBandRows;
+  tbb::parallel_for(0, bands, [&](int band) {
+    const int row0 = band * kBandRows, row1 = std::min(img.height, row0 + kBandRows);
+    for (const ScreenTriangle& t : screen) {
+      if (t.id < 0 || t.ymax < row0 || t.ymin >= row1) continue;
+      DrawTriangle(t, row0, row1, img.width, img);
+    }
+    if (options.background) {
+      for (int y = row0; y < row1; ++y) {
+        for (int x = 0; x < img.width; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * img.width + x;
+          if (img.triangle[p] >= 0) continue;
+          const Rgb c = options.background(cam.PixelDirection(x + 0.5, y + 0.5));
+          for (int k = 0; k < 3; ++k) img.rgb[3 * p + k] = std::isfinite(c[k]) ? c[k] : 0.0f;
+        }
+      }
+    }
+  });
+  return img;
+}
+
+BackgroundFunction CubemapBackground(const CubemapRgb& cube) {
+  const CubemapLayout layout(cube.n);
+  for (int c = 0; c < 3; ++c) {
+    if (cube.Channel(c).size() != layout.texel_count()) {
+      throw std::invalid_argument("CubemapBackground: channel " + std::to_string(c) + " has " +
+                                  std::to_string(cube.Channel(c).size()) + " texels, expected " +
+                                  std::to_string(layout.texel_count()));
+    }
+  }
+  return [layout, cube](const Vec3& d) {
+    const std::size_t t = layout.TexelOf(d);
+    return Rgb{cube.r[t], cube.g[t], cube.b[t]};
+  };
+}
+
+}  // namespace prt

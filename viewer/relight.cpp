@@ -1,0 +1,215 @@
+// Relighting from Haar-basis transport rows (Ng et al. 2003 Eq. 1; Overbeck et al. 2006 Eq. 4:
+// ΔB = T·ΔL touches only the columns named by ΔL's terms).
+#include "viewer/relight.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace prt {
+
+SampleRadiance::SampleRadiance(std::size_t samples) {
+  for (auto& c : channel) c.assign(samples, 0.0);
+}
+
+void SampleRadiance::SetZero() {
+  for (auto& c : channel) std::fill(c.begin(), c.end(), 0.0);
+}
+
+SampleRadiance& SampleRadiance::operator+=(const SampleRadiance& other) {
+  if (other.size() != size()) throw std::invalid_argument("SampleRadiance += : size mismatch");
+  for (int c = 0; c < 3; ++c) {
+    double* __restrict d = channel[c].data();
+    const double* __restrict s = other.channel[c].data();
+    const std::size_t n = size();
+    for (std::size_t i = 0; i < n; ++i) d[i] += s[i];
+  }
+  return *this;
+}
+
+SampleRadiance TransportOperator::Apply(std::span<const LightingTerm> terms) const {
+  SampleRadiance out(sample_count());
+  Accumulate(terms, out);
+  return out;
+}
+
+namespace {
+
+void CheckTerms(std::span<const LightingTerm> terms, std::size_t coefficients,
+                const SampleRadiance& out, std::size_t samples) {
+  if (out.size() != samples) {
+    throw std::invalid_argument("TransportOperator::Accumulate: output has " +
+                                std::to_string(out.size()) + " samples, expected " +
+                                std::to_string(samples));
+  }
+  for (const LightingTerm& t : terms) {
+    if (t.index >= coefficients) {
+      throw std::out_of_range("TransportOperator::Accumulate: coefficient " +
+                              std::to_string(t.index) + " out of range (" +
+                              std::to_string(coefficients) + " coefficients)");
+    }
+  }
+}
+
+std::size_t BlockCount(std::size_t samples, std::size_t block) {
+  return (samples + block - 1) / block;
+}
+
+}  // namespace
+
+DenseTransport::DenseTransport(std::span<const float> rows, std::size_t samples,
+                               std::size_t coefficients)
+    : samples_(samples), coefficients_(coefficients) {
+  if (rows.size() != samples * coefficients) {
+    throw std::invalid_argument("DenseTransport: " + std::to_string(rows.size()) + " values for " +
+                                std::to_string(samples) + " × " + std::to_string(coefficients));
+  }
+  const std::size_t nb = BlockCount(samples, kBlockSamples);
+  blocks_.assign(nb * coefficients * kBlockSamples, 0.0f);
+  // Transpose each block of rows into column-major order (parallel over blocks).
+  tbb::parallel_for(std::size_t{0}, nb, [&](std::size_t b) {
+    const std::size_t s0 = b * kBlockSamples;
+    const std::size_t s1 = std::min(samples, s0 + kBlockSamples);
+    float* dst = blocks_.data() + b * coefficients * kBlockSamples;
+    for (std::size_t s = s0; s < s1; ++s) {
+      const float* row = rows.data() + s * coefficients;
+      for (std::size_t j = 0; j < coefficients; ++j) {
+        if (!std::isfinite(row[j])) {
+          throw std::invalid_argument("DenseTransport: NaN/Inf at sample " + std::to_string(s) +
+                                      ", coefficient " + std::to_string(j));
+        }
+        dst[j * kBlockSamples + (s - s0)] = row[j];
+      }
+    }
+  });
+}
+
+void DenseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const {
+  CheckTerms(terms, coefficients_, out, samples_);
+  if (terms.empty() || samples_ == 0) return;
+  const std::size_t nb = BlockCount(samples_, kBlockSamples);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb), [&](const auto& range) {
+    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+      const std::size_t s0 = b * kBlockSamples;
+      const std::size_t len = std::min(samples_, s0 + kBlockSamples) - s0;
+      // Accumulate the block locally (fixed size, stays in L1), then add once.
+      alignas(64) double acc[3][kBlockSamples] = {};
+      const float* base = blocks_.data() + b * coefficients_ * kBlockSamples;
+      for (const LightingTerm& t : terms) {
+        const float* __restrict col = base + static_cast<std::size_t>(t.index) * kBlockSamples;
+        const double vr = t.value[0], vg = t.value[1], vb = t.value[2];
+        for (std::size_t i = 0; i < kBlockSamples; ++i) {
+          const double x = static_cast<double>(col[i]);
+          acc[0][i] += x * vr;
+          acc[1][i] += x * vg;
+          acc[2][i] += x * vb;
+        }
+      }
+      for (int c = 0; c < 3; ++c) {
+        double* __restrict o = out.channel[c].data() + s0;
+        for (std::size_t i = 0; i < len; ++i) o[i] += acc[c][i];
+      }
+    }
+  });
+}
+
+SparseTransport::SparseTransport(std::span<const uint64_t> row_offsets,
+                                 std::span<const uint32_t> indices, std::span<const float> values,
+                                 std::size_t coefficients)
+    : samples_(row_offsets.empty() ? 0 : row_offsets.size() - 1), coefficients_(coefficients) {
+  if (row_offsets.empty() || row_offsets.front() != 0 || row_offsets.back() != indices.size() ||
+      indices.size() != values.size()) {
+    throw std::invalid_argument("SparseTransport: inconsistent CSR offsets/indices/values");
+  }
+  for (std::size_t s = 0; s < samples_; ++s) {
+    if (row_offsets[s + 1] < row_offsets[s]) {
+      throw std::invalid_argument("SparseTransport: row offsets decrease at sample " +
+                                  std::to_string(s));
+    }
+  }
+  for (std::size_t k = 0; k < indices.size(); ++k) {
+    if (indices[k] >= coefficients) {
+      throw std::invalid_argument("SparseTransport: coefficient index " +
+                                  std::to_string(indices[k]) + " out of range");
+    }
+    if (!std::isfinite(values[k])) {
+      throw std::invalid_argument("SparseTransport: NaN/Inf value at non-zero " +
+                                  std::to_string(k));
+    }
+  }
+  const std::size_t nb = BlockCount(samples_, kBlockSamples);
+  const std::size_t stride = coefficients + 1;
+  column_start_.assign(nb * stride, 0);
+  local_sample_.resize(values.size());
+  values_.resize(values.size());
+  // Counting sort of each block's non-zeros by column; blocks occupy the same value range as in
+  // the CSR input (rows of a block are contiguous there), so blocks fill independently.
+  tbb::parallel_for(std::size_t{0}, nb, [&](std::size_t b) {
+    const std::size_t s0 = b * kBlockSamples;
+    const std::size_t s1 = std::min(samples_, s0 + kBlockSamples);
+    const uint64_t first = row_offsets[s0];
+    uint64_t* start = column_start_.data() + b * stride;
+    for (std::size_t s = s0; s < s1; ++s) {
+      for (uint64_t k = row_offsets[s]; k < row_offsets[s + 1]; ++k) ++start[indices[k] + 1];
+    }
+    start[0] = first;
+    for (std::size_t j = 0; j < coefficients; ++j) start[j + 1] += start[j];
+    std::vector<uint64_t> fill(start, start + coefficients);
+    for (std::size_t s = s0; s < s1; ++s) {
+      for (uint64_t k = row_offsets[s]; k < row_offsets[s + 1]; ++k) {
+        const uint64_t dst = fill[indices[k]]++;
+        local_sample_[dst] = static_cast<uint16_t>(s - s0);
+        values_[dst] = values[k];
+      }
+    }
+  });
+}
+
+void SparseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const {
+  CheckTerms(terms, coefficients_, out, samples_);
+  if (terms.empty() || samples_ == 0) return;
+  const std::size_t nb = BlockCount(samples_, kBlockSamples);
+  const std::size_t stride = coefficients_ + 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb), [&](const auto& range) {
+    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+      const std::size_t s0 = b * kBlockSamples;
+      double* __restrict r = out.channel[0].data() + s0;
+      double* __restrict g = out.channel[1].data() + s0;
+      double* __restrict bl = out.channel[2].data() + s0;
+      const uint64_t* start = column_start_.data() + b * stride;
+      for (const LightingTerm& t : terms) {
+        const double vr = t.value[0], vg = t.value[1], vb = t.value[2];
+        for (uint64_t k = start[t.index]; k < start[t.index + 1]; ++k) {
+          const std::size_t i = local_sample_[k];
+          const double x = static_cast<double>(values_[k]);
+          r[i] += x * vr;
+          g[i] += x * vg;
+          bl[i] += x * vb;
+        }
+      }
+    }
+  });
+}
+
+std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo) {
+  const std::size_t n = radiance.size();
+  if (albedo.size() > 1 && albedo.size() != n) {
+    throw std::invalid_argument("ShadeSamples: " + std::to_string(albedo.size()) + " albedos for " +
+                                std::to_string(n) + " samples");
+  }
+  std::vector<float> rgb(3 * n);
+  for (std::size_t s = 0; s < n; ++s) {
+    for (int c = 0; c < 3; ++c) {
+      const double a = albedo.empty() ? 1.0 : albedo[albedo.size() == 1 ? 0 : s][c];
+      const double v = a * radiance.channel[c][s];
+      rgb[3 * s + c] = std::isfinite(v) ? static_cast<float>(v) : 0.0f;
+    }
+  }
+  return rgb;
+}
+
+}  // namespace prt

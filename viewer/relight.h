@@ -1,0 +1,108 @@
+// Relighting B = albedo ⊙ (T·L̂) (Ng et al. 2003 Eq. 1; Overbeck et al. 2006 Eq. 1–4) for a light
+// transport T given in the orthonormal Haar basis of the lighting cubemap (vocabulary/wavelets.h):
+// since the transform is orthonormal, T·L over texels equals (T Wᵀ)·(W L) over coefficients.
+//
+// T is albedo-free (worker/transport_sampler.h): radiance per sample is (T·L̂) per colour channel,
+// and the albedo multiplies it at the end (ShadeSamples). A lighting approximation L̂ is a short
+// list of terms (coefficient index, RGB value); every operator applies only the columns its terms
+// name, so an incremental update B += T·ΔL̂ costs N columns, not the whole matrix.
+//
+// TransportOperator is the seam where other representations plug in (the compressed 4D transport
+// of vocabulary/compressed_transport.h implements the same Accumulate).
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "vocabulary/scene.h"
+
+namespace prt {
+
+// One term of a lighting approximation: a Haar coefficient index and its value per channel.
+struct LightingTerm {
+  uint32_t index = 0;
+  std::array<double, 3> value{0.0, 0.0, 0.0};
+};
+
+// Outgoing radiance per spatial sample, one array per colour channel, accumulated in double so
+// that long sums of incremental updates do not drift.
+struct SampleRadiance {
+  std::array<std::vector<double>, 3> channel;
+
+  SampleRadiance() = default;
+  explicit SampleRadiance(std::size_t samples);
+  std::size_t size() const { return channel[0].size(); }
+  void SetZero();
+  SampleRadiance& operator+=(const SampleRadiance& other);
+};
+
+// A light transport operator: sample_count() rows, coefficient_count() Haar columns.
+class TransportOperator {
+ public:
+  virtual ~TransportOperator() = default;
+  virtual std::size_t sample_count() const = 0;
+  virtual std::size_t coefficient_count() const = 0;
+
+  // out.channel[c][s] += Σ_k T[s][terms[k].index] · terms[k].value[c] for every sample s.
+  // out must have sample_count() samples; every index must be < coefficient_count() (throws
+  // std::out_of_range otherwise). Repeated indices are allowed (their values add).
+  virtual void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const = 0;
+
+  // T·L̂ for a lighting approximation, from zero.
+  SampleRadiance Apply(std::span<const LightingTerm> terms) const;
+};
+
+// Dense rows: T stored in blocks of kBlockSamples samples, column-major inside a block, so that
+// applying one term is a contiguous, vectorisable axpy over the block. Blocks run in parallel
+// (TBB).
+class DenseTransport final : public TransportOperator {
+ public:
+  static constexpr std::size_t kBlockSamples = 256;
+
+  // rows: samples × coefficients floats, row-major (one Haar-transformed row per sample).
+  // Throws std::invalid_argument on a size mismatch or a NaN/Inf entry.
+  DenseTransport(std::span<const float> rows, std::size_t samples, std::size_t coefficients);
+
+  std::size_t sample_count() const override { return samples_; }
+  std::size_t coefficient_count() const override { return coefficients_; }
+  void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+
+ private:
+  std::size_t samples_;
+  std::size_t coefficients_;
+  std::vector<float> blocks_;  // [block][coefficient][sample in block], zero-padded
+};
+
+// Sparse rows (CSR: row_offsets has samples + 1 entries, indices/values hold the non-zeros of each
+// row). Stored as one compressed-column block per kBlockSamples samples, so a term visits only the
+// non-zeros of its column; blocks run in parallel (TBB).
+class SparseTransport final : public TransportOperator {
+ public:
+  static constexpr std::size_t kBlockSamples = 1024;
+
+  // Throws std::invalid_argument on inconsistent offsets, an index ≥ coefficients, or NaN/Inf.
+  SparseTransport(std::span<const uint64_t> row_offsets, std::span<const uint32_t> indices,
+                  std::span<const float> values, std::size_t coefficients);
+
+  std::size_t sample_count() const override { return samples_; }
+  std::size_t coefficient_count() const override { return coefficients_; }
+  std::size_t nonzero_count() const { return values_.size(); }
+  void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+
+ private:
+  std::size_t samples_;
+  std::size_t coefficients_;
+  std::vector<uint64_t> column_start_;  // [block · (coefficients + 1) + column]
+  std::vector<uint16_t> local_sample_;  // sample within its block
+  std::vector<float> values_;
+};
+
+// Final colours: albedo ⊙ radiance, interleaved RGB float per sample. albedo may be empty (white),
+// hold one colour (uniform) or one per sample (else std::invalid_argument). NaN/Inf become 0.
+std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo);
+
+}  // namespace prt
