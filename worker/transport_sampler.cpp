@@ -1,0 +1,308 @@
+#include "worker/transport_sampler.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+#include "vocabulary/errors.h"
+
+namespace prt {
+
+namespace {
+
+// SplitMix64 finaliser (Steele, Lea & Flood 2014): a bijective 64-bit mixer, used as a
+// counter-based hash so that every jitter is a pure function of its key (no RNG state).
+constexpr uint64_t SplitMix64(uint64_t z) {
+  z += 0x9E3779B97F4A7C15ull;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+// Key of one row: depends on (seed, global sample index) only.
+constexpr uint64_t RowKey(uint64_t seed, uint64_t sample_index) {
+  return SplitMix64(SplitMix64(seed ^ 0x5052544641524D31ull) ^ sample_index);
+}
+
+// Largest divisor of k not above √k: the strata grid is (k / b) × b.
+int StrataV(int k) {
+  int b = 1;
+  for (int d = 1; d * d <= k; ++d) {
+    if (k % d == 0) b = d;
+  }
+  return b;
+}
+
+// Everything a row needs about its sample, computed once per call.
+struct SampleFrame {
+  Vec3 normal;         // unit shading normal
+  OcclusionRay ray{};  // origin, tnear, tfar filled; direction per ray
+  uint64_t key = 0;    // RowKey(seed, sample index)
+};
+
+// Trace functors: the same EvaluateTexel instantiation serves ComputeRow and ComputeTexels, so
+// their values agree bit for bit; the collecting one reproduces the exact rays for benchmarks.
+struct EmbreeTracer {
+  const EmbreeScene* scene;
+  bool operator()(const OcclusionRay& r) const { return scene->Occluded(r); }
+};
+struct CollectingTracer {
+  std::vector<OcclusionRay>* rays;
+  bool operator()(const OcclusionRay& r) const {
+    rays->push_back(r);
+    return true;
+  }
+};
+
+}  // namespace
+
+struct TransportSampler::Impl {
+  const EmbreeScene& scene;
+  CubemapLayout layout;
+  TransportSamplerOptions options;
+  int strata_u = 1;
+  int strata_v = 1;
+  // Ω_s for every stratum of every texel of one face (all faces share it): index
+  // (y·n + x)·k + s.
+  std::vector<double> stratum_omega;
+
+  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o)
+      : scene(s), layout(n), options(o) {
+    const int k = o.rays_per_texel;
+    if (k < 1 || k > 1024) {
+      throw std::invalid_argument("TransportSampler: rays_per_texel must be in [1, 1024], got " +
+                                  std::to_string(k));
+    }
+    strata_v = StrataV(k);
+    strata_u = k / strata_v;
+    stratum_omega.resize(layout.face_size() * static_cast<std::size_t>(k));
+    const double h = 2.0 / n;
+    const double du = h / strata_u, dv = h / strata_v;
+    for (int y = 0; y < n; ++y) {
+      for (int x = 0; x < n; ++x) {
+        const double u0 = -1 + h * x, v0 = -1 + h * y;
+        for (int sv = 0; sv < strata_v; ++sv) {
+          for (int su = 0; su < strata_u; ++su) {
+            // The stratum edges are computed as the jittered rays compute them (u0 + i·du), so
+            // neighbouring strata share their edge and the strata tile the texel exactly.
+            stratum_omega[(static_cast<std::size_t>(y) * n + x) * k + sv * strata_u + su] =
+                FaceRectSolidAngle(u0 + su * du, su + 1 == strata_u ? u0 + h : u0 + (su + 1) * du,
+                                   v0 + sv * dv, sv + 1 == strata_v ? v0 + h : v0 + (sv + 1) * dv);
+          }
+        }
+      }
+    }
+  }
+
+  SampleFrame Frame(const SpatialSample& sample, uint64_t sample_index) const {
+    SampleFrame f;
+    const double len = Length(sample.normal);
+    if (!IsFinite(sample.position) || !std::isfinite(len) || len == 0) {
+      throw NumericalError("TransportSampler: sample " + std::to_string(sample_index) +
+                           " has a non-finite position or a zero/non-finite normal");
+    }
+    f.normal = std::abs(len - 1) > 1e-12 ? sample.normal / len : sample.normal;
+    Vec3 ng = sample.geometric_normal;
+    const double lg = Length(ng);
+    ng = (std::isfinite(lg) && lg > 0) ? ng / lg : f.normal;
+    if (Dot(ng, f.normal) < 0) ng = -ng;
+    scene.RobustOrigin(sample.position, ng, f.ray.origin);
+    f.ray.tnear = 0.0f;
+    f.ray.tfar = std::numeric_limits<float>::infinity();
+    f.key = RowKey(options.seed, sample_index);
+    return f;
+  }
+
+  // (1/π)·Σ_s Ω_s·V(ω_s)·max(0, n·ω_s) over the strata of texel (face, x, y) — DESIGN.md's
+  // transport integral, estimated by stratified jittered sampling in the face coordinates with
+  // exact stratum solid angles as weights (docs/transport-sampling.md, "Estimator").
+  template <class Trace>
+  [[gnu::noinline]] float EvaluateTexel(const SampleFrame& f, int face, int x, int y,
+                                        std::size_t texel, SampleStats& stats,
+                                        const Trace& trace) const {
+    const int n = layout.n();
+    const int k = options.rays_per_texel;
+    const double h = 2.0 / n;
+    const double du = h / strata_u, dv = h / strata_v;
+    const double u0 = -1 + h * x, v0 = -1 + h * y;
+    const double* omega = &stratum_omega[(static_cast<std::size_t>(y) * n + x) * k];
+    const uint64_t base = static_cast<uint64_t>(texel) * static_cast<uint64_t>(k);
+    OcclusionRay ray = f.ray;
+    double sum = 0;
+    for (int sv = 0; sv < strata_v; ++sv) {
+      for (int su = 0; su < strata_u; ++su) {
+        const int s = sv * strata_u + su;
+        // Jitter = pure function of (seed, sample index, texel, stratum); open interval (0, 1).
+        const uint64_t bits = SplitMix64(f.key ^ (base + static_cast<uint64_t>(s)));
+        const double ju = (static_cast<double>(bits >> 32) + 0.5) * 0x1p-32;
+        const double jv = (static_cast<double>(bits & 0xFFFFFFFFull) + 0.5) * 0x1p-32;
+        const double u = u0 + (su + ju) * du;
+        const double v = v0 + (sv + jv) * dv;
+        const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
+        const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
+        const double c = Dot(f.normal, d);
+        if (!(c > 0)) {  // below the horizon inside a partly visible texel: 0, not traced
+          ++stats.rays_below_horizon;
+          continue;
+        }
+        ray.direction[0] = static_cast<float>(d.x);
+        ray.direction[1] = static_cast<float>(d.y);
+        ray.direction[2] = static_cast<float>(d.z);
+        ++stats.rays_traced;
+        if (!trace(ray)) sum += omega[s] * c;
+      }
+    }
+    ++stats.texels_traced;
+    return static_cast<float>(sum * std::numbers::inv_pi);
+  }
+
+  template <class Trace>
+  SampleStats Row(const SpatialSample& sample, uint64_t sample_index, float* row,
+                  const Trace& trace) const {
+    const ScopedFlushDenormals ftz;
+    const SampleFrame f = Frame(sample, sample_index);
+    SampleStats stats;
+    const int n = layout.n();
+    std::size_t j = 0;
+    for (int face = 0; face < 6; ++face) {
+      for (int y = 0; y < n; ++y) {
+        for (int x = 0; x < n; ++x, ++j) {
+          if (!layout.TexelAboveHorizon(j, f.normal)) {
+            ++stats.texels_below_horizon;
+            if (row != nullptr) row[j] = 0.0f;
+            continue;
+          }
+          const float value = EvaluateTexel(f, face, x, y, j, stats, trace);
+          if (row != nullptr) row[j] = value;
+        }
+      }
+    }
+    return stats;
+  }
+};
+
+TransportSampler::TransportSampler(const EmbreeScene& scene, int cubemap_n,
+                                   TransportSamplerOptions options)
+    : impl_(std::make_unique<Impl>(scene, cubemap_n, options)) {}
+
+TransportSampler::~TransportSampler() = default;
+
+const CubemapLayout& TransportSampler::layout() const {
+  return impl_->layout;
+}
+const TransportSamplerOptions& TransportSampler::options() const {
+  return impl_->options;
+}
+int TransportSampler::strata_u() const {
+  return impl_->strata_u;
+}
+int TransportSampler::strata_v() const {
+  return impl_->strata_v;
+}
+
+double TransportSampler::StratumSolidAngle(std::size_t texel, int stratum) const {
+  const std::size_t fs = impl_->layout.face_size();
+  const int k = impl_->options.rays_per_texel;
+  if (texel >= impl_->layout.texel_count() || stratum < 0 || stratum >= k) {
+    throw std::out_of_range("TransportSampler::StratumSolidAngle: texel or stratum out of range");
+  }
+  return impl_->stratum_omega[(texel % fs) * k + stratum];
+}
+
+SampleStats TransportSampler::ComputeRow(const SpatialSample& sample, uint64_t sample_index,
+                                         float* row) const {
+  return impl_->Row(sample, sample_index, row, EmbreeTracer{&impl_->scene});
+}
+
+SampleStats TransportSampler::ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
+                                            std::span<const uint32_t> texels, float* values) const {
+  const Impl& im = *impl_;
+  const std::size_t count = im.layout.texel_count();
+  for (uint32_t j : texels) {
+    if (j >= count) {
+      throw std::out_of_range("TransportSampler::ComputeTexels: texel " + std::to_string(j) +
+                              " ≥ " + std::to_string(count));
+    }
+  }
+  const ScopedFlushDenormals ftz;
+  const SampleFrame f = im.Frame(sample, sample_index);
+  const EmbreeTracer trace{&im.scene};
+  SampleStats stats;
+  for (std::size_t i = 0; i < texels.size(); ++i) {
+    const std::size_t j = texels[i];
+    if (!im.layout.TexelAboveHorizon(j, f.normal)) {
+      ++stats.texels_below_horizon;
+      values[i] = 0.0f;
+      continue;
+    }
+    const TexelCoord c = im.layout.Coord(j);
+    values[i] = im.EvaluateTexel(f, c.face, c.x, c.y, j, stats, trace);
+  }
+  return stats;
+}
+
+SampleStats TransportSampler::ComputeRows(std::span<const SpatialSample> samples,
+                                          uint64_t first_index, float* out) const {
+  const std::size_t row_size = impl_->layout.texel_count();
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, samples.size()), SampleStats{},
+      [&](const tbb::blocked_range<std::size_t>& r, SampleStats acc) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          acc += ComputeRow(samples[i], first_index + i, out + i * row_size);
+        }
+        return acc;
+      },
+      [](SampleStats a, const SampleStats& b) { return a += b; });
+}
+
+void TransportSampler::AppendRowRays(const SpatialSample& sample, uint64_t sample_index,
+                                     std::vector<OcclusionRay>& rays) const {
+  impl_->Row(sample, sample_index, nullptr, CollectingTracer{&rays});
+}
+
+std::vector<SpatialSample> SpatialSamplesOf(const SceneGeometry& geometry) {
+  std::size_t total = 0;
+  for (const SceneMesh& m : geometry.meshes) total += m.mesh.positions.size();
+  std::vector<SpatialSample> samples;
+  samples.reserve(total);
+  std::vector<Vec3> face_sum;
+  for (const SceneMesh& m : geometry.meshes) {
+    const TriangleMesh& mesh = m.mesh;
+    face_sum.assign(mesh.positions.size(), Vec3{});
+    for (const auto& t : mesh.triangles) {
+      if (t[0] >= mesh.positions.size() || t[1] >= mesh.positions.size() ||
+          t[2] >= mesh.positions.size()) {
+        continue;  // EmbreeScene reports the bad index as an InputError
+      }
+      const Vec3 a = mesh.positions[t[0]], b = mesh.positions[t[1]], c = mesh.positions[t[2]];
+      const Vec3 area2 = Cross(b - a, c - a);  // |area2| = 2·area: area-weighted face normal
+      for (uint32_t v : t) face_sum[v] += area2;
+    }
+    for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+      SpatialSample s;
+      s.position = mesh.positions[i];
+      Vec3 ng = face_sum[i];
+      const double lg = Length(ng);
+      const bool has_ng = std::isfinite(lg) && lg > 0;
+      Vec3 ns = i < mesh.normals.size() ? mesh.normals[i] : Vec3{};
+      const double ls = Length(ns);
+      const bool has_ns = std::isfinite(ls) && ls > 0;
+      if (has_ng) ng = ng / lg;
+      if (has_ns) ns = ns / ls;
+      if (!has_ns) ns = has_ng ? ng : Vec3{0, 1, 0};
+      if (!has_ng) ng = ns;
+      if (Dot(ng, ns) < 0) ng = -ng;
+      s.normal = ns;
+      s.geometric_normal = ng;
+      samples.push_back(s);
+    }
+  }
+  return samples;
+}
+
+}  // namespace prt

@@ -1,0 +1,112 @@
+// Worker kernel: rows of the light transport matrix T by Embree ray tracing (no MPI here).
+// For a spatial sample x with normal n and cubemap texel j (docs/conventions.md):
+//   T[x][j] = (1/π) · ∫_texel_j V(x, ω) · max(0, n·ω) dω
+// (albedo is applied at relighting, B = albedo ⊙ (T·L)), estimated with k stratified jittered
+// occlusion rays per texel, one per stratum s of an a×b grid of the texel's face rectangle,
+// each weighted by the exact solid angle Ω_s of its stratum (Σ_s Ω_s = Ω_j exactly):
+//   T[x][j] ≈ (1/π) · Σ_s Ω_s · V(x, ω_s) · max(0, n·ω_s).
+// Texels entirely below the horizon of n are skipped without tracing and counted; rays below
+// the horizon inside a partly visible texel count 0 without tracing.
+// Full description: docs/transport-sampling.md.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "vocabulary/cubemap.h"
+#include "vocabulary/scene.h"
+#include "vocabulary/vec3.h"
+#include "worker/embree_scene.h"
+
+namespace prt {
+
+// One spatial sample: a point on a surface with its shading normal and the geometric normal of
+// (one of) its triangles, which the robust ray-origin offset uses.
+struct SpatialSample {
+  Vec3 position;
+  Vec3 normal;            // unit shading normal (the cosine term and the horizon use it)
+  Vec3 geometric_normal;  // unit, same hemisphere as normal
+};
+
+// Samples of a scene in prtfarm's global order (scene.h): meshes in file order, ground last;
+// each mesh's vertices in order. The geometric normal is the normalised sum of the incident
+// triangles' cross products (area-weighted face normals), flipped into the shading normal's
+// hemisphere. A vertex without a usable shading normal takes the geometric one; one with
+// neither (no non-degenerate triangle) gets +Y.
+std::vector<SpatialSample> SpatialSamplesOf(const SceneGeometry& geometry);
+
+struct TransportSamplerOptions {
+  // Stratified jittered rays per texel, in [1, 1024]: an a×b grid of strata in the texel's face
+  // coordinates (u, v) with b the largest divisor of k not above √k and a = k/b (2×2 for 4).
+  int rays_per_texel = 4;
+  uint64_t seed = 1;  // rows are a pure function of (seed, global sample index)
+};
+
+// Counters a job reports (added up by the coordinator into run/report.json).
+struct SampleStats {
+  uint64_t rays_traced = 0;           // occlusion rays given to Embree
+  uint64_t texels_traced = 0;         // texels meeting the upper hemisphere (evaluated)
+  uint64_t texels_below_horizon = 0;  // texels entirely below the horizon: skipped, T = 0
+  uint64_t rays_below_horizon = 0;    // strata of evaluated texels below the horizon: not traced
+  SampleStats& operator+=(const SampleStats& o) {
+    rays_traced += o.rays_traced;
+    texels_traced += o.texels_traced;
+    texels_below_horizon += o.texels_below_horizon;
+    rays_below_horizon += o.rays_below_horizon;
+    return *this;
+  }
+  bool operator==(const SampleStats&) const = default;
+};
+
+// Thread-safe after construction: one sampler serves every thread of a rank. The scene must
+// outlive it.
+class TransportSampler {
+ public:
+  // cubemap_n: a power of two in [1, 256] (CubemapLayout). Throws std::invalid_argument on a bad
+  // n or rays_per_texel outside [1, 1024].
+  TransportSampler(const EmbreeScene& scene, int cubemap_n, TransportSamplerOptions options);
+  ~TransportSampler();
+  TransportSampler(const TransportSampler&) = delete;
+  TransportSampler& operator=(const TransportSampler&) = delete;
+
+  const CubemapLayout& layout() const;
+  const TransportSamplerOptions& options() const;
+  // The stratum grid: strata_u() × strata_v() = rays_per_texel; stratum s = sv·strata_u() + su.
+  int strata_u() const;
+  int strata_v() const;
+  // Exact solid angle Ω_s of stratum s of texel `texel` (FaceRectSolidAngle of its rectangle).
+  double StratumSolidAngle(std::size_t texel, int stratum) const;
+
+  // Every function below throws prt::NumericalError when the sample's position is not finite
+  // or its normal is zero or not finite (SpatialSamplesOf never produces such a sample).
+
+  // Full row of T for one sample (layout().texel_count() floats). `sample_index` is the
+  // sample's global index: it seeds the jitter, so a row is identical whichever rank, thread
+  // or batch computes it. Thread-safe; no allocation inside.
+  SampleStats ComputeRow(const SpatialSample& sample, uint64_t sample_index, float* row) const;
+
+  // Only the listed texels (for adaptive angular sampling and sparse vertices); values[i] is
+  // T for texels[i], using the same jitter as ComputeRow (so values agree bit for bit). Throws
+  // std::out_of_range on a texel index ≥ layout().texel_count().
+  SampleStats ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
+                            std::span<const uint32_t> texels, float* values) const;
+
+  // Rows for samples[0..count) with global indices first_index.., into out (count rows,
+  // row-major), in parallel over samples with TBB.
+  SampleStats ComputeRows(std::span<const SpatialSample> samples, uint64_t first_index,
+                          float* out) const;
+
+  // The occlusion rays ComputeRow traces for this sample, in the order it traces them, appended
+  // to `rays` (for the raw-Embree reference in bench/transport_bench.cpp and for tests).
+  void AppendRowRays(const SpatialSample& sample, uint64_t sample_index,
+                     std::vector<OcclusionRay>& rays) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace prt
