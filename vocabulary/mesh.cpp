@@ -55,7 +55,9 @@ bool ParseInt(std::string_view tok, int64_t& v) {
 }
 
 // A coordinate must be finite and representable as float32 (storage downstream is float32).
-bool IsStorableFloat(double v) { return std::isfinite(v) && std::fabs(v) <= FLT_MAX; }
+bool IsStorableFloat(double v) {
+  return std::isfinite(v) && std::fabs(v) <= FLT_MAX;
+}
 
 uint32_t FromLittleEndian(uint32_t u) {
   if constexpr (std::endian::native == std::endian::big) {
@@ -88,7 +90,9 @@ class LineReader {
   std::size_t line_ = 0;
 };
 
-bool IsSpace(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+bool IsSpace(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
 
 // Next whitespace-separated token of a line; false at the end of the line.
 bool NextToken(std::string_view& rest, std::string_view& tok) {
@@ -184,8 +188,9 @@ RawMesh ReadOff(std::string_view text, const std::string& name) {
   } else if (tok == "NOFF" || tok == "CNOFF") {
     has_normals = true;
   } else if (tok.size() >= 3 && tok.substr(tok.size() - 3) == "OFF") {
-    FailLine(name, lines.line(), "unsupported OFF variant '" + std::string(tok) +
-                                     "' (supported: OFF, COFF, NOFF, CNOFF)");
+    FailLine(
+        name, lines.line(),
+        "unsupported OFF variant '" + std::string(tok) + "' (supported: OFF, COFF, NOFF, CNOFF)");
   } else {
     FailLine(name, lines.line(), "not an OFF file (first keyword is '" + std::string(tok) + "')");
   }
@@ -210,8 +215,7 @@ RawMesh ReadOff(std::string_view text, const std::string& name) {
   if (static_cast<uint64_t>(nv) > left / 6 + 1 || static_cast<uint64_t>(nf) > left / 8 + 1) {
     FailLine(name, lines.line(),
              "truncated: header declares " + std::to_string(nv) + " vertices and " +
-                 std::to_string(nf) + " faces but only " + std::to_string(left) +
-                 " bytes follow");
+                 std::to_string(nf) + " faces but only " + std::to_string(left) + " bytes follow");
   }
   if (static_cast<uint64_t>(nv) > std::numeric_limits<uint32_t>::max()) {
     FailLine(name, lines.line(), "too many vertices");
@@ -235,9 +239,9 @@ RawMesh ReadOff(std::string_view text, const std::string& name) {
                      " numbers, got '" + std::string(line) + "'");
       }
       if (!IsStorableFloat(c[k])) {
-        FailLine(name, lines.line(),
-                 "vertex " + std::to_string(v) + ": '" + std::string(tok) +
-                     "' is not a finite float32");
+        FailLine(
+            name, lines.line(),
+            "vertex " + std::to_string(v) + ": '" + std::string(tok) + "' is not a finite float32");
       }
     }
     raw.positions.push_back({c[0], c[1], c[2]});
@@ -260,9 +264,9 @@ RawMesh ReadOff(std::string_view text, const std::string& name) {
     for (int64_t i = 0; i < k; ++i) {
       int64_t vi = 0;
       if (!NextToken(rest, tok) || !ParseInt(tok, vi)) {
-        FailLine(name, lines.line(),
-                 "face " + std::to_string(f) + ": expected " + std::to_string(k) +
-                     " vertex indices");
+        FailLine(
+            name, lines.line(),
+            "face " + std::to_string(f) + ": expected " + std::to_string(k) + " vertex indices");
       }
       if (vi < 0 || vi >= nv) {
         FailLine(name, lines.line(),
@@ -420,11 +424,11 @@ enum class PlyType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, 
 
 bool PlyTypeOf(std::string_view s, PlyType& t) {
   static const std::pair<std::string_view, PlyType> kTypes[] = {
-      {"char", PlyType::kInt8},     {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
-      {"uint8", PlyType::kUint8},   {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
-      {"ushort", PlyType::kUint16}, {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
-      {"int32", PlyType::kInt32},   {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
-      {"float", PlyType::kFloat32}, {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
+      {"char", PlyType::kInt8},      {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
+      {"uint8", PlyType::kUint8},    {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
+      {"ushort", PlyType::kUint16},  {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
+      {"int32", PlyType::kInt32},    {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
+      {"float", PlyType::kFloat32},  {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
       {"float64", PlyType::kFloat64}};
   for (const auto& [n, ty] : kTypes) {
     if (n == s) {
@@ -453,7 +457,9 @@ std::size_t PlySize(PlyType t) {
   return 0;
 }
 
-bool PlyIsFloat(PlyType t) { return t == PlyType::kFloat32 || t == PlyType::kFloat64; }
+bool PlyIsFloat(PlyType t) {
+  return t == PlyType::kFloat32 || t == PlyType::kFloat64;
+}
 
 struct PlyProperty {
   std::string name;
@@ -549,8 +555,8 @@ class PlyValues {
     }
     const std::size_t n = PlySize(t);
     if (body_.size() - pos_ < n) {
-      throw InputError(name_, "truncated: file ends in " + what + " (byte " +
-                                  std::to_string(pos_) + " of the binary body)");
+      throw InputError(name_, "truncated: file ends in " + what + " (byte " + std::to_string(pos_) +
+                                  " of the binary body)");
     }
     const double v =
         LoadBinary(reinterpret_cast<const unsigned char*>(body_.data()) + pos_, t, swap_);
@@ -561,6 +567,23 @@ class PlyValues {
   [[noreturn]] void Fail(const std::string& what, const std::string& msg) const {
     if (format_ == PlyFormat::kAscii) FailLine(name_, tokens_.line(), what + ": " + msg);
     throw InputError(name_, what + ": " + msg);
+  }
+
+  // Reads a list length and checks that the list fits in what is left of the file.
+  int64_t ReadListLength(const PlyProperty& p, const std::string& what) {
+    const double k = Read(p.count_type, what);
+    if (k < 0) Fail(what, "negative list length " + std::to_string(static_cast<int64_t>(k)));
+    const std::size_t min_bytes = format_ == PlyFormat::kAscii ? 2 : PlySize(p.type);
+    if (k * static_cast<double>(min_bytes) > static_cast<double>(bytes_left())) {
+      if (format_ == PlyFormat::kAscii) {
+        throw InputError(name_, "truncated: file ends in " + what + " (line " +
+                                    std::to_string(tokens_.line()) + ")");
+      }
+      throw InputError(name_, "truncated: file ends in " + what + " (list of " +
+                                  std::to_string(static_cast<int64_t>(k)) + " values, " +
+                                  std::to_string(bytes_left()) + " bytes left)");
+    }
+    return static_cast<int64_t>(k);
   }
 
   std::size_t bytes_left() const {
@@ -700,11 +723,8 @@ RawMesh ReadPly(std::string_view text, const std::string& name) {
         for (std::size_t i = 0; i < e.props.size(); ++i) {
           const PlyProperty& p = e.props[i];
           if (p.is_list) {
-            const double k = values.Read(p.count_type, what);
-            if (k < 0 || k > static_cast<double>(values.bytes_left())) {
-              values.Fail(what, "bad list length " + std::to_string(k));
-            }
-            for (int64_t j = 0; j < static_cast<int64_t>(k); ++j) values.Read(p.type, what);
+            const int64_t k = values.ReadListLength(p, what);
+            for (int64_t j = 0; j < k; ++j) values.Read(p.type, what);
           } else {
             vals[i] = values.Read(p.type, what);
           }
@@ -739,11 +759,7 @@ RawMesh ReadPly(std::string_view text, const std::string& name) {
             values.Read(p.type, what);
             continue;
           }
-          const double k = values.Read(p.count_type, what);
-          if (k < 0 || k > static_cast<double>(values.bytes_left())) {
-            values.Fail(what, "bad list length " + std::to_string(k));
-          }
-          const int64_t kk = static_cast<int64_t>(k);
+          const int64_t kk = values.ReadListLength(p, what);
           if (static_cast<int>(i) != list) {
             for (int64_t j = 0; j < kk; ++j) values.Read(p.type, what);
             continue;
@@ -766,11 +782,8 @@ RawMesh ReadPly(std::string_view text, const std::string& name) {
         const std::string what = e.name + " " + std::to_string(r) + " of " + std::to_string(count);
         for (const PlyProperty& p : e.props) {
           if (p.is_list) {
-            const double k = values.Read(p.count_type, what);
-            if (k < 0 || k > static_cast<double>(values.bytes_left())) {
-              values.Fail(what, "bad list length " + std::to_string(k));
-            }
-            for (int64_t j = 0; j < static_cast<int64_t>(k); ++j) values.Read(p.type, what);
+            const int64_t k = values.ReadListLength(p, what);
+            for (int64_t j = 0; j < k; ++j) values.Read(p.type, what);
           } else {
             values.Read(p.type, what);
           }
@@ -841,9 +854,8 @@ RawMesh ReadStlBinary(std::string_view bytes, const std::string& name, uint32_t 
         u = FromLittleEndian(u);
         xyz[k] = std::bit_cast<float>(u);
         if (!std::isfinite(xyz[k])) {
-          throw InputError(name, "triangle " + std::to_string(t) + " of " +
-                                     std::to_string(count) + ": corner " + std::to_string(c) +
-                                     " is not finite");
+          throw InputError(name, "triangle " + std::to_string(t) + " of " + std::to_string(count) +
+                                     ": corner " + std::to_string(c) + " is not finite");
         }
       }
       idx[c] = welder.Add(xyz[0], xyz[1], xyz[2]);
@@ -943,8 +955,7 @@ RawMesh ReadStl(std::string_view bytes, const std::string& name) {
   throw InputError(name, "truncated or not an STL: binary header declares " +
                              std::to_string(count) + " triangles (" +
                              std::to_string(84 + 50 * static_cast<uint64_t>(count)) +
-                             " bytes) but the file has " + std::to_string(bytes.size()) +
-                             " bytes");
+                             " bytes) but the file has " + std::to_string(bytes.size()) + " bytes");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1036,20 +1047,32 @@ void FlipWinding(TriangleMesh& mesh) {
 }
 
 void AnalyzeTopology(TriangleMesh& mesh) {
-  std::vector<uint64_t> edges;
-  edges.reserve(mesh.triangles.size() * 3);
+  // Directed edges bucketed by their first vertex (counting sort): an edge a→b is matched when
+  // b's bucket holds b→a; a repeated directed edge means a non-manifold or inconsistently
+  // oriented surface.
+  const std::size_t nv = mesh.positions.size();
+  std::vector<uint32_t> start(nv + 1, 0);
   for (const auto& t : mesh.triangles) {
-    for (int k = 0; k < 3; ++k) {
-      edges.push_back(static_cast<uint64_t>(t[k]) << 32 | t[(k + 1) % 3]);
-    }
+    for (uint32_t v : t) ++start[v + 1];
   }
-  std::sort(edges.begin(), edges.end());
+  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+  std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+  std::vector<uint32_t> target(mesh.triangles.size() * 3);
+  for (const auto& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) target[fill[t[k]]++] = t[(k + 1) % 3];
+  }
   bool manifold = true;
   std::size_t boundary = 0;
-  for (std::size_t i = 0; i < edges.size(); ++i) {
-    if (i + 1 < edges.size() && edges[i + 1] == edges[i]) manifold = false;
-    const uint64_t reverse = (edges[i] << 32) | (edges[i] >> 32);
-    if (!std::binary_search(edges.begin(), edges.end(), reverse)) ++boundary;
+  for (std::size_t a = 0; a < nv; ++a) {
+    for (uint32_t i = start[a]; i < start[a + 1]; ++i) {
+      const uint32_t b = target[i];
+      for (uint32_t j = i + 1; j < start[a + 1]; ++j) {
+        if (target[j] == b) manifold = false;
+      }
+      bool matched = false;
+      for (uint32_t j = start[b]; j < start[b + 1] && !matched; ++j) matched = target[j] == a;
+      if (!matched) ++boundary;
+    }
   }
   mesh.report.boundary_edges = boundary;
   mesh.report.closed = manifold && boundary == 0 && !mesh.triangles.empty();
@@ -1091,8 +1114,8 @@ TriangleMesh ParseMesh(const std::string& bytes, const std::string& name) {
   } else if (ext == ".stl") {
     raw = ReadStl(bytes, name);
   } else {
-    throw InputError(name, "unknown mesh format '" + ext +
-                               "' (supported extensions: .ply, .obj, .off, .stl)");
+    throw InputError(
+        name, "unknown mesh format '" + ext + "' (supported extensions: .ply, .obj, .off, .stl)");
   }
   return Finish(std::move(raw), name);
 }
@@ -1103,8 +1126,8 @@ TriangleMesh LoadMesh(const std::string& path) {
   if (std::filesystem::is_directory(path, ec)) throw InputError(path, "is a directory");
   const std::string ext = LowerExtension(path);
   if (ext != ".ply" && ext != ".obj" && ext != ".off" && ext != ".stl") {
-    throw InputError(path, "unknown mesh format '" + ext +
-                               "' (supported extensions: .ply, .obj, .off, .stl)");
+    throw InputError(
+        path, "unknown mesh format '" + ext + "' (supported extensions: .ply, .obj, .off, .stl)");
   }
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, "cannot open for reading");

@@ -20,10 +20,10 @@
 namespace prt {
 
 struct MeshImportReport {
-  std::string format;                            // "ply-ascii", "ply-binary-le", "obj", "stl-binary"…
-  std::size_t file_vertices = 0;                 // vertices as written (STL: triangle corners)
-  std::size_t file_faces = 0;                    // faces/polygons as written
-  std::size_t polygons_triangulated = 0;         // faces with > 3 corners, fan-triangulated
+  std::string format;                     // "ply-ascii", "ply-binary-le", "obj", "stl-binary"…
+  std::size_t file_vertices = 0;          // vertices as written (STL: triangle corners)
+  std::size_t file_faces = 0;             // faces/polygons as written
+  std::size_t polygons_triangulated = 0;  // faces with > 3 corners, fan-triangulated
   std::size_t degenerate_triangles_dropped = 0;  // zero-area or repeated-index triangles
   std::size_t unreferenced_vertices = 0;         // kept (they are still spatial samples)
   std::size_t welded_vertices = 0;               // STL: corners merged into shared vertices
@@ -37,9 +37,9 @@ struct MeshImportReport {
 };
 
 struct TriangleMesh {
-  std::string source;                          // file it came from (for messages)
-  std::vector<Vec3> positions;                 // file order
-  std::vector<Vec3> normals;                   // unit, one per position
+  std::string source;           // file it came from (for messages)
+  std::vector<Vec3> positions;  // file order
+  std::vector<Vec3> normals;    // unit, one per position
   std::vector<std::array<uint32_t, 3>> triangles;
   MeshImportReport report;
 };

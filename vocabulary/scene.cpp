@@ -2,6 +2,8 @@
 // path resolution, and the world-space geometry (fit, transforms, ground grid).
 #include "vocabulary/scene.h"
 
+#include <toml++/toml.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -13,7 +15,6 @@
 #include <sstream>
 #include <stdexcept>
 #include <string_view>
-#include <toml++/toml.h>
 
 #include "vocabulary/errors.h"
 
@@ -65,8 +66,8 @@ class Section {
 
   [[noreturn]] void Fail(const toml::node* n, std::string_view key, const std::string& msg) const {
     const int l = n ? static_cast<int>(n->source().begin.line) : line();
-    throw InputError(file_, "line " + std::to_string(l) + ": " + label_ + " " + std::string(key) +
-                                ": " + msg);
+    throw InputError(
+        file_, "line " + std::to_string(l) + ": " + label_ + " " + std::string(key) + ": " + msg);
   }
 
   const toml::node* Find(std::string_view key) {
@@ -85,8 +86,8 @@ class Section {
     const bool above = hi_open ? !(v < hi) : !(v <= hi);
     if (below || above) {
       Fail(n, key,
-           FormatNumber(v) + " is out of range " + (lo_open ? "(" : "[") + FormatNumber(lo) +
-               ", " + (std::isinf(hi) ? "∞" : FormatNumber(hi)) + (hi_open ? ")" : "]"));
+           FormatNumber(v) + " is out of range " + (lo_open ? "(" : "[") + FormatNumber(lo) + ", " +
+               (std::isinf(hi) ? "∞" : FormatNumber(hi)) + (hi_open ? ")" : "]"));
     }
     return v;
   }
@@ -193,7 +194,9 @@ class Section {
   std::vector<std::string> known_;
 };
 
-bool IsPowerOfTwo(int64_t v) { return v > 0 && (v & (v - 1)) == 0; }
+bool IsPowerOfTwo(int64_t v) {
+  return v > 0 && (v & (v - 1)) == 0;
+}
 
 // ---------------------------------------------------------------------------------------------
 // Transforms
@@ -251,9 +254,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
   scene.file = file;
   scene.search_dirs = search_dirs;
   Section top(root, "top level", file);
-  auto section = [&](std::string_view key) -> const toml::table* {
-    return top.SubTable(key);
-  };
+  auto section = [&](std::string_view key) -> const toml::table* { return top.SubTable(key); };
 
   static const toml::table kEmpty;
   {
@@ -306,8 +307,8 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
           Section f(*ft, "[[mesh]] fit", file);
           FitBox fit;
           fit.size = f.Number("size", fit.size, 0, 1e30, true);
-          fit.center = f.Vector("center", {scene.ground.center.x, scene.ground.height,
-                                           scene.ground.center.z});
+          fit.center = f.Vector(
+              "center", {scene.ground.center.x, scene.ground.height, scene.ground.center.z});
           std::string up = f.String("up", fit.up_axis);
           for (char& ch : up) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
           if (up.size() == 1) up = "+" + up;
@@ -372,8 +373,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     // §7: 350 features at n = 32 (about 6% of 6144 directions); the same fraction at other n.
     const int64_t n = scene.cubemap_n;
     const int64_t default_features = (350 * n * n + 512) / 1024;
-    p.features =
-        static_cast<int>(s.Integer("features", default_features, 1, 6 * n * n));
+    p.features = static_cast<int>(s.Integer("features", default_features, 1, 6 * n * n));
     p.lambda = s.Number("lambda", p.lambda, 0, 1e30, true);
     p.seed = static_cast<uint64_t>(s.Integer("seed", 1, 0, INT64_MAX));
     s.RejectUnknown();
@@ -420,7 +420,8 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
   return scene;
 }
 
-const char kDefaultScene[] = R"toml(# prtfarm's default scene: the Stanford bunny (CGAL's watertight remesh, 37,706 vertices)
+const char kDefaultScene[] =
+    R"toml(# prtfarm's default scene: the Stanford bunny (CGAL's watertight remesh, 37,706 vertices)
 # fitted on a 64×64 ground grid, lit by Blender's sunrise and city environment maps, n = 32.
 # The format is specified in docs/scene-format.md. Relative paths are looked up next to this
 # file, then in each folder of PRT_DATA_PATH (colon-separated), then as given; the build tree's
@@ -538,9 +539,9 @@ SceneDescription ParseScene(const std::string& text, const std::string& name,
   try {
     root = toml::parse(text, name);
   } catch (const toml::parse_error& e) {
-    throw InputError(name, "line " + std::to_string(e.source().begin.line) + ", column " +
-                               std::to_string(e.source().begin.column) +
-                               ": TOML syntax error: " + std::string(e.description()));
+    throw InputError(
+        name, "line " + std::to_string(e.source().begin.line) + ": TOML syntax error at column " +
+                  std::to_string(e.source().begin.column) + ": " + std::string(e.description()));
   }
   return ParseTable(root, name, DataSearchDirs(base_dir, extra_data_dirs));
 }
@@ -678,9 +679,9 @@ TriangleMesh MakeGroundGrid(const GroundPlane& ground) {
   for (int iz = 0; iz + 1 < res; ++iz) {
     for (int ix = 0; ix + 1 < res; ++ix) {
       const uint32_t a = static_cast<uint32_t>(iz * res + ix);  // (ix, iz)
-      const uint32_t b = a + 1;                                  // (ix+1, iz)
-      const uint32_t c = a + static_cast<uint32_t>(res);         // (ix, iz+1)
-      const uint32_t d = c + 1;                                  // (ix+1, iz+1)
+      const uint32_t b = a + 1;                                 // (ix+1, iz)
+      const uint32_t c = a + static_cast<uint32_t>(res);        // (ix, iz+1)
+      const uint32_t d = c + 1;                                 // (ix+1, iz+1)
       // (c−a)×(b−a) = (0,0,dz)×(dx,0,0) = (0, dz·dx, 0): +Y.
       mesh.triangles.push_back({a, c, b});
       mesh.triangles.push_back({b, c, d});

@@ -44,11 +44,11 @@ struct MeshInstance {
 };
 
 struct GroundPlane {
-  bool enabled = false;   // true when the scene has a [ground] table, unless it says otherwise
-  double height = 0.0;    // y of the plane
-  Vec3 center{0, 0, 0};   // x and z used (the file gives center = [x, z])
-  double size = 4.0;      // side length
-  int resolution = 64;    // grid vertices per side
+  bool enabled = false;  // true when the scene has a [ground] table, unless it says otherwise
+  double height = 0.0;   // y of the plane
+  Vec3 center{0, 0, 0};  // x and z used (the file gives center = [x, z])
+  double size = 4.0;     // side length
+  int resolution = 64;   // grid vertices per side
   Rgb albedo{0.8f, 0.8f, 0.8f};
 };
 
@@ -64,7 +64,7 @@ struct Camera {
 enum class SpatialSamples { kVertices, kCameraPixels };
 
 struct SamplingSettings {
-  int rays_per_texel = 4;        // stratified jittered occlusion rays per cubemap texel
+  int rays_per_texel = 4;  // stratified jittered occlusion rays per cubemap texel
   uint64_t seed = 1;
   std::string method = "brute";  // brute | sparse
 };
@@ -79,7 +79,7 @@ struct SparseSettings {
                                    // scene's bounding-box diagonal (0.2 / 5.7)
   int max_neighbors = 40;          // §5.1: "usually 10–40" dense neighbours
   int features = 350;              // §7: 350 directions at n = 32; default scales with n²
-  double lambda = 1e-3;            // L1 weight relative to λ_max = ‖2Aᵀb‖∞ (not in the paper)
+  double lambda = 1e-3;  // L1 weight relative to λ_max = ‖2Aᵀb‖∞ (not in the paper)
   uint64_t seed = 1;
 };
 
@@ -138,8 +138,7 @@ std::string FindDataFile(const std::string& path, const std::vector<std::string>
                          std::vector<std::string>* tried = nullptr);
 // FindDataFile over scene.search_dirs; throws InputError naming the scene file (and `line` when
 // > 0) and listing every place it looked.
-std::string ResolveScenePath(const SceneDescription& scene, const std::string& path,
-                             int line = 0);
+std::string ResolveScenePath(const SceneDescription& scene, const std::string& path, int line = 0);
 
 // One world-space mesh of the scene with its material.
 struct SceneMesh {
