@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstring>
 #include <string>
+#include <vector>
 
 namespace prt::pack {
 
@@ -19,7 +20,7 @@ inline constexpr uint32_t kEntrySize = 64;
 inline constexpr uint32_t kDefaultAlignment = 64;
 inline constexpr uint32_t kMaxSectionCount = 65536;
 inline constexpr uint32_t kMaxMeshNameLength = 4096;
-inline constexpr uint32_t kMaxTransportParams = 1u << 20;
+inline constexpr uint32_t kMaxTransportParams = 1u << 30;
 inline constexpr uint32_t kTransportHeaderSize = 40;
 inline constexpr uint32_t kBlockEntrySize = 48;
 inline constexpr uint32_t kMaterialHeaderSize = 24;
@@ -95,5 +96,11 @@ uint64_t HeaderChecksum(const uint8_t* header, const uint8_t* table, std::size_t
 // checked that index_offset + block_count * 48 lies inside the section).
 uint64_t TransportIndexChecksum(const uint8_t* section, std::size_t params_size,
                                 std::size_t index_offset, std::size_t block_count);
+
+// Recomputes every checksum of a (possibly damaged) pack wherever its structure allows: block
+// checksums and the index checksum of TRNS, every section checksum, then the header checksum.
+// Safe on any bytes (ranges are checked; what is out of range is left alone). For tests and
+// fuzzing, so that a mutated file reaches the decoders behind the checksums.
+void ResealChecksums(std::vector<uint8_t>& file);
 
 }  // namespace prt::pack

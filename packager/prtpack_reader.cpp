@@ -327,7 +327,7 @@ TransportIndex PackReader::Impl::Transport() const {
   t.row_count = LoadU64(p + 8);
   t.column_count = LoadU64(p + 16);
   const uint32_t params_size = LoadU32(p + 24);
-  if (params_size > kMaxTransportParams) Fail(where + " parameters exceed 1 MiB");
+  if (params_size > kMaxTransportParams) Fail(where + " parameters exceed 1 GiB");
   const uint64_t index_offset = AlignUp(kTransportHeaderSize + uint64_t(params_size), 8);
   const uint64_t index_size = uint64_t(block_count) * kBlockEntrySize;
   if (!InRange(index_offset, index_size, n)) Fail(where + " block index extends past the section");

@@ -101,7 +101,7 @@ PendingSection MaterialSection(const PackMeshInput& m, uint32_t id) {
 // as is when zstd does not shrink it), every block 64-byte aligned inside the section.
 PendingSection TransportSection(const TransportInput& t, const WriterOptions& o) {
   if (t.params.size() > kMaxTransportParams) {
-    throw InputError("transport", "global parameters exceed 1 MiB");
+    throw InputError("transport", "global parameters exceed 1 GiB");
   }
   if (t.blocks.size() > std::numeric_limits<uint32_t>::max()) {
     throw InputError("transport", "too many blocks");
@@ -180,6 +180,20 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     mesh.raw_size = MeshRawSize(m.mesh.positions.size(), m.mesh.triangles.size());
     sections.push_back(std::move(mesh));
     sections.push_back(MaterialSection(m, static_cast<uint32_t>(i)));
+  }
+  for (const ExtraSectionInput& x : input.extra_sections) {
+    if (x.type.size() != 4) throw InputError("extra section", "type must be 4 bytes");
+    PendingSection s;
+    s.type = LoadU32(reinterpret_cast<const uint8_t*>(x.type.data()));
+    if (s.type == kTypeMeta || s.type == kTypeMesh || s.type == kTypeMaterial ||
+        s.type == kTypeTransport) {
+      throw InputError("extra section", "type " + x.type + " is reserved");
+    }
+    s.flags = x.flags;
+    s.id = x.id;
+    s.bytes = x.bytes;
+    s.raw_size = x.bytes.size();
+    sections.push_back(std::move(s));
   }
   if (input.transport) sections.push_back(TransportSection(*input.transport, options));
 

@@ -30,8 +30,17 @@ struct TransportBlockInput {
 struct TransportInput {
   uint32_t encoding = 0;     // the encoder's format version, stored as is
   uint64_t row_count = 0;    // spatial samples
-  std::vector<uint8_t> params;  // opaque global parameters (≤ 1 MiB)
+  std::vector<uint8_t> params;  // opaque global parameters
   std::vector<TransportBlockInput> blocks;
+};
+
+// A section this version does not interpret (e.g. a later VISIBILITY), stored as given with
+// codec none. Readers that do not know `type` skip it unless `flags` has bit 0 (CRITICAL).
+struct ExtraSectionInput {
+  std::string type;  // exactly 4 bytes, not META/MESH/MATL/TRNS
+  uint32_t flags = 0;
+  uint32_t id = 0;
+  std::vector<uint8_t> bytes;
 };
 
 struct PackInput {
@@ -40,6 +49,7 @@ struct PackInput {
   std::string metadata_json;
   std::vector<PackMeshInput> meshes;
   std::optional<TransportInput> transport;
+  std::vector<ExtraSectionInput> extra_sections;  // written after the materials, before TRNS
 };
 
 struct WriterOptions {
@@ -51,7 +61,7 @@ struct WriterOptions {
 
 // Builds the whole file in memory. Throws prt::InputError (naming the mesh or "metadata") on
 // invalid inputs: metadata that is not a JSON object, no meshes, a mesh the codec rejects
-// (see draco_mesh_codec.h), a transport block with no columns, parameters over 1 MiB,
+// (see draco_mesh_codec.h), a transport block with no columns,
 // albedo outside [0, 1], bad options.
 std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options = {});
 // WritePack, then writes the bytes to `path` (via a temporary file renamed into place).

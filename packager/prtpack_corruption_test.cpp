@@ -1,0 +1,178 @@
+// A .prtpack reader on damaged input (docs/prtpack-format.md, "Verification"): every single-byte
+// corruption of a small pack either reads identically (the byte was padding) or fails with a
+// clear InputError; every truncation fails; and mutated copies of the seed corpus whose
+// checksums were recomputed (so that they reach the decoders) never crash the reader.
+// This is also the GCC build's stand-in for the libFuzzer harness (reader_fuzz.cpp).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "packager/prtpack_format.h"
+#include "packager/prtpack_reader.h"
+#include "packager/prtpack_test_util.h"
+#include "packager/prtpack_writer.h"
+#include "vocabulary/errors.h"
+
+namespace prt::pack {
+namespace {
+
+// Bytes of `file` that no checksum covers: between the table and the first section, between
+// sections, and between TRNS blocks (the writer zeroes them).
+std::vector<bool> PaddingMask(const std::vector<uint8_t>& file) {
+  std::vector<bool> padding(file.size(), true);
+  const PackReader r = PackReader::OpenMemory(file.data(), file.size());
+  const uint64_t table_end = kHeaderSize + r.sections().size() * kEntrySize;
+  std::fill(padding.begin(), padding.begin() + std::ptrdiff_t(table_end), false);
+  for (const SectionInfo& s : r.sections()) {
+    std::fill(padding.begin() + std::ptrdiff_t(s.offset),
+              padding.begin() + std::ptrdiff_t(s.offset + s.stored_size), false);
+  }
+  return padding;
+}
+
+// ReaderOptions small enough that a corrupted size never allocates much.
+ReaderOptions Bounded() {
+  ReaderOptions o;
+  o.max_section_bytes = 64 << 20;
+  return o;
+}
+
+// Reads all of `bytes`; returns "" and fills `out` on success, else the InputError's message.
+// Any other exception fails the test.
+std::string TryRead(const std::vector<uint8_t>& bytes, testing::FullRead* out) {
+  try {
+    *out = testing::ReadEverything(
+        PackReader::OpenMemory(bytes.data(), bytes.size(), "<memory>", Bounded()));
+    return "";
+  } catch (const InputError& e) {
+    return std::string(e.what()).empty() ? "(empty message)" : e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "not an InputError: " << e.what();
+    return "unexpected";
+  }
+}
+
+TEST(PrtpackCorruption, EveryFlippedByteIsPaddingOrDetected) {
+  const std::vector<uint8_t> file = WritePack(testing::MakeSmallInput());
+  testing::FullRead reference;
+  ASSERT_EQ(TryRead(file, &reference), "");
+  const std::vector<bool> padding = PaddingMask(file);
+  std::size_t detected = 0, identical = 0;
+  for (std::size_t i = 0; i < file.size(); ++i) {
+    std::vector<uint8_t> bad = file;
+    bad[i] ^= 0xFF;
+    testing::FullRead got;
+    const std::string error = TryRead(bad, &got);
+    if (error.empty()) {
+      EXPECT_TRUE(padding[i]) << "byte " << i << " changed without detection";
+      EXPECT_TRUE(testing::SameRead(got, reference)) << "byte " << i << " changed the content";
+      ++identical;
+    } else {
+      EXPECT_FALSE(padding[i]) << "padding byte " << i << " refused: " << error;
+      EXPECT_GT(error.size(), 12u);
+      ++detected;
+    }
+  }
+  std::printf("prtpack corruption: %zu bytes, %zu flips detected, %zu padding flips read "
+              "identically\n", file.size(), detected, identical);
+  EXPECT_GT(detected, file.size() / 2);
+}
+
+TEST(PrtpackCorruption, EveryTruncationFailsClearly) {
+  const std::vector<uint8_t> file = WritePack(testing::MakeSmallInput());
+  for (std::size_t n = 0; n < file.size(); ++n) {
+    std::vector<uint8_t> cut(file.begin(), file.begin() + std::ptrdiff_t(n));
+    testing::FullRead got;
+    const std::string error = TryRead(cut, &got);
+    ASSERT_FALSE(error.empty()) << "truncated at " << n << " read fine";
+    if (n >= kHeaderSize) {
+      EXPECT_NE(error.find("truncated"), std::string::npos) << error;
+    }
+  }
+  std::vector<uint8_t> longer = file;
+  longer.push_back(0);
+  testing::FullRead got;
+  EXPECT_NE(TryRead(longer, &got).find("trailing bytes"), std::string::npos);
+}
+
+// The seed corpus in packager/fuzz_corpus/ is written by this test when PRT_WRITE_FUZZ_CORPUS
+// is set (run it after a format change); otherwise it only checks the generator still works.
+TEST(PrtpackCorruption, WriteSeedCorpus) {
+  std::vector<std::pair<std::string, std::vector<uint8_t>>> seeds;
+  PackInput in = testing::MakeSmallInput();
+  seeds.emplace_back("small.prtpack", WritePack(in));
+  in.extra_sections.push_back({"VISB", 0, 0, {1, 2, 3, 4}});
+  seeds.emplace_back("extra_section.prtpack", WritePack(in));
+  in.transport.reset();
+  in.extra_sections.clear();
+  seeds.emplace_back("no_transport.prtpack", WritePack(in));
+  in = testing::MakeSmallInput();
+  in.transport = testing::MakeSmallCompressedTransportInput();
+  seeds.emplace_back("compressed_transport.prtpack", WritePack(in));
+  PackInput real;
+  real.metadata_json = R"({"scene":{"name":"bunny"}})";
+  real.meshes.push_back({"bunny", LoadMesh(std::string(PRT_SHARED_DATA_DIR) +
+                                           "/meshes/bunny_npm_lowres.obj"),
+                         {0.8f, 0.8f, 0.8f}, false, 0});
+  seeds.emplace_back("bunny_lowres.prtpack", WritePack(real));
+  const char* dir = std::getenv("PRT_WRITE_FUZZ_CORPUS");
+  for (const auto& [name, bytes] : seeds) {
+    testing::FullRead got;
+    EXPECT_EQ(TryRead(bytes, &got), "") << name;
+    if (dir != nullptr) {
+      std::ofstream out(std::filesystem::path(dir) / name, std::ios::binary);
+      out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    }
+  }
+}
+
+std::vector<std::vector<uint8_t>> SeedCorpus() {
+  const std::filesystem::path dir = std::filesystem::path(PRT_SOURCE_DIR) / "packager/fuzz_corpus";
+  std::vector<std::filesystem::path> paths;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) paths.push_back(e.path());
+  std::sort(paths.begin(), paths.end());
+  std::vector<std::vector<uint8_t>> seeds;
+  for (const auto& p : paths) {
+    std::ifstream in(p, std::ios::binary);
+    seeds.emplace_back(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  return seeds;
+}
+
+TEST(PrtpackCorruption, SeedCorpusReadsAndMutatedResealedCopiesNeverCrash) {
+  const std::vector<std::vector<uint8_t>> seeds = SeedCorpus();
+  ASSERT_GE(seeds.size(), 3u);
+  for (const auto& s : seeds) {
+    testing::FullRead got;
+    EXPECT_EQ(TryRead(s, &got), "");
+  }
+  std::mt19937_64 rng(12345);
+  std::size_t read_ok = 0, refused = 0;
+  const int kCopies = 3000;
+  for (int k = 0; k < kCopies; ++k) {
+    std::vector<uint8_t> m = seeds[std::size_t(k) % seeds.size()];
+    const int edits = 1 + int(rng() % 4);
+    for (int e = 0; e < edits && !m.empty(); ++e) {
+      const std::size_t at = rng() % m.size();
+      switch (rng() % 5) {
+        case 0: m[at] ^= uint8_t(1u << (rng() % 8)); break;      // bit flip
+        case 1: m[at] = uint8_t(rng()); break;                   // random byte
+        case 2: m[at] = (rng() & 1) ? 0xFF : 0x00; break;        // extreme byte
+        case 3: m.resize(at); break;                             // truncation
+        default: m.insert(m.begin() + std::ptrdiff_t(at), uint8_t(rng())); break;  // insertion
+      }
+    }
+    if (rng() % 4 != 0) ResealChecksums(m);  // mostly: get past the checksums
+    testing::FullRead got;
+    (TryRead(m, &got).empty() ? read_ok : refused)++;
+  }
+  std::printf("prtpack mutation: %d mutated copies, %zu read, %zu refused with InputError\n",
+              kCopies, read_ok, refused);
+}
+
+}  // namespace
+}  // namespace prt::pack

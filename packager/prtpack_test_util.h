@@ -1,0 +1,127 @@
+// Shared fixtures for the packager tests and the fuzz harness: a small pack with every section
+// kind, and a canonical full read for comparing two packs.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "packager/prtpack_reader.h"
+#include "packager/prtpack_transport.h"
+#include "packager/prtpack_writer.h"
+
+namespace prt::pack::testing {
+
+// An octahedron-based closed mesh of 6 + 12 vertices (octahedron plus edge midpoints).
+inline TriangleMesh MakeSmallMesh(double scale = 1.0) {
+  TriangleMesh m;
+  m.source = "small";
+  const Vec3 v[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  const uint32_t f[8][3] = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4},
+                            {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  for (const Vec3& p : v) m.positions.push_back(p * scale);
+  for (const auto& t : f) m.triangles.push_back({t[0], t[1], t[2]});
+  for (const Vec3& p : m.positions) m.normals.push_back(Normalize(p));
+  return m;
+}
+
+inline std::vector<uint8_t> PseudoRandomBytes(std::size_t n, uint32_t seed, bool compressible) {
+  std::vector<uint8_t> b(n);
+  uint32_t x = seed * 2654435761u + 1;
+  for (std::size_t i = 0; i < n; ++i) {
+    x ^= x << 13;
+    x ^= x >> 17;
+    x ^= x << 5;
+    b[i] = compressible ? static_cast<uint8_t>((x & 3) == 0 ? x >> 8 : 0) : static_cast<uint8_t>(x);
+  }
+  return b;
+}
+
+inline PackInput MakeSmallInput() {
+  PackInput in;
+  in.metadata_json = R"({"scene":{"name":"tiny"},"parameters":{"bits":9},"report":{"rays":42}})";
+  PackMeshInput a;
+  a.name = "octa";
+  a.mesh = MakeSmallMesh();
+  a.albedo = {0.5f, 0.25f, 0.75f};
+  in.meshes.push_back(a);
+  PackMeshInput g;
+  g.name = "ground";
+  g.mesh = MakeSmallMesh(3.0);
+  g.is_ground = true;
+  g.grid_resolution = 4;
+  in.meshes.push_back(g);
+  TransportInput t;
+  t.encoding = 7;
+  t.row_count = 12;
+  t.params = {1, 2, 3, 4, 5};
+  t.blocks.push_back({3, PseudoRandomBytes(120, 1, true)});   // zstd
+  t.blocks.push_back({5, PseudoRandomBytes(40, 2, false)});   // stored as is
+  t.blocks.push_back({1, {}});                                // empty block
+  in.transport = t;
+  return in;
+}
+
+// A valid compressed transport (vocabulary/compressed_transport.h) for 12 samples at n = 2,
+// split into blocks of 5 columns.
+inline TransportInput MakeSmallCompressedTransportInput() {
+  CompressedTransport ct;
+  ct.header.cubemap_n = 2;
+  ct.header.sample_count = 12;
+  ct.header.terms_per_column = 3;
+  SpatialSegment seg;
+  seg.count = 12;
+  ct.header.domain.segments.push_back(seg);
+  for (uint32_t col : {0u, 4u, 5u, 17u, 23u}) {
+    CompressedColumn c;
+    c.column = col;
+    c.scale = 0.5f + float(col);
+    c.index = {1, 2 + col % 10};
+    c.q = {5, -static_cast<int32_t>(col) - 1};
+    ct.columns.push_back(c);
+  }
+  return MakeTransportInput(ct, 5);
+}
+
+// Everything a pack holds, fully decoded (throws InputError like the reader).
+struct FullRead {
+  std::string metadata;
+  std::vector<UnpackedMesh> meshes;
+  TransportIndex index;
+  std::vector<std::vector<uint8_t>> blocks;
+};
+
+inline FullRead ReadEverything(const PackReader& r) {
+  r.VerifyAll();
+  FullRead out;
+  out.metadata = r.ReadMetadata();
+  for (std::size_t i = 0; i < r.mesh_count(); ++i) out.meshes.push_back(r.ReadMesh(i));
+  if (r.has_transport()) {
+    out.index = r.ReadTransportIndex();
+    for (std::size_t b = 0; b < out.index.blocks.size(); ++b) {
+      out.blocks.push_back(r.ReadTransportBlock(out.index, b));
+    }
+  }
+  return out;
+}
+
+inline bool SameRead(const FullRead& a, const FullRead& b) {
+  if (a.metadata != b.metadata || a.meshes.size() != b.meshes.size() || a.blocks != b.blocks ||
+      a.index.params != b.index.params || a.index.encoding != b.index.encoding ||
+      a.index.row_count != b.index.row_count || a.index.column_count != b.index.column_count) {
+    return false;
+  }
+  for (std::size_t i = 0; i < a.meshes.size(); ++i) {
+    const UnpackedMesh& x = a.meshes[i];
+    const UnpackedMesh& y = b.meshes[i];
+    if (x.name != y.name || x.positions != y.positions || x.normals != y.normals ||
+        x.triangles != y.triangles || x.albedo != y.albedo || x.is_ground != y.is_ground ||
+        x.grid_resolution != y.grid_resolution) {
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace prt::pack::testing
