@@ -1,0 +1,37 @@
+// prt-farm: mpirun -np N prt-farm [scene.toml] --out run/   (docs/farm.md)
+#include <mpi.h>
+
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+
+#include "farm/farm_coordinator.h"
+#include "farm/farm_options.h"
+
+int main(int argc, char** argv) {
+  int provided = 0;
+  if (MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS) {
+    std::fprintf(stderr, "prt-farm: MPI_Init_thread failed\n");
+    return prt::kExitRankFailed;
+  }
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  prt::FarmOptions options;
+  std::ostringstream quiet_out, quiet_err;
+  // Every rank parses the same command line; only rank 0 prints help, version and errors.
+  const int early = rank == 0
+                        ? prt::ParseFarmCommandLine(argc, argv, options, std::cout, std::cerr)
+                        : prt::ParseFarmCommandLine(argc, argv, options, quiet_out, quiet_err);
+  int code = early;
+  if (early < 0) {
+    if (provided < MPI_THREAD_FUNNELED) {
+      if (rank == 0)
+        std::fprintf(stderr, "prt-farm: this MPI does not provide MPI_THREAD_FUNNELED\n");
+      code = prt::kExitRankFailed;
+    } else {
+      code = prt::RunFarm(options);
+    }
+  }
+  MPI_Finalize();
+  return code;
+}

@@ -1,0 +1,84 @@
+// prt-farm's command line (CLI11). The text of --help is the reference of docs/farm.md.
+#include "farm/farm_options.h"
+
+#include <CLI/CLI.hpp>
+#include <ostream>
+
+#ifndef PRT_VERSION
+#define PRT_VERSION "0.1.0"
+#endif
+
+namespace prt {
+
+std::string FarmVersion() {
+  return PRT_VERSION;
+}
+
+int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& out,
+                         std::ostream& err) {
+  CLI::App app(
+      "prt-farm: precomputes the light transport matrix T of a scene on a cluster.\n"
+      "Run under MPI: mpirun -np N prt-farm [scene.toml] --out run/ (N = 1 works too).\n"
+      "Without a scene file it runs the embedded default scene.",
+      "prt-farm");
+  app.set_version_flag("--version", "prt-farm " + FarmVersion());
+  app.footer(
+      "Exit codes: 0 ok, 1 usage error (or a run folder that needs --resume/--force),\n"
+      "2 bad input (scene, mesh, checkpoints of another run), 3 I/O error in the run folder,\n"
+      "4 a rank failed (died, hung past --rank-timeout, internal error). Finished jobs are\n"
+      "always kept: rerun with --resume. See docs/farm.md.");
+  app.add_option("scene", o.scene_path, "Scene description (TOML, docs/scene-format.md)");
+  app.add_option("-o,--out", o.out_dir, "Run folder (created if missing)")->capture_default_str();
+  app.add_option("--data-dir", o.data_dirs, "Extra folder to look up relative mesh paths in");
+  app.add_option("-t,--threads", o.threads,
+                 "TBB threads per rank (0: cores of the node / ranks on the node)")
+      ->check(CLI::Range(0, 4096))
+      ->capture_default_str();
+  app.add_flag("--resume", o.resume,
+               "Continue the run in --out: re-run only unfinished jobs (starts fresh if the "
+               "folder holds no run)");
+  app.add_flag("--force", o.force, "Discard a run already in --out and start over");
+  app.add_option("--method", o.method, "Sampling method (default: the scene's; brute)")
+      ->check(CLI::IsMember({"brute", "sparse"}));
+  app.add_option("--rays-per-texel", o.rays_per_texel,
+                 "Occlusion rays per cubemap texel (default: the scene's)")
+      ->check(CLI::Range(1, 1024));
+  app.add_option("--job-seconds", o.job_seconds, "Target wall time of one job")
+      ->check(CLI::Range(0.001, 86400.0))
+      ->capture_default_str();
+  app.add_option("--rows-per-block", o.rows_per_block,
+                 "Rows per checksummed block of transport.prtt")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  app.add_option("--log-interval", o.log_interval_s, "Seconds between progress lines")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->capture_default_str();
+  app.add_option("--rank-timeout", o.rank_timeout_s,
+                 "Seconds a job may stay out before rank 0 gives up with exit code 4 "
+                 "(0: max(300, 50 x --job-seconds))")
+      ->check(CLI::Range(0.0, 1e7));
+  bool coordinator_only = false;
+  app.add_flag("--coordinator-only", coordinator_only,
+               "Rank 0 only plans and writes (by default it also computes jobs)");
+  app.add_flag("-q,--quiet", o.quiet, "Only warnings and errors");
+  // Hidden debugging and test options (an empty group hides them from --help).
+  app.add_option("--fail-after-jobs", o.fail_after_jobs)->group("");
+  app.add_option("--fail-rank", o.fail_rank)->group("");
+  app.add_option("--fail-mode", o.fail_mode)->check(CLI::IsMember({"exit", "hang"}))->group("");
+  app.add_option("--initial-job-rows", o.initial_job_rows)->group("");
+  app.add_option("--max-job-rows", o.max_job_rows)->group("");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e, out, err);
+    return code == 0 ? kExitOk : kExitUsage;
+  }
+  o.coordinator_works = !coordinator_only;
+  if (o.resume && o.force) {
+    err << "prt-farm: --resume and --force contradict each other\n";
+    return kExitUsage;
+  }
+  return -1;
+}
+
+}  // namespace prt

@@ -1,0 +1,81 @@
+// report.json (see farm_report.h).
+#include "farm/farm_report.h"
+
+#include <algorithm>
+#include <nlohmann/json.hpp>
+
+namespace prt {
+
+double FarmReport::LoadImbalance() const {
+  double max = 0, sum = 0;
+  int n = 0;
+  for (const RankReport& r : rank_reports) {
+    if (!r.computes) continue;
+    max = std::max(max, r.busy_seconds);
+    sum += r.busy_seconds;
+    ++n;
+  }
+  return (n == 0 || sum <= 0) ? 0.0 : max / (sum / n);
+}
+
+std::string FarmReport::ToJsonText() const {
+  using Json = nlohmann::ordered_json;
+  Json phases_json = Json::array();
+  for (const PhaseReport& p : phases) {
+    phases_json.push_back({{"name", p.name}, {"wall_seconds", p.wall_seconds}});
+  }
+  Json ranks_json = Json::array();
+  for (const RankReport& r : rank_reports) {
+    ranks_json.push_back(
+        {{"rank", r.rank},
+         {"host", r.host},
+         {"threads", r.threads},
+         {"computes", r.computes},
+         {"jobs", r.jobs},
+         {"rows", r.rows},
+         {"rays_traced", r.rays_traced},
+         {"busy_seconds", r.busy_seconds},
+         {"rays_per_second",
+          r.busy_seconds > 0 ? static_cast<double>(r.rays_traced) / r.busy_seconds : 0.0}});
+  }
+  Json j = {
+      {"tool", "prt-farm"},
+      {"version", version},
+      {"status", status},
+      {"exit_code", exit_code},
+      {"error", error},
+      {"scene", scene},
+      {"scene_name", scene_name},
+      {"method", method},
+      {"ranks", ranks},
+      {"cubemap_n", cubemap_n},
+      {"rays_per_texel", rays_per_texel},
+      {"seed", seed},
+      {"rows", rows},
+      {"cols", cols},
+      {"rows_per_block", rows_per_block},
+      {"wall_seconds", wall_seconds},
+      {"phases", phases_json},
+      {"rays_traced", rays_traced},
+      {"rays_per_second",
+       sampling_seconds > 0 ? static_cast<double>(rays_traced) / sampling_seconds : 0.0},
+      {"texels_traced", texels_traced},
+      {"texels_skipped_below_horizon", texels_below_horizon},
+      {"rays_skipped_below_horizon", rays_below_horizon},
+      {"rays_traced_including_reused", rays_traced_all},
+      {"texels_skipped_below_horizon_including_reused", texels_below_horizon_all},
+      {"jobs",
+       {{"total", jobs_total},
+        {"done", jobs_done},
+        {"reused_from_checkpoints", jobs_reused},
+        {"rows_done", rows_done},
+        {"rows_reused", rows_reused},
+        {"damaged_journal_lines", damaged_journal_lines},
+        {"checkpoints_rejected", checkpoints_rejected}}},
+      {"load_imbalance", LoadImbalance()},
+      {"rank_details", ranks_json},
+  };
+  return j.dump(2) + "\n";
+}
+
+}  // namespace prt

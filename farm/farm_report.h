@@ -1,0 +1,69 @@
+// run/report.json (docs/farm.md, "report.json"): what a run did and how long each phase took.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace prt {
+
+struct RankReport {
+  int rank = 0;
+  std::string host;
+  int threads = 0;
+  bool computes = true;  // false for a coordinator-only rank 0
+  uint64_t jobs = 0;
+  uint64_t rows = 0;
+  uint64_t rays_traced = 0;
+  double busy_seconds = 0;  // time inside the worker kernels
+};
+
+struct PhaseReport {
+  std::string name;
+  double wall_seconds = 0;
+};
+
+struct FarmReport {
+  std::string status = "running";  // ok | failed | running
+  int exit_code = 0;
+  std::string error;
+  std::string version;
+  std::string scene;  // the scene file ("<default scene>" for the embedded one)
+  std::string scene_name;
+  std::string method;
+  int ranks = 1;
+  int cubemap_n = 0;
+  int rays_per_texel = 0;
+  uint64_t seed = 0;
+  uint64_t rows = 0;
+  uint64_t cols = 0;
+  uint32_t rows_per_block = 0;
+  std::vector<PhaseReport> phases;
+  double wall_seconds = 0;
+  double sampling_seconds = 0;  // wall time of the sampling phase (for rays/s)
+
+  // This run only (jobs re-used from checkpoints are counted separately).
+  uint64_t rays_traced = 0;
+  uint64_t texels_traced = 0;
+  uint64_t texels_below_horizon = 0;
+  uint64_t rays_below_horizon = 0;
+  // Including the re-used jobs' counters, i.e. the whole matrix.
+  uint64_t rays_traced_all = 0;
+  uint64_t texels_below_horizon_all = 0;
+
+  uint64_t jobs_total = 0;  // done + reused
+  uint64_t jobs_done = 0;
+  uint64_t jobs_reused = 0;
+  uint64_t rows_done = 0;
+  uint64_t rows_reused = 0;
+  int damaged_journal_lines = 0;
+  uint64_t checkpoints_rejected = 0;  // journaled jobs whose rows did not verify
+
+  std::vector<RankReport> rank_reports;
+
+  // max / mean busy time over the computing ranks (1 = perfect balance; 0 when none computed).
+  double LoadImbalance() const;
+  std::string ToJsonText() const;
+};
+
+}  // namespace prt

@@ -1,0 +1,45 @@
+// The run folder prt-farm writes (docs/farm.md, "Run folder") and the manifest that ties its
+// checkpoints to one set of inputs, so that --resume never mixes rows of two different runs.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace prt {
+
+struct RunFolder {
+  explicit RunFolder(const std::string& dir);
+  std::string dir;
+  std::string transport;    // transport.prtt (final, complete)
+  std::string partial;      // transport.prtt.partial (rows written in place while running)
+  std::string geometry;     // geometry.prtg
+  std::string scene_copy;   // scene.toml
+  std::string report;       // report.json
+  std::string checkpoints;  // checkpoints/
+  std::string manifest;     // checkpoints/manifest.json
+  std::string journal;      // checkpoints/journal.txt
+};
+
+// Everything that determines the bytes of transport.prtt. Two runs with equal manifests produce
+// bit-identical files, whatever the number of ranks, threads or job sizes.
+struct RunManifest {
+  int format_version = 1;
+  std::string method = "brute";
+  int cubemap_n = 32;
+  int rays_per_texel = 4;
+  uint64_t seed = 1;
+  uint64_t rows = 0;
+  uint32_t rows_per_block = 256;
+  uint64_t scene_checksum = 0;     // XXH64 of the scene text
+  uint64_t geometry_checksum = 0;  // XXH64 of geometry.prtg
+
+  std::string ToJsonText() const;
+  // Throws InputError naming `file` when the text is not a manifest.
+  static RunManifest FromJsonText(const std::string& text, const std::string& file);
+  // XXH64 of ToJsonText(): the run key stored in the journal.
+  uint64_t Key() const;
+  // "rays_per_texel 4 → 16, ..." for the fields that differ ("" when equal).
+  std::string DifferencesFrom(const RunManifest& older) const;
+};
+
+}  // namespace prt
