@@ -226,8 +226,9 @@ void AnalyzeD4(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
   for (int j = 0; j < half; ++j) {
     const double* x0 = in[2 * j];
     const double* x1 = in[2 * j + 1];
-    const double* x2 = in[(2 * j + 2) % len];
-    const double* x3 = in[(2 * j + 3) % len];
+    const int wrap = 2 * j + 2 < len ? 0 : len;  // periodic extension, only at the last j
+    const double* x2 = in[2 * j + 2 - wrap];
+    const double* x3 = in[2 * j + 3 - wrap];
     double* a = out[j];
     double* d = out[half + j];
     for (int x = 0; x < w; ++x) {
@@ -244,7 +245,7 @@ void SynthesizeD4(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
   const int half = len / 2;
   const int w = in.Width();
   for (int i = 0; i < half; ++i) {
-    const int p = (i + half - 1) % half;
+    const int p = i == 0 ? half - 1 : i - 1;  // periodic extension
     const double* a = in[i];
     const double* d = in[half + i];
     const double* ap = in[p];
@@ -300,7 +301,56 @@ void CopyBlock(const double* from, double* to, std::ptrdiff_t stride, int wc, in
   }
 }
 
+// Haar in one pass over 2×2 blocks (same result as rows then columns): with the block
+//   p q
+//   r s   LL = (p+q+r+s)/2, HL = (p−q+r−s)/2, LH = (p+q−r−s)/2, HH = (p−q−r+s)/2.
+void ForwardHaarStep2D(double* a, double* b, std::ptrdiff_t stride, int wc, int hc) {
+  const int hw = wc / 2, hh = hc / 2;
+  for (int j = 0; j < hh; ++j) {
+    const double* r0 = a + 2 * j * stride;
+    const double* r1 = r0 + stride;
+    double* ll = b + j * stride;
+    double* hl = ll + hw;
+    double* lh = b + (hh + j) * stride;
+    double* hh_row = lh + hw;
+    for (int i = 0; i < hw; ++i) {
+      const double p = r0[2 * i], q = r0[2 * i + 1], r = r1[2 * i], s = r1[2 * i + 1];
+      const double top = p + q, bottom = r + s, left = p + r, right = q + s;
+      ll[i] = 0.5 * (top + bottom);
+      hl[i] = 0.5 * (left - right);
+      lh[i] = 0.5 * (top - bottom);
+      hh_row[i] = 0.5 * ((p - q) - (r - s));
+    }
+  }
+  CopyBlock(b, a, stride, wc, hc);
+}
+
+void InverseHaarStep2D(double* a, double* b, std::ptrdiff_t stride, int wc, int hc) {
+  const int hw = wc / 2, hh = hc / 2;
+  for (int j = 0; j < hh; ++j) {
+    const double* ll = a + j * stride;
+    const double* hl = ll + hw;
+    const double* lh = a + (hh + j) * stride;
+    const double* hh_row = lh + hw;
+    double* r0 = b + 2 * j * stride;
+    double* r1 = r0 + stride;
+    for (int i = 0; i < hw; ++i) {
+      const double sum_l = ll[i] + lh[i], dif_l = ll[i] - lh[i];
+      const double sum_h = hl[i] + hh_row[i], dif_h = hl[i] - hh_row[i];
+      r0[2 * i] = 0.5 * (sum_l + sum_h);
+      r0[2 * i + 1] = 0.5 * (sum_l - sum_h);
+      r1[2 * i] = 0.5 * (dif_l + dif_h);
+      r1[2 * i + 1] = 0.5 * (dif_l - dif_h);
+    }
+  }
+  CopyBlock(b, a, stride, wc, hc);
+}
+
 void ForwardStep2D(WaveletFilter f, double* a, double* b, std::ptrdiff_t stride, int wc, int hc) {
+  if (f == WaveletFilter::kHaar) {
+    ForwardHaarStep2D(a, b, stride, wc, hc);
+    return;
+  }
   double* src = a;
   if (wc >= 2) {
     for (int y = 0; y < hc; ++y) {
@@ -317,6 +367,10 @@ void ForwardStep2D(WaveletFilter f, double* a, double* b, std::ptrdiff_t stride,
 }
 
 void InverseStep2D(WaveletFilter f, double* a, double* b, std::ptrdiff_t stride, int wc, int hc) {
+  if (f == WaveletFilter::kHaar) {
+    InverseHaarStep2D(a, b, stride, wc, hc);
+    return;
+  }
   double* src = a;
   if (hc >= 2) {
     Synthesize<false>(f, {a, stride, wc}, {b, stride, wc}, hc);
