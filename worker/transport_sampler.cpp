@@ -51,6 +51,9 @@ struct EmbreeTracer {
   const EmbreeScene* scene;
   bool operator()(const OcclusionRay& r) const { return scene->Occluded(r); }
 };
+struct UnoccludedTracer {
+  bool operator()(const OcclusionRay&) const { return false; }
+};
 struct CollectingTracer {
   std::vector<OcclusionRay>* rays;
   bool operator()(const OcclusionRay& r) const {
@@ -184,6 +187,32 @@ struct TransportSampler::Impl {
     }
     return stats;
   }
+
+  template <class Trace>
+  SampleStats Texels(const SpatialSample& sample, uint64_t sample_index,
+                     std::span<const uint32_t> texels, float* values, const Trace& trace) const {
+    const std::size_t count = layout.texel_count();
+    for (uint32_t j : texels) {
+      if (j >= count) {
+        throw std::out_of_range("TransportSampler: texel " + std::to_string(j) +
+                                " >= " + std::to_string(count));
+      }
+    }
+    const ScopedFlushDenormals ftz;
+    const SampleFrame f = Frame(sample, sample_index);
+    SampleStats stats;
+    for (std::size_t i = 0; i < texels.size(); ++i) {
+      const std::size_t j = texels[i];
+      if (!layout.TexelAboveHorizon(j, f.normal)) {
+        ++stats.texels_below_horizon;
+        values[i] = 0.0f;
+        continue;
+      }
+      const TexelCoord c = layout.Coord(j);
+      values[i] = EvaluateTexel(f, c.face, c.x, c.y, j, stats, trace);
+    }
+    return stats;
+  }
 };
 
 TransportSampler::TransportSampler(const EmbreeScene& scene, int cubemap_n,
@@ -221,29 +250,13 @@ SampleStats TransportSampler::ComputeRow(const SpatialSample& sample, uint64_t s
 
 SampleStats TransportSampler::ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
                                             std::span<const uint32_t> texels, float* values) const {
-  const Impl& im = *impl_;
-  const std::size_t count = im.layout.texel_count();
-  for (uint32_t j : texels) {
-    if (j >= count) {
-      throw std::out_of_range("TransportSampler::ComputeTexels: texel " + std::to_string(j) +
-                              " ≥ " + std::to_string(count));
-    }
-  }
-  const ScopedFlushDenormals ftz;
-  const SampleFrame f = im.Frame(sample, sample_index);
-  const EmbreeTracer trace{&im.scene};
-  SampleStats stats;
-  for (std::size_t i = 0; i < texels.size(); ++i) {
-    const std::size_t j = texels[i];
-    if (!im.layout.TexelAboveHorizon(j, f.normal)) {
-      ++stats.texels_below_horizon;
-      values[i] = 0.0f;
-      continue;
-    }
-    const TexelCoord c = im.layout.Coord(j);
-    values[i] = im.EvaluateTexel(f, c.face, c.x, c.y, j, stats, trace);
-  }
-  return stats;
+  return impl_->Texels(sample, sample_index, texels, values, EmbreeTracer{&impl_->scene});
+}
+
+void TransportSampler::ComputeUnoccludedTexels(const SpatialSample& sample, uint64_t sample_index,
+                                               std::span<const uint32_t> texels,
+                                               float* values) const {
+  impl_->Texels(sample, sample_index, texels, values, UnoccludedTracer{});
 }
 
 SampleStats TransportSampler::ComputeRows(std::span<const SpatialSample> samples,

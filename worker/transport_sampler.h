@@ -94,6 +94,14 @@ class TransportSampler {
   SampleStats ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
                             std::span<const uint32_t> texels, float* values) const;
 
+  // U_j for the listed texels: the estimator of ComputeTexels with visibility ≡ 1 (the same
+  // jittered directions and weights, no rays traced), so T_j / U_j ∈ [0, 1] is the visible
+  // fraction of texel j and equals 1 exactly where no ray was blocked. Texels below the horizon
+  // give 0. Throws std::out_of_range like ComputeTexels. Used by adaptive angular sampling and
+  // sparse reconstruction (Huang & Ramamoorthi 2010).
+  void ComputeUnoccludedTexels(const SpatialSample& sample, uint64_t sample_index,
+                               std::span<const uint32_t> texels, float* values) const;
+
   // Rows for samples[0..count) with global indices first_index.., into out (count rows,
   // row-major), in parallel over samples with TBB.
   SampleStats ComputeRows(std::span<const SpatialSample> samples, uint64_t first_index,

@@ -371,6 +371,34 @@ TEST(TransportSampler, ComputeTexelsMatchesComputeRowBitForBit) {
   EXPECT_THROW(sampler.ComputeTexels(scene_data.samples[0], 0, {&bad, 1}, &v), std::out_of_range);
 }
 
+// U_j (visibility ≡ 1) equals T_j bit for bit where nothing is in the way, bounds T_j from
+// above everywhere, and sums to 1 over the hemisphere.
+TEST(TransportSampler, UnoccludedTexelsBoundTheRowAndMatchItWhenFree) {
+  const PartlyOccluded scene_data;
+  const EmbreeScene scene(scene_data.geometry);
+  const EmbreeScene none{SceneGeometry{}};
+  const TransportSampler sampler(scene, 16, {4, 5});
+  const TransportSampler free_sampler(none, 16, {4, 5});
+  const std::size_t m = sampler.layout().texel_count();
+  std::vector<uint32_t> all(m);
+  std::iota(all.begin(), all.end(), 0u);
+  for (std::size_t i : {0u, 8u, 20u}) {
+    const SpatialSample& s = scene_data.samples[i];
+    const std::vector<float> row = Row(sampler, s, i);
+    const std::vector<float> free_row = Row(free_sampler, s, i);
+    std::vector<float> u(m);
+    sampler.ComputeUnoccludedTexels(s, i, all, u.data());
+    EXPECT_EQ(0, std::memcmp(u.data(), free_row.data(), m * sizeof(float)));
+    std::size_t blocked = 0;
+    for (std::size_t j = 0; j < m; ++j) {
+      EXPECT_LE(row[j], u[j]);
+      blocked += row[j] < u[j] ? 1 : 0;
+    }
+    EXPECT_GT(blocked, 0u);
+    EXPECT_NEAR(Sum(u), 1.0, 2e-3);
+  }
+}
+
 // AppendRowRays reproduces the traced rays: as many as ComputeRow traces, from the robust
 // origin, and re-tracing them reproduces the row's visibility.
 TEST(TransportSampler, AppendRowRaysReproducesTheTracedRays) {
