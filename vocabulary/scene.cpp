@@ -392,23 +392,24 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
   {
     const toml::node* n = top.Find("environments");
     const toml::array* list = nullptr;
-    std::string_view key = "environments";
+    std::string label = "environments";
     if (n && n->is_table()) {
       Section s(*n->as_table(), "[environments]", file);
       const toml::node* pn = s.Find("paths");
-      key = "paths";
-      if (pn && !pn->is_array()) s.Fail(pn, key, "expected an array of paths");
+      if (pn && !pn->is_array()) s.Fail(pn, "paths", "expected an array of paths");
       if (pn) list = pn->as_array();
       s.RejectUnknown();
+      label = "[environments] paths";
     } else if (n && n->is_array()) {
       list = n->as_array();
     } else if (n) {
-      top.Fail(n, key, "expected a table [environments] with paths = [...]");
+      top.Fail(n, "environments", "expected a table [environments] with paths = [...]");
     }
     if (list) {
       for (const toml::node& e : *list) {
         if (!e.is_string() || e.value<std::string>()->empty()) {
-          top.Fail(&e, key, "expected non-empty path strings");
+          throw InputError(file, "line " + std::to_string(e.source().begin.line) + ": " + label +
+                                     ": expected non-empty path strings, got " + TypeName(e));
         }
         const std::string p = *e.value<std::string>();
         const std::string found = FindDataFile(p, search_dirs);

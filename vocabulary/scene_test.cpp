@@ -372,5 +372,26 @@ TEST(SceneTest, DefaultSceneBuildsTheFittedBunnyOnTheGround) {
             << g.diagonal() << "\n";
 }
 
+TEST(SceneTest, TeapotExampleStandsZUpOnTheGround) {
+  const std::string shared = PRT_SHARED_DATA_DIR;
+  if (!fs::exists(shared + "/meshes/utah_teapot_24x24.obj")) GTEST_SKIP() << "no shared data";
+  const SceneDescription s =
+      LoadSceneFile(std::string(PRT_SOURCE_DIR) + "/scenes/teapot.toml", {shared});
+  EXPECT_EQ(s.samples, SpatialSamples::kCameraPixels);
+  ASSERT_EQ(s.environments.size(), 2u);
+  EXPECT_TRUE(fs::exists(s.environments[0]));
+  const SceneGeometry g = BuildSceneGeometry(s);
+  const TriangleMesh& m = g.meshes[0].mesh;
+  EXPECT_EQ(m.positions.size(), 18529u);
+  double lo = 1e9, hi = -1e9;
+  for (const Vec3& p : m.positions) {
+    lo = std::min(lo, p.y);
+    hi = std::max(hi, p.y);
+  }
+  // Z-up source: height 3.15 of a 6.43-wide teapot, fitted to 1.2 → 1.2·3.15/6.43404.
+  EXPECT_NEAR(lo, 0.0, 1e-12);
+  EXPECT_NEAR(hi, 1.2 * 3.15 / 6.43404, 1e-4);
+}
+
 }  // namespace
 }  // namespace prt
