@@ -1,0 +1,109 @@
+/* Plain C interface to the .prtpack reader (docs/prtpack-format.md), for runtimes and engines
+ * that do not speak C++. Same guarantees as prtpack_reader.h: safe on untrusted input; every
+ * failure returns NULL or PRTPACK_ERROR and leaves a message, readable with prtpack_last_error()
+ * on the same thread, that names the file and the problem. No function aborts or throws.
+ *
+ * Memory: a prtpack handle owns everything it returns pointers to (meshes, metadata, transport
+ * parameters); the pointers stay valid until prtpack_close(). Transport blocks are copied into
+ * caller memory. A handle may be used from one thread at a time. */
+#ifndef PRT_PACKAGER_PRTPACK_H_
+#define PRT_PACKAGER_PRTPACK_H_
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define PRTPACK_OK 0
+#define PRTPACK_ERROR (-1)
+
+typedef struct prtpack prtpack; /* opaque */
+
+typedef struct prtpack_section_info {
+  char type[5];         /* FourCC, NUL-terminated ("MESH"); unprintable bytes shown as '?' */
+  uint32_t flags;       /* bit 0: critical */
+  uint32_t codec;       /* 0 none, 1 zstd, 2 draco */
+  uint32_t id;          /* mesh index for MESH and MATL */
+  uint64_t offset;      /* in the file, aligned */
+  uint64_t stored_size; /* bytes in the file */
+  uint64_t raw_size;    /* bytes once decoded */
+  uint64_t checksum;    /* XXH64 of the stored bytes */
+  int known;            /* 1 if this reader understands the section type */
+} prtpack_section_info;
+
+typedef struct prtpack_mesh {
+  const char* name;         /* NUL-terminated */
+  size_t vertex_count;
+  size_t triangle_count;
+  const float* positions;   /* 3 × vertex_count; vertex i is vertex i of the packed mesh */
+  const float* normals;     /* 3 × vertex_count, unit */
+  const uint32_t* triangles; /* 3 × triangle_count, indices < vertex_count */
+  float albedo[3];          /* linear RGB in [0, 1] */
+  int is_ground;            /* 1 for the ground plane */
+  uint32_t grid_resolution; /* ground plane: vertices per side, else 0 */
+} prtpack_mesh;
+
+typedef struct prtpack_transport_info {
+  uint32_t encoding;       /* the transport encoder's format version */
+  uint64_t row_count;      /* spatial samples */
+  uint64_t column_count;   /* columns over all blocks */
+  size_t block_count;
+  const uint8_t* params;   /* opaque global parameters (owned by the handle) */
+  size_t params_size;
+} prtpack_transport_info;
+
+typedef struct prtpack_block_info {
+  uint64_t first_column;
+  uint32_t column_count;
+  uint64_t raw_size; /* bytes prtpack_get_transport_block writes */
+} prtpack_block_info;
+
+/* The last error on this thread, or "" if none. Valid until the next prtpack call on it. */
+const char* prtpack_last_error(void);
+
+/* Opens a pack from a file (memory-mapped) or from `size` bytes at `data` (copied; the caller may
+ * free its buffer afterwards). Checks the header, its checksum and the section table. Returns
+ * NULL on failure: unreadable file, not a .prtpack, unsupported major version, truncated,
+ * corrupted header or table, unknown critical section. */
+prtpack* prtpack_open_file(const char* path);
+prtpack* prtpack_open_memory(const void* data, size_t size);
+/* Frees the handle and everything it returned. NULL is allowed. */
+void prtpack_close(prtpack* pack);
+
+/* Format version of the open file. */
+int prtpack_version(const prtpack* pack, uint32_t* major, uint32_t* minor);
+
+/* Number of sections (0 if pack is NULL), and section `index`'s table entry. */
+size_t prtpack_section_count(const prtpack* pack);
+int prtpack_get_section_info(const prtpack* pack, size_t index, prtpack_section_info* out);
+
+/* Number of meshes (0 if pack is NULL), and mesh `index` decoded (on first use; later calls
+ * return the same arrays). Errors: index out of range, checksum mismatch, Draco failure, counts
+ * that disagree with the section table, non-finite values. */
+size_t prtpack_mesh_count(const prtpack* pack);
+int prtpack_get_mesh(prtpack* pack, size_t index, prtpack_mesh* out);
+/* Mesh `index`'s albedo without decoding the mesh. */
+int prtpack_get_albedo(prtpack* pack, size_t index, float rgb[3]);
+
+/* The META JSON text (NUL-terminated, `length` excludes the NUL; length may be NULL). Errors:
+ * checksum mismatch, zstd failure, not a JSON object. */
+int prtpack_get_metadata(prtpack* pack, const char** json, size_t* length);
+
+/* The transport's parameters and block count. Errors: no TRNS section, index corrupted. */
+int prtpack_get_transport_info(prtpack* pack, prtpack_transport_info* out);
+int prtpack_get_block_info(prtpack* pack, size_t block, prtpack_block_info* out);
+/* Block `block` decompressed into dst, which must hold exactly raw_size bytes (dst_size ==
+ * raw_size). Verifies the block's checksum. Errors: out of range, wrong size, checksum mismatch,
+ * decompression failure. */
+int prtpack_get_transport_block(prtpack* pack, size_t block, void* dst, size_t dst_size);
+
+/* Every checksum and structural rule (prt-pack verify). PRTPACK_OK if all hold. */
+int prtpack_verify(prtpack* pack);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* PRT_PACKAGER_PRTPACK_H_ */

@@ -1,0 +1,210 @@
+// The C interface of prtpack.h over PackReader: every entry point catches every exception and
+// turns it into PRTPACK_ERROR (or NULL) plus a thread-local message.
+#include "packager/prtpack.h"
+
+#include <cstring>
+#include <exception>
+#include <memory>
+#include <new>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "packager/prtpack_reader.h"
+
+struct prtpack {
+  explicit prtpack(prt::pack::PackReader r) : reader(std::move(r)) {}
+  prt::pack::PackReader reader;
+  std::vector<std::unique_ptr<prt::pack::UnpackedMesh>> meshes;
+  std::optional<std::string> metadata;
+  std::optional<prt::pack::TransportIndex> transport;
+};
+
+namespace {
+
+thread_local std::string g_last_error;
+
+int Fail(const std::string& message) {
+  g_last_error = message.empty() ? "unknown error" : message;
+  return PRTPACK_ERROR;
+}
+
+// Runs f, mapping any exception to PRTPACK_ERROR with its message.
+template <typename F>
+int Guard(F&& f) {
+  g_last_error.clear();
+  try {
+    return f();
+  } catch (const std::bad_alloc&) {
+    return Fail("out of memory");
+  } catch (const std::exception& e) {
+    return Fail(e.what());
+  } catch (...) {
+    return Fail("unknown error");
+  }
+}
+
+const prt::pack::TransportIndex& Transport(prtpack* p) {
+  if (!p->transport) p->transport = p->reader.ReadTransportIndex();
+  return *p->transport;
+}
+
+}  // namespace
+
+extern "C" {
+
+const char* prtpack_last_error(void) { return g_last_error.c_str(); }
+
+prtpack* prtpack_open_file(const char* path) {
+  prtpack* out = nullptr;
+  Guard([&] {
+    if (path == nullptr) return Fail("prtpack_open_file: path is NULL");
+    out = new prtpack(prt::pack::PackReader::OpenFile(path));
+    return PRTPACK_OK;
+  });
+  return out;
+}
+
+prtpack* prtpack_open_memory(const void* data, size_t size) {
+  prtpack* out = nullptr;
+  Guard([&] {
+    if (data == nullptr && size > 0) return Fail("prtpack_open_memory: data is NULL");
+    out = new prtpack(prt::pack::PackReader::OpenMemory(data, size));
+    return PRTPACK_OK;
+  });
+  return out;
+}
+
+void prtpack_close(prtpack* pack) { delete pack; }
+
+int prtpack_version(const prtpack* pack, uint32_t* major, uint32_t* minor) {
+  return Guard([&] {
+    if (pack == nullptr) return Fail("prtpack_version: pack is NULL");
+    if (major) *major = pack->reader.version_major();
+    if (minor) *minor = pack->reader.version_minor();
+    return PRTPACK_OK;
+  });
+}
+
+size_t prtpack_section_count(const prtpack* pack) {
+  return pack == nullptr ? 0 : pack->reader.sections().size();
+}
+
+int prtpack_get_section_info(const prtpack* pack, size_t index, prtpack_section_info* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_section_info: NULL argument");
+    const auto& sections = pack->reader.sections();
+    if (index >= sections.size()) {
+      return Fail(pack->reader.name() + ": section " + std::to_string(index) + " out of range");
+    }
+    const prt::pack::SectionInfo& s = sections[index];
+    std::memcpy(out->type, s.type.c_str(), 4);
+    out->type[4] = '\0';
+    out->flags = s.flags;
+    out->codec = s.codec;
+    out->id = s.id;
+    out->offset = s.offset;
+    out->stored_size = s.stored_size;
+    out->raw_size = s.raw_size;
+    out->checksum = s.checksum;
+    out->known = s.known ? 1 : 0;
+    return PRTPACK_OK;
+  });
+}
+
+size_t prtpack_mesh_count(const prtpack* pack) {
+  return pack == nullptr ? 0 : pack->reader.mesh_count();
+}
+
+int prtpack_get_mesh(prtpack* pack, size_t index, prtpack_mesh* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_mesh: NULL argument");
+    if (index >= pack->reader.mesh_count()) {
+      return Fail(pack->reader.name() + ": mesh " + std::to_string(index) + " out of range");
+    }
+    if (pack->meshes.size() < pack->reader.mesh_count()) {
+      pack->meshes.resize(pack->reader.mesh_count());
+    }
+    auto& slot = pack->meshes[index];
+    if (!slot) slot = std::make_unique<prt::pack::UnpackedMesh>(pack->reader.ReadMesh(index));
+    const prt::pack::UnpackedMesh& m = *slot;
+    out->name = m.name.c_str();
+    out->vertex_count = m.vertex_count();
+    out->triangle_count = m.triangle_count();
+    out->positions = m.positions.data();
+    out->normals = m.normals.data();
+    out->triangles = m.triangles.data();
+    for (int c = 0; c < 3; ++c) out->albedo[c] = m.albedo[static_cast<std::size_t>(c)];
+    out->is_ground = m.is_ground ? 1 : 0;
+    out->grid_resolution = m.grid_resolution;
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_albedo(prtpack* pack, size_t index, float rgb[3]) {
+  return Guard([&] {
+    if (pack == nullptr || rgb == nullptr) return Fail("prtpack_get_albedo: NULL argument");
+    const prt::pack::MeshMaterial m = pack->reader.ReadMaterial(index);
+    for (int c = 0; c < 3; ++c) rgb[c] = m.albedo[static_cast<std::size_t>(c)];
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_metadata(prtpack* pack, const char** json, size_t* length) {
+  return Guard([&] {
+    if (pack == nullptr || json == nullptr) return Fail("prtpack_get_metadata: NULL argument");
+    if (!pack->metadata) pack->metadata = pack->reader.ReadMetadata();
+    *json = pack->metadata->c_str();
+    if (length) *length = pack->metadata->size();
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_transport_info(prtpack* pack, prtpack_transport_info* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_transport_info: NULL argument");
+    const prt::pack::TransportIndex& t = Transport(pack);
+    out->encoding = t.encoding;
+    out->row_count = t.row_count;
+    out->column_count = t.column_count;
+    out->block_count = t.blocks.size();
+    out->params = t.params.data();
+    out->params_size = t.params.size();
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_block_info(prtpack* pack, size_t block, prtpack_block_info* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_block_info: NULL argument");
+    const prt::pack::TransportIndex& t = Transport(pack);
+    if (block >= t.blocks.size()) {
+      return Fail(pack->reader.name() + ": transport block " + std::to_string(block) +
+                  " out of range");
+    }
+    out->first_column = t.blocks[block].first_column;
+    out->column_count = t.blocks[block].column_count;
+    out->raw_size = t.blocks[block].raw_size;
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_transport_block(prtpack* pack, size_t block, void* dst, size_t dst_size) {
+  return Guard([&] {
+    if (pack == nullptr || (dst == nullptr && dst_size > 0)) {
+      return Fail("prtpack_get_transport_block: NULL argument");
+    }
+    pack->reader.ReadTransportBlockInto(Transport(pack), block, dst, dst_size);
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_verify(prtpack* pack) {
+  return Guard([&] {
+    if (pack == nullptr) return Fail("prtpack_verify: pack is NULL");
+    pack->reader.VerifyAll();
+    return PRTPACK_OK;
+  });
+}
+
+}  // extern "C"
