@@ -620,6 +620,32 @@ void InverseWavelet1D(WaveletFilter filter, float* data, int length, int depth,
   for (std::size_t i = 0; i < n; ++i) data[i] = static_cast<float>(a[i]);
 }
 
+void ForwardWavelet1DStep(WaveletFilter filter, float* data, int length, int step,
+                          WaveletWorkspace& ws) {
+  CheckStep("ForwardWavelet1DStep", step,
+            CheckedMaxDepth1D("ForwardWavelet1DStep", filter, length));
+  const int m = SizeAtDepth(length, step - 1);
+  const auto n = static_cast<std::size_t>(m);
+  double* a = ws.Doubles(2 * n);
+  double* b = a + n;
+  for (std::size_t i = 0; i < n; ++i) a[i] = data[i];
+  Analyze<true>(filter, {a, 1, 1}, {b, 1, 1}, m);
+  for (std::size_t i = 0; i < n; ++i) data[i] = static_cast<float>(b[i]);
+}
+
+void InverseWavelet1DStep(WaveletFilter filter, float* data, int length, int step,
+                          WaveletWorkspace& ws) {
+  CheckStep("InverseWavelet1DStep", step,
+            CheckedMaxDepth1D("InverseWavelet1DStep", filter, length));
+  const int m = SizeAtDepth(length, step - 1);
+  const auto n = static_cast<std::size_t>(m);
+  double* a = ws.Doubles(2 * n);
+  double* b = a + n;
+  for (std::size_t i = 0; i < n; ++i) a[i] = data[i];
+  Synthesize<true>(filter, {a, 1, 1}, {b, 1, 1}, m);
+  for (std::size_t i = 0; i < n; ++i) data[i] = static_cast<float>(b[i]);
+}
+
 void ForwardWavelet2D(WaveletFilter filter, float* data, int width, int height, int depth,
                       WaveletWorkspace& ws) {
   CheckDepth("ForwardWavelet2D", depth,

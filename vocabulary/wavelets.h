@@ -138,6 +138,13 @@ void ForwardWavelet1D(WaveletFilter filter, float* data, int length, int depth,
 void InverseWavelet1D(WaveletFilter filter, float* data, int length, int depth,
                       WaveletWorkspace& ws = ThreadWaveletWorkspace());
 
+// One single 1D step t on the prefix SizeAtDepth(length, t−1): Forward takes depth t−1 to t,
+// Inverse takes depth t back to t−1 (for 1D column transforms and Eq. 8 relighting).
+void ForwardWavelet1DStep(WaveletFilter filter, float* data, int length, int step,
+                          WaveletWorkspace& ws = ThreadWaveletWorkspace());
+void InverseWavelet1DStep(WaveletFilter filter, float* data, int length, int step,
+                          WaveletWorkspace& ws = ThreadWaveletWorkspace());
+
 // 2D non-standard decomposition of a row-major width×height array (data[y·width + x]).
 // Haar and D4 need width == height, a power of two (a cubemap face).
 void ForwardWavelet2D(WaveletFilter filter, float* data, int width, int height, int depth,

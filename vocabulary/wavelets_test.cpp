@@ -112,6 +112,22 @@ TEST(Wavelets, SingleStepsComposeToDepth) {
   }
 }
 
+TEST(Wavelets, SingleStepsComposeToDepth1D) {
+  for (WaveletFilter f : kAllFilters) {
+    for (int n : Lengths1D(f)) {
+      const std::vector<float> x = RandomSignal(static_cast<std::size_t>(n), 21u + n);
+      for (int k = 1; k <= WaveletMaxDepth(f, n); ++k) {
+        std::vector<float> whole = x, steps = x;
+        ForwardWavelet1D(f, whole.data(), n, k);
+        for (int t = 1; t <= k; ++t) ForwardWavelet1DStep(f, steps.data(), n, t);
+        EXPECT_LE(RelativeError(steps, whole), 1e-6) << Name(f) << " n=" << n;
+        for (int t = k; t >= 1; --t) InverseWavelet1DStep(f, steps.data(), n, t);
+        EXPECT_LE(RelativeError(steps, x), 1e-6) << Name(f) << " n=" << n;
+      }
+    }
+  }
+}
+
 // A single step touches only the region SizeAtDepth(·, t−1) of its step.
 TEST(Wavelets, SingleStepLeavesOuterCoefficientsAlone) {
   const int w = 13, h = 9;
@@ -675,6 +691,7 @@ TEST(Wavelets, RejectsInvalidArguments) {
   EXPECT_THROW(InverseWavelet2DStep(WaveletFilter::kCdf97, x.data(), 8, 8, 0),
                std::invalid_argument);
   EXPECT_THROW(ForwardWavelet1D(WaveletFilter::kHaar, x.data(), 6, 1), std::invalid_argument);
+  EXPECT_THROW(ForwardWavelet1DStep(WaveletFilter::kCdf97, x.data(), 7, 4), std::invalid_argument);
   EXPECT_THROW(ForwardWavelet1D(WaveletFilter::kLeGall53, x.data(), 0, 0), std::invalid_argument);
   EXPECT_THROW(CoefficientLevel1D(5, 1, 5), std::invalid_argument);
   EXPECT_THROW(CoefficientClass2D(5, 3, 1, 0, 3), std::invalid_argument);
