@@ -1,0 +1,52 @@
+// Dense vertices, angular domain (Huang & Ramamoorthi 2010, §4.2, Figure 3): trace a regular grid
+// at half resolution per face axis (1/4 of the texels), then for every other texel above the
+// horizon inspect the sampled texels in a 7×7 window: where they disagree (non-zero variance) the
+// texel is a feature and is traced; where they agree it borrows their value.
+//
+// The test is made on visibility, not on T: a texel's fractional visibility is
+// v_j = T_j / U_j, with U_j the same estimator with visibility ≡ 1 (TransportSampler::
+// ComputeUnoccludedTexels, identical directions), so v_j ∈ [0, 1] is exactly 1 for an unoccluded
+// texel. The cosine varies smoothly across a window and would make every variance non-zero; the
+// paper's argument ("visibility is a binary function, so we can determine the value of a pixel by
+// borrowing if all its neighbours are the same") is about V. A borrowed texel gets
+// T_j = v · U_j with its own cosine.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "worker/transport_sampler.h"
+
+namespace prt {
+
+struct DenseRow {
+  std::vector<float> transport;   // T, texel_count floats (0 below the horizon)
+  std::vector<float> visibility;  // v = T/U in [0, 1] above the horizon, 0 below
+  std::vector<uint8_t> feature;   // 1 where the texel was traced in the second (feature) pass
+};
+
+struct AngularStats {
+  SampleStats trace;  // rays and texels actually traced
+  uint64_t texels_above_horizon = 0;
+  uint64_t grid_texels = 0;      // first pass
+  uint64_t feature_texels = 0;   // second pass
+  uint64_t borrowed_texels = 0;  // filled from neighbours without tracing
+  AngularStats& operator+=(const AngularStats& o);
+};
+
+struct AngularOptions {
+  int window = 7;           // the paper's 7×7
+  double tolerance = 1e-6;  // |v_a − v_b| above this counts as non-zero variance
+};
+
+// One dense vertex row by two-pass adaptive angular sampling. Deterministic: traced values are
+// bit-identical to TransportSampler::ComputeRow's entries for the same texels.
+AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const SpatialSample& sample,
+                                    uint64_t sample_index, const AngularOptions& options,
+                                    DenseRow& out);
+
+// Visibility fractions of a full row: v_j = T_j / U_j above the horizon (U_j > 0), else 0.
+void VisibilityOfRow(const TransportSampler& sampler, const SpatialSample& sample,
+                     uint64_t sample_index, const float* transport, float* visibility);
+
+}  // namespace prt

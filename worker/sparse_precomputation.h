@@ -1,0 +1,68 @@
+// Sparse precomputation of the transport matrix (Huang & Ramamoorthi 2010), as job-sized kernels
+// that the farm distributes, plus an in-process driver that runs all phases on one machine:
+//
+//   phase 1 (dense vertices, §4): an initial random set (initial_fraction of the samples), then
+//     `iterations` rounds: for candidate vertices estimate the local rank of the dense
+//     neighbours' transport (§4.1; worker/local_rank.h) and draw the next dense vertices with
+//     weight = rank, until dense_budget; every dense row by adaptive angular sampling (§4.2).
+//   phase 2 (sparse vertices, §5): every other vertex from its dense neighbours within the radius
+//     (capped at max_neighbors), feature directions, L1 solve; fallbacks become dense.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <vector>
+
+#include "vocabulary/scene.h"
+#include "worker/adaptive_angular_sampling.h"
+#include "worker/sparse_reconstruction.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+
+struct SparsePlan {
+  double initial_fraction = 0.05;
+  double dense_budget = 0.25;
+  int iterations = 4;
+  double radius = 0.1;  // absolute (scene units); see RadiusFor()
+  int max_neighbors = 40;
+  int rank_resolution = 8;  // rows are box-averaged to 6·m·m texels for rank estimation
+  double rank_threshold = 0.05;
+  int candidates_per_pick = 4;  // rank is estimated on this many random candidates per pick
+  uint64_t seed = 1;
+  AngularOptions angular;
+  SparseOptions sparse;
+};
+
+// The plan from the scene's [sparse] settings: radius relative to the scene's bounding-box
+// diagonal, features scaled with the cubemap resolution (350 at n = 32, ∝ n²).
+SparsePlan PlanFromSettings(const SparseSettings& s, double scene_diagonal, int cubemap_n);
+
+struct SparseReport {
+  uint64_t samples = 0;
+  uint64_t dense_initial = 0;
+  uint64_t dense_by_rank = 0;
+  uint64_t dense_fallback = 0;  // sparse vertices that fell back to dense
+  uint64_t sparse = 0;          // reconstructed
+  AngularStats dense_angular;   // over all dense rows
+  SparseStats sparse_stats;
+  uint64_t texels_above_horizon_total = 0;  // what brute force would evaluate
+  double seconds_dense = 0, seconds_rank = 0, seconds_sparse = 0;
+  std::vector<int> local_rank;    // rank estimated at each candidate vertex, −1 elsewhere
+  std::vector<uint8_t> is_dense;  // per sample
+  // Traced texels as a fraction of what brute force traces (texels above the horizons).
+  double SampledFraction() const;
+};
+
+// Deterministic initial dense set: `count` distinct sample indices, sorted.
+std::vector<uint32_t> InitialDenseSet(std::size_t sample_count, std::size_t count, uint64_t seed);
+
+// Runs every phase in this process (TBB threads). Returns T as sample_count rows of
+// texel_count floats. `progress` (may be empty) receives (phase name, done, total).
+std::vector<float> RunSparsePrecomputation(
+    const TransportSampler& sampler, std::span<const SpatialSample> samples, const SparsePlan& plan,
+    SparseReport& report,
+    const std::function<void(const char*, std::size_t, std::size_t)>& progress = {});
+
+}  // namespace prt

@@ -1,0 +1,77 @@
+// Sparse vertices (Huang & Ramamoorthi 2010, §5): a sparse vertex's transport row is a linear
+// combination of its dense neighbours' rows (Eq. 4), with weights α found from a few traced
+// feature directions (Eq. 5) by L1-regularised least squares (§5.1; worker/l1_solver.h).
+// Feature directions are chosen from the neighbours [§5.2]: variance of the neighbours' values
+// in that direction × how many neighbours had it as a feature.
+//
+// The neighbours' rows live in their own normals' hemispheres, so the sparse vertex's own
+// horizon and cosine are handled explicitly. Two modes:
+//   kVisibility (default): interpolate fractional visibility v = T/U (U: the same estimator with
+//     V ≡ 1), then re-apply the vertex's own cosine: T_x(j) = clamp(Σ α_k v_k(j), 0, 1) · U_x(j);
+//   kTransport: interpolate T directly, T_x(j) = clamp(Σ α_k T_k(j), 0, U_x(j)), zero below the
+//     vertex's horizon.
+// In both, the traced feature values are kept exactly.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "worker/adaptive_angular_sampling.h"
+#include "worker/l1_solver.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+
+enum class InterpolationMode : uint8_t { kVisibility = 0, kTransport = 1 };
+enum class SolverKind : uint8_t { kL1 = 0, kLeastSquares = 1 };
+
+struct SparseOptions {
+  int features = 350;     // traced directions per sparse vertex (at n = 32)
+  double lambda = 1e-3;   // relative L1 penalty (L1Options::lambda)
+  int min_neighbors = 3;  // fewer dense neighbours: the vertex becomes dense
+  InterpolationMode mode = InterpolationMode::kVisibility;
+  SolverKind solver = SolverKind::kL1;
+};
+
+// A dense neighbour as a sparse job receives it.
+struct DenseNeighbor {
+  const float* transport = nullptr;   // texel_count floats
+  const float* visibility = nullptr;  // texel_count floats
+  const uint8_t* feature = nullptr;   // texel_count flags
+};
+
+enum class SparseOutcome : uint8_t {
+  kReconstructed = 0,
+  kTooFewNeighbors = 1,  // fallback: make it dense
+  kSolveFailed = 2,      // fallback: make it dense
+};
+
+struct SparseStats {
+  SampleStats trace;
+  uint64_t reconstructed = 0;
+  uint64_t fallback_too_few_neighbors = 0;
+  uint64_t fallback_solve_failed = 0;
+  uint64_t solved_lars = 0;
+  uint64_t solved_admm = 0;
+  uint64_t zero_systems = 0;
+  uint64_t features_traced = 0;
+  uint64_t texels_above_horizon = 0;  // of reconstructed vertices
+  SparseStats& operator+=(const SparseStats& o);
+};
+
+// Chooses up to `count` feature texels above the vertex's horizon [§5.2], best first:
+// weight = variance across neighbours of v (or T) × number of neighbours that had it as a
+// feature; ties and the remainder are filled by variance alone, then by a deterministic spread.
+std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const Vec3& normal,
+                                              std::span<const DenseNeighbor> neighbors,
+                                              InterpolationMode mode, int count, uint64_t seed);
+
+// Reconstructs one sparse row into `row` (texel_count floats). On a fallback outcome `row` is
+// untouched and the caller must sample the vertex densely.
+SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
+                                   uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
+                                   const SparseOptions& options, L1Solver& solver, float* row,
+                                   SparseStats& stats);
+
+}  // namespace prt
