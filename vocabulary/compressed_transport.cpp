@@ -18,7 +18,7 @@ constexpr char kHeaderMagic[8] = {'P', 'R', 'T', 'C', 'T', 'H', 'D', '1'};
 constexpr char kBlockMagic[4] = {'P', 'C', 'B', '1'};
 constexpr char kFileMagic[8] = {'P', 'R', 'T', 'C', 'T', 'F', 'L', '1'};
 constexpr uint32_t kFormatVersion = 1;
-constexpr uint32_t kMaxSamples = 1u << 30;
+constexpr uint32_t kMaxSamples = 1u << 28;  // consumers allocate O(samples)
 
 class Writer {
  public:

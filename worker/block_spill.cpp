@@ -116,10 +116,9 @@ void BlockTransposer::AddRows(uint64_t first_row, uint64_t count, const float* d
     throw std::invalid_argument("BlockTransposer: row range out of bounds");
   const std::size_t width = m.end - m.begin;
   if (stride < width) throw std::invalid_argument("BlockTransposer: stride < owned columns");
-  for (uint64_t r = first_row; r < first_row + count; ++r) {
+  for (uint64_t r = first_row; r < first_row + count; ++r)
     if (m.seen[r]) throw std::invalid_argument("BlockTransposer: row added twice");
-    m.seen[r] = 1;
-  }
+  for (uint64_t r = first_row; r < first_row + count; ++r) m.seen[r] = 1;
   for (uint64_t r = 0; r < count; ++r) {
     const float* row = data + r * stride;
     for (uint32_t b = 0; b < m.nblocks; ++b) {

@@ -1,0 +1,166 @@
+#include "vocabulary/compressed_relight.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+
+namespace prt {
+namespace {
+
+SpatialDomain TwoSegmentDomain() {
+  SpatialDomain d;
+  SpatialSegment mesh;
+  mesh.kind = SpatialSegment::Kind::kMesh1D;
+  mesh.count = 45;
+  mesh.order.resize(45);
+  std::iota(mesh.order.begin(), mesh.order.end(), 0u);
+  std::shuffle(mesh.order.begin(), mesh.order.end(), std::mt19937(11));
+  SpatialSegment grid;
+  grid.kind = SpatialSegment::Kind::kGrid2D;
+  grid.width = 9;
+  grid.height = 6;
+  grid.count = 54;
+  d.segments = {mesh, grid};
+  return d;
+}
+
+double RelErr(const std::vector<double>& got, const std::vector<double>& want) {
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    num += (got[i] - want[i]) * (got[i] - want[i]);
+    den += want[i] * want[i];
+  }
+  return std::sqrt(num / std::max(den, 1e-300));
+}
+
+TEST(ColumnTransform, ForwardInverseRoundTripAtEveryDepth) {
+  const SpatialDomain d = TwoSegmentDomain();
+  EXPECT_EQ(MaxColumnDepth(d), 6);  // ⌈log2 45⌉
+  std::mt19937 rng(1);
+  std::vector<float> x(d.sample_count());
+  for (float& v : x) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+  for (ColumnWavelet w : {ColumnWavelet::kLeGall53, ColumnWavelet::kCdf97}) {
+    for (int depth = 0; depth <= MaxColumnDepth(d); ++depth) {
+      std::vector<float> y = x;
+      ForwardColumnTransform(d, w, depth, y.data());
+      // Single inverse steps from the deepest level equal the full inverse.
+      std::vector<float> z = y;
+      for (int t = depth; t >= 1; --t) InverseColumnTransformStep(d, w, t, z.data());
+      std::vector<float> zs(z.size());
+      CoefficientOrderToSamples(d, z.data(), zs.data());
+      InverseColumnTransform(d, w, depth, y.data());
+      for (std::size_t i = 0; i < x.size(); ++i) {
+        EXPECT_NEAR(y[i], x[i], 2e-6) << depth;
+        EXPECT_NEAR(zs[i], x[i], 2e-6) << depth;
+      }
+    }
+  }
+}
+
+TEST(ColumnTransform, DepthZeroIsTheHilbertPermutationAndLevelsMatchWavelets) {
+  const SpatialDomain d = TwoSegmentDomain();
+  std::vector<float> x(d.sample_count());
+  std::iota(x.begin(), x.end(), 0.0f);
+  std::vector<float> y = x;
+  ForwardColumnTransform(d, ColumnWavelet::kLeGall53, 0, y.data());
+  for (uint32_t k = 0; k < 45; ++k) EXPECT_EQ(y[k], static_cast<float>(d.segments[0].order[k]));
+  for (uint32_t k = 45; k < 99; ++k) EXPECT_EQ(y[k], static_cast<float>(k));
+  std::vector<uint8_t> levels(d.sample_count());
+  ColumnLevelMap(d, 6, levels.data());
+  EXPECT_EQ(levels[0], 0);   // mesh scaling coefficient (1 left after 6 steps)
+  EXPECT_EQ(levels[44], 6);  // finest mesh detail
+  EXPECT_EQ(levels[45], 0);  // grid: clamped to its own depth ⌈log2 9⌉ = 4
+  EXPECT_EQ(levels[45 + 53], 4);
+}
+
+TEST(Dither, OffsetsAreUniformInHalfOpenUnitIntervalAndDeterministic) {
+  double sum = 0, sum2 = 0;
+  const int N = 200000;
+  for (int i = 0; i < N; ++i) {
+    const double r = DitherOffset(7, static_cast<uint32_t>(i % 97), static_cast<uint32_t>(i));
+    ASSERT_GE(r, -0.5);
+    ASSERT_LT(r, 0.5);
+    sum += r;
+    sum2 += r * r;
+  }
+  EXPECT_NEAR(sum / N, 0.0, 0.005);
+  EXPECT_NEAR(sum2 / N, 1.0 / 12.0, 0.002);
+  EXPECT_EQ(DitherOffset(7, 3, 4), DitherOffset(7, 3, 4));
+  EXPECT_NE(DitherOffset(7, 3, 4), DitherOffset(8, 3, 4));
+}
+
+// Random compressed columns at random depths: Eq. 8 relighting against the dense decompressed
+// matrix times the lighting, and T̂·L̂ against T·L (orthonormal row transform).
+TEST(CompressedRelighter, Equation8MatchesDenseProductForEveryWaveletPair) {
+  for (RowWavelet rw : {RowWavelet::kHaar, RowWavelet::kD4}) {
+    for (ColumnWavelet cw : {ColumnWavelet::kLeGall53, ColumnWavelet::kCdf97}) {
+      CompressedTransport t;
+      t.header.cubemap_n = 4;
+      t.header.row_wavelet = rw;
+      t.header.column_wavelet = cw;
+      t.header.bits = 11;
+      t.header.domain = TwoSegmentDomain();
+      t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+      std::mt19937 rng(static_cast<unsigned>(rw) * 2 + static_cast<unsigned>(cw));
+      const int maxd = MaxColumnDepth(t.header.domain);
+      for (uint32_t j = 0; j < t.header.column_count(); ++j) {
+        if (rng() % 5 == 0) continue;
+        CompressedColumn c;
+        c.column = j;
+        c.depth = static_cast<uint8_t>(rng() % (maxd + 1));
+        c.scale = std::uniform_real_distribution<float>(0.1f, 2.0f)(rng);
+        for (uint32_t i = 0; i < t.header.sample_count; ++i) {
+          if (rng() % 4) continue;
+          c.index.push_back(i);
+          const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
+          c.q.push_back(q == 0 ? 1 : q);
+        }
+        if (c.index.empty()) continue;
+        t.columns.push_back(c);
+      }
+      const std::size_t S = t.header.sample_count, M = t.header.column_count();
+      const int channels = 3;
+      std::vector<float> L(M * channels);
+      for (float& v : L) v = std::uniform_real_distribution<float>(0, 1)(rng);
+      const std::vector<float> Lhat = LightingToRowWaveletBasis(rw, 4, L, channels);
+      const std::vector<float> That = DecompressToRowWaveletBasis(t);
+      const std::vector<float> T = DecompressTransport(t);
+      std::vector<double> ref(S * channels), ref_texel(S * channels);
+      for (int ch = 0; ch < channels; ++ch)
+        for (std::size_t s = 0; s < S; ++s) {
+          double a = 0, b = 0;
+          for (std::size_t j = 0; j < M; ++j) {
+            a += static_cast<double>(That[s * M + j]) * Lhat[ch * M + j];
+            b += static_cast<double>(T[s * M + j]) * L[ch * M + j];
+          }
+          ref[ch * S + s] = a;
+          ref_texel[ch * S + s] = b;
+        }
+      EXPECT_LT(RelErr(ref_texel, ref), 1e-5);
+      CompressedRelighter relighter(t);
+      std::vector<float> B(S * channels);
+      relighter.Relight(Lhat, channels, B);
+      std::vector<double> Bd(B.begin(), B.end());
+      EXPECT_LT(RelErr(Bd, ref), 1e-5) << ToString(rw) << " " << ToString(cw);
+      // Sparse lighting: the first 20 columns only.
+      std::vector<uint32_t> cols(20);
+      std::iota(cols.begin(), cols.end(), 0u);
+      std::vector<float> w(20 * channels), Lsparse(M * channels, 0.0f);
+      for (uint32_t k = 0; k < 20; ++k)
+        for (int ch = 0; ch < channels; ++ch) {
+          w[k * channels + ch] = Lhat[ch * M + k];
+          Lsparse[ch * M + k] = Lhat[ch * M + k];
+        }
+      std::vector<float> Bs(S * channels), Bs_ref(S * channels);
+      relighter.RelightSparse(cols, w, channels, Bs);
+      relighter.Relight(Lsparse, channels, Bs_ref);
+      for (std::size_t i = 0; i < Bs.size(); ++i) EXPECT_NEAR(Bs[i], Bs_ref[i], 1e-5);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace prt

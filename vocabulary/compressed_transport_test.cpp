@@ -1,0 +1,198 @@
+#include "vocabulary/compressed_transport.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+#include "vocabulary/compressed_relight.h"
+#include "vocabulary/errors.h"
+
+namespace prt {
+namespace {
+
+// A header over a Hilbert-ordered mesh of 37 vertices and a 6×5 grid, n = 2 (24 columns).
+CompressedTransportHeader TestHeader(int bits = 9) {
+  CompressedTransportHeader h;
+  h.cubemap_n = 2;
+  h.bits = static_cast<uint8_t>(bits);
+  h.dither_seed = 1234;
+  h.terms_per_column = 7;
+  SpatialSegment mesh;
+  mesh.kind = SpatialSegment::Kind::kMesh1D;
+  mesh.count = 37;
+  mesh.order.resize(37);
+  std::iota(mesh.order.begin(), mesh.order.end(), 0u);
+  std::shuffle(mesh.order.begin(), mesh.order.end(), std::mt19937(5));
+  SpatialSegment grid;
+  grid.kind = SpatialSegment::Kind::kGrid2D;
+  grid.count = 30;
+  grid.width = 6;
+  grid.height = 5;
+  h.domain.segments = {mesh, grid};
+  h.sample_count = 67;
+  return h;
+}
+
+CompressedTransport RandomTransport(const CompressedTransportHeader& h, unsigned seed) {
+  std::mt19937 rng(seed);
+  CompressedTransport t;
+  t.header = h;
+  const int maxq = QuantiserMax(h.bits);
+  const int maxd = MaxColumnDepth(h.domain);
+  for (uint32_t j = 0; j < h.column_count(); ++j) {
+    if (rng() % 4 == 0) continue;  // all-zero column
+    CompressedColumn c;
+    c.column = j;
+    c.depth = static_cast<uint8_t>(rng() % (maxd + 1));
+    c.scale = std::uniform_real_distribution<float>(0.01f, 3.0f)(rng);
+    for (uint32_t i = 0; i < h.sample_count; ++i) {
+      if (rng() % 3 != 0) continue;
+      int q = static_cast<int>(rng() % (2 * maxq + 1)) - maxq;
+      if (q == 0) q = 1;
+      c.index.push_back(i);
+      c.q.push_back(q);
+    }
+    if (c.index.empty()) {
+      c.index.push_back(3);
+      c.q.push_back(-maxq);
+    }
+    t.columns.push_back(std::move(c));
+  }
+  return t;
+}
+
+void ExpectSameTransport(const CompressedTransport& a, const CompressedTransport& b) {
+  EXPECT_EQ(EncodeHeader(a.header), EncodeHeader(b.header));
+  ASSERT_EQ(a.columns.size(), b.columns.size());
+  for (std::size_t k = 0; k < a.columns.size(); ++k) {
+    EXPECT_EQ(a.columns[k].column, b.columns[k].column);
+    EXPECT_EQ(a.columns[k].depth, b.columns[k].depth);
+    EXPECT_EQ(a.columns[k].scale, b.columns[k].scale);
+    EXPECT_EQ(a.columns[k].index, b.columns[k].index);
+    EXPECT_EQ(a.columns[k].q, b.columns[k].q);
+  }
+}
+
+TEST(CompressedTransportFormat, HeaderRoundTripsExactly) {
+  const CompressedTransportHeader h = TestHeader();
+  const CompressedTransportHeader d = DecodeHeader(EncodeHeader(h), "h");
+  EXPECT_EQ(d.cubemap_n, 2u);
+  EXPECT_EQ(d.sample_count, 67u);
+  EXPECT_EQ(d.bits, 9);
+  EXPECT_EQ(d.dither_seed, 1234u);
+  EXPECT_EQ(d.terms_per_column, 7u);
+  ASSERT_EQ(d.domain.segments.size(), 2u);
+  EXPECT_EQ(d.domain.segments[0].order, h.domain.segments[0].order);
+  EXPECT_EQ(d.domain.segments[1].width, 6u);
+  EXPECT_EQ(d.domain.segments[1].height, 5u);
+}
+
+TEST(CompressedTransportFormat, TransportRoundTripsExactlyAtEveryBitDepth) {
+  for (int bits : {2, 5, 9, 16, 24}) {
+    const CompressedTransport t = RandomTransport(TestHeader(bits), static_cast<unsigned>(bits));
+    for (uint32_t per_block : {1u, 5u, 1024u}) {
+      const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, per_block);
+      ExpectSameTransport(t, DecodeCompressedTransport(bytes, "t"));
+    }
+  }
+}
+
+TEST(CompressedTransportFormat, EveryTruncationIsRejectedWithInputError) {
+  const CompressedTransport t = RandomTransport(TestHeader(), 7);
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, 8);
+  for (std::size_t len = 0; len < bytes.size(); ++len) {
+    EXPECT_THROW(DecodeCompressedTransport(std::span(bytes.data(), len), "cut.prtc"), InputError)
+        << len;
+  }
+  std::vector<uint8_t> longer = bytes;
+  longer.push_back(0);
+  EXPECT_THROW(DecodeCompressedTransport(longer, "long.prtc"), InputError);
+}
+
+TEST(CompressedTransportFormat, CorruptedBytesAreRejectedOrDecodeToValidData) {
+  const CompressedTransport t = RandomTransport(TestHeader(), 8);
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, 8);
+  std::mt19937 rng(3);
+  int rejected = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::vector<uint8_t> b = bytes;
+    const int flips = 1 + static_cast<int>(rng() % 4);
+    for (int f = 0; f < flips; ++f) b[rng() % b.size()] ^= static_cast<uint8_t>(1 + rng() % 255);
+    try {
+      const CompressedTransport d = DecodeCompressedTransport(b, "bad.prtc");
+      // Whatever got through must satisfy every invariant the relighter relies on.
+      ValidateHeader(d.header, "bad.prtc");
+      for (const auto& c : d.columns) ValidateColumn(d.header, c, "bad.prtc");
+    } catch (const InputError& e) {
+      ++rejected;
+      EXPECT_NE(std::string(e.what()).find("bad.prtc"), std::string::npos);
+    }
+  }
+  EXPECT_GT(rejected, 1000);
+}
+
+TEST(CompressedTransportFormat, MaliciousCountsAreRejectedWithoutAllocating) {
+  const CompressedTransportHeader h = TestHeader();
+  // A block claiming 2^32−1 stored columns and a column with 2^32−1 terms.
+  std::vector<uint8_t> b = {'P', 'C', 'B', '1', 0, 0, 0, 0, 24, 0, 0, 0, 0xff, 0xff, 0xff, 0xff};
+  EXPECT_THROW(DecodeColumnBlock(h, b, "evil"), InputError);
+  std::vector<uint8_t> c = {
+      'P',  'C',  'B',  '1',  0,    0, 0, 0, 24,   0,    0, 0,
+      1,    0,    0,    0,    0,    0, 0, 0, 0x80, 0x3f,  // delta, depth, scale 1
+      0xff, 0xff, 0xff, 0xff, 0x0f, 0, 0, 0, 0,    0,    0, 0};
+  EXPECT_THROW(DecodeColumnBlock(h, c, "evil"), InputError);
+  // Overlong varint, index out of range, depth beyond the maximum, zero value.
+  std::vector<uint8_t> d = {'P', 'C',  'B',  '1',  0,    0,    0,    0, 24, 0, 0, 0, 1, 0, 0,
+                            0,   0xff, 0xff, 0xff, 0xff, 0xff, 0x01, 0, 0,  0, 0, 0, 0, 0, 0};
+  EXPECT_THROW(DecodeColumnBlock(h, d, "evil"), InputError);
+  CompressedColumnBlock ok;
+  ok.first_column = 0;
+  ok.column_span = 24;
+  CompressedColumn col;
+  col.column = 3;
+  col.depth = 1;
+  col.scale = 1.0f;
+  col.index = {5};
+  col.q = {2};
+  ok.columns = {col};
+  EXPECT_NO_THROW(DecodeColumnBlock(h, EncodeColumnBlock(h, ok), "good"));
+  CompressedColumn bad = col;
+  bad.index = {67};
+  ok.columns = {bad};
+  EXPECT_THROW(EncodeColumnBlock(h, ok), InputError);
+  bad = col;
+  bad.depth = static_cast<uint8_t>(MaxColumnDepth(h.domain) + 1);
+  EXPECT_THROW(ValidateColumn(h, bad, "x"), InputError);
+  bad = col;
+  bad.q = {0};
+  EXPECT_THROW(ValidateColumn(h, bad, "x"), InputError);
+  bad = col;
+  bad.q = {QuantiserMax(h.bits) + 1};
+  EXPECT_THROW(ValidateColumn(h, bad, "x"), InputError);
+  // Header: grid size mismatch, order not a permutation, segments not covering the samples.
+  CompressedTransportHeader hb = h;
+  hb.domain.segments[1].width = 7;
+  EXPECT_THROW(ValidateHeader(hb, "x"), InputError);
+  hb = h;
+  hb.domain.segments[0].order[0] = hb.domain.segments[0].order[1];
+  EXPECT_THROW(ValidateHeader(hb, "x"), InputError);
+  hb = h;
+  hb.sample_count = 66;
+  EXPECT_THROW(ValidateHeader(hb, "x"), InputError);
+  hb = h;
+  hb.cubemap_n = 3;
+  EXPECT_THROW(ValidateHeader(hb, "x"), InputError);
+}
+
+TEST(CompressedTransportFormat, ParsesSchemeAndWaveletNames) {
+  EXPECT_EQ(ParseRowWavelet("d4", "f"), RowWavelet::kD4);
+  EXPECT_EQ(ParseColumnWavelet("cdf97", "f"), ColumnWavelet::kCdf97);
+  EXPECT_EQ(ParseCompressionScheme("2d", "f"), CompressionScheme::k2D);
+  EXPECT_THROW(ParseCompressionScheme("3d", "scene.toml"), InputError);
+  EXPECT_STREQ(ToString(CompressionScheme::kAdaptive4D), "adaptive4d");
+}
+
+}  // namespace
+}  // namespace prt
