@@ -1,0 +1,139 @@
+// prt-pack's library side: a run folder (geometry.prtg, scene.toml, report.json, transport.prtc)
+// packs into a .prtpack whose meshes, compressed transport and metadata read back unchanged;
+// inspect and verify report on it.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "packager/prtpack_test_util.h"
+#include "packager/prtpack_transport.h"
+#include "packager/run_folder_pack.h"
+#include "vocabulary/compressed_transport.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/transport_file.h"
+
+namespace prt::pack {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunFolderFixture {
+  fs::path dir;
+  SceneGeometry geometry;
+  CompressedTransport transport;
+};
+
+RunFolderFixture MakeRunFolder(const std::string& name) {
+  RunFolderFixture f;
+  f.dir = fs::temp_directory_path() / name;
+  fs::remove_all(f.dir);
+  fs::create_directories(f.dir);
+  SceneMesh a;
+  a.name = "octa";
+  a.mesh = testing::MakeSmallMesh();
+  a.albedo = {0.6f, 0.5f, 0.4f};
+  SceneMesh g;
+  g.name = "ground";
+  g.mesh = testing::MakeSmallMesh(2.0);
+  g.is_ground = true;
+  g.grid_resolution = 2;
+  f.geometry.meshes = {a, g};
+  f.geometry.bounds_min = {-2, -2, -2};
+  f.geometry.bounds_max = {2, 2, 2};
+  WriteSceneGeometryFile((f.dir / kGeometryFileName).string(), f.geometry);
+  WriteFileDurably((f.dir / kSceneCopyFileName).string(),
+                   "name = \"octa-scene\"\ncubemap_n = 2\n");
+  WriteFileDurably((f.dir / kReportFileName).string(), R"({"wall_seconds": 1.5})");
+  f.transport.header.cubemap_n = 2;
+  f.transport.header.sample_count = 12;
+  f.transport.header.terms_per_column = 2;
+  SpatialSegment s1, s2;
+  s1.count = 6;
+  s2.count = 6;
+  f.transport.header.domain.segments = {s1, s2};
+  for (uint32_t col = 0; col < 24; col += 3) {
+    CompressedColumn c;
+    c.column = col;
+    c.scale = 1.0f + float(col);
+    c.index = {col % 12};
+    c.q = {int32_t(col) - 12 == 0 ? 1 : int32_t(col) - 12};
+    f.transport.columns.push_back(c);
+  }
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(f.transport, 7);
+  WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  return f;
+}
+
+TEST(RunFolderPack, RunFolderRoundTrip) {
+  const RunFolderFixture f = MakeRunFolder("prtpack_run_folder_test");
+  RunPackOptions o;
+  o.columns_per_block = 5;
+  const std::vector<uint8_t> bytes = WritePack(PackInputFromRunFolder(f.dir.string(), o));
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size(), "run.prtpack");
+  ASSERT_EQ(r.mesh_count(), 2u);
+  for (std::size_t m = 0; m < 2; ++m) {
+    const UnpackedMesh u = r.ReadMesh(m);
+    EXPECT_EQ(u.name, f.geometry.meshes[m].name);
+    EXPECT_EQ(u.albedo, f.geometry.meshes[m].albedo);
+    EXPECT_EQ(u.is_ground, f.geometry.meshes[m].is_ground);
+    EXPECT_EQ(u.ToTriangleMesh().triangles, f.geometry.meshes[m].mesh.triangles);
+  }
+  const CompressedTransport back = ReadCompressedTransport(r);
+  EXPECT_EQ(r.ReadTransportIndex().blocks.size(), 5u);  // 24 columns in blocks of 5
+  ASSERT_EQ(back.columns.size(), f.transport.columns.size());
+  for (std::size_t k = 0; k < back.columns.size(); ++k) {
+    EXPECT_EQ(back.columns[k].column, f.transport.columns[k].column);
+    EXPECT_EQ(back.columns[k].scale, f.transport.columns[k].scale);
+    EXPECT_EQ(back.columns[k].index, f.transport.columns[k].index);
+    EXPECT_EQ(back.columns[k].q, f.transport.columns[k].q);
+  }
+  const nlohmann::json meta = nlohmann::json::parse(r.ReadMetadata());
+  EXPECT_EQ(meta["scene"]["name"], "octa-scene");
+  EXPECT_EQ(meta["scene"]["cubemap_n"], 2);
+  EXPECT_EQ(meta["report"]["wall_seconds"], 1.5);
+  EXPECT_EQ(meta["parameters"]["sample_count"], 12);
+  EXPECT_EQ(meta["parameters"]["columns_per_block"], 5);
+
+  const std::string inspect = InspectPack(r);
+  EXPECT_NE(inspect.find("scene: \"octa-scene\""), std::string::npos) << inspect;
+  EXPECT_NE(inspect.find("12 samples x 24 columns in 5 blocks"), std::string::npos) << inspect;
+  EXPECT_NE(inspect.find("mesh 1 \"ground\": 6 vertices, 8 triangles"), std::string::npos)
+      << inspect;
+  const std::string verify = VerifyPack(r);
+  EXPECT_NE(verify.find("OK"), std::string::npos);
+  EXPECT_NE(verify.find("8 compressed columns decoded"), std::string::npos) << verify;
+  fs::remove_all(f.dir);
+}
+
+TEST(RunFolderPack, MissingOrMismatchedTransportIsAnError) {
+  const RunFolderFixture f = MakeRunFolder("prtpack_run_folder_test2");
+  CompressedTransport wrong = f.transport;
+  wrong.header.sample_count = 10;
+  wrong.header.domain.segments[1].count = 4;
+  for (CompressedColumn& c : wrong.columns) c.index = {c.index[0] % 10};
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(wrong);
+  WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  try {
+    PackInputFromRunFolder(f.dir.string(), {});
+    FAIL() << "accepted a transport for another geometry";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("10 samples but the geometry has 12"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::remove(f.dir / kCompressedTransportFileName);
+  EXPECT_THROW(PackInputFromRunFolder(f.dir.string(), {}), InputError);
+  RunPackOptions geometry_only;
+  geometry_only.geometry_only = true;
+  const PackInput in = PackInputFromRunFolder(f.dir.string(), geometry_only);
+  EXPECT_FALSE(in.transport.has_value());
+  EXPECT_EQ(in.meshes.size(), 2u);
+  fs::remove_all(f.dir);
+  EXPECT_THROW(PackInputFromRunFolder(f.dir.string(), {}), InputError);
+}
+
+}  // namespace
+}  // namespace prt::pack
