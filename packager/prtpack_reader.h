@@ -90,6 +90,7 @@ class PackReader {
   // Throws InputError(path, ...) on: unreadable file, bad magic, unsupported major version
   // ("unsupported .prtpack major version N"), truncation, trailing bytes, a table entry out of
   // range, misaligned or overlapping, an unknown critical section, wrong section multiplicity.
+  // The mapping is private and read-only; the file must not be truncated while it is open.
   static PackReader OpenFile(const std::string& path, const ReaderOptions& options = {});
   // Same, over a copy of `size` bytes at `data` (`name` is used in messages).
   static PackReader OpenMemory(const void* data, std::size_t size,
