@@ -22,7 +22,8 @@ SparseStats& SparseStats::operator+=(const SparseStats& o) {
 
 std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const Vec3& normal,
                                               std::span<const DenseNeighbor> neighbors,
-                                              InterpolationMode mode, int count, uint64_t seed) {
+                                              InterpolationMode /*mode*/, int count,
+                                              uint64_t seed) {
   struct Cand {
     double key;
     uint32_t texel;
@@ -36,7 +37,7 @@ std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const
     double s = 0, s2 = 0;
     int feat = 0;
     for (const DenseNeighbor& nb : neighbors) {
-      const double v = mode == InterpolationMode::kVisibility ? nb.visibility[j] : nb.transport[j];
+      const double v = nb.transport[j];
       s += v;
       s2 += v * v;
       feat += nb.feature[j] != 0;
@@ -87,18 +88,19 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   std::vector<float> unocc(total, 0.0f);
   for (std::size_t i = 0; i < above.size(); ++i) unocc[above[i]] = unocc_above[i];
 
+  // Equations in transport units for both modes, so that each constraint weighs what it adds to
+  // the relit radiance: visibility mode fits Σ α_k v_k(j) · U_x(j) to T_x(j) (the neighbours'
+  // visibility under this vertex's own cosine); transport mode fits Σ α_k T_k(j) to T_x(j).
   const bool vis = options.mode == InterpolationMode::kVisibility;
   std::vector<double> A(static_cast<std::size_t>(m) * k), b(static_cast<std::size_t>(m));
   for (int i = 0; i < m; ++i) {
     const uint32_t j = feats[static_cast<std::size_t>(i)];
-    const float u = unocc[j];
-    b[static_cast<std::size_t>(i)] =
-        vis ? (u > 0 ? std::clamp(traced[static_cast<std::size_t>(i)] / u, 0.0f, 1.0f) : 0.0)
-            : traced[static_cast<std::size_t>(i)];
+    const double u = unocc[j];
+    b[static_cast<std::size_t>(i)] = traced[static_cast<std::size_t>(i)];
     for (int c = 0; c < k; ++c) {
       const DenseNeighbor& nb = neighbors[static_cast<std::size_t>(c)];
       A[static_cast<std::size_t>(i) + static_cast<std::size_t>(m) * c] =
-          vis ? nb.visibility[j] : nb.transport[j];
+          vis ? nb.visibility[j] * u : nb.transport[j];
     }
   }
   std::vector<double> alpha;
