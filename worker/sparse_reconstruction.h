@@ -7,10 +7,13 @@
 // The neighbours' rows live in their own normals' hemispheres, so the sparse vertex's own
 // horizon and cosine are handled explicitly. Two modes:
 //   kVisibility (default): interpolate fractional visibility v = T/U (U: the same estimator with
-//     V ≡ 1), then re-apply the vertex's own cosine: T_x(j) = clamp(Σ α_k v_k(j), 0, 1) · U_x(j);
+//     V ≡ 1) and re-apply the vertex's own cosine: T_x(j) = clamp(Σ α_k v_k(j), 0, 1) · U_x(j);
+//     α fits Σ α_k v_k(j) U_x(j) to the traced T_x(j);
 //   kTransport: interpolate T directly, T_x(j) = clamp(Σ α_k T_k(j), 0, U_x(j)), zero below the
-//     vertex's horizon.
-// In both, the traced feature values are kept exactly.
+//     vertex's horizon; α fits Σ α_k T_k(j) to T_x(j).
+// Both fit in transport units, so each constraint weighs what it adds to the relit radiance
+// (fitting v directly gave 2× the ground error on the test scene). In both, the traced feature
+// values are kept exactly. Features are ranked by the variance of the neighbours' T.
 #pragma once
 
 #include <cstdint>
