@@ -1,0 +1,313 @@
+// prt-farm end to end under mpirun (docs/farm.md): the tiny scene of tests/data farmed with 1, 2
+// and 3 ranks gives byte-identical transport files equal to the worker kernels called directly;
+// a run killed mid-way (coordinator or worker) and resumed gives the same bytes without redoing
+// the journaled jobs; a hung worker ends the run with exit code 4; bad input gives the
+// documented exit codes and messages.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "farm/farm_options.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/scene.h"
+#include "vocabulary/transport_file.h"
+#include "worker/embree_scene.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kScene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
+// Small jobs and blocks so that 72 samples make many jobs and several blocks.
+const std::string kSmallJobs = " --max-job-rows 5 --rows-per-block 16 --log-interval 0.2";
+
+struct RunResult {
+  int exit_code = -1;
+  std::string output;
+};
+
+// The environment every MPI test needs in a root container (PRT_MPI_TEST_ENV of the top
+// CMakeLists.txt); set here as well in case the test runs outside CTest.
+void ApplyMpiTestEnvironment() {
+  std::stringstream env(PRT_MPI_TEST_ENV_LIST);
+  std::string item;
+  while (std::getline(env, item, ';')) {
+    const std::size_t eq = item.find('=');
+    if (eq != std::string::npos) {
+      ::setenv(item.substr(0, eq).c_str(), item.substr(eq + 1).c_str(), 0);
+    }
+  }
+}
+
+RunResult Farm(int ranks, const std::string& args) {
+  ApplyMpiTestEnvironment();
+  const std::string command = std::string(PRT_MPIEXEC) + " " + PRT_MPIEXEC_NUMPROC_FLAG + " " +
+                              std::to_string(ranks) + " " + PRT_MPIEXEC_PREFLAGS + " " +
+                              PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args + " 2>&1";
+  RunResult r;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return r;
+  char buf[4096];
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return r;
+}
+
+std::string WorkDir(const std::string& name) {
+  const fs::path dir = fs::path(PRT_TEST_WORK_DIR) / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+nlohmann::json ReadReport(const std::string& run) {
+  return nlohmann::json::parse(ReadWholeFile(run + "/report.json"));
+}
+
+int JournalJobs(const std::string& run) {
+  std::ifstream in(run + "/checkpoints/journal.txt");
+  std::string line;
+  int jobs = 0;
+  while (std::getline(in, line)) jobs += line.rfind("job ", 0) == 0 ? 1 : 0;
+  return jobs;
+}
+
+// The reference: the worker kernels called directly on the scene, no MPI, no farm.
+struct Reference {
+  std::vector<float> rows;
+  SampleStats stats;
+  SceneGeometry geometry;
+};
+
+const Reference& KernelReference() {
+  static const Reference ref = [] {
+    Reference r;
+    const SceneDescription scene = LoadSceneFile(kScene);
+    r.geometry = BuildSceneGeometry(scene);
+    const std::vector<SpatialSample> samples = SpatialSamplesOf(r.geometry);
+    const EmbreeScene embree(r.geometry);
+    TransportSamplerOptions options;
+    options.rays_per_texel = scene.sampling.rays_per_texel;
+    options.seed = scene.sampling.seed;
+    const TransportSampler sampler(embree, scene.cubemap_n, options);
+    r.rows.resize(samples.size() * sampler.layout().texel_count());
+    r.stats = sampler.ComputeRows(samples, 0, r.rows.data());
+    return r;
+  }();
+  return ref;
+}
+
+void ExpectEqualsKernels(const std::string& transport) {
+  const Reference& ref = KernelReference();
+  TransportFileReader reader(transport);
+  ASSERT_EQ(reader.info().rows, 72u);
+  ASSERT_EQ(reader.info().cols(), 384u);
+  EXPECT_EQ(reader.info().rows_per_block, 16u);
+  EXPECT_EQ(reader.info().block_count(), 5u);
+  EXPECT_EQ(reader.FindCorruptBlock(), -1);
+  std::vector<float> rows(ref.rows.size());
+  reader.ReadRows(0, reader.info().rows, rows.data());
+  ASSERT_EQ(std::memcmp(rows.data(), ref.rows.data(), rows.size() * sizeof(float)), 0)
+      << "the farmed rows differ from the worker kernels' rows";
+  // Not all zero and not all equal: the box shadows part of the ground.
+  float lo = rows[0], hi = rows[0];
+  for (float v : rows) {
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  EXPECT_EQ(lo, 0.0f);
+  EXPECT_GT(hi, 0.0f);
+}
+
+TEST(FarmMpiTest, OneTwoAndThreeRanksGiveByteIdenticalFilesEqualToTheKernels) {
+  const std::string dir = WorkDir("ranks");
+  std::string reference_bytes;
+  for (int ranks : {1, 2, 3}) {
+    const std::string run = dir + "/np" + std::to_string(ranks);
+    const RunResult r = Farm(ranks, kScene + " --out " + run + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("[brute]"), std::string::npos) << "no progress line:\n" << r.output;
+    ExpectEqualsKernels(run + "/transport.prtt");
+    const std::string bytes = ReadWholeFile(run + "/transport.prtt");
+    if (reference_bytes.empty()) {
+      reference_bytes = bytes;
+    } else {
+      EXPECT_TRUE(bytes == reference_bytes) << ranks << " ranks changed the file's bytes";
+    }
+    EXPECT_FALSE(fs::exists(run + "/transport.prtt.partial"));
+
+    const nlohmann::json rep = ReadReport(run);
+    const Reference& ref = KernelReference();
+    EXPECT_EQ(rep["status"], "ok");
+    EXPECT_EQ(rep["ranks"], ranks);
+    EXPECT_EQ(rep["rows"], 72);
+    EXPECT_EQ(rep["jobs"]["rows_done"], 72);
+    EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], 0);
+    EXPECT_EQ(rep["jobs"]["done"], JournalJobs(run));
+    EXPECT_GE(rep["jobs"]["done"].get<int>(), 72 / 5 + 1);  // jobs of at most 5 rows
+    EXPECT_EQ(rep["rays_traced"], ref.stats.rays_traced);
+    EXPECT_EQ(rep["texels_skipped_below_horizon"], ref.stats.texels_below_horizon);
+    ASSERT_EQ(rep["rank_details"].size(), static_cast<std::size_t>(ranks));
+    uint64_t rows_by_ranks = 0;
+    for (const auto& rank : rep["rank_details"]) rows_by_ranks += rank["rows"].get<uint64_t>();
+    EXPECT_EQ(rows_by_ranks, 72u);
+    EXPECT_GE(rep["load_imbalance"].get<double>(), 1.0);
+    std::vector<std::string> phases;
+    for (const auto& p : rep["phases"]) phases.push_back(p["name"]);
+    EXPECT_EQ(phases, (std::vector<std::string>{"setup", "brute", "finalize"}));
+  }
+  // What later stages read without the original files: the scene text and the exact geometry.
+  const std::string run = dir + "/np2";
+  EXPECT_EQ(ReadWholeFile(run + "/scene.toml"), ReadWholeFile(kScene));
+  const SceneGeometry g = ReadSceneGeometryFile(run + "/geometry.prtg");
+  const SceneGeometry& ref = KernelReference().geometry;
+  ASSERT_EQ(g.meshes.size(), 2u);
+  EXPECT_EQ(g.meshes[0].name, "box");
+  EXPECT_TRUE(g.meshes[1].is_ground);
+  EXPECT_EQ(g.meshes[1].grid_resolution, 8);
+  for (std::size_t m = 0; m < 2; ++m) {
+    EXPECT_EQ(g.meshes[m].mesh.positions, ref.meshes[m].mesh.positions);
+    EXPECT_EQ(g.meshes[m].mesh.normals, ref.meshes[m].mesh.normals);
+    EXPECT_EQ(g.meshes[m].mesh.triangles, ref.meshes[m].mesh.triangles);
+    EXPECT_EQ(g.meshes[m].albedo, ref.meshes[m].albedo);
+  }
+}
+
+// Kill, then --resume: the file is the same, and exactly the journaled jobs are re-used.
+void KillAndResume(const std::string& name, int ranks, const std::string& kill_args) {
+  const std::string run = WorkDir(name) + "/run";
+  const RunResult killed = Farm(ranks, kScene + " --out " + run + kSmallJobs + kill_args);
+  EXPECT_NE(killed.exit_code, 0) << killed.output;
+  EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
+  EXPECT_TRUE(fs::exists(run + "/transport.prtt.partial"));
+  const int journaled = JournalJobs(run);
+
+  const RunResult again = Farm(ranks, kScene + " --out " + run + kSmallJobs);
+  EXPECT_EQ(again.exit_code, kExitUsage) << again.output;  // needs --resume or --force
+  EXPECT_NE(again.output.find("--resume"), std::string::npos) << again.output;
+
+  const RunResult resumed = Farm(ranks, kScene + " --out " + run + kSmallJobs + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  ExpectEqualsKernels(run + "/transport.prtt");
+  const nlohmann::json rep = ReadReport(run);
+  EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], journaled);
+  EXPECT_EQ(rep["jobs"]["checkpoints_rejected"], 0);
+  EXPECT_EQ(rep["jobs"]["rows_done"].get<int>() + rep["jobs"]["rows_reused"].get<int>(), 72);
+  EXPECT_EQ(rep["jobs"]["done"].get<int>() + journaled, JournalJobs(run));
+  EXPECT_EQ(rep["rays_traced_including_reused"], KernelReference().stats.rays_traced);
+}
+
+TEST(FarmMpiTest, CoordinatorKilledMidwayThenResumeRedoesOnlyUnfinishedJobs) {
+  // Rank 0 exits abruptly right after its 4th journaled job: the whole run dies.
+  const std::string run = WorkDir("kill0") + "/run";
+  const RunResult killed =
+      Farm(2, kScene + " --out " + run + kSmallJobs + " --fail-after-jobs 4 --fail-rank 0");
+  EXPECT_EQ(killed.exit_code, 4) << killed.output;
+  EXPECT_EQ(JournalJobs(run), 4);
+  const RunResult resumed = Farm(2, kScene + " --out " + run + kSmallJobs + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  ExpectEqualsKernels(run + "/transport.prtt");
+  const nlohmann::json rep = ReadReport(run);
+  EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], 4);
+  EXPECT_LT(rep["jobs"]["rows_done"].get<int>(), 72);
+  EXPECT_EQ(rep["jobs"]["rows_done"].get<int>() + rep["jobs"]["rows_reused"].get<int>(), 72);
+  EXPECT_NE(resumed.output.find("re-used from checkpoints"), std::string::npos);
+}
+
+TEST(FarmMpiTest, WorkerKilledMidwayThenResumeGivesTheSameFile) {
+  KillAndResume("kill1", 2, " --fail-after-jobs 2 --fail-rank 1");
+}
+
+TEST(FarmMpiTest, SingleRankKilledMidwayThenResumeGivesTheSameFile) {
+  KillAndResume("kill_np1", 1, " --fail-after-jobs 3 --fail-rank 0");
+}
+
+TEST(FarmMpiTest, ResumingAFinishedRunReusesEveryJobAndKeepsTheBytes) {
+  const std::string run = WorkDir("finished") + "/run";
+  ASSERT_EQ(Farm(1, kScene + " --out " + run + kSmallJobs).exit_code, 0);
+  const std::string before = ReadWholeFile(run + "/transport.prtt");
+  const int jobs = JournalJobs(run);
+  const RunResult r = Farm(1, kScene + " --out " + run + kSmallJobs + " --resume");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == before);
+  const nlohmann::json rep = ReadReport(run);
+  EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], jobs);
+  EXPECT_EQ(rep["jobs"]["done"], 0);
+  EXPECT_EQ(rep["rays_traced"], 0);
+}
+
+TEST(FarmMpiTest, HungWorkerEndsTheRunWithExitCode4AndAReport) {
+  const std::string run = WorkDir("hang") + "/run";
+  const RunResult r = Farm(2, kScene + " --out " + run + kSmallJobs +
+                                  " --fail-after-jobs 1 --fail-rank 1 --fail-mode hang "
+                                  "--rank-timeout 1");
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("rank 1 has not returned its job"), std::string::npos) << r.output;
+  const nlohmann::json rep = ReadReport(run);
+  EXPECT_EQ(rep["status"], "failed");
+  EXPECT_EQ(rep["exit_code"], 4);
+  EXPECT_EQ(rep["jobs"]["done"], JournalJobs(run));  // what was counted is on disk
+}
+
+struct BadCase {
+  int ranks;
+  std::string args;
+  int exit_code;
+  std::string message;
+};
+
+void ExpectExitCodes(const std::vector<BadCase>& cases) {
+  for (const BadCase& c : cases) {
+    const RunResult r = Farm(c.ranks, c.args);
+    EXPECT_EQ(r.exit_code, c.exit_code) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.message), std::string::npos) << c.args << "\n" << r.output;
+  }
+}
+
+TEST(FarmMpiTest, BadInputAndUnwritableOutputGiveExitCodes2And3) {
+  const std::string dir = WorkDir("bad_input");
+  std::ofstream(dir + "/invalid.toml") << "[scene]\nn = 12\n";
+  std::ofstream(dir + "/nomesh.toml") << "[[mesh]]\npath = \"missing.off\"\n";
+  std::ofstream(dir + "/a_file") << "not a folder";
+  ExpectExitCodes({
+      {2, dir + "/missing.toml --out " + dir + "/r1", 2, "missing.toml: scene file not found"},
+      {1, dir + "/invalid.toml --out " + dir + "/r2", 2, "not a power of two"},
+      {1, dir + "/nomesh.toml --out " + dir + "/r3", 2, "missing.off"},
+      {2, kScene + " --out " + dir + "/a_file/run", 3, "cannot create the run folder"},
+      {1, kScene + " --method sparse --out " + dir + "/r4", 2, "only brute"},
+  });
+  EXPECT_FALSE(fs::exists(dir + "/r1"));  // nothing is created for a scene that does not load
+}
+
+TEST(FarmMpiTest, UsageErrorsHelpVersionAndForeignCheckpoints) {
+  const std::string dir = WorkDir("usage");
+  ExpectExitCodes({
+      {2, "--no-such-option", 1, "--no-such-option"},
+      {1, kScene + " --resume --force", 1, "contradict"},
+      {1, "--version", 0, "prt-farm 0."},
+      {1, "--help", 0, "Exit codes: 0 ok, 1 usage error"},
+  });
+  // Checkpoints of another run are refused, not mixed.
+  const std::string run = dir + "/mixed";
+  ASSERT_EQ(Farm(1, kScene + " --out " + run + kSmallJobs).exit_code, 0);
+  const RunResult r =
+      Farm(1, kScene + " --out " + run + kSmallJobs + " --rays-per-texel 9 --resume");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("rays_per_texel 4 -> 9"), std::string::npos) << r.output;
+}
+
+}  // namespace
+}  // namespace prt
