@@ -6,7 +6,8 @@
 //   (2) a bare rtcOccluded1 loop (EmbreeScene::CountOccluded) over exactly the rays of (1),
 //       pre-generated into an array by TransportSampler::AppendRowRays,
 // and prints (1)/(2) (goal ≥ 0.8), plus (1) on all threads and (2) on the same rays shuffled
-// (incoherent), for context. Each time is the best of several passes after a warm-up.
+// (incoherent) and the cost of generating the rays without tracing them
+// (ComputeUnoccludedTexels), for context. Each time is the best of several passes after a warm-up.
 //
 // Usage: transport_bench [mesh file] [cubemap n] [rays per texel] [samples] [passes]
 #include <tbb/task_arena.h>
@@ -142,13 +143,20 @@ int main(int argc, char** argv) {
   std::vector<prt::OcclusionRay> shuffled = rays;
   std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937_64(7));
   const int threads = tbb::this_task_arena::max_concurrency();
-  Timing t_rows, t_raw, t_shuffled, t_rows_mt, warm_up;
+  Timing t_rows, t_raw, t_shuffled, t_rows_mt, t_generate, warm_up;
+  std::vector<uint32_t> all_texels(m);
+  for (std::size_t j = 0; j < m; ++j) all_texels[j] = static_cast<uint32_t>(j);
   std::size_t occluded = 0;
   for (int p = 0; p <= passes; ++p) {  // pass 0 warms caches, page tables and TBB up
     TimeOnce(p == 0 ? warm_up : t_rows,
              [&] { one.execute([&] { stats = sampler.ComputeRows(samples, 0, rows.data()); }); });
     TimeOnce(p == 0 ? warm_up : t_raw, [&] { occluded = scene.CountOccluded(rays); });
     TimeOnce(p == 0 ? warm_up : t_shuffled, [&] { scene.CountOccluded(shuffled); });
+    TimeOnce(p == 0 ? warm_up : t_generate, [&] {
+      for (std::size_t i = 0; i < samples.size(); ++i) {
+        sampler.ComputeUnoccludedTexels(samples[i], i, all_texels, rows.data() + i * m);
+      }
+    });
   }
   for (int p = 0; p < passes; ++p) {
     TimeOnce(t_rows_mt, [&] { sampler.ComputeRows(samples, 0, rows.data()); });
@@ -184,6 +192,7 @@ int main(int argc, char** argv) {
   line("(2) bare rtcOccluded1 loop, wall clock", t_raw.wall, 1);
   std::printf("  %-44s %9s %9.3f\n", "(3) ratio (1)/(2), wall clock", "", t_raw.wall / t_rows.wall);
   line("bare loop, same rays shuffled (incoherent)", t_shuffled.cpu, 1);
+  line("ray generation only (no tracing), CPU", t_generate.cpu, 1);
   const std::string mt = "ComputeRows, " + std::to_string(threads) + " threads, wall clock";
   line(mt.c_str(), t_rows_mt.wall, threads);
   return 0;

@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -137,31 +138,65 @@ struct TransportSampler::Impl {
     const uint64_t base = static_cast<uint64_t>(texel) * static_cast<uint64_t>(k);
     OcclusionRay ray = f.ray;
     double sum = 0;
-    for (int sv = 0; sv < strata_v; ++sv) {
-      for (int su = 0; su < strata_u; ++su) {
-        const int s = sv * strata_u + su;
+    // Directions are generated a chunk of strata at a time, then traced: the chunk's
+    // computations are independent, so they overlap instead of adding their latencies to every
+    // Embree call. Each ray's arithmetic and the order of the sum do not depend on the chunking.
+    constexpr int kChunk = 16;
+    float dir[kChunk][3];
+    double cosine[kChunk];
+    int su = 0, sv = 0;
+    for (int s0 = 0; s0 < k; s0 += kChunk) {
+      const int count = std::min(kChunk, k - s0);
+      for (int i = 0; i < count; ++i) {
         // Jitter = pure function of (seed, sample index, texel, stratum); open interval (0, 1).
-        const uint64_t bits = SplitMix64(f.key ^ (base + static_cast<uint64_t>(s)));
+        const uint64_t bits = SplitMix64(f.key ^ (base + static_cast<uint64_t>(s0 + i)));
         const double ju = (static_cast<double>(bits >> 32) + 0.5) * 0x1p-32;
         const double jv = (static_cast<double>(bits & 0xFFFFFFFFull) + 0.5) * 0x1p-32;
         const double u = u0 + (su + ju) * du;
         const double v = v0 + (sv + jv) * dv;
         const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
         const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
-        const double c = Dot(f.normal, d);
+        cosine[i] = Dot(f.normal, d);
+        dir[i][0] = static_cast<float>(d.x);
+        dir[i][1] = static_cast<float>(d.y);
+        dir[i][2] = static_cast<float>(d.z);
+        if (++su == strata_u) {  // stratum s = sv·strata_u + su
+          su = 0;
+          ++sv;
+        }
+      }
+      for (int i = 0; i < count; ++i) {
+        const double c = cosine[i];
         if (!(c > 0)) {  // below the horizon inside a partly visible texel: 0, not traced
           ++stats.rays_below_horizon;
           continue;
         }
-        ray.direction[0] = static_cast<float>(d.x);
-        ray.direction[1] = static_cast<float>(d.y);
-        ray.direction[2] = static_cast<float>(d.z);
+        ray.direction[0] = dir[i][0];
+        ray.direction[1] = dir[i][1];
+        ray.direction[2] = dir[i][2];
         ++stats.rays_traced;
-        if (!trace(ray)) sum += omega[s] * c;
+        if (!trace(ray)) sum += omega[s0 + i] * c;
       }
     }
     ++stats.texels_traced;
     return static_cast<float>(sum * std::numbers::inv_pi);
+  }
+
+  // A face whose four corners are all below (above) the horizon plane by more than the
+  // rounding error of a corner's dot product has every texel below (above): n·p is linear on
+  // the face and texel corners are exact in double, so TexelAboveHorizon would say the same for
+  // each texel. Used to skip per-texel horizon tests; the counts stay exact.
+  enum class FaceSide { kBelow, kAbove, kMixed };
+  static FaceSide ClassifyFace(int face, const Vec3& nrm) {
+    constexpr double kMargin = 1e-12;  // ≫ 3·2⁻⁵³·(|x|+|y|+|z|) for |p|∞ = 1, |n| = 1
+    int below = 0, above = 0;
+    for (int c = 0; c < 4; ++c) {
+      const double d =
+          Dot(CubemapLayout::FacePoint(face, c & 1 ? 1.0 : -1.0, c & 2 ? 1.0 : -1.0), nrm);
+      below += d < -kMargin ? 1 : 0;
+      above += d > kMargin ? 1 : 0;
+    }
+    return below == 4 ? FaceSide::kBelow : (above == 4 ? FaceSide::kAbove : FaceSide::kMixed);
   }
 
   template <class Trace>
@@ -173,9 +208,16 @@ struct TransportSampler::Impl {
     const int n = layout.n();
     std::size_t j = 0;
     for (int face = 0; face < 6; ++face) {
+      const FaceSide side = ClassifyFace(face, f.normal);
+      if (side == FaceSide::kBelow) {
+        stats.texels_below_horizon += layout.face_size();
+        if (row != nullptr) std::fill(row + j, row + j + layout.face_size(), 0.0f);
+        j += layout.face_size();
+        continue;
+      }
       for (int y = 0; y < n; ++y) {
         for (int x = 0; x < n; ++x, ++j) {
-          if (!layout.TexelAboveHorizon(j, f.normal)) {
+          if (side == FaceSide::kMixed && !layout.TexelAboveHorizon(j, f.normal)) {
             ++stats.texels_below_horizon;
             if (row != nullptr) row[j] = 0.0f;
             continue;

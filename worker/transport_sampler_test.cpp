@@ -196,6 +196,37 @@ TEST(TransportSampler, SkipsAndCountsTexelsBelowTheHorizon) {
   }
 }
 
+// The row skips whole faces whose corners are all below the horizon; the counts must still be
+// exactly those of TexelAboveHorizon, also for normals on face diagonals and axes.
+TEST(TransportSampler, BelowHorizonCountMatchesTexelAboveHorizonForManyNormals) {
+  const EmbreeScene none{SceneGeometry{}};
+  const TransportSampler sampler(none, 8, {1, 3});
+  const CubemapLayout& layout = sampler.layout();
+  std::vector<Vec3> normals = {{1, 0, 0},  {0, -1, 0}, {0, 0, 1},   {1, 1, 0},
+                               {0, 1, -1}, {1, 1, 1},  {-1, 1, -1}, {1, 1e-13, 0}};
+  uint64_t h = 12345;
+  auto next = [&h] {  // a small LCG: deterministic normals
+    h = h * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<double>(h >> 11) * 0x1p-53 * 2 - 1;
+  };
+  for (int i = 0; i < 200; ++i) normals.push_back({next(), next(), next()});
+  std::vector<float> row(layout.texel_count());
+  for (Vec3 n : normals) {
+    n = Normalize(n);
+    const SampleStats st = sampler.ComputeRow({{0, 0, 0}, n, n}, 1, row.data());
+    std::size_t below = 0;
+    for (std::size_t j = 0; j < layout.texel_count(); ++j) {
+      const bool above = layout.TexelAboveHorizon(j, n);
+      below += above ? 0 : 1;
+      if (!above) {
+        EXPECT_EQ(row[j], 0.0f);
+      }
+    }
+    EXPECT_EQ(st.texels_below_horizon, below) << n.x << " " << n.y << " " << n.z;
+    EXPECT_EQ(st.texels_traced, layout.texel_count() - below);
+  }
+}
+
 // Unoccluded vertex under a uniform environment: Σ_j T[j] = (1/π)∫ max(0, n·ω) dω = 1, for the
 // upward vertex at the centre of a ground grid and for tilted normals in an empty scene.
 TEST(TransportSampler, UnoccludedRowSumsToOne) {
