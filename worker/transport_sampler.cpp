@@ -46,20 +46,23 @@ struct SampleFrame {
   uint64_t key = 0;    // RowKey(seed, sample index)
 };
 
-// Trace functors: the same EvaluateTexel instantiation serves ComputeRow and ComputeTexels, so
-// their values agree bit for bit; the collecting one reproduces the exact rays for benchmarks.
-struct EmbreeTracer {
-  const EmbreeScene* scene;
-  bool operator()(const OcclusionRay& r) const { return scene->Occluded(r); }
-};
-struct UnoccludedTracer {
-  bool operator()(const OcclusionRay&) const { return false; }
-};
-struct CollectingTracer {
-  std::vector<OcclusionRay>* rays;
-  bool operator()(const OcclusionRay& r) const {
-    rays->push_back(r);
-    return true;
+// What happens to a generated ray. One compiled EvaluateTexel serves every mode (a predictable
+// branch per ray), so ComputeRow, ComputeTexels, ComputeUnoccludedTexels and AppendRowRays use
+// bit-identical directions and sums whatever the compiler does with floating-point contraction.
+struct Tracer {
+  enum Mode { kEmbree, kUnoccluded, kCollect } mode;
+  const EmbreeScene* scene = nullptr;         // kEmbree
+  std::vector<OcclusionRay>* rays = nullptr;  // kCollect
+  bool Blocked(const OcclusionRay& r) const {
+    switch (mode) {
+      case kEmbree:
+        return scene->Occluded(r);
+      case kCollect:
+        rays->push_back(r);
+        return true;
+      default:
+        return false;
+    }
   }
 };
 
@@ -125,10 +128,10 @@ struct TransportSampler::Impl {
   // (1/π)·Σ_s Ω_s·V(ω_s)·max(0, n·ω_s) over the strata of texel (face, x, y) — DESIGN.md's
   // transport integral, estimated by stratified jittered sampling in the face coordinates with
   // exact stratum solid angles as weights (docs/transport-sampling.md, "Estimator").
-  template <class Trace>
+  // Not inlined: one compiled copy serves every caller (see Tracer).
   [[gnu::noinline]] float EvaluateTexel(const SampleFrame& f, int face, int x, int y,
                                         std::size_t texel, SampleStats& stats,
-                                        const Trace& trace) const {
+                                        const Tracer& trace) const {
     const int n = layout.n();
     const int k = options.rays_per_texel;
     const double h = 2.0 / n;
@@ -175,7 +178,7 @@ struct TransportSampler::Impl {
         ray.direction[1] = dir[i][1];
         ray.direction[2] = dir[i][2];
         ++stats.rays_traced;
-        if (!trace(ray)) sum += omega[s0 + i] * c;
+        if (!trace.Blocked(ray)) sum += omega[s0 + i] * c;
       }
     }
     ++stats.texels_traced;
@@ -199,9 +202,8 @@ struct TransportSampler::Impl {
     return below == 4 ? FaceSide::kBelow : (above == 4 ? FaceSide::kAbove : FaceSide::kMixed);
   }
 
-  template <class Trace>
   SampleStats Row(const SpatialSample& sample, uint64_t sample_index, float* row,
-                  const Trace& trace) const {
+                  const Tracer& trace) const {
     const ScopedFlushDenormals ftz;
     const SampleFrame f = Frame(sample, sample_index);
     SampleStats stats;
@@ -230,9 +232,8 @@ struct TransportSampler::Impl {
     return stats;
   }
 
-  template <class Trace>
   SampleStats Texels(const SpatialSample& sample, uint64_t sample_index,
-                     std::span<const uint32_t> texels, float* values, const Trace& trace) const {
+                     std::span<const uint32_t> texels, float* values, const Tracer& trace) const {
     const std::size_t count = layout.texel_count();
     for (uint32_t j : texels) {
       if (j >= count) {
@@ -287,18 +288,20 @@ double TransportSampler::StratumSolidAngle(std::size_t texel, int stratum) const
 
 SampleStats TransportSampler::ComputeRow(const SpatialSample& sample, uint64_t sample_index,
                                          float* row) const {
-  return impl_->Row(sample, sample_index, row, EmbreeTracer{&impl_->scene});
+  return impl_->Row(sample, sample_index, row, Tracer{Tracer::kEmbree, &impl_->scene, nullptr});
 }
 
 SampleStats TransportSampler::ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
                                             std::span<const uint32_t> texels, float* values) const {
-  return impl_->Texels(sample, sample_index, texels, values, EmbreeTracer{&impl_->scene});
+  return impl_->Texels(sample, sample_index, texels, values,
+                       Tracer{Tracer::kEmbree, &impl_->scene, nullptr});
 }
 
 void TransportSampler::ComputeUnoccludedTexels(const SpatialSample& sample, uint64_t sample_index,
                                                std::span<const uint32_t> texels,
                                                float* values) const {
-  impl_->Texels(sample, sample_index, texels, values, UnoccludedTracer{});
+  impl_->Texels(sample, sample_index, texels, values,
+                Tracer{Tracer::kUnoccluded, nullptr, nullptr});
 }
 
 SampleStats TransportSampler::ComputeRows(std::span<const SpatialSample> samples,
@@ -317,7 +320,7 @@ SampleStats TransportSampler::ComputeRows(std::span<const SpatialSample> samples
 
 void TransportSampler::AppendRowRays(const SpatialSample& sample, uint64_t sample_index,
                                      std::vector<OcclusionRay>& rays) const {
-  impl_->Row(sample, sample_index, nullptr, CollectingTracer{&rays});
+  impl_->Row(sample, sample_index, nullptr, Tracer{Tracer::kCollect, nullptr, &rays});
 }
 
 std::vector<SpatialSample> SpatialSamplesOf(const SceneGeometry& geometry) {
