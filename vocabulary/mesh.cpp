@@ -289,8 +289,8 @@ RawMesh ReadObj(std::string_view text, const std::string& name) {
   RawMesh raw;
   raw.report.format = "obj";
   std::vector<Vec3> vn;
-  // Per position: the vn index its corners use; −1 none yet, −2 conflicting normals.
-  std::vector<int64_t> corner_normal;
+  // (position, vn index) of every corner that names a normal.
+  std::vector<std::pair<uint32_t, int64_t>> corner_normals;
   bool any_corner_without_normal = false;
   int64_t max_index = -1;
   std::size_t max_index_line = 0;
@@ -319,7 +319,6 @@ RawMesh ReadObj(std::string_view text, const std::string& name) {
           FailLine(name, lines.line(), "too many vertices");
         }
         raw.positions.push_back({c[0], c[1], c[2]});
-        corner_normal.push_back(-1);
       }
     } else if (tok == "f") {
       idx.clear();
@@ -368,19 +367,11 @@ RawMesh ReadObj(std::string_view text, const std::string& name) {
         }
         nidx.push_back(ni);
       }
-      // Is there a single normal per position? Positions referenced later than defined get
-      // their slot when the slot exists (checked again after the whole file is read).
       for (std::size_t i = 0; i < idx.size(); ++i) {
         if (nidx[i] < 0) {
           any_corner_without_normal = true;
-          continue;
-        }
-        if (idx[i] >= corner_normal.size()) corner_normal.resize(idx[i] + 1, -1);
-        int64_t& slot = corner_normal[idx[i]];
-        if (slot == -1) {
-          slot = nidx[i];
-        } else if (slot >= 0 && slot != nidx[i] && !(vn[slot] == vn[nidx[i]])) {
-          slot = -2;
+        } else {
+          corner_normals.push_back({idx[i], nidx[i]});
         }
       }
       AddPolygon(raw, idx.data(), idx.size());
@@ -393,10 +384,19 @@ RawMesh ReadObj(std::string_view text, const std::string& name) {
              "vertex reference " + std::to_string(max_index + 1) + " out of range (the file has " +
                  std::to_string(nv) + " vertices)");
   }
-  corner_normal.resize(raw.positions.size(), -1);
   if (!vn.empty() && !any_corner_without_normal) {
-    // File normals only when every referenced position has exactly one; an unreferenced
-    // position then takes +Y until the area-weighted pass fills it (it has no triangles).
+    // Is there a single normal per position? (Checked after the whole file is read, since a
+    // face may refer to a vertex defined later.) File normals only when every referenced
+    // position has exactly one; an unreferenced position keeps the computed +Y.
+    std::vector<int64_t> corner_normal(raw.positions.size(), -1);  // −1 none, −2 conflicting
+    for (const auto& [v, n] : corner_normals) {
+      int64_t& slot = corner_normal[v];
+      if (slot == -1) {
+        slot = n;
+      } else if (slot >= 0 && slot != n && !(vn[slot] == vn[n])) {
+        slot = -2;
+      }
+    }
     bool consistent = true;
     std::vector<bool> referenced(raw.positions.size(), false);
     for (const auto& t : raw.triangles) {
@@ -524,6 +524,16 @@ double LoadBinary(const unsigned char* p, PlyType t, bool swap) {
   return 0;
 }
 
+// Which element is being read, for messages ("face 3 of 4"); formatted only on failure.
+struct PlyWhere {
+  const std::string& element;
+  std::size_t index;
+  std::size_t count;
+  std::string str() const {
+    return element + " " + std::to_string(index) + " of " + std::to_string(count);
+  }
+};
+
 // Source of PLY values: ascii tokens or binary bytes, with the position for messages.
 class PlyValues {
  public:
@@ -536,11 +546,11 @@ class PlyValues {
         name_(name) {}
 
   // Reads one value; `what` describes the element for messages ("vertex 12 of 100").
-  double Read(PlyType t, const std::string& what) {
+  double Read(PlyType t, const PlyWhere& what) {
     if (format_ == PlyFormat::kAscii) {
       std::string_view tok;
       if (!tokens_.Next(tok)) {
-        throw InputError(name_, "truncated: file ends in " + what + " (line " +
+        throw InputError(name_, "truncated: file ends in " + what.str() + " (line " +
                                     std::to_string(tokens_.line()) + ")");
       }
       double v = 0;
@@ -555,8 +565,8 @@ class PlyValues {
     }
     const std::size_t n = PlySize(t);
     if (body_.size() - pos_ < n) {
-      throw InputError(name_, "truncated: file ends in " + what + " (byte " + std::to_string(pos_) +
-                                  " of the binary body)");
+      throw InputError(name_, "truncated: file ends in " + what.str() + " (byte " +
+                                  std::to_string(pos_) + " of the binary body)");
     }
     const double v =
         LoadBinary(reinterpret_cast<const unsigned char*>(body_.data()) + pos_, t, swap_);
@@ -564,22 +574,22 @@ class PlyValues {
     return v;
   }
 
-  [[noreturn]] void Fail(const std::string& what, const std::string& msg) const {
-    if (format_ == PlyFormat::kAscii) FailLine(name_, tokens_.line(), what + ": " + msg);
-    throw InputError(name_, what + ": " + msg);
+  [[noreturn]] void Fail(const PlyWhere& what, const std::string& msg) const {
+    if (format_ == PlyFormat::kAscii) FailLine(name_, tokens_.line(), what.str() + ": " + msg);
+    throw InputError(name_, what.str() + ": " + msg);
   }
 
   // Reads a list length and checks that the list fits in what is left of the file.
-  int64_t ReadListLength(const PlyProperty& p, const std::string& what) {
+  int64_t ReadListLength(const PlyProperty& p, const PlyWhere& what) {
     const double k = Read(p.count_type, what);
     if (k < 0) Fail(what, "negative list length " + std::to_string(static_cast<int64_t>(k)));
     const std::size_t min_bytes = format_ == PlyFormat::kAscii ? 2 : PlySize(p.type);
     if (k * static_cast<double>(min_bytes) > static_cast<double>(bytes_left())) {
       if (format_ == PlyFormat::kAscii) {
-        throw InputError(name_, "truncated: file ends in " + what + " (line " +
+        throw InputError(name_, "truncated: file ends in " + what.str() + " (line " +
                                     std::to_string(tokens_.line()) + ")");
       }
-      throw InputError(name_, "truncated: file ends in " + what + " (list of " +
+      throw InputError(name_, "truncated: file ends in " + what.str() + " (list of " +
                                   std::to_string(static_cast<int64_t>(k)) + " values, " +
                                   std::to_string(bytes_left()) + " bytes left)");
     }
@@ -719,7 +729,7 @@ RawMesh ReadPly(std::string_view text, const std::string& name) {
       if (normals) raw.file_normals.reserve(count);
       std::vector<double> vals(e.props.size(), 0.0);
       for (std::size_t v = 0; v < count; ++v) {
-        const std::string what = "vertex " + std::to_string(v) + " of " + std::to_string(count);
+        const PlyWhere what{e.name, v, count};
         for (std::size_t i = 0; i < e.props.size(); ++i) {
           const PlyProperty& p = e.props[i];
           if (p.is_list) {
@@ -752,7 +762,7 @@ RawMesh ReadPly(std::string_view text, const std::string& name) {
       }
       raw.triangles.reserve(count);
       for (std::size_t f = 0; f < count; ++f) {
-        const std::string what = "face " + std::to_string(f) + " of " + std::to_string(count);
+        const PlyWhere what{e.name, f, count};
         for (std::size_t i = 0; i < e.props.size(); ++i) {
           const PlyProperty& p = e.props[i];
           if (!p.is_list) {
@@ -778,8 +788,8 @@ RawMesh ReadPly(std::string_view text, const std::string& name) {
       }
     } else {
       // Any other element (edge, material, …): read past it.
-      for (std::size_t r = 0; r < count; ++r) {
-        const std::string what = e.name + " " + std::to_string(r) + " of " + std::to_string(count);
+      for (std::size_t r = 0; r < count && !e.props.empty(); ++r) {
+        const PlyWhere what{e.name, r, count};
         for (const PlyProperty& p : e.props) {
           if (p.is_list) {
             const int64_t k = values.ReadListLength(p, what);

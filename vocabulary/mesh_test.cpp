@@ -138,6 +138,11 @@ TEST(MeshTest, ObjFaceFormsNegativeIndicesAndConsistentNormals) {
   const TriangleMesh m2 = ParseMesh(obj2, "sq2.obj");
   EXPECT_FALSE(m2.report.normals_from_file);
   EXPECT_NEAR(m2.normals[0].z, 1.0, 1e-15);
+  // A face may refer to vertices defined after it.
+  const TriangleMesh m4 =
+      ParseMesh("vn 0 0 1\nf 1//1 2//1 3//1\nv 0 0 0\nv 1 0 0\nv 0 1 0\n", "fwd.obj");
+  EXPECT_EQ(m4.triangles.size(), 1u);
+  EXPECT_TRUE(m4.report.normals_from_file);
   // Faces without vn → area-weighted; polygon with 5 corners → 3 triangles.
   const std::string obj3 = "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 2 0\nv 0 1 0\nf 1 2 3 4 5\n";
   const TriangleMesh m3 = ParseMesh(obj3, "pent.obj");
@@ -279,6 +284,10 @@ TEST(MeshTest, ErrorsNameTheFileAndTheLineOrElement) {
   ExpectInputError([] { ParseMesh("OFF\n3000000000 1 0\n", "big.off"); }, {"big.off", "truncated"});
   ExpectInputError([] { ParseMesh("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "r.obj"); },
                    {"r.obj", "line 4", "out of range"});
+  // A huge forward reference with a normal must fail fast, without allocating for it.
+  ExpectInputError(
+      [] { ParseMesh("v 0 0 0\nvn 0 0 1\nf 1999999999//1 1//1 1//1\nv 1 0 0\n", "h.obj"); },
+      {"h.obj", "line 3", "out of range (the file has 2 vertices)"});
   ExpectInputError([] { ParseMesh("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "z.obj"); },
                    {"z.obj", "line 4"});
   ExpectInputError([] { ParseMesh("v 0 0 0\nv 1 inf 0\n", "i.obj"); }, {"i.obj", "line 2"});
