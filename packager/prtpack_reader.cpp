@@ -114,6 +114,7 @@ void PackReader::Impl::Parse() {
   const uint8_t* d = data();
   const uint64_t n = storage->size;
   if (n < kMagic.size() || std::memcmp(d, kMagic.data(), kMagic.size()) != 0) {
+    if (n == 0) Fail("empty file: not a .prtpack");
     if (n < kMagic.size() && std::memcmp(d, kMagic.data(), n) == 0) {
       Fail("truncated: " + std::to_string(n) + " bytes, shorter than the .prtpack header");
     }
