@@ -132,6 +132,17 @@ void ColumnLevelMap(const SpatialDomain& domain, int depth, uint8_t* levels) {
   }
 }
 
+void ColumnScaleMap(const SpatialDomain& domain, int depth, uint8_t* scale) {
+  ColumnLevelMap(domain, depth, scale);
+  std::size_t off = 0;
+  for (const auto& s : domain.segments) {
+    const int dim = s.kind == SpatialSegment::Kind::kGrid2D ? 2 : 1;
+    for (uint32_t i = 0; i < s.count; ++i)
+      scale[off + i] = static_cast<uint8_t>(scale[off + i] * dim);
+    off += s.count;
+  }
+}
+
 double DitherOffset(uint64_t seed, uint32_t column, uint32_t index) {
   const uint64_t h = SplitMix64(SplitMix64(seed ^ 0x5851f42d4c957f2dull) ^
                                 ((static_cast<uint64_t>(column) << 32) | index));
@@ -139,12 +150,12 @@ double DitherOffset(uint64_t seed, uint32_t column, uint32_t index) {
 }
 
 void DequantiseColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
-                      const uint8_t* levels, float* coefficients) {
+                      const uint8_t* scale_map, float* coefficients) {
   std::fill(coefficients, coefficients + h.sample_count, 0.0f);
   for (std::size_t k = 0; k < c.index.size(); ++k) {
     const uint32_t i = c.index[k];
     coefficients[i] = static_cast<float>(DequantiseTerm(
-        c.q[k], DitherOffset(h.dither_seed, c.column, i), c.scale, h.bits, levels[i]));
+        c.q[k], DitherOffset(h.dither_seed, c.column, i), c.scale, h.bits, scale_map[i]));
   }
 }
 
@@ -157,7 +168,7 @@ std::vector<float> DecompressToRowWaveletBasis(const CompressedTransport& t) {
   int levels_depth = -1;
   for (const auto& c : t.columns) {
     if (c.depth != levels_depth) {
-      ColumnLevelMap(h.domain, c.depth, levels.data());
+      ColumnScaleMap(h.domain, c.depth, levels.data());
       levels_depth = c.depth;
     }
     DequantiseColumn(h, c, levels.data(), col.data());
@@ -203,7 +214,7 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
     auto& lv = levels[c.depth];
     if (lv.empty()) {
       lv.resize(S);
-      ColumnLevelMap(header_.domain, c.depth, lv.data());
+      ColumnScaleMap(header_.domain, c.depth, lv.data());
     }
     slot_[c.column] = static_cast<int32_t>(columns_.size());
     Column col{c.depth, static_cast<uint32_t>(index_.size()), 0};

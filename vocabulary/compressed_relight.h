@@ -44,8 +44,18 @@ void SamplesToCoefficientOrder(const SpatialDomain& domain, const float* samples
 void CoefficientOrderToSamples(const SpatialDomain& domain, const float* coefficients, float* out);
 
 // levels[i] = wavelets.h level (0 = scaling … depth = finest) of coefficient i at `depth`
-// (domain.sample_count() entries). §4.3 scales the coefficient at level l by 2^l.
+// (domain.sample_count() entries).
 void ColumnLevelMap(const SpatialDomain& domain, int depth, uint8_t* levels);
+// §4.3 non-linear scaling, as a power of √2 per coefficient: scale[i] = level · dim, dim the
+// dimension of the coefficient's segment (1 mesh, 2 grid), so that the coefficient is multiplied
+// by ScaleFactor(scale[i]) = 2^(level·dim/2). With √2-normalised filters a level-l coefficient of
+// a smooth dim-dimensional signal is ∝ 2^(−l·dim/2) (its basis function has 2^(dim·(L−l))
+// samples of amplitude 2^(−dim·(L−l)/2)); for a 2D image this is the paper's 2^l.
+void ColumnScaleMap(const SpatialDomain& domain, int depth, uint8_t* scale);
+inline double ScaleFactor(int half_octaves) {
+  const double f = static_cast<double>(uint64_t{1} << (half_octaves / 2));
+  return (half_octaves & 1) ? f * 1.4142135623730951 : f;
+}
 
 // Subtractive dither offset r ∈ [−1/2, 1/2) for term `index` of column `column`: a pure hash
 // of (seed, column, index), the same in encoder and decoder.
@@ -54,16 +64,15 @@ double DitherOffset(uint64_t seed, uint32_t column, uint32_t index);
 inline int QuantiserMax(int bits) {
   return (1 << (bits - 1)) - 1;
 }
-// Value of one quantised term, undoing dither, normalisation and the 2^level scaling:
-//   c = (q − r) · scale / A / 2^level.
-inline double DequantiseTerm(int32_t q, double dither, double scale, int bits, int level) {
-  return (static_cast<double>(q) - dither) * scale / QuantiserMax(bits) /
-         static_cast<double>(uint64_t{1} << level);
+// Value of one quantised term, undoing dither, normalisation and the §4.3 scaling:
+//   c = (q − r) · scale / A / ScaleFactor(half_octaves).
+inline double DequantiseTerm(int32_t q, double dither, double scale, int bits, int half_octaves) {
+  return (static_cast<double>(q) - dither) * scale / QuantiserMax(bits) / ScaleFactor(half_octaves);
 }
 // Column coefficients (coefficient layout at c.depth, sample_count floats) from a compressed
-// column. `levels` is ColumnLevelMap at c.depth.
+// column. `scale_map` is ColumnScaleMap at c.depth.
 void DequantiseColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
-                      const uint8_t* levels, float* coefficients);
+                      const uint8_t* scale_map, float* coefficients);
 
 // Dense T̂ (rows = samples, columns = row-wavelet coefficients, sample_count × column_count),
 // and dense T in the cubemap texel basis (inverse row transform of every row of T̂).

@@ -74,6 +74,13 @@ TEST(ColumnTransform, DepthZeroIsTheHilbertPermutationAndLevelsMatchWavelets) {
   EXPECT_EQ(levels[44], 6);  // finest mesh detail
   EXPECT_EQ(levels[45], 0);  // grid: clamped to its own depth ⌈log2 9⌉ = 4
   EXPECT_EQ(levels[45 + 53], 4);
+  // §4.3 scaling in half-octaves: level × segment dimension (mesh 1, grid 2).
+  std::vector<uint8_t> scale(d.sample_count());
+  ColumnScaleMap(d, 6, scale.data());
+  EXPECT_EQ(scale[44], 6);
+  EXPECT_EQ(scale[45 + 53], 8);
+  EXPECT_DOUBLE_EQ(ScaleFactor(8), 16.0);
+  EXPECT_DOUBLE_EQ(ScaleFactor(3), 2.0 * std::sqrt(2.0));
 }
 
 TEST(Dither, OffsetsAreUniformInHalfOpenUnitIntervalAndDeterministic) {

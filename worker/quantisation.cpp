@@ -20,15 +20,14 @@ double DequantiseDithered(int32_t q, double dither, int bits) {
 }
 
 CompressedColumn QuantiseColumn(uint32_t column, int depth, const float* coefficients,
-                                std::span<const uint32_t> kept, const uint8_t* levels, int bits,
+                                std::span<const uint32_t> kept, const uint8_t* scale_map, int bits,
                                 uint64_t dither_seed) {
   CompressedColumn c;
   c.column = column;
   c.depth = static_cast<uint8_t>(depth);
   double m = 0;
   for (uint32_t i : kept)
-    m = std::max(m, std::fabs(static_cast<double>(coefficients[i])) *
-                        static_cast<double>(uint64_t{1} << levels[i]));
+    m = std::max(m, std::fabs(static_cast<double>(coefficients[i])) * ScaleFactor(scale_map[i]));
   if (!(m > 0) || !std::isfinite(m)) return c;
   // The stored float scale must not be below m, so that |u| ≤ 1 and |q| ≤ A without clamping.
   float mf = static_cast<float>(m);
@@ -39,8 +38,7 @@ CompressedColumn QuantiseColumn(uint32_t column, int depth, const float* coeffic
   c.index.reserve(kept.size());
   c.q.reserve(kept.size());
   for (uint32_t i : kept) {
-    const double u =
-        static_cast<double>(coefficients[i]) * static_cast<double>(uint64_t{1} << levels[i]) * inv;
+    const double u = static_cast<double>(coefficients[i]) * ScaleFactor(scale_map[i]) * inv;
     const int32_t q = QuantiseDithered(u, DitherOffset(dither_seed, column, i), bits);
     if (q != 0) {
       c.index.push_back(i);

@@ -23,7 +23,7 @@ double DequantiseDithered(int32_t q, double dither, int bits);
 // kept by the non-linear approximation, and the level map at that depth. Returns a column with
 // no terms when every kept term quantises to zero.
 CompressedColumn QuantiseColumn(uint32_t column, int depth, const float* coefficients,
-                                std::span<const uint32_t> kept, const uint8_t* levels, int bits,
+                                std::span<const uint32_t> kept, const uint8_t* scale_map, int bits,
                                 uint64_t dither_seed);
 
 }  // namespace prt

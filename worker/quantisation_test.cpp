@@ -41,7 +41,8 @@ TEST(DitheredQuantiser, ErrorIsUniformWithRmsDeltaOverSqrt12From6To16Bits) {
 TEST(QuantiseColumn, ScalesByTwoToTheLevelNormalisesAndDecodesWithinHalfAStep) {
   const int bits = 9;
   std::vector<float> c = {0.5f, -0.25f, 0.125f, 1e-6f, 0.0f, -0.0625f};
-  std::vector<uint8_t> levels = {0, 1, 2, 3, 3, 3};
+  // Scale map in half-octaves: factors 1, 2, 4, 8, 8, 8.
+  std::vector<uint8_t> levels = {0, 2, 4, 6, 6, 6};
   std::vector<uint32_t> kept = {0, 1, 2, 3, 5};
   const CompressedColumn col = QuantiseColumn(17, 3, c.data(), kept, levels.data(), bits, 5);
   // Scaled magnitudes 0.5, 0.5, 0.5, 8e-6, 0.5: m = 0.5.
@@ -53,7 +54,7 @@ TEST(QuantiseColumn, ScalesByTwoToTheLevelNormalisesAndDecodesWithinHalfAStep) {
     const uint32_t i = col.index[k];
     EXPECT_NE(i, 3u) << "the tiny term quantises to zero and is dropped";
     const double v = DequantiseTerm(col.q[k], DitherOffset(5, 17, i), col.scale, bits, levels[i]);
-    EXPECT_NEAR(v, c[i], col.scale / A / 2 / (1 << levels[i]) * 1.0000001);
+    EXPECT_NEAR(v, c[i], col.scale / A / 2 / ScaleFactor(levels[i]) * 1.0000001);
     EXPECT_LE(std::abs(col.q[k]), A);
   }
   EXPECT_EQ(col.index.size(), 4u);

@@ -102,7 +102,7 @@ CompressedColumn CompressOneColumn(const CompressedTransportHeader& h, uint32_t 
   const ApproximationEnergy e = MeasureApproximation(c.data(), S, budget);
   const std::vector<uint32_t> kept = LargestTerms(c.data(), S, budget);
   levels.resize(S);
-  ColumnLevelMap(h.domain, depth, levels.data());
+  ColumnScaleMap(h.domain, depth, levels.data());
   CompressedColumn out =
       QuantiseColumn(column, depth, c.data(), kept, levels.data(), h.bits, h.dither_seed);
   st.depth = static_cast<uint8_t>(depth);
