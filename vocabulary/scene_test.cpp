@@ -393,5 +393,31 @@ TEST(SceneTest, TeapotExampleStandsZUpOnTheGround) {
   EXPECT_NEAR(hi, 1.2 * 3.15 / 6.43404, 1e-4);
 }
 
+TEST(SceneTest, FlipWindingTurnsTheInwardHorseOutward) {
+  const std::string shared = PRT_SHARED_DATA_DIR;
+  if (!fs::exists(shared + "/meshes/horse_cyberware.ply")) GTEST_SKIP() << "no shared data";
+  const std::string text =
+      "[[mesh]]\nname = \"horse\"\npath = \"meshes/horse_cyberware.ply\"\n"
+      "fit = { size = 1.0 }\nflip_winding = FLIP\n";
+  for (const bool flip : {false, true}) {
+    std::string t = text;
+    t.replace(t.find("FLIP"), 4, flip ? "true" : "false");
+    const SceneGeometry g = BuildSceneGeometry(ParseScene(t, "horse.toml", "", {shared}));
+    const TriangleMesh& m = g.meshes[0].mesh;
+    ASSERT_EQ(m.positions.size(), 48485u);
+    EXPECT_EQ(m.report.inward_wound, !flip);
+    EXPECT_EQ(m.report.signed_volume > 0, flip);
+    EXPECT_NEAR(SignedVolume(m), m.report.signed_volume, 1e-9);
+    // Normals follow the winding: after the flip they agree with the outward area-weighted ones.
+    TriangleMesh computed = m;
+    ComputeAreaWeightedNormals(computed);
+    std::size_t agree = 0;
+    for (std::size_t v = 0; v < m.normals.size(); ++v) {
+      agree += Dot(m.normals[v], computed.normals[v]) > 0;
+    }
+    EXPECT_GE(agree, m.normals.size() - 10);
+  }
+}
+
 }  // namespace
 }  // namespace prt
