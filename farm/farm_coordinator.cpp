@@ -354,7 +354,6 @@ class SetupPhase : public FarmPhase {
     }
     fs::create_directories(f.checkpoints, ec);
     if (ec) throw FileIoError(f.checkpoints, "cannot create the run folder: " + ec.message());
-    ctx.folder_ready = true;
 
     const bool has_run = fs::exists(f.journal) || fs::exists(f.partial) || fs::exists(f.transport);
     bool fresh = true;
@@ -383,6 +382,8 @@ class SetupPhase : public FarmPhase {
         fs::remove(p, ec);
       }
     }
+    // From here on the folder is this run's: a failure report may replace an older report.
+    ctx.folder_ready = true;
     WriteFileDurably(f.scene_copy, scene_text);
     WriteFileDurably(f.geometry, geometry_bytes);
     WriteFileDurably(f.manifest, manifest.ToJsonText());

@@ -198,6 +198,7 @@ void KillAndResume(const std::string& name, int ranks, const std::string& kill_a
   const RunResult again = Farm(ranks, kScene + " --out " + run + kSmallJobs);
   EXPECT_EQ(again.exit_code, kExitUsage) << again.output;  // needs --resume or --force
   EXPECT_NE(again.output.find("--resume"), std::string::npos) << again.output;
+  EXPECT_FALSE(fs::exists(run + "/report.json"));  // a refused run leaves the folder alone
 
   const RunResult resumed = Farm(ranks, kScene + " --out " + run + kSmallJobs + " --resume");
   ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
