@@ -1,0 +1,53 @@
+// Shared by the benchmark programs: the benchmark scenes (the default scene and real meshes on a
+// ground plane), the real environment maps, relit radiance B = albedo ⊙ (T·L), the relative RMS
+// error every accuracy figure uses, and rendering relit vertices to an image.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "vocabulary/envmap.h"
+#include "vocabulary/image_io.h"
+#include "vocabulary/scene.h"
+
+namespace prt::bench {
+
+// Data folder: $PRT_DATA_DIR if set, else the build tree's data/ (compiled in).
+std::string DataDir();
+
+// A benchmark scene by name: "default" (the bunny), "armadillo", "dragon" (the CGAL 10k-vertex
+// Chinese dragon), "camel", each fitted on the default scene's ground plane; `n` overrides the
+// cubemap resolution (0 keeps the scene's). Throws InputError for an unknown name.
+SceneDescription BenchScene(const std::string& name, int n = 0);
+
+// The real environment maps used for accuracy figures, resampled to n: sunrise, city, studio,
+// interior (Blender's, from the data folder).
+struct NamedEnvironment {
+  std::string name;
+  CubemapRgb cube;
+};
+std::vector<NamedEnvironment> BenchEnvironments(int n,
+                                                const std::vector<std::string>& names = {
+                                                    "sunrise", "city", "studio", "interior"});
+
+// Relit radiance per sample (3 floats per sample): B_s = albedo_s ⊙ Σ_j T[s][j]·L_j, in double.
+// `rows` is samples × texels, row-major.
+std::vector<float> RelitRadiance(const SceneGeometry& geometry, const std::vector<float>& rows,
+                                 const CubemapRgb& light);
+
+// Relative RMS error ‖B − B_ref‖ / ‖B_ref‖ over samples [first, last) and all three channels.
+double RelativeRmsError(const std::vector<float>& b, const std::vector<float>& ref,
+                        std::size_t first, std::size_t last);
+
+// [first, last) sample range of the scene's meshes (not ground) and of the ground.
+struct SampleRanges {
+  std::size_t model_first = 0, model_last = 0, ground_first = 0, ground_last = 0;
+};
+SampleRanges RangesOf(const SceneGeometry& geometry);
+
+// Rasterises the scene from its camera with the given per-sample colours (3 floats per sample),
+// over the environment as background when `background` is non-null.
+ImageRgb RenderVertexColours(const SceneDescription& scene, const SceneGeometry& geometry,
+                             const std::vector<float>& rgb, const CubemapRgb* background);
+
+}  // namespace prt::bench
