@@ -227,6 +227,37 @@ bool EmbreeScene::Occluded(const OcclusionRay& ray) const {
   return OccludedOne(impl_->scene, ray);
 }
 
+bool EmbreeScene::Intersect(const OcclusionRay& r, RayHit& hit) const {
+  const ScopedFlushDenormals ftz;
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray.org_x = r.origin[0];
+  rh.ray.org_y = r.origin[1];
+  rh.ray.org_z = r.origin[2];
+  rh.ray.tnear = r.tnear;
+  rh.ray.dir_x = r.direction[0];
+  rh.ray.dir_y = r.direction[1];
+  rh.ray.dir_z = r.direction[2];
+  rh.ray.time = 0.0f;
+  rh.ray.tfar = r.tfar;
+  rh.ray.mask = std::numeric_limits<unsigned>::max();
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &context, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+  hit.t = rh.ray.tfar;
+  hit.geometry = rh.hit.geomID;
+  hit.primitive = rh.hit.primID;
+  hit.u = rh.hit.u;
+  hit.v = rh.hit.v;
+  hit.geometric_normal = Normalize(Vec3{rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z});
+  return true;
+}
+
 std::size_t EmbreeScene::CountOccluded(std::span<const OcclusionRay> rays) const {
   const ScopedFlushDenormals ftz;
   std::size_t hits = 0;

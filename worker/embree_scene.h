@@ -22,6 +22,15 @@ struct OcclusionRay {
   float tfar;
 };
 
+// The closest hit of a ray (EmbreeScene::Intersect).
+struct RayHit {
+  float t = 0;
+  uint32_t geometry = 0;   // mesh index in the SceneGeometry
+  uint32_t primitive = 0;  // triangle index in that mesh
+  float u = 0, v = 0;      // barycentrics of vertices 1 and 2 (Embree's convention)
+  Vec3 geometric_normal;   // unit, (v1−v0)×(v2−v0) direction (Embree's Ng, normalised)
+};
+
 // Robust ray origins (Wächter & Binder, "A Fast and Robust Method for Avoiding
 // Self-Intersection", Ray Tracing Gems ch. 6, adapted): the origin is moved off the surface along
 // the geometric normal by kRayOffsetUlps float epsilons of the point's float scale
@@ -59,6 +68,9 @@ class EmbreeScene {
 
   // True when the ray hits any triangle with t in (tnear, tfar). Thread-safe.
   bool Occluded(const OcclusionRay& ray) const;
+  // Closest hit with t in (tnear, tfar), for primary rays (e.g. camera-pixel samples); false
+  // when the ray hits nothing. Thread-safe.
+  bool Intersect(const OcclusionRay& ray, RayHit& hit) const;
   // A bare rtcOccluded1 loop over the rays (the raw-throughput reference of
   // bench/transport_bench.cpp); returns how many are occluded.
   std::size_t CountOccluded(std::span<const OcclusionRay> rays) const;

@@ -61,6 +61,23 @@ TEST(EmbreeScene, OccludedHitsAndMissesBothSidesAndRespectsTfar) {
   EXPECT_EQ(scene.CountOccluded(rays), 2u);
 }
 
+TEST(EmbreeScene, IntersectReportsTheClosestHit) {
+  SceneGeometry g;
+  g.meshes = {Square(1.0, "low"), Square(2.0, "high")};
+  const EmbreeScene scene(g);
+  RayHit hit;
+  ASSERT_TRUE(scene.Intersect(Ray({0.75, 3, 0.25}, {0, -1, 0}), hit));
+  EXPECT_FLOAT_EQ(hit.t, 1.0f);
+  EXPECT_EQ(hit.geometry, 1u);
+  EXPECT_EQ(hit.primitive, 0u);  // (0.75, 0.25) is in triangle {0, 2, 1}
+  EXPECT_NEAR(std::abs(hit.geometric_normal.y), 1.0, 1e-12);
+  ASSERT_TRUE(scene.Intersect(Ray({0.25, 1.5, 0.75}, {0, -1, 0}), hit));
+  EXPECT_FLOAT_EQ(hit.t, 0.5f);
+  EXPECT_EQ(hit.geometry, 0u);
+  EXPECT_EQ(hit.primitive, 1u);
+  EXPECT_FALSE(scene.Intersect(Ray({0.5, 0.5, 0.5}, {0, -1, 0}), hit));
+}
+
 TEST(EmbreeScene, EmptySceneOccludesNothing) {
   const EmbreeScene scene(SceneGeometry{});
   EXPECT_EQ(scene.geometry_count(), 0u);
