@@ -12,7 +12,9 @@
 // the average chosen column depth per row-transform level (Fig. 8) for adaptive 4D.
 //
 // Usage: compression_bench [--run DIR] [--mesh FILE] [--n N] [--rays K] [--ground RES]
-//                          [--bits B] [--keep f1,f2,...]
+//                          [--bits B] [--keep f1,f2,...] [--budget column|global|both]
+// Budget "column" is the paper's N terms per column (2D: per row, Ng et al. 2003); "global" keeps
+// the largest f·samples·texels coefficients of the whole transformed matrix (not in the paper).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -115,6 +117,7 @@ std::vector<double> Split(const std::string& s) {
 int main(int argc, char** argv) {
   std::string run, mesh = std::string(PRT_DATA_DIR) + "/meshes/ChineseDragon-10kv.off";
   int n = 16, rays = 2, ground = 32, bits = 9;
+  std::string budget = "both";  // column | global | both
   std::vector<double> keeps = {0.0025, 0.005, 0.01, 0.02, 0.05};
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i], v = argv[i + 1];
@@ -130,6 +133,8 @@ int main(int argc, char** argv) {
       ground = std::atoi(v.c_str());
     else if (a == "--bits")
       bits = std::atoi(v.c_str());
+    else if (a == "--budget")
+      budget = v;
     else if (a == "--keep")
       keeps = Split(v);
     else {
@@ -187,61 +192,68 @@ int main(int argc, char** argv) {
 
   const std::vector<uint8_t> row_levels = prt::RowCoefficientLevels(n);
   const int row_depth = prt::RowTransformDepth(n);
-  std::printf("\n%-11s %7s %10s %10s %7s %10s %10s %8s\n", "scheme", "keep", "terms", "bytes",
-              "%raw", "T_relF", "B_relRMS", "time_s");
+  std::printf("\n%-11s %-7s %7s %10s %10s %7s %10s %10s %8s\n", "scheme", "budget", "keep", "terms",
+              "bytes", "%raw", "T_relF", "B_relRMS", "time_s");
   std::vector<std::string> depth_lines;
-  for (prt::CompressionScheme scheme : {prt::CompressionScheme::k2D, prt::CompressionScheme::k4D,
-                                        prt::CompressionScheme::kAdaptive4D}) {
-    for (double keep : keeps) {
-      prt::CompressionOptions o;
-      o.scheme = scheme;
-      o.keep_fraction = keep;
-      o.bits = bits;
-      std::vector<prt::ColumnStats> stats;
-      const auto t0 = Clock::now();
-      const prt::CompressedTransport ct =
-          prt::CompressTransport(tr.T.data(), n, tr.domain, o, &stats);
-      const double secs = Seconds(t0);
-      const std::size_t bytes = prt::EncodeCompressedTransport(ct).size();
-      // Relit error by Eq. 8 from the compressed columns.
-      const prt::CompressedRelighter relighter(ct);
-      double err = 0;
-      std::vector<float> B(3 * S);
-      for (std::size_t e = 0; e < lights.size(); ++e) {
-        relighter.Relight(prt::LightingToRowWaveletBasis(o.row_wavelet, n, lights[e], 3), 3, B);
-        for (std::size_t i = 0; i < 3 * S; ++i) {
-          const double d = B[i] - ref[e][i];
-          err += d * d;
+  std::vector<bool> modes;
+  if (budget != "global") modes.push_back(false);
+  if (budget != "column") modes.push_back(true);
+  for (bool global : modes)
+    for (prt::CompressionScheme scheme : {prt::CompressionScheme::k2D, prt::CompressionScheme::k4D,
+                                          prt::CompressionScheme::kAdaptive4D}) {
+      for (double keep : keeps) {
+        prt::CompressionOptions o;
+        o.scheme = scheme;
+        o.keep_fraction = keep;
+        o.bits = bits;
+        o.global_budget = global;
+        std::vector<prt::ColumnStats> stats;
+        const auto t0 = Clock::now();
+        const prt::CompressedTransport ct =
+            prt::CompressTransport(tr.T.data(), n, tr.domain, o, &stats);
+        const double secs = Seconds(t0);
+        const std::size_t bytes = prt::EncodeCompressedTransport(ct).size();
+        // Relit error by Eq. 8 from the compressed columns.
+        const prt::CompressedRelighter relighter(ct);
+        double err = 0;
+        std::vector<float> B(3 * S);
+        for (std::size_t e = 0; e < lights.size(); ++e) {
+          relighter.Relight(prt::LightingToRowWaveletBasis(o.row_wavelet, n, lights[e], 3), 3, B);
+          for (std::size_t i = 0; i < 3 * S; ++i) {
+            const double d = B[i] - ref[e][i];
+            err += d * d;
+          }
         }
-      }
-      const std::vector<float> back = prt::DecompressTransport(ct);
-      double terr = 0;
-      for (std::size_t i = 0; i < back.size(); ++i) {
-        const double d = static_cast<double>(back[i]) - tr.T[i];
-        terr += d * d;
-      }
-      std::printf("%-11s %7.4f %10zu %10zu %7.3f %10.5f %10.5f %8.2f\n", prt::ToString(scheme),
-                  keep, ct.term_count(), bytes,
-                  100.0 * static_cast<double>(bytes) / (static_cast<double>(S * M) * 4.0),
-                  std::sqrt(terr / t_energy), std::sqrt(err / ref_energy), secs);
-      std::fflush(stdout);
-      if (scheme == prt::CompressionScheme::kAdaptive4D) {
-        std::vector<double> sum(row_depth + 1, 0.0), cnt(row_depth + 1, 0.0);
-        for (const auto& st : stats) {
-          sum[row_levels[st.column]] += st.depth;
-          cnt[row_levels[st.column]] += 1;
+        const std::vector<float> back = prt::DecompressTransport(ct);
+        double terr = 0;
+        for (std::size_t i = 0; i < back.size(); ++i) {
+          const double d = static_cast<double>(back[i]) - tr.T[i];
+          terr += d * d;
         }
-        std::ostringstream os;
-        os << "keep " << keep << ":";
-        for (int l = 0; l <= row_depth; ++l) {
-          char buf[32];
-          std::snprintf(buf, sizeof buf, " %6.2f", cnt[l] > 0 ? sum[l] / cnt[l] : 0.0);
-          os << buf;
+        std::printf("%-11s %-7s %7.4f %10zu %10zu %7.3f %10.5f %10.5f %8.2f\n",
+                    prt::ToString(scheme),
+                    global ? "global" : (scheme == prt::CompressionScheme::k2D ? "row" : "column"),
+                    keep, ct.term_count(), bytes,
+                    100.0 * static_cast<double>(bytes) / (static_cast<double>(S * M) * 4.0),
+                    std::sqrt(terr / t_energy), std::sqrt(err / ref_energy), secs);
+        std::fflush(stdout);
+        if (scheme == prt::CompressionScheme::kAdaptive4D) {
+          std::vector<double> sum(row_depth + 1, 0.0), cnt(row_depth + 1, 0.0);
+          for (const auto& st : stats) {
+            sum[row_levels[st.column]] += st.depth;
+            cnt[row_levels[st.column]] += 1;
+          }
+          std::ostringstream os;
+          os << (global ? "global" : "column") << " keep " << keep << ":";
+          for (int l = 0; l <= row_depth; ++l) {
+            char buf[32];
+            std::snprintf(buf, sizeof buf, " %6.2f", cnt[l] > 0 ? sum[l] / cnt[l] : 0.0);
+            os << buf;
+          }
+          depth_lines.push_back(os.str());
         }
-        depth_lines.push_back(os.str());
       }
     }
-  }
   std::printf(
       "\naverage adaptive column depth by row-transform level (0 = scaling … %d = finest;"
       " max depth %d):\n",

@@ -6,7 +6,8 @@
 // Rows are 2D wavelet transformed per cubemap face (§4.1), so column j holds, for every spatial
 // sample, the coefficient of row-wavelet basis function j. Each column is then a function over
 // the spatial domain and is wavelet transformed to its own depth (§4.2), non-linearly
-// approximated, scaled by 2^l per column level l, normalised and dither-quantised (§4.3).
+// approximated, scaled by 2^(l·d/2) per column level l (d = segment dimension), normalised and
+// dither-quantised (§4.3).
 //
 // The spatial domain is a list of segments in the global sample order (scene.h): a mesh is a 1D
 // signal along the Hilbert order of its vertices, a ground grid or an image is a 2D w×h grid.
@@ -74,12 +75,13 @@ struct CompressedTransportHeader {
 
 // One compressed column: the kept coefficients of column `column` after its column transform to
 // `depth`, in the coefficient layout of compressed_relight.h. Value k is
-//   c = (q[k] − r(seed, column, index[k])) · scale / (2^(bits−1) − 1) / 2^level(index[k]).
+//   c = (q[k] − r(seed, column, index[k])) · scale / (2^(bits−1) − 1) / ScaleFactor(s[index[k]])
+// with s = ColumnScaleMap at `depth` (compressed_relight.h): 2^(level·dim/2).
 // An all-zero column is not stored at all.
 struct CompressedColumn {
   uint32_t column = 0;
   uint8_t depth = 0;
-  float scale = 0;              // per-column normalisation: max |2^l c| over kept terms
+  float scale = 0;              // per-column normalisation: max |ScaleFactor·c| over kept terms
   std::vector<uint32_t> index;  // strictly increasing, < sample_count
   std::vector<int32_t> q;       // non-zero, |q| ≤ 2^(bits−1) − 1
 };

@@ -1,8 +1,9 @@
 // Scaling and dithered scalar quantisation of a column (Cheslack-Postava et al. 2008 §4.3).
 // The kept coefficients (chosen by the non-linear approximation on the ORIGINAL coefficients) are
-// scaled by 2^l, l their column-transform level (wavelets.h: 0 = scaling … finest), normalised by
+// scaled by f = 2^(l·d/2), l their column-transform level (wavelets.h: 0 = scaling … finest) and d
+// their segment's dimension (1 mesh, 2 grid; the paper's 2^l for 2D images), normalised by
 // the column's largest scaled magnitude m, and quantised to `bits` bits with subtractive dither:
-//   u = 2^l c / m ∈ [−1, 1],  A = 2^(bits−1) − 1,  r = DitherOffset(seed, column, index) ∈ [−½, ½)
+//   u = f·c / m ∈ [−1, 1],  A = 2^(bits−1) − 1,  r = DitherOffset(seed, column, index) ∈ [−½, ½)
 //   q = ⌊u·A + r + ½⌋ ∈ [−A, A],   û = (q − r) / A.
 // The error û − u is uniform in (−Δ/2, Δ/2] with Δ = 1/A, independent of u (RMS Δ/√12). Terms
 // with q = 0 are dropped (they decode to 0, error |u| < Δ).

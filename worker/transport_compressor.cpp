@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "vocabulary/compressed_relight.h"
 #include "vocabulary/errors.h"
@@ -62,49 +63,66 @@ void PrepareRows(const CompressedTransportHeader& h, const CompressionOptions& o
   const std::size_t M = h.column_count();
   tbb::parallel_for(std::size_t{0}, count, [&](std::size_t r) {
     ForwardRowTransform(h.row_wavelet, n, rows + r * M, 1);
-    if (h.scheme == CompressionScheme::k2D)
+    if (h.scheme == CompressionScheme::k2D && !o.global_budget)
       KeepLargestPerRow(rows + r * M, 1, M, RowTermBudget(o, M));
   });
 }
 
 namespace {
 
-// One column through §4.2–4.3.
-CompressedColumn CompressOneColumn(const CompressedTransportHeader& h, uint32_t column,
-                                   const float* samples, ColumnStats& st) {
+// §4.2: one column, sample order in, coefficient layout out; returns its depth.
+int TransformOneColumn(const CompressedTransportHeader& h, float* c) {
   const std::size_t S = h.sample_count;
-  thread_local std::vector<float> c;
-  thread_local std::vector<uint8_t> levels;
-  c.assign(samples, samples + S);
-  st = ColumnStats{};
-  st.column = column;
   int depth = 0;
-  std::size_t budget = h.terms_per_column;
   switch (h.scheme) {
     case CompressionScheme::k2D: {
-      // Rows were already truncated (Ng et al. 2003): keep every surviving term.
-      budget = S;
-      float* p = c.data();
-      std::vector<float> tmp(p, p + S);
-      SamplesToCoefficientOrder(h.domain, tmp.data(), p);
+      thread_local std::vector<float> tmp;
+      tmp.assign(c, c + S);
+      SamplesToCoefficientOrder(h.domain, tmp.data(), c);
       break;
     }
     case CompressionScheme::k4D:
       depth = MaxColumnDepth(h.domain);
-      ForwardColumnTransform(h.domain, h.column_wavelet, depth, c.data());
+      ForwardColumnTransform(h.domain, h.column_wavelet, depth, c);
       break;
     case CompressionScheme::kAdaptive4D:
-      depth = TransformColumnAdaptive(h.domain, h.column_wavelet, budget, c.data());
+      depth = TransformColumnAdaptive(h.domain, h.column_wavelet, h.terms_per_column, c);
       break;
   }
-  for (float& v : c)
-    if (!std::isfinite(v)) throw NumericalError("CompressColumnBlock: non-finite coefficient");
-  const ApproximationEnergy e = MeasureApproximation(c.data(), S, budget);
-  const std::vector<uint32_t> kept = LargestTerms(c.data(), S, budget);
-  levels.resize(S);
-  ColumnScaleMap(h.domain, depth, levels.data());
+  for (std::size_t i = 0; i < S; ++i)
+    if (!std::isfinite(c[i])) throw NumericalError("CompressColumnBlock: non-finite coefficient");
+  return depth;
+}
+
+// Non-linear approximation and §4.3 quantisation of one transformed column: the column's
+// per-column budget, or every |c| ≥ threshold when threshold > 0 (global budget).
+CompressedColumn QuantiseOneColumn(const CompressedTransportHeader& h, uint32_t column, int depth,
+                                   const float* c, float threshold, ColumnStats& st) {
+  const std::size_t S = h.sample_count;
+  // 2D with a per-row budget: the rows were truncated already, keep every surviving term.
+  const std::size_t budget = h.scheme == CompressionScheme::k2D ? S : h.terms_per_column;
+  std::vector<uint32_t> kept;
+  ApproximationEnergy e;
+  if (threshold > 0) {
+    for (std::size_t i = 0; i < S; ++i) {
+      const double v = static_cast<double>(c[i]) * c[i];
+      e.total += v;
+      if (c[i] != 0.0f && std::fabs(c[i]) >= threshold) {
+        kept.push_back(static_cast<uint32_t>(i));
+        e.kept += v;
+      }
+    }
+  } else {
+    e = MeasureApproximation(c, S, budget);
+    kept = LargestTerms(c, S, budget);
+  }
+  thread_local std::vector<uint8_t> scale;
+  scale.resize(S);
+  ColumnScaleMap(h.domain, depth, scale.data());
   CompressedColumn out =
-      QuantiseColumn(column, depth, c.data(), kept, levels.data(), h.bits, h.dither_seed);
+      QuantiseColumn(column, depth, c, kept, scale.data(), h.bits, h.dither_seed);
+  st = ColumnStats{};
+  st.column = column;
   st.depth = static_cast<uint8_t>(depth);
   st.kept_terms = static_cast<uint32_t>(kept.size());
   st.stored_terms = static_cast<uint32_t>(out.index.size());
@@ -115,22 +133,54 @@ CompressedColumn CompressOneColumn(const CompressedTransportHeader& h, uint32_t 
 
 }  // namespace
 
-std::vector<CompressedColumn> CompressColumnBlock(const CompressedTransportHeader& h,
+void TransformColumnBlock(const CompressedTransportHeader& h, uint32_t count, float* columns,
+                          uint8_t* depths) {
+  const std::size_t S = h.sample_count;
+  tbb::parallel_for(uint32_t{0}, count, [&](uint32_t k) {
+    depths[k] =
+        static_cast<uint8_t>(TransformOneColumn(h, columns + static_cast<std::size_t>(k) * S));
+  });
+}
+
+std::vector<CompressedColumn> QuantiseColumnBlock(const CompressedTransportHeader& h,
                                                   uint32_t first_column, uint32_t count,
-                                                  const float* columns,
+                                                  const float* transformed, const uint8_t* depths,
+                                                  float threshold,
                                                   std::vector<ColumnStats>* stats) {
   const std::size_t S = h.sample_count;
   std::vector<CompressedColumn> all(count);
   std::vector<ColumnStats> st(count);
   tbb::parallel_for(uint32_t{0}, count, [&](uint32_t k) {
-    all[k] =
-        CompressOneColumn(h, first_column + k, columns + static_cast<std::size_t>(k) * S, st[k]);
+    all[k] = QuantiseOneColumn(h, first_column + k, depths[k],
+                               transformed + static_cast<std::size_t>(k) * S, threshold, st[k]);
   });
   std::vector<CompressedColumn> out;
   for (auto& c : all)
     if (!c.index.empty()) out.push_back(std::move(c));
   if (stats) stats->insert(stats->end(), st.begin(), st.end());
   return out;
+}
+
+std::vector<CompressedColumn> CompressColumnBlock(const CompressedTransportHeader& h,
+                                                  uint32_t first_column, uint32_t count,
+                                                  const float* columns,
+                                                  std::vector<ColumnStats>* stats) {
+  std::vector<float> c(columns, columns + static_cast<std::size_t>(count) * h.sample_count);
+  std::vector<uint8_t> depths(count);
+  TransformColumnBlock(h, count, c.data(), depths.data());
+  return QuantiseColumnBlock(h, first_column, count, c.data(), depths.data(), 0.0f, stats);
+}
+
+float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep) {
+  std::vector<float> mag;
+  mag.reserve(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (coefficients[i] != 0.0f) mag.push_back(std::fabs(coefficients[i]));
+  if (mag.empty()) return 0.0f;
+  if (keep == 0) return std::numeric_limits<float>::infinity();
+  if (keep >= mag.size()) return *std::min_element(mag.begin(), mag.end());
+  std::nth_element(mag.begin(), mag.begin() + (keep - 1), mag.end(), std::greater<float>());
+  return mag[keep - 1];
 }
 
 CompressedTransport CompressTransport(const float* T, int cubemap_n, const SpatialDomain& domain,
@@ -141,18 +191,21 @@ CompressedTransport CompressTransport(const float* T, int cubemap_n, const Spati
   const std::size_t S = out.header.sample_count, M = out.header.column_count();
   std::vector<float> rows(T, T + S * M);
   PrepareRows(out.header, o, rows.data(), S);
-  // Transpose in column blocks (block_spill.h does the same out of core).
-  const uint32_t block = 256;
-  std::vector<float> cols;
-  for (uint32_t first = 0; first < M; first += block) {
-    const uint32_t count = std::min<uint32_t>(block, static_cast<uint32_t>(M - first));
-    cols.resize(static_cast<std::size_t>(count) * S);
-    for (std::size_t s = 0; s < S; ++s)
-      for (uint32_t k = 0; k < count; ++k) cols[k * S + s] = rows[s * M + first + k];
-    std::vector<CompressedColumn> c =
-        CompressColumnBlock(out.header, first, count, cols.data(), stats);
-    for (auto& x : c) out.columns.push_back(std::move(x));
+  // Transpose (block_spill.h does the same out of core) and transform every column.
+  std::vector<float> cols(S * M);
+  for (std::size_t s = 0; s < S; ++s)
+    for (std::size_t j = 0; j < M; ++j) cols[j * S + s] = rows[s * M + j];
+  rows = std::vector<float>();
+  std::vector<uint8_t> depths(M);
+  TransformColumnBlock(out.header, static_cast<uint32_t>(M), cols.data(), depths.data());
+  float threshold = 0.0f;
+  if (o.global_budget) {
+    const double keep = std::round(o.keep_fraction * static_cast<double>(S * M));
+    threshold = GlobalThreshold(cols.data(), S * M, static_cast<std::size_t>(std::max(1.0, keep)));
+    if (!(threshold > 0)) threshold = std::numeric_limits<float>::min();
   }
+  out.columns = QuantiseColumnBlock(out.header, 0, static_cast<uint32_t>(M), cols.data(),
+                                    depths.data(), threshold, stats);
   return out;
 }
 

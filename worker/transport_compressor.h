@@ -1,6 +1,6 @@
 // In-memory compression of the transport matrix T into adaptive 4D wavelet form
 // (Cheslack-Postava et al. 2008 §4): rows → row transform (§4.1) → columns → adaptive column
-// transform (§4.2) → non-linear approximation → 2^l scaling, normalisation, dithered
+// transform (§4.2) → non-linear approximation → 2^(l·d/2) scaling, normalisation, dithered
 // quantisation (§4.3) → compressed columns (vocabulary/compressed_transport.h). The 2D baseline
 // (Ng et al. 2003) and full non-adaptive 4D run through the same code. The stages are exposed
 // separately so that the farm can run them on row blocks and column blocks (worker/block_spill.h)
@@ -27,6 +27,10 @@ struct CompressionOptions {
   // approximation per column (§4.4).
   double keep_fraction = 0.05;
   uint32_t terms_per_column = 0;  // when > 0, overrides keep_fraction for the column budget
+  // Not in the paper: keep the round(f·samples·columns) largest coefficients of the whole
+  // transformed matrix instead of N per column (2D: instead of per row). The per-column budget
+  // still decides each column's depth. In memory only (the farm would need a global threshold).
+  bool global_budget = false;
   uint64_t dither_seed = 1;
 };
 
@@ -62,6 +66,18 @@ std::vector<CompressedColumn> CompressColumnBlock(const CompressedTransportHeade
                                                   uint32_t first_column, uint32_t count,
                                                   const float* columns,
                                                   std::vector<ColumnStats>* stats = nullptr);
+// The same in two halves: column transforms to each column's depth (in place, §4.2), then
+// non-linear approximation and quantisation (§4.3) with the per-column budget (threshold 0) or
+// keeping every |c| ≥ threshold (global budget).
+void TransformColumnBlock(const CompressedTransportHeader& h, uint32_t count, float* columns,
+                          uint8_t* depths);
+std::vector<CompressedColumn> QuantiseColumnBlock(const CompressedTransportHeader& h,
+                                                  uint32_t first_column, uint32_t count,
+                                                  const float* transformed, const uint8_t* depths,
+                                                  float threshold,
+                                                  std::vector<ColumnStats>* stats = nullptr);
+// The keep-th largest non-zero |c| of n coefficients (the global budget's threshold).
+float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep);
 
 // The whole pipeline in memory: T is samples × 6n², row-major, in the cubemap texel basis.
 CompressedTransport CompressTransport(const float* T, int cubemap_n, const SpatialDomain& domain,
