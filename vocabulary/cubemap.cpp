@@ -29,6 +29,58 @@ CubemapLayout::CubemapLayout(int n) : n_(n) {
           FaceRectSolidAngle(-1 + h * x, -1 + h * (x + 1), -1 + h * y, -1 + h * (y + 1));
     }
   }
+  vector_irradiance_.resize(texel_count());
+  for (int f = 0; f < 6; ++f) {
+    for (int y = 0; y < n; ++y) {
+      for (int x = 0; x < n; ++x) {
+        const Vec3 c[4] = {FaceDirection(f, -1 + h * x, -1 + h * y),
+                           FaceDirection(f, -1 + h * (x + 1), -1 + h * y),
+                           FaceDirection(f, -1 + h * (x + 1), -1 + h * (y + 1)),
+                           FaceDirection(f, -1 + h * x, -1 + h * (y + 1))};
+        Vec3 phi;
+        for (int e = 0; e < 4; ++e) {
+          const Vec3& a = c[e];
+          const Vec3& b = c[(e + 1) % 4];
+          const Vec3 cr = Cross(a, b);
+          const double theta = std::atan2(Length(cr), Dot(a, b));
+          phi += Normalize(cr) * (0.5 * theta);
+        }
+        // Orient Φ towards the texel (the corner order above may wind either way per face).
+        const Vec3 mid = FaceDirection(f, -1 + h * (x + 0.5), -1 + h * (y + 0.5));
+        if (Dot(phi, mid) < 0) phi = -phi;
+        vector_irradiance_[Index(f, x, y)] = phi;
+      }
+    }
+  }
+}
+
+const std::vector<Vec3>& CubemapLayout::TexelVectorIrradiance() const { return vector_irradiance_; }
+
+std::size_t CubemapLayout::AboveHorizonMask(const Vec3& nrm, uint8_t* mask,
+                                            uint8_t* fully_above) const {
+  const int n = n_;
+  const double h = 2.0 / n;
+  std::vector<double> dots(static_cast<std::size_t>(n + 1) * (n + 1));
+  std::size_t count = 0;
+  for (int f = 0; f < 6; ++f) {
+    for (int y = 0; y <= n; ++y)
+      for (int x = 0; x <= n; ++x)
+        dots[static_cast<std::size_t>(y) * (n + 1) + x] =
+            Dot(FacePoint(f, -1 + h * x, -1 + h * y), nrm);
+    for (int y = 0; y < n; ++y) {
+      for (int x = 0; x < n; ++x) {
+        const double* r0 = &dots[static_cast<std::size_t>(y) * (n + 1) + x];
+        const double* r1 = r0 + (n + 1);
+        const bool any = r0[0] > 0 || r0[1] > 0 || r1[0] > 0 || r1[1] > 0;
+        const std::size_t j = Index(f, x, y);
+        mask[j] = any ? 1 : 0;
+        count += any;
+        if (fully_above != nullptr)
+          fully_above[j] = (r0[0] > 0 && r0[1] > 0 && r1[0] > 0 && r1[1] > 0) ? 1 : 0;
+      }
+    }
+  }
+  return count;
 }
 
 TexelCoord CubemapLayout::Coord(std::size_t index) const {

@@ -60,9 +60,21 @@ class CubemapLayout {
   // half-plane, so it suffices to test the texel's four corners.
   bool TexelAboveHorizon(std::size_t index, const Vec3& nrm) const;
 
+  // The same test for every texel at once (mask[j] = 1 above, 0 below), sharing each face's
+  // (n+1)² corner dot products; writes texel_count() bytes and returns how many are above.
+  // fully_above (optional, texel_count() bytes) marks texels whose four corners are all
+  // strictly above, i.e. entirely in the upper hemisphere.
+  std::size_t AboveHorizonMask(const Vec3& nrm, uint8_t* mask, uint8_t* fully_above = nullptr) const;
+
+  // Vector irradiance of each texel: Φ_j = ∫_texel ω dω (Arvo 1995: for a spherical polygon
+  // with vertices v_i, Φ = ½ Σ_i θ_i · normalize(v_i × v_{i+1}), θ_i the arc length of edge i).
+  // For a texel entirely above the plane with normal n, ∫_texel max(0, n·ω) dω = n·Φ_j exactly.
+  const std::vector<Vec3>& TexelVectorIrradiance() const;
+
  private:
   int n_;
   std::vector<double> solid_angle_;  // one face; every face has the same texel solid angles
+  std::vector<Vec3> vector_irradiance_;  // all faces
 };
 
 // Solid angle subtended on the unit sphere by the face rectangle [u0,u1]×[v0,v1] at distance 1.

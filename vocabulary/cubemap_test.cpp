@@ -68,6 +68,58 @@ TEST(Cubemap, HorizonTestAgreesWithDenseSampling) {
   }
 }
 
+// The mask agrees with the per-texel test; "fully above" means all of the texel is above.
+TEST(Cubemap, AboveHorizonMaskMatchesPerTexelTest) {
+  CubemapLayout c(16);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> g;
+  std::vector<uint8_t> mask(c.texel_count()), full(c.texel_count());
+  for (int trial = 0; trial < 20; ++trial) {
+    const Vec3 n = Normalize(Vec3{g(rng), g(rng), g(rng)});
+    std::size_t count = c.AboveHorizonMask(n, mask.data(), full.data());
+    std::size_t expect = 0;
+    for (std::size_t i = 0; i < c.texel_count(); ++i) {
+      ASSERT_EQ(mask[i] != 0, c.TexelAboveHorizon(i, n)) << i;
+      expect += mask[i];
+      if (full[i]) {
+        for (int a = 0; a <= 4; ++a)
+          for (int b = 0; b <= 4; ++b) ASSERT_GT(Dot(c.TexelDirection(i, a / 4.0, b / 4.0), n), 0);
+      }
+    }
+    EXPECT_EQ(count, expect);
+  }
+}
+
+// Arvo's vector irradiance: |Φ_j| ≤ Ω_j, n·Φ_j equals a dense quadrature of the cosine over a
+// fully visible texel, and Σ_j Φ_j = 0 over the whole sphere.
+TEST(Cubemap, VectorIrradianceIntegratesTheCosine) {
+  CubemapLayout c(8);
+  const auto& phi = c.TexelVectorIrradiance();
+  Vec3 total;
+  for (std::size_t i = 0; i < c.texel_count(); ++i) {
+    total += phi[i];
+    EXPECT_LE(Length(phi[i]), c.TexelSolidAngle(i) * (1 + 1e-12));
+  }
+  EXPECT_LT(Length(total), 1e-12);
+  const Vec3 n = Normalize(Vec3{0.2, 1.0, 0.1});
+  std::vector<uint8_t> mask(c.texel_count()), full(c.texel_count());
+  c.AboveHorizonMask(n, mask.data(), full.data());
+  const int q = 64;
+  const double h = 2.0 / c.n();
+  for (std::size_t i = 0; i < c.texel_count(); i += 5) {
+    if (!full[i]) continue;
+    const TexelCoord tc = c.Coord(i);
+    double sum = 0;
+    for (int a = 0; a < q; ++a)
+      for (int b = 0; b < q; ++b) {
+        const double u0 = -1 + h * (tc.x + a / double(q)), v0 = -1 + h * (tc.y + b / double(q));
+        const double om = FaceRectSolidAngle(u0, u0 + h / q, v0, v0 + h / q);
+        sum += om * Dot(n, CubemapLayout::FaceDirection(tc.face, u0 + 0.5 * h / q, v0 + 0.5 * h / q));
+      }
+    EXPECT_NEAR(Dot(n, phi[i]) / sum, 1.0, 1e-4) << i;
+  }
+}
+
 TEST(Cubemap, RejectsBadResolution) {
   EXPECT_THROW(CubemapLayout(0), std::invalid_argument);
   EXPECT_THROW(CubemapLayout(48), std::invalid_argument);
