@@ -513,6 +513,18 @@ std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapL
       (env.layout == EnvmapLayout::kCube && env.height != 6 * env.width)) {
     throw std::invalid_argument("ResampleToCubemap: image shape does not fit its layout");
   }
+  if (!std::isfinite(rotation_y)) throw std::invalid_argument("ResampleToCubemap: rotation");
+  for (int c = 0; c < 3; ++c) {
+    const std::vector<float>& ch = env.Channel(c);
+    for (std::size_t i = 0; i < ch.size(); ++i) {
+      if (!std::isfinite(ch[i])) {
+        throw NumericalError("ResampleToCubemap: non-finite radiance at pixel (x=" +
+                             std::to_string(i % static_cast<std::size_t>(env.width)) +
+                             ", y=" + std::to_string(i / static_cast<std::size_t>(env.width)) +
+                             ", channel " + std::to_string(c) + ")");
+      }
+    }
+  }
   const double leaf_max = MinTexelAngle(n) / kLeavesPerTexel;
   const double split = 2.0 / n / kSplitRatio;
   const int w = env.width, h = env.height;

@@ -111,7 +111,8 @@ std::array<double, 3> CubemapPower(const CubemapRgb& cube);
 // is shared between the texels it overlaps (first-order exact overlap, see envmap.cpp), and each
 // texel divides its accumulated radiance × solid angle by its accumulated solid angle. A constant
 // map stays constant; a one-pixel sun keeps its power. n: power of two in [1, 256]
-// (std::invalid_argument otherwise). Parallel (TBB) and deterministic.
+// (std::invalid_argument otherwise). A NaN/Inf pixel throws prt::NumericalError naming it.
+// Parallel (TBB) and deterministic (independent of the thread count).
 CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation_y = 0.0);
 
 // Diagnostic: the source solid angle credited to each texel by ResampleToCubemap's integration

@@ -166,6 +166,21 @@ TEST(EnvmapResample, ConstantMapStaysConstant) {
   }
 }
 
+TEST(EnvmapResample, RejectsNonFiniteInput) {
+  EnvironmentImage img = Constant(EnvmapLayout::kLatLong, 16, 8, 1);
+  img.b[img.Index(3, 2)] = std::numeric_limits<float>::infinity();
+  try {
+    ResampleToCubemap(img, 4);
+    FAIL();
+  } catch (const NumericalError& e) {
+    EXPECT_NE(std::string(e.what()).find("x=3, y=2, channel 2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(ResampleToCubemap(Constant(EnvmapLayout::kLatLong, 16, 8, 1), 4, std::nan("")),
+               std::invalid_argument);
+  EXPECT_THROW(ResampleToCubemap(Constant(EnvmapLayout::kLatLong, 16, 8, 1), 3),
+               std::invalid_argument);
+}
+
 // A one-pixel sun keeps its power Σ L_j Ω_j (exact texel solid angles) within 0.5%, wherever it
 // is: at the equator, near the poles, on cube face edges and near a cube corner.
 TEST(EnvmapResample, OnePixelSunKeepsItsPower) {
@@ -543,6 +558,42 @@ TEST(EnvmapHdr, CorruptFilesThrowNamingTheFile) {
   expect_rejected("badrun.hdr", bad_run);
   std::string bad_width = "#?RADIANCE\n\n-Y 16 +X 32\n" + std::string("\x02\x02\x00\x21", 4);
   expect_rejected("badwidth.hdr", bad_width);
+  fs::remove_all(dir);
+}
+
+// The reader is safe on untrusted input: random byte corruptions and truncations of a valid
+// file either read (finite, non-negative pixels) or throw InputError; never crash or hang.
+TEST(EnvmapHdr, RandomCorruptionsReadOrThrowInputError) {
+  const fs::path dir = TempDir();
+  SkySunParams sky;
+  const std::string good = (dir / "good.hdr").string();
+  WriteRadianceHdr(MakeSkyWithSun(EnvmapLayout::kLatLong, 64, 32, sky), good, true);
+  std::ifstream in(good, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::mt19937 rng(11);
+  int read = 0, rejected = 0;
+  const std::string path = (dir / "mutant.hdr").string();
+  for (int trial = 0; trial < 300; ++trial) {
+    std::string m = bytes;
+    const int edits = 1 + static_cast<int>(rng() % 8);
+    for (int e = 0; e < edits; ++e) {
+      m[rng() % m.size()] = static_cast<char>(rng() & 255);
+    }
+    if (trial % 3 == 0) m.resize(rng() % m.size());
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << m;
+    try {
+      const EnvironmentImage img = ReadEnvironment(path);
+      for (int c = 0; c < 3; ++c) {
+        for (float v : img.Channel(c)) ASSERT_TRUE(std::isfinite(v) && v >= 0);
+      }
+      ++read;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+      ++rejected;
+    }
+  }
+  EXPECT_GT(rejected, 0);
+  std::printf("corrupted .hdr: %d read, %d rejected\n", read, rejected);
   fs::remove_all(dir);
 }
 
