@@ -24,6 +24,8 @@ inline constexpr uint32_t kMaxTransportParams = 1u << 30;
 inline constexpr uint32_t kTransportHeaderSize = 40;
 inline constexpr uint32_t kBlockEntrySize = 48;
 inline constexpr uint32_t kMaterialHeaderSize = 24;
+// A MESH may declare at most this many raw bytes per stored byte (plus 4 KiB).
+inline constexpr uint64_t kMaxMeshExpansion = 256;
 
 // Header field offsets.
 inline constexpr std::size_t kHdrMajor = 8, kHdrMinor = 10, kHdrHeaderSize = 12,

@@ -303,6 +303,12 @@ UnpackedMesh PackReader::Impl::Mesh(std::size_t i) const {
          std::to_string(counts.faces) + " triangles, which disagrees with its raw size " +
          std::to_string(s.raw_size));
   }
+  // A decompression-bomb guard: Draco allocates per its declared counts before it finds the
+  // data missing. Real meshes decode to ≈ 2.4× their stored size (docs/prtpack-format.md).
+  if (s.raw_size > kMaxMeshExpansion * s.stored_size + 4096) {
+    Fail(where + " declares " + std::to_string(s.raw_size) + " decoded bytes from " +
+         std::to_string(s.stored_size) + " stored: more than Draco can compress");
+  }
   MeshArrays arrays = DecodeMeshDraco(p, s.stored_size, counts, name + ": " + where);
   UnpackedMesh m;
   m.name = material.name;

@@ -214,6 +214,17 @@ TEST(PrtpackRoundTrip, DecodedSizesAreBoundedBeforeAllocation) {
   ResealChecksums(mesh);
   const std::string e3 = ErrorOf(mesh);
   EXPECT_NE(e3.find("disagrees with its raw size"), std::string::npos) << e3;
+  // A MESH whose Draco header claims a million vertices, consistently with raw_size, from 156
+  // stored bytes: refused before Draco sees it.
+  std::vector<uint8_t> bomb = bytes;
+  uint8_t* mesh_entry = bomb.data() + kHeaderSize + kEntrySize;
+  uint8_t* draco = bomb.data() + LoadU64(mesh_entry + kSecOffset);
+  const uint8_t counts[4] = {0x00, 0xC0, 0x84, 0x3D};  // varint 0 faces, 1 000 000 points
+  std::copy(counts, counts + 4, draco + 11);
+  StoreU64(mesh_entry + kSecRaw, 24 * 1000000ull);
+  ResealChecksums(bomb);
+  const std::string e4 = ErrorOf(bomb);
+  EXPECT_NE(e4.find("more than Draco can compress"), std::string::npos) << e4;
 }
 
 TEST(PrtpackRoundTrip, WriterRejectsBadInputs) {
