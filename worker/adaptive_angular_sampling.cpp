@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace prt {
 
@@ -14,21 +15,44 @@ AngularStats& AngularStats::operator+=(const AngularStats& o) {
   return *this;
 }
 
+void UnoccludedValues(const TransportSampler& sampler, const SpatialSample& sample,
+                      uint64_t sample_index, std::span<const uint32_t> texels,
+                      const uint8_t* fully_above, float* values) {
+  const std::vector<Vec3>& phi = sampler.layout().TexelVectorIrradiance();
+  const Vec3 n = Normalize(sample.normal);
+  std::vector<uint32_t> straddling;
+  std::vector<std::size_t> where;
+  for (std::size_t i = 0; i < texels.size(); ++i) {
+    const uint32_t j = texels[i];
+    if (fully_above[j]) {
+      values[i] = static_cast<float>(std::max(0.0, Dot(n, phi[j])) * std::numbers::inv_pi);
+    } else {
+      straddling.push_back(j);
+      where.push_back(i);
+    }
+  }
+  std::vector<float> u(straddling.size());
+  sampler.ComputeUnoccludedTexels(sample, sample_index, straddling, u.data());
+  for (std::size_t k = 0; k < where.size(); ++k) values[where[k]] = u[k];
+}
+
 void VisibilityOfRow(const TransportSampler& sampler, const SpatialSample& sample,
                      uint64_t sample_index, const float* transport, float* visibility) {
   const CubemapLayout& layout = sampler.layout();
   const std::size_t count = layout.texel_count();
-  std::vector<uint32_t> above;
-  above.reserve(count);
+  std::vector<uint8_t> above(count);
+  layout.AboveHorizonMask(sample.normal, above.data());
+  std::vector<uint32_t> list;
+  list.reserve(count);
   for (std::size_t j = 0; j < count; ++j) {
     visibility[j] = 0.0f;
-    if (layout.TexelAboveHorizon(j, sample.normal)) above.push_back(static_cast<uint32_t>(j));
+    if (above[j]) list.push_back(static_cast<uint32_t>(j));
   }
-  std::vector<float> unocc(above.size());
-  sampler.ComputeUnoccludedTexels(sample, sample_index, above, unocc.data());
-  for (std::size_t i = 0; i < above.size(); ++i) {
+  std::vector<float> unocc(list.size());
+  sampler.ComputeUnoccludedTexels(sample, sample_index, list, unocc.data());
+  for (std::size_t i = 0; i < list.size(); ++i) {
     const float u = unocc[i];
-    visibility[above[i]] = u > 0 ? std::clamp(transport[above[i]] / u, 0.0f, 1.0f) : 0.0f;
+    visibility[list[i]] = u > 0 ? std::clamp(transport[list[i]] / u, 0.0f, 1.0f) : 0.0f;
   }
 }
 
@@ -43,75 +67,71 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   out.feature.assign(count, 0);
   AngularStats stats;
 
-  // Unoccluded values of every texel above the horizon (no rays: visibility ≡ 1).
-  std::vector<uint8_t> above(count, 0);
-  std::vector<uint32_t> above_list;
-  above_list.reserve(count);
-  for (std::size_t j = 0; j < count; ++j) {
-    if (layout.TexelAboveHorizon(j, sample.normal)) {
-      above[j] = 1;
-      above_list.push_back(static_cast<uint32_t>(j));
-    }
-  }
-  stats.texels_above_horizon = above_list.size();
-  std::vector<float> unocc_list(above_list.size());
-  sampler.ComputeUnoccludedTexels(sample, sample_index, above_list, unocc_list.data());
-  std::vector<float> unocc(count, 0.0f);
-  for (std::size_t i = 0; i < above_list.size(); ++i) unocc[above_list[i]] = unocc_list[i];
+  std::vector<uint8_t> above(count), fully(count);
+  stats.texels_above_horizon = layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
 
-  // Pass 1: the regular grid at half resolution per face axis.
+  // Pass 1: the regular grid at half resolution per face axis. The same rays give the
+  // unoccluded estimate U_j, so v_j = T_j / U_j is exactly 1 where nothing blocks the texel.
   std::vector<uint8_t> sampled(count, 0);
   std::vector<uint32_t> grid;
-  grid.reserve(above_list.size() / 4 + 8);
+  grid.reserve(count / 4 + 8);
   const int step = n >= 2 ? 2 : 1;
-  for (uint32_t j : above_list) {
-    const TexelCoord c = layout.Coord(j);
-    if (c.x % step == 0 && c.y % step == 0) grid.push_back(j);
-  }
-  std::vector<float> values(grid.size());
-  stats.trace += sampler.ComputeTexels(sample, sample_index, grid, values.data());
+  for (int face = 0; face < 6; ++face)
+    for (int y = 0; y < n; y += step)
+      for (int x = 0; x < n; x += step) {
+        const std::size_t j = layout.Index(face, x, y);
+        if (above[j]) grid.push_back(static_cast<uint32_t>(j));
+      }
+  std::vector<float> values(grid.size()), unocc(grid.size());
+  stats.trace += sampler.ComputeTexels(sample, sample_index, grid, values.data(), unocc.data());
   stats.grid_texels = grid.size();
-  auto record = [&](uint32_t j, float t) {
+  auto record = [&](uint32_t j, float t, float u) {
     out.transport[j] = t;
-    const float u = unocc[j];
     out.visibility[j] = u > 0 ? std::clamp(t / u, 0.0f, 1.0f) : 0.0f;
     sampled[j] = 1;
   };
-  for (std::size_t i = 0; i < grid.size(); ++i) record(grid[i], values[i]);
+  for (std::size_t i = 0; i < grid.size(); ++i) record(grid[i], values[i], unocc[i]);
 
   // Pass 2: the window test on every other texel above the horizon.
   const int half = options.window / 2;
-  std::vector<uint32_t> features;
-  std::vector<std::pair<uint32_t, float>> borrowed;
-  for (uint32_t j : above_list) {
-    if (sampled[j]) continue;
-    const TexelCoord c = layout.Coord(j);
-    float lo = 2.0f, hi = -1.0f;
-    int seen = 0;
-    for (int y = std::max(0, c.y - half); y <= std::min(n - 1, c.y + half); ++y) {
-      for (int x = std::max(0, c.x - half); x <= std::min(n - 1, c.x + half); ++x) {
-        const std::size_t k = layout.Index(c.face, x, y);
-        if (!sampled[k]) continue;
-        lo = std::min(lo, out.visibility[k]);
-        hi = std::max(hi, out.visibility[k]);
-        ++seen;
+  std::vector<uint32_t> features, borrowed;
+  std::vector<float> borrowed_v;
+  for (int face = 0; face < 6; ++face) {
+    for (int cy = 0; cy < n; ++cy) {
+      for (int cx = 0; cx < n; ++cx) {
+        const std::size_t j = layout.Index(face, cx, cy);
+        if (!above[j] || sampled[j]) continue;
+        float lo = 2.0f, hi = -1.0f;
+        for (int y = std::max(0, cy - half); y <= std::min(n - 1, cy + half); ++y) {
+          const std::size_t rowbase = layout.Index(face, 0, y);
+          for (int x = std::max(0, cx - half); x <= std::min(n - 1, cx + half); ++x) {
+            if (!sampled[rowbase + x]) continue;
+            lo = std::min(lo, out.visibility[rowbase + x]);
+            hi = std::max(hi, out.visibility[rowbase + x]);
+          }
+        }
+        if (hi < lo || hi - lo > options.tolerance) {
+          features.push_back(static_cast<uint32_t>(j));
+        } else {
+          borrowed.push_back(static_cast<uint32_t>(j));
+          borrowed_v.push_back(0.5f * (lo + hi));
+        }
       }
-    }
-    if (seen == 0 || hi - lo > options.tolerance) {
-      features.push_back(j);
-    } else {
-      borrowed.emplace_back(j, 0.5f * (lo + hi));
     }
   }
   values.resize(features.size());
-  stats.trace += sampler.ComputeTexels(sample, sample_index, features, values.data());
+  unocc.resize(features.size());
+  stats.trace += sampler.ComputeTexels(sample, sample_index, features, values.data(), unocc.data());
   for (std::size_t i = 0; i < features.size(); ++i) {
-    record(features[i], values[i]);
+    record(features[i], values[i], unocc[i]);
     out.feature[features[i]] = 1;
   }
-  for (const auto& [j, v] : borrowed) {
-    out.visibility[j] = v;
-    out.transport[j] = v * unocc[j];
+  // Borrowed texels: the window's visibility under this texel's own cosine.
+  std::vector<float> ub(borrowed.size());
+  UnoccludedValues(sampler, sample, sample_index, borrowed, fully.data(), ub.data());
+  for (std::size_t i = 0; i < borrowed.size(); ++i) {
+    out.visibility[borrowed[i]] = borrowed_v[i];
+    out.transport[borrowed[i]] = borrowed_v[i] * ub[i];
   }
   stats.feature_texels = features.size();
   stats.borrowed_texels = borrowed.size();

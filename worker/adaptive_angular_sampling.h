@@ -5,14 +5,15 @@
 //
 // The test is made on visibility, not on T: a texel's fractional visibility is
 // v_j = T_j / U_j, with U_j the same estimator with visibility ≡ 1 (TransportSampler::
-// ComputeUnoccludedTexels, identical directions), so v_j ∈ [0, 1] is exactly 1 for an unoccluded
-// texel. The cosine varies smoothly across a window and would make every variance non-zero; the
-// paper's argument ("visibility is a binary function, so we can determine the value of a pixel by
-// borrowing if all its neighbours are the same") is about V. A borrowed texel gets
+// ComputeTexels' unoccluded output: identical rays), so v_j ∈ [0, 1] is exactly 1 for an
+// unoccluded texel. The cosine varies smoothly across a window and would make every variance
+// non-zero; the paper's argument ("visibility is a binary function, so we can determine the value
+// of a pixel by borrowing if all its neighbours are the same") is about V. A borrowed texel gets
 // T_j = v · U_j with its own cosine.
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "worker/transport_sampler.h"
@@ -44,6 +45,13 @@ struct AngularOptions {
 AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const SpatialSample& sample,
                                     uint64_t sample_index, const AngularOptions& options,
                                     DenseRow& out);
+
+// Unoccluded values U_j for texels not traced: exact (n·Φ_j/π, CubemapLayout::
+// TexelVectorIrradiance) where the texel is entirely above the horizon (fully_above[j] = 1),
+// else the sampler's estimate with visibility ≡ 1.
+void UnoccludedValues(const TransportSampler& sampler, const SpatialSample& sample,
+                      uint64_t sample_index, std::span<const uint32_t> texels,
+                      const uint8_t* fully_above, float* values);
 
 // Visibility fractions of a full row: v_j = T_j / U_j above the horizon (U_j > 0), else 0.
 void VisibilityOfRow(const TransportSampler& sampler, const SpatialSample& sample,

@@ -20,44 +20,73 @@ SparseStats& SparseStats::operator+=(const SparseStats& o) {
   return *this;
 }
 
-std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const Vec3& normal,
-                                              std::span<const DenseNeighbor> neighbors,
-                                              InterpolationMode /*mode*/, int count,
-                                              uint64_t seed) {
+namespace {
+// Per-texel statistics over the neighbours, neighbour-outer so that the inner loops run
+// contiguously over texels.
+void NeighbourStatistics(std::span<const DenseNeighbor> neighbors, std::size_t total,
+                         std::vector<float>& var, std::vector<uint16_t>& feat) {
+  std::vector<float> s(total, 0.0f), s2(total, 0.0f);
+  feat.assign(total, 0);
+  for (const DenseNeighbor& nb : neighbors) {
+    const float* t = nb.transport;
+    const uint8_t* f = nb.feature;
+    for (std::size_t j = 0; j < total; ++j) {
+      s[j] += t[j];
+      s2[j] += t[j] * t[j];
+      feat[j] = static_cast<uint16_t>(feat[j] + f[j]);
+    }
+  }
+  var.resize(total);
+  const float inv = neighbors.empty() ? 0.0f : 1.0f / static_cast<float>(neighbors.size());
+  for (std::size_t j = 0; j < total; ++j) {
+    const float m = s[j] * inv;
+    var[j] = std::max(0.0f, s2[j] * inv - m * m);
+  }
+}
+
+std::vector<uint32_t> ChooseFromStatistics(const uint8_t* above, std::size_t total,
+                                           const std::vector<float>& var,
+                                           const std::vector<uint16_t>& feat, int count,
+                                           uint64_t seed) {
   struct Cand {
     double key;
     uint32_t texel;
   };
   std::vector<Cand> cands;
-  const std::size_t total = layout.texel_count();
   cands.reserve(total / 2 + 8);
-  const double k = static_cast<double>(neighbors.size());
   for (std::size_t j = 0; j < total; ++j) {
-    if (!layout.TexelAboveHorizon(j, normal)) continue;
-    double s = 0, s2 = 0;
-    int feat = 0;
-    for (const DenseNeighbor& nb : neighbors) {
-      const double v = nb.transport[j];
-      s += v;
-      s2 += v * v;
-      feat += nb.feature[j] != 0;
-    }
-    const double var = k > 0 ? std::max(0.0, s2 / k - (s / k) * (s / k)) : 0.0;
-    // Primary: the paper's product; then variance alone; then a deterministic spread so that
-    // a region where all neighbours agree still gets constraints.
-    const double key = var * feat + 1e-3 * var + 1e-9 * HashUniform(seed, j);
-    cands.push_back({key, static_cast<uint32_t>(j)});
+    if (!above[j]) continue;
+    // Primary: the paper's product of variance and feature count; then variance alone; then a
+    // deterministic spread so that a region where all neighbours agree still gets constraints.
+    const double v = var[j];
+    cands.push_back(
+        {v * feat[j] + 1e-3 * v + 1e-12 * HashUniform(seed, j), static_cast<uint32_t>(j)});
   }
   const std::size_t take =
       std::min<std::size_t>(static_cast<std::size_t>(std::max(count, 0)), cands.size());
-  std::partial_sort(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(take), cands.end(),
-                    [](const Cand& a, const Cand& b) {
-                      return a.key != b.key ? a.key > b.key : a.texel < b.texel;
-                    });
+  auto better = [](const Cand& a, const Cand& b) {
+    return a.key != b.key ? a.key > b.key : a.texel < b.texel;
+  };
+  std::nth_element(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(take), cands.end(),
+                   better);
   std::vector<uint32_t> out(take);
   for (std::size_t i = 0; i < take; ++i) out[i] = cands[i].texel;
   std::sort(out.begin(), out.end());
   return out;
+}
+}  // namespace
+
+std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const Vec3& normal,
+                                              std::span<const DenseNeighbor> neighbors,
+                                              InterpolationMode /*mode*/, int count,
+                                              uint64_t seed) {
+  const std::size_t total = layout.texel_count();
+  std::vector<uint8_t> above(total);
+  layout.AboveHorizonMask(normal, above.data());
+  std::vector<float> var;
+  std::vector<uint16_t> feat;
+  NeighbourStatistics(neighbors, total, var, feat);
+  return ChooseFromStatistics(above.data(), total, var, feat, count, seed);
 }
 
 SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
@@ -70,23 +99,32 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   }
   const CubemapLayout& layout = sampler.layout();
   const std::size_t total = layout.texel_count();
-  const std::vector<uint32_t> feats = ChooseFeatureDirections(
-      layout, sample.normal, neighbors, options.mode, options.features, sample_index);
+  std::vector<uint8_t> above(total), fully(total);
+  const std::size_t above_count =
+      layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
+  std::vector<float> var;
+  std::vector<uint16_t> featcount;
+  NeighbourStatistics(neighbors, total, var, featcount);
+  const std::vector<uint32_t> feats =
+      ChooseFromStatistics(above.data(), total, var, featcount, options.features, sample_index);
   const int m = static_cast<int>(feats.size());
   const int k = static_cast<int>(neighbors.size());
-  std::vector<float> traced(feats.size());
-  stats.trace += sampler.ComputeTexels(sample, sample_index, feats, traced.data());
+  std::vector<float> traced(feats.size()), traced_unocc(feats.size());
+  stats.trace +=
+      sampler.ComputeTexels(sample, sample_index, feats, traced.data(), traced_unocc.data());
   stats.features_traced += feats.size();
 
-  // Unoccluded values of every texel above this vertex's horizon (no rays).
-  std::vector<uint32_t> above;
-  above.reserve(total / 2 + 8);
+  // Unoccluded values U_x(j) of every texel above this vertex's horizon: exact where the texel
+  // is entirely above, the sampler's estimate where it straddles the horizon.
+  std::vector<uint32_t> above_list;
+  above_list.reserve(above_count);
   for (std::size_t j = 0; j < total; ++j)
-    if (layout.TexelAboveHorizon(j, sample.normal)) above.push_back(static_cast<uint32_t>(j));
-  std::vector<float> unocc_above(above.size());
-  sampler.ComputeUnoccludedTexels(sample, sample_index, above, unocc_above.data());
+    if (above[j]) above_list.push_back(static_cast<uint32_t>(j));
+  std::vector<float> unocc_list(above_list.size());
+  UnoccludedValues(sampler, sample, sample_index, above_list, fully.data(), unocc_list.data());
   std::vector<float> unocc(total, 0.0f);
-  for (std::size_t i = 0; i < above.size(); ++i) unocc[above[i]] = unocc_above[i];
+  for (std::size_t i = 0; i < above_list.size(); ++i) unocc[above_list[i]] = unocc_list[i];
+  for (std::size_t i = 0; i < feats.size(); ++i) unocc[feats[i]] = traced_unocc[i];
 
   // Equations in transport units for both modes, so that each constraint weighs what it adds to
   // the relit radiance: visibility mode fits Σ α_k v_k(j) · U_x(j) to T_x(j) (the neighbours'
@@ -118,22 +156,29 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
     alpha = r.alpha;
   }
 
-  // Eq. 4 on this vertex's own hemisphere, then the traced values exactly.
-  std::fill(row, row + total, 0.0f);
-  for (uint32_t j : above) {
-    double s = 0;
-    for (int c = 0; c < k; ++c) {
-      const DenseNeighbor& nb = neighbors[static_cast<std::size_t>(c)];
-      s += alpha[static_cast<std::size_t>(c)] * (vis ? nb.visibility[j] : nb.transport[j]);
+  // Eq. 4 on this vertex's own hemisphere (neighbour-outer, contiguous over texels), then the
+  // traced values exactly.
+  std::vector<float> acc(total, 0.0f);
+  for (int c = 0; c < k; ++c) {
+    const float a = static_cast<float>(alpha[static_cast<std::size_t>(c)]);
+    if (a == 0.0f) continue;
+    const DenseNeighbor& nb = neighbors[static_cast<std::size_t>(c)];
+    const float* src = vis ? nb.visibility : nb.transport;
+    for (std::size_t j = 0; j < total; ++j) acc[j] += a * src[j];
+  }
+  for (std::size_t j = 0; j < total; ++j) {
+    if (!above[j]) {
+      row[j] = 0.0f;
+      continue;
     }
-    const double u = unocc[j];
-    const double t = vis ? std::clamp(s, 0.0, 1.0) * u : std::clamp(s, 0.0, u);
-    row[j] = std::isfinite(t) ? static_cast<float>(t) : 0.0f;
+    const float u = unocc[j];
+    const float t = vis ? std::clamp(acc[j], 0.0f, 1.0f) * u : std::clamp(acc[j], 0.0f, u);
+    row[j] = std::isfinite(t) ? t : 0.0f;
   }
   for (int i = 0; i < m; ++i)
     row[feats[static_cast<std::size_t>(i)]] = traced[static_cast<std::size_t>(i)];
   ++stats.reconstructed;
-  stats.texels_above_horizon += above.size();
+  stats.texels_above_horizon += above_count;
   return SparseOutcome::kReconstructed;
 }
 

@@ -130,8 +130,8 @@ struct TransportSampler::Impl {
   // exact stratum solid angles as weights (docs/transport-sampling.md, "Estimator").
   // Not inlined: one compiled copy serves every caller (see Tracer).
   [[gnu::noinline]] float EvaluateTexel(const SampleFrame& f, int face, int x, int y,
-                                        std::size_t texel, SampleStats& stats,
-                                        const Tracer& trace) const {
+                                        std::size_t texel, SampleStats& stats, const Tracer& trace,
+                                        float* unoccluded = nullptr) const {
     const int n = layout.n();
     const int k = options.rays_per_texel;
     const double h = 2.0 / n;
@@ -141,6 +141,7 @@ struct TransportSampler::Impl {
     const uint64_t base = static_cast<uint64_t>(texel) * static_cast<uint64_t>(k);
     OcclusionRay ray = f.ray;
     double sum = 0;
+    double unocc = 0;  // the same sum with V ≡ 1, in the same order (= kUnoccluded's sum)
     // Directions are generated a chunk of strata at a time, then traced: the chunk's
     // computations are independent, so they overlap instead of adding their latencies to every
     // Embree call. Each ray's arithmetic and the order of the sum do not depend on the chunking.
@@ -178,10 +179,12 @@ struct TransportSampler::Impl {
         ray.direction[1] = dir[i][1];
         ray.direction[2] = dir[i][2];
         ++stats.rays_traced;
+        unocc += omega[s0 + i] * c;
         if (!trace.Blocked(ray)) sum += omega[s0 + i] * c;
       }
     }
     ++stats.texels_traced;
+    if (unoccluded != nullptr) *unoccluded = static_cast<float>(unocc * std::numbers::inv_pi);
     return static_cast<float>(sum * std::numbers::inv_pi);
   }
 
@@ -233,7 +236,8 @@ struct TransportSampler::Impl {
   }
 
   SampleStats Texels(const SpatialSample& sample, uint64_t sample_index,
-                     std::span<const uint32_t> texels, float* values, const Tracer& trace) const {
+                     std::span<const uint32_t> texels, float* values, const Tracer& trace,
+                     float* unoccluded = nullptr) const {
     const std::size_t count = layout.texel_count();
     for (uint32_t j : texels) {
       if (j >= count) {
@@ -249,10 +253,12 @@ struct TransportSampler::Impl {
       if (!layout.TexelAboveHorizon(j, f.normal)) {
         ++stats.texels_below_horizon;
         values[i] = 0.0f;
+        if (unoccluded != nullptr) unoccluded[i] = 0.0f;
         continue;
       }
       const TexelCoord c = layout.Coord(j);
-      values[i] = EvaluateTexel(f, c.face, c.x, c.y, j, stats, trace);
+      values[i] = EvaluateTexel(f, c.face, c.x, c.y, j, stats, trace,
+                                unoccluded != nullptr ? unoccluded + i : nullptr);
     }
     return stats;
   }
@@ -292,9 +298,10 @@ SampleStats TransportSampler::ComputeRow(const SpatialSample& sample, uint64_t s
 }
 
 SampleStats TransportSampler::ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
-                                            std::span<const uint32_t> texels, float* values) const {
+                                            std::span<const uint32_t> texels, float* values,
+                                            float* unoccluded) const {
   return impl_->Texels(sample, sample_index, texels, values,
-                       Tracer{Tracer::kEmbree, &impl_->scene, nullptr});
+                       Tracer{Tracer::kEmbree, &impl_->scene, nullptr}, unoccluded);
 }
 
 void TransportSampler::ComputeUnoccludedTexels(const SpatialSample& sample, uint64_t sample_index,

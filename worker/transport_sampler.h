@@ -91,8 +91,11 @@ class TransportSampler {
   // Only the listed texels (for adaptive angular sampling and sparse vertices); values[i] is
   // T for texels[i], using the same jitter as ComputeRow (so values agree bit for bit). Throws
   // std::out_of_range on a texel index ≥ layout().texel_count().
+  // unoccluded (optional): receives, for each texel, the same estimate with visibility ≡ 1
+  // from the same rays (bit-identical to ComputeUnoccludedTexels), at no extra tracing cost.
   SampleStats ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
-                            std::span<const uint32_t> texels, float* values) const;
+                            std::span<const uint32_t> texels, float* values,
+                            float* unoccluded = nullptr) const;
 
   // U_j for the listed texels: the estimator of ComputeTexels with visibility ≡ 1 (the same
   // jittered directions and weights, no rays traced), so T_j / U_j ∈ [0, 1] is the visible

@@ -427,6 +427,11 @@ TEST(TransportSampler, UnoccludedTexelsBoundTheRowAndMatchItWhenFree) {
     }
     EXPECT_GT(blocked, 0u);
     EXPECT_NEAR(Sum(u), 1.0, 2e-3);
+    // ComputeTexels' optional unoccluded output comes from the same rays, bit for bit.
+    std::vector<float> t(m), u2(m);
+    sampler.ComputeTexels(s, i, all, t.data(), u2.data());
+    EXPECT_EQ(0, std::memcmp(u2.data(), u.data(), m * sizeof(float)));
+    EXPECT_EQ(0, std::memcmp(t.data(), row.data(), m * sizeof(float)));
   }
 }
 
