@@ -2,6 +2,7 @@
 #include "farm/farm_coordinator.h"
 
 #include <mpi.h>
+#include <sched.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
@@ -847,6 +848,17 @@ void ConfigureLogging(const FarmContext& ctx) {
   spdlog::set_level(chatty ? spdlog::level::info : spdlog::level::warn);
 }
 
+// CPUs this process may run on (mpirun binds each rank to one core by default when there are
+// at most 2 ranks, and to a socket otherwise).
+int AllowedCpus() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) != 0) return 0;
+  return CPU_COUNT(&set);
+}
+
+// Threads per rank for --threads 0: the CPUs the rank is bound to when mpirun bound it to part
+// of the node, else the node's cores divided by the ranks on the node.
 int AutoThreads(MPI_Comm comm) {
   MPI_Comm node;
   int local_ranks = 1;
@@ -854,8 +866,10 @@ int AutoThreads(MPI_Comm comm) {
     MPI_Comm_size(node, &local_ranks);
     MPI_Comm_free(&node);
   }
-  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
-  return std::max(1, static_cast<int>(cores) / std::max(1, local_ranks));
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int allowed = AllowedCpus();
+  if (allowed > 0 && allowed < cores) return allowed;
+  return std::max(1, cores / std::max(1, local_ranks));
 }
 
 }  // namespace
@@ -872,6 +886,13 @@ int RunFarm(const FarmOptions& options) {
   ::gethostname(host, sizeof host - 1);
   ctx.host = host;
   ctx.threads = options.threads > 0 ? options.threads : AutoThreads(ctx.comm);
+  const int allowed = AllowedCpus();
+  if (allowed > 0 && ctx.threads > allowed) {
+    spdlog::warn(
+        "rank {} uses {} threads but may only run on {} CPU(s): start mpirun with "
+        "--bind-to none (or srun --cpu-bind=none), see cluster-configs/README.md",
+        ctx.rank, ctx.threads, allowed);
+  }
   tbb::global_control threads_limit(tbb::global_control::max_allowed_parallelism,
                                     static_cast<std::size_t>(ctx.threads));
 

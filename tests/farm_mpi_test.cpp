@@ -293,12 +293,11 @@ TEST(FarmMpiTest, BadInputAndUnwritableOutputGiveExitCodes2And3) {
   EXPECT_FALSE(fs::exists(dir + "/r1"));  // nothing is created for a scene that does not load
 }
 
-TEST(FarmMpiTest, UsageErrorsHelpVersionAndForeignCheckpoints) {
+// The rest of the command line is tested without MPI in farm/farm_options_test.cpp.
+TEST(FarmMpiTest, UsageErrorsHelpAndForeignCheckpoints) {
   const std::string dir = WorkDir("usage");
   ExpectExitCodes({
       {2, "--no-such-option", 1, "--no-such-option"},
-      {1, kScene + " --resume --force", 1, "contradict"},
-      {1, "--version", 0, "prt-farm 0."},
       {1, "--help", 0, "Exit codes: 0 ok, 1 usage error"},
   });
   // Checkpoints of another run are refused, not mixed.
