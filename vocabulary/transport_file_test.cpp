@@ -75,8 +75,8 @@ TEST_F(TransportFileTest, RoundTripRowsWrittenOutOfOrder) {
   {
     auto writer = TransportFileWriter::Create(path, info);
     // Jobs arrive in any order and straddle block boundaries.
-    for (auto [first, count] : std::vector<std::pair<uint64_t, uint64_t>>{
-             {15, 8}, {0, 5}, {5, 10}}) {
+    for (auto [first, count] :
+         std::vector<std::pair<uint64_t, uint64_t>>{{15, 8}, {0, 5}, {5, 10}}) {
       std::vector<float> rows(count * info.cols());
       for (uint64_t r = 0; r < count; ++r) {
         for (uint64_t c = 0; c < info.cols(); ++c) rows[r * info.cols() + c] = Value(first + r, c);
