@@ -201,15 +201,19 @@ class TexelAccumulator {
   // in face coordinates is not added; AddLeaf returns false and the caller splits it in four.
   bool AddLeaf(const Vec3& p, const Vec3& ta, const Vec3& tb, double omega, const float* rgb,
                double split_extent) {
-    int face;
-    double u, v;
-    CubemapLayout::DirectionToFace(p, face, u, v);
+    // Face as CubemapLayout::DirectionToFace (largest |component|, ties to x then y), with one
+    // division.
+    const double ax = std::abs(p.x), ay = std::abs(p.y), az = std::abs(p.z);
+    const int face = (ax >= ay && ax >= az) ? (p.x > 0 ? 0 : 1)
+                     : (ay >= az)           ? (p.y > 0 ? 2 : 3)
+                                            : (p.z > 0 ? 4 : 5);
     const int m = kMajor[face], iu = kAxisU[face], iv = kAxisV[face];
-    const double pm = std::abs(p[m]);
-    const double sm = p[m] >= 0 ? 1.0 : -1.0;
+    const double inv = 1.0 / std::abs(p[m]);
+    const double sm = (face & 1) ? -1.0 : 1.0;
+    const double u = p[iu] * inv, v = p[iv] * inv;
     // d(p_i / |p_m|) = (t_i − u·sign·t_m) / |p_m|
-    const double ua = (ta[iu] - u * sm * ta[m]) / pm, ub = (tb[iu] - u * sm * tb[m]) / pm;
-    const double va = (ta[iv] - v * sm * ta[m]) / pm, vb = (tb[iv] - v * sm * tb[m]) / pm;
+    const double ua = (ta[iu] - u * sm * ta[m]) * inv, ub = (tb[iu] - u * sm * tb[m]) * inv;
+    const double va = (ta[iv] - v * sm * ta[m]) * inv, vb = (tb[iv] - v * sm * tb[m]) * inv;
     const double pu = std::abs(ua), qu = std::abs(ub), pv = std::abs(va), qv = std::abs(vb);
     const double eu = 0.5 * (pu + qu), ev = 0.5 * (pv + qv);
     const double half = 0.5 * n_;
