@@ -26,8 +26,8 @@ int AddFloatAttribute(draco::Mesh& mesh, draco::GeometryAttribute::Type type,
                       const std::vector<Vec3>& values) {
   draco::GeometryAttribute ga;
   ga.Init(type, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
-  const int id = mesh.AddAttribute(ga, /*identity_mapping=*/true,
-                                   static_cast<uint32_t>(values.size()));
+  const int id =
+      mesh.AddAttribute(ga, /*identity_mapping=*/true, static_cast<uint32_t>(values.size()));
   draco::PointAttribute* att = mesh.attribute(id);
   for (std::size_t i = 0; i < values.size(); ++i) {
     const float v[3] = {static_cast<float>(values[i].x), static_cast<float>(values[i].y),
@@ -71,8 +71,8 @@ void ExtractAttribute(const draco::Mesh& mesh, draco::GeometryAttribute::Type ty
     }
     for (int c = 0; c < 3; ++c) {
       if (!std::isfinite(v[c])) {
-        throw InputError(where, std::string("MESH ") + what + " of vertex " +
-                                    std::to_string(i) + " is not finite");
+        throw InputError(where, std::string("MESH ") + what + " of vertex " + std::to_string(i) +
+                                    " is not finite");
       }
       out[std::size_t(i) * 3 + std::size_t(c)] = v[c];
     }

@@ -27,7 +27,9 @@ struct DracoMeshCounts {
 };
 
 // Decoded size a MESH section declares as raw_size: 24 bytes per vertex, 12 per triangle.
-inline uint64_t MeshRawSize(uint64_t points, uint64_t faces) { return 24 * points + 12 * faces; }
+inline uint64_t MeshRawSize(uint64_t points, uint64_t faces) {
+  return 24 * points + 12 * faces;
+}
 
 // Encodes `mesh` with Draco's sequential mesh encoder and no deduplication, so that point i of
 // the decoded mesh is vertex i of `mesh` and face i is triangle i, corners in the same order.

@@ -104,12 +104,13 @@ TEST(DracoMeshCodec, EveryRealMeshKeepsVertexOrderWithinQuantisation) {
       b2 += b * b;
     }
     const double radiance = std::sqrt(d2 / b2);
-    std::printf("%-28s %6zu v %6zu t  Draco %8zu B (%.1f B/v)  max |Δp|/diag %.3g (bound %.3g)  "
-                "max normal error %.4f°  radiance rel RMS %.2g\n",
-                m.name.c_str(), src.positions.size(), src.triangles.size(),
-                std::size_t(r.sections()[1].stored_size),
-                double(r.sections()[1].stored_size) / double(src.positions.size()), max_position,
-                bound, max_angle, radiance);
+    std::printf(
+        "%-28s %6zu v %6zu t  Draco %8zu B (%.1f B/v)  max |Δp|/diag %.3g (bound %.3g)  "
+        "max normal error %.4f°  radiance rel RMS %.2g\n",
+        m.name.c_str(), src.positions.size(), src.triangles.size(),
+        std::size_t(r.sections()[1].stored_size),
+        double(r.sections()[1].stored_size) / double(src.positions.size()), max_position, bound,
+        max_angle, radiance);
     // float32 rounding of the input adds < 1e-7 of the coordinates' magnitude.
     EXPECT_LE(max_position, bound * 1.001 + 1e-7 * Length(hi) / diagonal + 1e-7) << file;
     EXPECT_LT(max_angle, 0.05) << file;

@@ -48,9 +48,11 @@ int Pack(const std::string& run_dir, const std::vector<std::string>& meshes,
       return kExitUsage;
     }
     for (const std::string& m : meshes) {
-      input.meshes.push_back(
-          {std::filesystem::path(m).stem().string(), prt::LoadMesh(m), {0.8f, 0.8f, 0.8f}, false,
-           0});
+      input.meshes.push_back({std::filesystem::path(m).stem().string(),
+                              prt::LoadMesh(m),
+                              {0.8f, 0.8f, 0.8f},
+                              false,
+                              0});
     }
     if (!metadata.empty()) input.metadata_json = prt::ReadWholeFile(metadata);
   }
@@ -72,9 +74,10 @@ int main(int argc, char** argv) {
   std::vector<char*> arg_ptrs;
   for (std::string& a : args) arg_ptrs.push_back(a.data());
 
-  CLI::App app{"prt-pack: builds, inspects and verifies .prtpack assets (docs/prtpack-format.md)."
-               "\nExit status: 0 success, 1 unreadable input or failed verification, 2 usage "
-               "error."};
+  CLI::App app{
+      "prt-pack: builds, inspects and verifies .prtpack assets (docs/prtpack-format.md)."
+      "\nExit status: 0 success, 1 unreadable input or failed verification, 2 usage "
+      "error."};
   app.set_version_flag("--version", std::string("prt-pack ") + PRT_VERSION + " (.prtpack 1.0)");
   app.require_subcommand(1);
 
@@ -108,8 +111,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 22))
       ->capture_default_str();
   pack->add_option("--alignment", options.alignment, "Section alignment (64 or 4096 for mmap)")
-      ->check(CLI::IsMember({64u, 128u, 256u, 512u, 1024u, 2048u, 4096u, 8192u, 16384u, 32768u,
-                             65536u}))
+      ->check(CLI::IsMember(
+          {64u, 128u, 256u, 512u, 1024u, 2048u, 4096u, 8192u, 16384u, 32768u, 65536u}))
       ->capture_default_str();
 
   std::string file;

@@ -34,23 +34,23 @@ typedef struct prtpack_section_info {
 } prtpack_section_info;
 
 typedef struct prtpack_mesh {
-  const char* name;         /* NUL-terminated */
+  const char* name; /* NUL-terminated */
   size_t vertex_count;
   size_t triangle_count;
-  const float* positions;   /* 3 × vertex_count; vertex i is vertex i of the packed mesh */
-  const float* normals;     /* 3 × vertex_count, unit */
+  const float* positions;    /* 3 × vertex_count; vertex i is vertex i of the packed mesh */
+  const float* normals;      /* 3 × vertex_count, unit */
   const uint32_t* triangles; /* 3 × triangle_count, indices < vertex_count */
-  float albedo[3];          /* linear RGB in [0, 1] */
-  int is_ground;            /* 1 for the ground plane */
-  uint32_t grid_resolution; /* ground plane: vertices per side, else 0 */
+  float albedo[3];           /* linear RGB in [0, 1] */
+  int is_ground;             /* 1 for the ground plane */
+  uint32_t grid_resolution;  /* ground plane: vertices per side, else 0 */
 } prtpack_mesh;
 
 typedef struct prtpack_transport_info {
-  uint32_t encoding;       /* the transport encoder's format version */
-  uint64_t row_count;      /* spatial samples */
-  uint64_t column_count;   /* columns over all blocks */
+  uint32_t encoding;     /* the transport encoder's format version */
+  uint64_t row_count;    /* spatial samples */
+  uint64_t column_count; /* columns over all blocks */
   size_t block_count;
-  const uint8_t* params;   /* opaque global parameters (owned by the handle) */
+  const uint8_t* params; /* opaque global parameters (owned by the handle) */
   size_t params_size;
 } prtpack_transport_info;
 

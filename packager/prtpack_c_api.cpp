@@ -1,7 +1,5 @@
 // The C interface of prtpack.h over PackReader: every entry point catches every exception and
 // turns it into PRTPACK_ERROR (or NULL) plus a thread-local message.
-#include "packager/prtpack.h"
-
 #include <cstring>
 #include <exception>
 #include <memory>
@@ -10,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "packager/prtpack.h"
 #include "packager/prtpack_reader.h"
 
 struct prtpack {
@@ -53,7 +52,9 @@ const prt::pack::TransportIndex& Transport(prtpack* p) {
 
 extern "C" {
 
-const char* prtpack_last_error(void) { return g_last_error.c_str(); }
+const char* prtpack_last_error(void) {
+  return g_last_error.c_str();
+}
 
 prtpack* prtpack_open_file(const char* path) {
   prtpack* out = nullptr;
@@ -75,7 +76,9 @@ prtpack* prtpack_open_memory(const void* data, size_t size) {
   return out;
 }
 
-void prtpack_close(prtpack* pack) { delete pack; }
+void prtpack_close(prtpack* pack) {
+  delete pack;
+}
 
 int prtpack_version(const prtpack* pack, uint32_t* major, uint32_t* minor) {
   return Guard([&] {

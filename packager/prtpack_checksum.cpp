@@ -6,7 +6,9 @@
 
 namespace prt::pack {
 
-uint64_t Checksum(const uint8_t* data, std::size_t size) { return XXH64(data, size, 0); }
+uint64_t Checksum(const uint8_t* data, std::size_t size) {
+  return XXH64(data, size, 0);
+}
 
 uint64_t HeaderChecksum(const uint8_t* header, const uint8_t* table, std::size_t table_size) {
   XXH64_state_t* state = XXH64_createState();

@@ -77,8 +77,10 @@ TEST(PrtpackCorruption, EveryFlippedByteIsPaddingOrDetected) {
       ++detected;
     }
   }
-  std::printf("prtpack corruption: %zu bytes, %zu flips detected, %zu padding flips read "
-              "identically\n", file.size(), detected, identical);
+  std::printf(
+      "prtpack corruption: %zu bytes, %zu flips detected, %zu padding flips read "
+      "identically\n",
+      file.size(), detected, identical);
   EXPECT_GT(detected, file.size() / 2);
 }
 
@@ -115,9 +117,12 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
   seeds.emplace_back("compressed_transport.prtpack", WritePack(in));
   PackInput real;
   real.metadata_json = R"({"scene":{"name":"bunny"}})";
-  real.meshes.push_back({"bunny", LoadMesh(std::string(PRT_SHARED_DATA_DIR) +
-                                           "/meshes/bunny_npm_lowres.obj"),
-                         {0.8f, 0.8f, 0.8f}, false, 0});
+  real.meshes.push_back(
+      {"bunny",
+       LoadMesh(std::string(PRT_SHARED_DATA_DIR) + "/meshes/bunny_npm_lowres.obj"),
+       {0.8f, 0.8f, 0.8f},
+       false,
+       0});
   seeds.emplace_back("bunny_lowres.prtpack", WritePack(real));
   const char* dir = std::getenv("PRT_WRITE_FUZZ_CORPUS");
   for (const auto& [name, bytes] : seeds) {
@@ -159,11 +164,21 @@ TEST(PrtpackCorruption, SeedCorpusReadsAndMutatedResealedCopiesNeverCrash) {
     for (int e = 0; e < edits && !m.empty(); ++e) {
       const std::size_t at = rng() % m.size();
       switch (rng() % 5) {
-        case 0: m[at] ^= uint8_t(1u << (rng() % 8)); break;      // bit flip
-        case 1: m[at] = uint8_t(rng()); break;                   // random byte
-        case 2: m[at] = (rng() & 1) ? 0xFF : 0x00; break;        // extreme byte
-        case 3: m.resize(at); break;                             // truncation
-        default: m.insert(m.begin() + std::ptrdiff_t(at), uint8_t(rng())); break;  // insertion
+        case 0:
+          m[at] ^= uint8_t(1u << (rng() % 8));
+          break;  // bit flip
+        case 1:
+          m[at] = uint8_t(rng());
+          break;  // random byte
+        case 2:
+          m[at] = (rng() & 1) ? 0xFF : 0x00;
+          break;  // extreme byte
+        case 3:
+          m.resize(at);
+          break;  // truncation
+        default:
+          m.insert(m.begin() + std::ptrdiff_t(at), uint8_t(rng()));
+          break;  // insertion
       }
     }
     if (rng() % 4 != 0) ResealChecksums(m);  // mostly: get past the checksums

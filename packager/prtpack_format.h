@@ -60,7 +60,9 @@ inline std::string FourCCString(uint32_t v) {
 }
 
 // Little-endian loads and stores from unaligned byte pointers (the callers check the range).
-inline uint16_t LoadU16(const uint8_t* p) { return static_cast<uint16_t>(p[0] | p[1] << 8); }
+inline uint16_t LoadU16(const uint8_t* p) {
+  return static_cast<uint16_t>(p[0] | p[1] << 8);
+}
 inline uint32_t LoadU32(const uint8_t* p) {
   return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
 }
@@ -89,7 +91,9 @@ inline void StoreF32(uint8_t* p, float f) {
   StoreU32(p, u);
 }
 
-inline constexpr uint64_t AlignUp(uint64_t v, uint64_t a) { return (v + a - 1) / a * a; }
+inline constexpr uint64_t AlignUp(uint64_t v, uint64_t a) {
+  return (v + a - 1) / a * a;
+}
 
 // XXH64 (seed 0) of bytes; of the header's first 56 bytes followed by the section table.
 uint64_t Checksum(const uint8_t* data, std::size_t size);

@@ -72,8 +72,7 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
 }
 
 bool IsKnownType(uint32_t type) {
-  return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial ||
-         type == kTypeTransport;
+  return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial || type == kTypeTransport;
 }
 
 }  // namespace
@@ -438,21 +437,37 @@ PackReader PackReader::OpenMemory(const void* data, std::size_t size, const std:
   impl->name = name;
   impl->options = options;
   const auto* b = static_cast<const uint8_t*>(data);
-  impl->storage = std::make_unique<VectorStorage>(
-      size > 0 ? std::vector<uint8_t>(b, b + size) : std::vector<uint8_t>());
+  impl->storage = std::make_unique<VectorStorage>(size > 0 ? std::vector<uint8_t>(b, b + size)
+                                                           : std::vector<uint8_t>());
   impl->Parse();
   return PackReader(std::move(impl));
 }
 
-const std::string& PackReader::name() const { return impl_->name; }
-uint16_t PackReader::version_major() const { return impl_->major; }
-uint16_t PackReader::version_minor() const { return impl_->minor; }
-uint64_t PackReader::file_size() const { return impl_->storage->size; }
-const std::vector<SectionInfo>& PackReader::sections() const { return impl_->sections; }
-std::size_t PackReader::mesh_count() const { return impl_->mesh_sections.size(); }
-bool PackReader::has_transport() const { return impl_->has_transport; }
+const std::string& PackReader::name() const {
+  return impl_->name;
+}
+uint16_t PackReader::version_major() const {
+  return impl_->major;
+}
+uint16_t PackReader::version_minor() const {
+  return impl_->minor;
+}
+uint64_t PackReader::file_size() const {
+  return impl_->storage->size;
+}
+const std::vector<SectionInfo>& PackReader::sections() const {
+  return impl_->sections;
+}
+std::size_t PackReader::mesh_count() const {
+  return impl_->mesh_sections.size();
+}
+bool PackReader::has_transport() const {
+  return impl_->has_transport;
+}
 
-std::string PackReader::ReadMetadata() const { return impl_->Metadata(); }
+std::string PackReader::ReadMetadata() const {
+  return impl_->Metadata();
+}
 
 UnpackedMesh PackReader::ReadMesh(std::size_t i) const {
   if (i >= mesh_count()) impl_->Fail("mesh index " + std::to_string(i) + " out of range");
@@ -464,11 +479,14 @@ MeshMaterial PackReader::ReadMaterial(std::size_t i) const {
   return impl_->Material(i);
 }
 
-TransportIndex PackReader::ReadTransportIndex() const { return impl_->Transport(); }
+TransportIndex PackReader::ReadTransportIndex() const {
+  return impl_->Transport();
+}
 
 std::vector<uint8_t> PackReader::ReadTransportBlock(const TransportIndex& index,
                                                     std::size_t b) const {
-  if (b >= index.blocks.size()) impl_->Fail("transport block " + std::to_string(b) + " out of range");
+  if (b >= index.blocks.size())
+    impl_->Fail("transport block " + std::to_string(b) + " out of range");
   const uint64_t raw = index.blocks[b].raw_size;
   if (raw > impl_->options.max_section_bytes) impl_->Fail("transport block exceeds the limit");
   std::vector<uint8_t> out(raw);
@@ -478,7 +496,8 @@ std::vector<uint8_t> PackReader::ReadTransportBlock(const TransportIndex& index,
 
 void PackReader::ReadTransportBlockInto(const TransportIndex& index, std::size_t b, void* dst,
                                         std::size_t dst_size) const {
-  if (b >= index.blocks.size()) impl_->Fail("transport block " + std::to_string(b) + " out of range");
+  if (b >= index.blocks.size())
+    impl_->Fail("transport block " + std::to_string(b) + " out of range");
   if (dst_size != index.blocks[b].raw_size) {
     impl_->Fail("transport block " + std::to_string(b) + " needs a buffer of " +
                 std::to_string(index.blocks[b].raw_size) + " bytes");

@@ -67,7 +67,7 @@ struct MeshMaterial {
 struct TransportBlockInfo {
   uint64_t first_column = 0;
   uint32_t column_count = 0;
-  uint32_t codec = 0;  // 0 none, 1 zstd
+  uint32_t codec = 0;   // 0 none, 1 zstd
   uint64_t offset = 0;  // absolute, in the file
   uint64_t stored_size = 0;
   uint64_t raw_size = 0;

@@ -56,9 +56,9 @@ inline PackInput MakeSmallInput() {
   t.encoding = 7;
   t.row_count = 12;
   t.params = {1, 2, 3, 4, 5};
-  t.blocks.push_back({3, PseudoRandomBytes(120, 1, true)});   // zstd
-  t.blocks.push_back({5, PseudoRandomBytes(40, 2, false)});   // stored as is
-  t.blocks.push_back({1, {}});                                // empty block
+  t.blocks.push_back({3, PseudoRandomBytes(120, 1, true)});  // zstd
+  t.blocks.push_back({5, PseudoRandomBytes(40, 2, false)});  // stored as is
+  t.blocks.push_back({1, {}});                               // empty block
   in.transport = t;
   return in;
 }

@@ -36,8 +36,9 @@ CompressedTransportHeader ReadCompressedTransportHeader(const PackReader& reader
                                                         const TransportIndex& index) {
   CompressedTransportHeader h = DecodeHeader(index.params, reader.name() + ": TRNS parameters");
   if (h.sample_count != index.row_count || h.column_count() != index.column_count) {
-    throw InputError(reader.name(), "TRNS parameters disagree with the section's row or column "
-                                    "count");
+    throw InputError(reader.name(),
+                     "TRNS parameters disagree with the section's row or column "
+                     "count");
   }
   return h;
 }

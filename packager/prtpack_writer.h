@@ -28,8 +28,8 @@ struct TransportBlockInput {
 };
 
 struct TransportInput {
-  uint32_t encoding = 0;     // the encoder's format version, stored as is
-  uint64_t row_count = 0;    // spatial samples
+  uint32_t encoding = 0;        // the encoder's format version, stored as is
+  uint64_t row_count = 0;       // spatial samples
   std::vector<uint8_t> params;  // opaque global parameters
   std::vector<TransportBlockInput> blocks;
 };

@@ -1,12 +1,13 @@
 // prt-pack's library side: run folder → PackInput, and the inspect / verify reports.
 #include "packager/run_folder_pack.h"
 
+#include <toml++/toml.h>
+
 #include <cinttypes>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <sstream>
-#include <toml++/toml.h>
 
 #include "packager/prtpack_format.h"
 #include "packager/prtpack_transport.h"
@@ -59,10 +60,14 @@ std::string Bytes(uint64_t n) {
 
 const char* CodecName(uint32_t c) {
   switch (c) {
-    case 0: return "none";
-    case 1: return "zstd";
-    case 2: return "draco";
-    default: return "?";
+    case 0:
+      return "none";
+    case 1:
+      return "zstd";
+    case 2:
+      return "draco";
+    default:
+      return "?";
   }
 }
 
@@ -91,9 +96,8 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
     if (r.is_discarded()) throw InputError(report.string(), "not valid JSON");
     meta["report"] = std::move(r);
   }
-  const fs::path transport = options.transport_file.empty()
-                                 ? dir / kCompressedTransportFileName
-                                 : fs::path(options.transport_file);
+  const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
+                                                            : fs::path(options.transport_file);
   if (fs::exists(transport)) {
     const std::string bytes = ReadWholeFile(transport.string());
     const CompressedTransport t = DecodeCompressedTransport(
@@ -130,9 +134,9 @@ std::string InspectPack(const PackReader& r) {
     std::snprintf(line, sizeof line,
                   "  %3zu  %-4s %5u  %-5s  %12" PRIu64 "  %12" PRIu64 "  %12" PRIu64
                   "  %6.2fx  %016" PRIx64 "%s\n",
-                  i, s.type.c_str(), s.id, CodecName(s.codec), s.offset, s.stored_size,
-                  s.raw_size, s.stored_size ? double(s.raw_size) / double(s.stored_size) : 1.0,
-                  s.checksum, s.known ? "" : "  (unknown: skipped)");
+                  i, s.type.c_str(), s.id, CodecName(s.codec), s.offset, s.stored_size, s.raw_size,
+                  s.stored_size ? double(s.raw_size) / double(s.stored_size) : 1.0, s.checksum,
+                  s.known ? "" : "  (unknown: skipped)");
     out << line;
     stored += s.stored_size;
     raw += s.raw_size;
@@ -154,8 +158,8 @@ std::string InspectPack(const PackReader& r) {
       counts = j.value("vertices", nlohmann::json()).dump() + " vertices, " +
                j.value("triangles", nlohmann::json()).dump() + " triangles, ";
     }
-    std::snprintf(line, sizeof line, "albedo (%.3f, %.3f, %.3f)%s", mat.albedo[0],
-                  mat.albedo[1], mat.albedo[2], mat.is_ground ? ", ground plane" : "");
+    std::snprintf(line, sizeof line, "albedo (%.3f, %.3f, %.3f)%s", mat.albedo[0], mat.albedo[1],
+                  mat.albedo[2], mat.is_ground ? ", ground plane" : "");
     out << "mesh " << m << " \"" << mat.name << "\": " << counts << line << ", "
         << Bytes(mesh ? mesh->stored_size : 0) << " Draco\n";
   }
@@ -167,8 +171,8 @@ std::string InspectPack(const PackReader& r) {
       bstored += b.stored_size;
     }
     out << "transport: " << t.row_count << " samples x " << t.column_count << " columns in "
-        << t.blocks.size() << " blocks (encoding " << t.encoding << "), "
-        << Bytes(braw) << " raw -> " << Bytes(bstored) << " stored";
+        << t.blocks.size() << " blocks (encoding " << t.encoding << "), " << Bytes(braw)
+        << " raw -> " << Bytes(bstored) << " stored";
     if (bstored > 0) {
       std::snprintf(line, sizeof line, " (%.2fx)", double(braw) / double(bstored));
       out << line;

@@ -1,6 +1,8 @@
 // prt-pack's library side: a run folder (geometry.prtg, scene.toml, report.json, transport.prtc)
 // packs into a .prtpack whose meshes, compressed transport and metadata read back unchanged;
 // inspect and verify report on it.
+#include "packager/run_folder_pack.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -8,7 +10,6 @@
 
 #include "packager/prtpack_test_util.h"
 #include "packager/prtpack_transport.h"
-#include "packager/run_folder_pack.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/transport_file.h"
@@ -42,8 +43,7 @@ RunFolderFixture MakeRunFolder(const std::string& name) {
   f.geometry.bounds_min = {-2, -2, -2};
   f.geometry.bounds_max = {2, 2, 2};
   WriteSceneGeometryFile((f.dir / kGeometryFileName).string(), f.geometry);
-  WriteFileDurably((f.dir / kSceneCopyFileName).string(),
-                   "name = \"octa-scene\"\ncubemap_n = 2\n");
+  WriteFileDurably((f.dir / kSceneCopyFileName).string(), "name = \"octa-scene\"\ncubemap_n = 2\n");
   WriteFileDurably((f.dir / kReportFileName).string(), R"({"wall_seconds": 1.5})");
   f.transport.header.cubemap_n = 2;
   f.transport.header.sample_count = 12;
@@ -120,8 +120,7 @@ TEST(RunFolderPack, MissingOrMismatchedTransportIsAnError) {
     PackInputFromRunFolder(f.dir.string(), {});
     FAIL() << "accepted a transport for another geometry";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("10 samples but the geometry has 12"),
-              std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("10 samples but the geometry has 12"), std::string::npos)
         << e.what();
   }
   fs::remove(f.dir / kCompressedTransportFileName);
