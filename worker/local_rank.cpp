@@ -24,16 +24,13 @@ double HashUniform(uint64_t seed, uint64_t a, uint64_t b) {
 int LocalRank(std::span<const float* const> rows, std::size_t dim, double rel_threshold) {
   const Eigen::Index k = static_cast<Eigen::Index>(rows.size());
   if (k == 0 || dim == 0) return 0;
-  Eigen::MatrixXd G(k, k);
-  for (Eigen::Index i = 0; i < k; ++i) {
-    for (Eigen::Index j = 0; j <= i; ++j) {
-      const float* a = rows[static_cast<std::size_t>(i)];
-      const float* b = rows[static_cast<std::size_t>(j)];
-      double s = 0;
-      for (std::size_t t = 0; t < dim; ++t) s += static_cast<double>(a[t]) * b[t];
-      G(i, j) = G(j, i) = s;
-    }
-  }
+  // Gram matrix of the rows (float products, vectorised by Eigen; the rows are averages of
+  // values in [0, 1/π], far from float's limits), then σ_i² as its eigenvalues in double.
+  Eigen::MatrixXf M(k, static_cast<Eigen::Index>(dim));
+  for (Eigen::Index i = 0; i < k; ++i)
+    M.row(i) = Eigen::Map<const Eigen::RowVectorXf>(rows[static_cast<std::size_t>(i)],
+                                                    static_cast<Eigen::Index>(dim));
+  const Eigen::MatrixXd G = (M * M.transpose()).cast<double>();
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(G, Eigen::EigenvaluesOnly);
   const Eigen::VectorXd ev = es.eigenvalues().cwiseMax(0.0);  // σ² ascending
   const double smax2 = ev.maxCoeff();
