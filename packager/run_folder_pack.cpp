@@ -143,9 +143,21 @@ std::string InspectPack(const PackReader& r) {
   }
   out << "  total: " << Bytes(raw) << " decoded in " << Bytes(stored) << " stored\n";
   const nlohmann::json meta = nlohmann::json::parse(r.ReadMetadata());
-  if (meta.contains("scene") && meta["scene"].is_object() && meta["scene"].contains("name")) {
-    out << "scene: " << meta["scene"]["name"].dump() << "\n";
+  // The scene's name: [scene] name in scene.toml, else a top-level name, else the report's.
+  const nlohmann::json* name = nullptr;
+  if (meta.contains("scene") && meta["scene"].is_object()) {
+    const nlohmann::json& sc = meta["scene"];
+    if (sc.contains("scene") && sc["scene"].is_object() && sc["scene"].contains("name")) {
+      name = &sc["scene"]["name"];
+    } else if (sc.contains("name")) {
+      name = &sc["name"];
+    }
   }
+  if (name == nullptr && meta.contains("report") && meta["report"].is_object() &&
+      meta["report"].contains("scene_name")) {
+    name = &meta["report"]["scene_name"];
+  }
+  if (name != nullptr) out << "scene: " << name->dump() << "\n";
   for (std::size_t m = 0; m < r.mesh_count(); ++m) {
     const MeshMaterial mat = r.ReadMaterial(m);
     const SectionInfo* mesh = nullptr;
