@@ -110,8 +110,13 @@ bool SetupTriangle(const CameraProjection& cam, const ClipVertex& a, const ClipV
   return t.xmin <= t.xmax && t.ymin <= t.ymax;
 }
 
-// Edge function of the edge a→b at p: positive on one side, zero on the line.
+// Edge function of the edge a→b at p: positive on one side, zero on the line. Evaluated with the
+// endpoints in a canonical order and negated when swapped, so that the two triangles sharing an
+// edge get bitwise opposite values and no pixel is lost or drawn twice along it.
 inline double Edge(double ax, double ay, double bx, double by, double px, double py) {
+  if (ax > bx || (ax == bx && ay > by)) {
+    return -((ax - bx) * (py - by) - (ay - by) * (px - bx));
+  }
   return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
 }
 

@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "vocabulary/compressed_relight.h"
+
 namespace prt {
 
 SampleRadiance::SampleRadiance(std::size_t samples) {
@@ -193,6 +195,43 @@ void SparseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadi
       }
     }
   });
+}
+
+CompressedTransportOperator::CompressedTransportOperator(const CompressedRelighter& relighter)
+    : relighter_(relighter) {
+  if (relighter.header().row_wavelet != RowWavelet::kHaar) {
+    throw std::invalid_argument(
+        "CompressedTransportOperator: the transport rows use the D4 row wavelet; the viewer's "
+        "lighting is in the Haar basis");
+  }
+}
+
+std::size_t CompressedTransportOperator::sample_count() const {
+  return relighter_.sample_count();
+}
+
+std::size_t CompressedTransportOperator::coefficient_count() const {
+  return relighter_.column_count();
+}
+
+void CompressedTransportOperator::Accumulate(std::span<const LightingTerm> terms,
+                                             SampleRadiance& out) const {
+  const std::size_t samples = sample_count();
+  CheckTerms(terms, coefficient_count(), out, samples);
+  if (terms.empty() || samples == 0) return;
+  std::vector<uint32_t> columns(terms.size());
+  std::vector<float> weights(3 * terms.size());
+  for (std::size_t k = 0; k < terms.size(); ++k) {
+    columns[k] = terms[k].index;
+    for (int c = 0; c < 3; ++c) weights[3 * k + c] = static_cast<float>(terms[k].value[c]);
+  }
+  std::vector<float> radiance(3 * samples);  // channel-major
+  relighter_.RelightSparse(columns, weights, 3, radiance);
+  for (int c = 0; c < 3; ++c) {
+    double* __restrict o = out.channel[c].data();
+    const float* __restrict r = radiance.data() + c * samples;
+    for (std::size_t s = 0; s < samples; ++s) o[s] += static_cast<double>(r[s]);
+  }
 }
 
 std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo) {

@@ -7,8 +7,9 @@
 // list of terms (coefficient index, RGB value); every operator applies only the columns its terms
 // name, so an incremental update B += T·ΔL̂ costs N columns, not the whole matrix.
 //
-// TransportOperator is the seam where other representations plug in (the compressed 4D transport
-// of vocabulary/compressed_transport.h implements the same Accumulate).
+// TransportOperator is the seam where other representations plug in: DenseTransport and
+// SparseTransport here, CompressedTransportOperator for the adaptive 4D compressed columns of
+// vocabulary/compressed_relight.h (Cheslack-Postava et al. 2008 Eq. 8).
 #pragma once
 
 #include <array>
@@ -21,6 +22,8 @@
 #include "vocabulary/scene.h"
 
 namespace prt {
+
+class CompressedRelighter;  // vocabulary/compressed_relight.h
 
 // One term of a lighting approximation: a Haar coefficient index and its value per channel.
 struct LightingTerm {
@@ -99,6 +102,23 @@ class SparseTransport final : public TransportOperator {
   std::vector<uint64_t> column_start_;  // [block · (coefficients + 1) + column]
   std::vector<uint16_t> local_sample_;  // sample within its block
   std::vector<float> values_;
+};
+
+// Relighting straight from adaptively compressed columns (Cheslack-Postava et al. 2008 §4.5,
+// Eq. 8) through vocabulary/compressed_relight.h. The relighter must outlive the operator and
+// its row wavelet must be Haar (the lighting basis here; std::invalid_argument otherwise).
+// Lighting values pass to the compressed path in float, and its radiance comes back in float:
+// expect ~1e-7 relative rounding per Accumulate (the incremental state stays in double).
+class CompressedTransportOperator final : public TransportOperator {
+ public:
+  explicit CompressedTransportOperator(const CompressedRelighter& relighter);
+
+  std::size_t sample_count() const override;
+  std::size_t coefficient_count() const override;
+  void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+
+ private:
+  const CompressedRelighter& relighter_;
 };
 
 // Final colours: albedo ⊙ radiance, interleaved RGB float per sample. albedo may be empty (white),
