@@ -114,13 +114,24 @@ int main(int argc, char** argv) {
       tm.plan.sparse.mode = InterpolationMode::kTransport;
       variants.push_back(ls);
       variants.push_back(tm);
-      for (double f : {0.5, 2.0, 3.0}) {
+      for (double f : {0.5, 2.0}) {
         for (SolverKind sk : {SolverKind::kL1, SolverKind::kLeastSquares}) {
           Variant v{std::string(sk == SolverKind::kL1 ? "L1" : "LS") + " radius ×" +
                         std::to_string(f).substr(0, 3),
                     base};
           v.plan.radius = base.radius * f;
           v.plan.sparse.solver = sk;
+          variants.push_back(v);
+        }
+      }
+      // Dense budget and feature count: the operating points a user picks from.
+      for (double budget : {0.10, 0.15}) {
+        for (double ffrac : {1.0, 0.7}) {
+          Variant v{"dense " + std::to_string(static_cast<int>(budget * 100)) + "%, features ×" +
+                        std::to_string(ffrac).substr(0, 3),
+                    base};
+          v.plan.dense_budget = budget;
+          v.plan.sparse.features = static_cast<int>(base.sparse.features * ffrac);
           variants.push_back(v);
         }
       }
