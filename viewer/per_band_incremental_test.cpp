@@ -55,18 +55,21 @@ DenseTransport ShadowedTransport(int n, int samples, uint32_t seed) {
 
 // Analytic sky with a small bright lobe, rotated by `angle` about +Y, at texel centres.
 WaveletLighting AnalyticSky(int n, double angle) {
-  const CubemapLayout layout(n);
-  static thread_local std::vector<Vec3> centres;
-  if (centres.size() != layout.texel_count()) {
+  static thread_local std::vector<Vec3> centres;  // texel centres, computed once per n
+  if (centres.size() != static_cast<std::size_t>(6) * n * n) {
+    const CubemapLayout layout(n);
     centres.resize(layout.texel_count());
     for (std::size_t j = 0; j < centres.size(); ++j) centres[j] = layout.TexelCenter(j);
   }
   CubemapRgb cube;
   cube.n = n;
-  for (int c = 0; c < 3; ++c) cube.Channel(c).resize(layout.texel_count());
+  for (int c = 0; c < 3; ++c) cube.Channel(c).resize(centres.size());
+  // L'(d) = L(R⁻¹d): rotate the texel direction by −angle about +Y (as RotateAboutY).
+  const double cs = std::cos(angle), sn = std::sin(angle);
   const Vec3 sun = Normalize(Vec3{0.6, 0.35, 0.7});
-  for (std::size_t j = 0; j < layout.texel_count(); ++j) {
-    const Vec3 d = RotateAboutY(centres[j], -angle);  // L'(d) = L(R⁻¹d)
+  for (std::size_t j = 0; j < centres.size(); ++j) {
+    const Vec3& e = centres[j];
+    const Vec3 d{e.x * cs - e.z * sn, e.y, e.x * sn + e.z * cs};
     const double cos_sun = Dot(d, sun);
     const double lobe = cos_sun > 0.95 ? 40.0 * std::exp(300.0 * (cos_sun - 1.0)) : 0.0;
     const double sky = d.y > 0 ? 0.4 + 0.6 * d.y : 0.15;
