@@ -46,6 +46,17 @@ bool ParseHex16(const std::string& s, uint64_t& v) {
 std::string FormatJournalLine(const JournalEntry& e) {
   char busy[32];
   std::snprintf(busy, sizeof busy, "%.6f", e.busy_seconds);
+  if (!e.phase.empty()) {
+    std::string body = "sjob";
+    for (const std::string& field :
+         {e.phase, std::to_string(e.rows.first), std::to_string(e.rows.count),
+          Hex16(e.rows_checksum), std::to_string(e.rank), std::string(busy),
+          std::to_string(e.counters.size())}) {
+      body.append(1, ' ').append(field);
+    }
+    for (uint64_t c : e.counters) body.append(1, ' ').append(std::to_string(c));
+    return body + " " + Hex16(Checksum64(body.data(), body.size()));
+  }
   std::string body = "job " + std::to_string(e.rows.first) + " " + std::to_string(e.rows.count) +
                      " " + Hex16(e.rows_checksum) + " " + std::to_string(e.rank) + " " +
                      std::to_string(e.rays_traced) + " " + std::to_string(e.texels_traced) + " " +
@@ -62,6 +73,18 @@ bool ParseJournalLine(const std::string& line, JournalEntry& e) {
   if (Checksum64(line.data(), last) != sum) return false;
   std::istringstream in(line.substr(0, last));
   std::string tag, checksum;
+  if (line.rfind("sjob ", 0) == 0) {
+    std::size_t k = 0;
+    if (!(in >> tag >> e.phase >> e.rows.first >> e.rows.count >> checksum >> e.rank >>
+          e.busy_seconds >> k) ||
+        k > 64) {
+      return false;
+    }
+    e.counters.assign(k, 0);
+    for (uint64_t& c : e.counters)
+      if (!(in >> c)) return false;
+    return ParseHex16(checksum, e.rows_checksum) && e.rows.count > 0;
+  }
   if (!(in >> tag >> e.rows.first >> e.rows.count >> checksum >> e.rank >> e.rays_traced >>
         e.texels_traced >> e.texels_below_horizon >> e.rays_below_horizon >> e.busy_seconds)) {
     return false;

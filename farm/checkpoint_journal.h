@@ -8,6 +8,9 @@
 //   prt-farm-journal 1 <run key, 16 hex>
 //   job <first> <count> <rows xxh64> <rank> <rays> <texels traced> <texels below horizon>
 //       <rays below horizon> <busy seconds> <line xxh64>          (one line)
+//   sjob <phase> <first> <count> <result xxh64> <rank> <busy seconds> <k> <counter 1> …
+//       <counter k> <line xxh64>        (a job of a sparse phase; first/count index the phase's
+//                                        deterministic item list, docs/farm.md "Sparse method")
 #pragma once
 
 #include <cstdint>
@@ -28,6 +31,10 @@ struct JournalEntry {
   uint64_t texels_below_horizon = 0;
   uint64_t rays_below_horizon = 0;
   double busy_seconds = 0;
+  // Sparse method only: the phase ("dense-initial", "rank-1", …) and its counters
+  // (SparseJobCounters, farm/sparse_jobs.h). Empty phase: a brute-force job line.
+  std::string phase;
+  std::vector<uint64_t> counters;
 };
 
 std::string FormatJournalLine(const JournalEntry& entry);

@@ -1,6 +1,7 @@
 // prt-farm's coordinator (see farm_coordinator.h and docs/farm.md).
 #include "farm/farm_coordinator.h"
 
+#include <fcntl.h>
 #include <mpi.h>
 #include <sched.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -9,6 +10,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -22,17 +24,23 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <type_traits>
+#include <unordered_map>
 #include <vector>
 
 #include "farm/checkpoint_journal.h"
 #include "farm/farm_report.h"
 #include "farm/job_planner.h"
 #include "farm/run_folder.h"
+#include "farm/sparse_jobs.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/progress.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
 #include "worker/embree_scene.h"
+#include "worker/local_rank.h"
+#include "worker/neighbor_index.h"
+#include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
@@ -50,7 +58,16 @@ constexpr uint64_t kMaxMessageBytes = uint64_t{64} << 20;  // rows travel in ≤
 constexpr uint64_t kMaxJobBytes = uint64_t{256} << 20;     // a job's rows fit in 256 MiB
 constexpr uint64_t kMaxBroadcastBytes = uint64_t{1} << 30;
 
-enum Tag : int { kTagReady = 1, kTagJob, kTagStop, kTagResult, kTagRows, kTagFailed };
+enum Tag : int {
+  kTagReady = 1,
+  kTagJob,
+  kTagStop,
+  kTagResult,
+  kTagRows,
+  kTagFailed,
+  kTagSparseJob,     // an encoded sparse-method job (farm/sparse_jobs.h), one message
+  kTagSparseResult,  // its encoded result, one message
+};
 
 struct ReadyMsg {
   int32_t threads = 0;
@@ -79,7 +96,9 @@ struct SetupParams {
   uint64_t seed = 1;
   int32_t cubemap_n = 32;
   int32_t rays_per_texel = 4;
+  int32_t sparse = 0;  // 1: method sparse (the SparsePlan follows in a second broadcast)
 };
+static_assert(std::is_trivially_copyable_v<SparsePlan>, "SparsePlan is broadcast as bytes");
 
 double Now() {
   using Clock = std::chrono::steady_clock;
@@ -144,6 +163,10 @@ struct FarmContext {
   std::vector<SpatialSample> samples;
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
+  SparsePlan plan;  // method sparse: every rank has rank 0's plan
+
+  // Rank 0, method sparse: the journal's lines (verified per phase when the phase is planned).
+  std::vector<JournalEntry> sparse_entries;
 
   // Rank 0 only.
   std::optional<TransportFileWriter> writer;
@@ -223,6 +246,11 @@ bool FailureDue(const FarmContext& ctx, int jobs) {
          jobs >= ctx.options.fail_after_jobs;
 }
 
+// run/sparse/: the sparse method's durable side results (docs/farm.md, "Sparse method").
+std::string SparseDir(const RunFolder& f) {
+  return (fs::path(f.dir) / "sparse").string();
+}
+
 // ------------------------------------------------------------------------------- setup phase
 
 class SetupPhase : public FarmPhase {
@@ -245,6 +273,10 @@ class SetupPhase : public FarmPhase {
     CheckMpi(MPI_Bcast(&status, 1, MPI_INT, 0, ctx.comm), "MPI_Bcast status");
     if (status != kExitOk) throw CollectiveStop{status};
     CheckMpi(MPI_Bcast(&ctx.params, sizeof(SetupParams), MPI_BYTE, 0, ctx.comm), "MPI_Bcast");
+    if (ctx.params.sparse) {
+      CheckMpi(MPI_Bcast(&ctx.plan, sizeof(SparsePlan), MPI_BYTE, 0, ctx.comm), "MPI_Bcast plan");
+      ctx.method = "sparse";
+    }
     BroadcastBytes(ctx, geometry_bytes, ctx.params.geometry_bytes);
 
     // Every rank, rank 0 included, samples the geometry decoded from the same bytes.
@@ -298,10 +330,8 @@ class SetupPhase : public FarmPhase {
       ctx.report.scene = o.scene_path;
     }
     ctx.method = o.method.empty() ? scene.sampling.method : o.method;
-    if (ctx.method != "brute") {
-      throw InputError(scene.file, "method '" + ctx.method +
-                                       "' is not available in this prt-farm yet (only brute); "
-                                       "pass --method brute");
+    if (ctx.method != "brute" && ctx.method != "sparse") {
+      throw InputError(scene.file, "unknown method '" + ctx.method + "' (brute or sparse)");
     }
     if (scene.samples != SpatialSamples::kVertices) {
       throw InputError(scene.file,
@@ -321,6 +351,10 @@ class SetupPhase : public FarmPhase {
     ctx.params.seed = scene.sampling.seed;
     ctx.params.cubemap_n = scene.cubemap_n;
     ctx.params.rays_per_texel = rays;
+    if (ctx.method == "sparse") {
+      ctx.params.sparse = 1;
+      ctx.plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
+    }
 
     RunManifest manifest;
     manifest.method = ctx.method;
@@ -382,6 +416,7 @@ class SetupPhase : public FarmPhase {
       for (const std::string& p : {f.transport, f.partial, f.journal, f.manifest, f.report}) {
         fs::remove(p, ec);
       }
+      fs::remove_all(SparseDir(f), ec);
     }
     // From here on the folder is this run's: a failure report may replace an older report.
     ctx.folder_ready = true;
@@ -409,6 +444,11 @@ class SetupPhase : public FarmPhase {
         }
         std::vector<float> rows;
         for (const JournalEntry& e : journal.entries) {
+          if (ctx.params.sparse) {
+            // Verified against the files when its phase is planned (SparseSamplingPhase).
+            if (!e.phase.empty()) ctx.sparse_entries.push_back(e);
+            continue;
+          }
           if (e.rows.end() > info.rows || e.rows.count * info.row_bytes() > kMaxJobBytes * 4) {
             ++ctx.report.checkpoints_rejected;
             continue;
@@ -430,9 +470,13 @@ class SetupPhase : public FarmPhase {
       }
     }
     if (!ctx.writer) ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
-    ctx.journal = std::make_unique<CheckpointJournal>(f.journal, manifest.Key(), reused);
+    ctx.journal = std::make_unique<CheckpointJournal>(
+        f.journal, manifest.Key(), ctx.params.sparse ? ctx.sparse_entries : reused);
     ctx.reused = std::move(reused);
-    if (!fresh) {
+    if (!fresh && ctx.params.sparse) {
+      spdlog::info("--resume: {} journaled sparse job(s) are verified phase by phase",
+                   ctx.sparse_entries.size());
+    } else if (!fresh) {
       uint64_t rows_reused = 0;
       for (const JournalEntry& e : ctx.reused) rows_reused += e.rows.count;
       spdlog::info("--resume: {} finished job(s) ({} of {} samples) re-used from checkpoints",
@@ -809,6 +853,764 @@ class BruteSamplingPhase : public FarmPhase {
   }
 };
 
+// ---------------------------------------------------------------------- sparse sampling phase
+
+// pwrite/pread/fdatasync on a side file of the run folder; FileIoError names the file.
+class SideFile {
+ public:
+  explicit SideFile(std::string path) : path_(std::move(path)) {
+    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd_ < 0) throw FileIoError(path_, std::string("cannot open: ") + std::strerror(errno));
+  }
+  ~SideFile() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  SideFile(const SideFile&) = delete;
+  SideFile& operator=(const SideFile&) = delete;
+
+  void Write(const void* data, std::size_t bytes, uint64_t offset) {
+    const char* p = static_cast<const char*>(data);
+    while (bytes > 0) {
+      const ssize_t n = ::pwrite(fd_, p, bytes, static_cast<off_t>(offset));
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        throw FileIoError(path_, std::string("write failed: ") + std::strerror(errno));
+      }
+      p += n;
+      bytes -= static_cast<std::size_t>(n);
+      offset += static_cast<uint64_t>(n);
+    }
+    dirty_ = true;
+  }
+  // False when the file ends before offset + bytes.
+  bool Read(void* data, std::size_t bytes, uint64_t offset) const {
+    char* p = static_cast<char*>(data);
+    while (bytes > 0) {
+      const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) throw FileIoError(path_, std::string("read failed: ") + std::strerror(errno));
+      if (n == 0) return false;
+      p += n;
+      bytes -= static_cast<std::size_t>(n);
+      offset += static_cast<uint64_t>(n);
+    }
+    return true;
+  }
+  void Sync() {
+    if (!dirty_) return;
+    if (::fdatasync(fd_) != 0)
+      throw FileIoError(path_, std::string("fdatasync failed: ") + std::strerror(errno));
+    dirty_ = false;
+  }
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+  bool dirty_ = false;
+};
+
+// Rank 0's own worker thread for the sparse method (same contract as LocalWorker).
+class SparseLocalWorker {
+ public:
+  struct Result {
+    std::string bytes;
+    std::exception_ptr error;
+  };
+  explicit SparseLocalWorker(const FarmContext& ctx) : ctx_(ctx), thread_([this] { Loop(); }) {}
+  ~SparseLocalWorker() {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  void Give(std::string job) {
+    {
+      std::lock_guard lock(mutex_);
+      job_ = std::move(job);
+    }
+    cv_.notify_all();
+  }
+  std::optional<Result> Poll() {
+    std::lock_guard lock(mutex_);
+    if (results_.empty()) return std::nullopt;
+    Result r = std::move(results_.front());
+    results_.pop_front();
+    return r;
+  }
+  void Wait(double seconds) {
+    std::unique_lock lock(mutex_);
+    cv_done_.wait_for(lock, std::chrono::duration<double>(seconds),
+                      [&] { return !results_.empty(); });
+  }
+
+ private:
+  void Loop() {
+    for (;;) {
+      std::string job;
+      {
+        std::unique_lock lock(mutex_);
+        cv_.wait(lock, [&] { return stop_ || job_.has_value(); });
+        if (stop_) return;
+        job = std::move(*job_);
+        job_.reset();
+      }
+      Result r;
+      try {
+        r.bytes = ComputeSparseJob(*ctx_.sampler, ctx_.samples, ctx_.plan, job);
+      } catch (...) {
+        r.error = std::current_exception();
+      }
+      {
+        std::lock_guard lock(mutex_);
+        results_.push_back(std::move(r));
+      }
+      cv_done_.notify_all();
+    }
+  }
+
+  const FarmContext& ctx_;
+  std::mutex mutex_;
+  std::condition_variable cv_, cv_done_;
+  std::optional<std::string> job_;
+  std::deque<Result> results_;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
+// The sparse method (Huang & Ramamoorthi 2010 §4–5) on the job queue; docs/farm.md, "Sparse
+// method". Rank 0 plans every sub-phase deterministically from the seed and the previous
+// sub-phases' durable results, exactly as RunSparsePrecomputation does in one process, so the
+// transport file is bit-identical to it for any number of ranks and after any resume:
+//   dense-initial   InitialDenseSet                          jobs: chunks of sample ids
+//   rank-k          candidates of round k (NeighborIndex over the dense positions, built once)
+//                                                            jobs: chunks of candidates
+//   dense-rank-k    WeightedSampleWithoutReplacement(weight = rank), on rank 0 only
+//   sparse-reconstruct  non-dense samples in Morton order     jobs: chunks of that order
+//   dense-fallback  the vertices whose reconstruction fell back
+// Dense T rows and reconstructed rows go into transport.prtt.partial as they arrive; dense
+// visibility and feature rows into run/sparse/dense_aux.bin (5·texels bytes per sample, at the
+// sample's offset: a sparse file), candidate weights into run/sparse/rank-k.bin (int32 per
+// candidate), sparse outcomes into run/sparse/sparse_outcome.bin (a byte per Morton position).
+// Every job is journaled after its results are durable ("sjob <phase> …").
+class SparseSamplingPhase : public FarmPhase {
+ public:
+  const char* name() const override { return "sparse"; }
+
+  void Run(FarmContext& ctx) override {
+    if (ctx.rank == 0) {
+      Coordinator(ctx).Run();
+    } else {
+      RunWorker(ctx);
+    }
+  }
+
+ private:
+  static void RunWorker(FarmContext& ctx) {
+    ReadyMsg ready;
+    ready.threads = ctx.threads;
+    std::snprintf(ready.host, sizeof ready.host, "%s", ctx.host.c_str());
+    CheckMpi(MPI_Send(&ready, sizeof ready, MPI_BYTE, 0, kTagReady, ctx.comm), "MPI_Send ready");
+    int jobs = 0;
+    std::string job;
+    for (;;) {
+      MPI_Status st;
+      CheckMpi(MPI_Probe(0, MPI_ANY_TAG, ctx.comm, &st), "MPI_Probe from rank 0");
+      if (st.MPI_TAG == kTagStop) {
+        CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
+                 "MPI_Recv stop");
+        return;
+      }
+      int len = 0;
+      MPI_Get_count(&st, MPI_BYTE, &len);
+      job.resize(static_cast<std::size_t>(std::max(0, len)));
+      CheckMpi(MPI_Recv(job.data(), len, MPI_BYTE, 0, kTagSparseJob, ctx.comm, MPI_STATUS_IGNORE),
+               "MPI_Recv sparse job");
+      if (FailureDue(ctx, jobs)) InjectFailure(ctx, jobs);
+      std::string result;
+      try {
+        result = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, job);
+      } catch (const std::exception& e) {
+        const std::string message = e.what();
+        spdlog::error("rank {}: {}", ctx.rank, message);
+        MPI_Send(message.data(), static_cast<int>(message.size()), MPI_CHAR, 0, kTagFailed,
+                 ctx.comm);
+        MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE);
+        throw CollectiveStop{kExitRankFailed};
+      }
+      CheckMpi(MPI_Send(result.data(), static_cast<int>(result.size()), MPI_BYTE, 0,
+                        kTagSparseResult, ctx.comm),
+               "MPI_Send sparse result");
+      ++jobs;
+    }
+  }
+
+  struct Slot {
+    int rank = 0;
+    bool local = false;
+    bool ready = false;
+    std::optional<SparseJobHeader> job;
+    double since = 0;
+  };
+
+  // One sub-phase's jobs: items [0, items) of a deterministic list, cut by a JobPlanner.
+  struct PhaseJobs {
+    std::string name;
+    SparseJobKind kind = SparseJobKind::kDense;
+    uint64_t items = 0;
+    std::string unit = "samples";
+    uint64_t max_items = 0;  // per job (0: the default sizing)
+    // Verifies a journaled job against the files and applies it to rank 0's state.
+    std::function<bool(const JournalEntry&)> reuse;
+    // Encodes the job for items [h.first, h.first + h.count); may lower h.count (too many bytes).
+    std::function<std::string(SparseJobHeader&)> make_job;
+    // Writes a result into the files and rank 0's state; returns its durable checksum and
+    // the number of transport rows it wrote.
+    std::function<uint64_t(const SparseJobResult&, uint64_t& rows_written)> accept;
+    std::function<void()> sync;  // makes what accept wrote durable
+  };
+
+  class Coordinator {
+   public:
+    explicit Coordinator(FarmContext& ctx)
+        : ctx_(ctx),
+          N_(ctx.samples.size()),
+          T_(6ull * ctx.params.cubemap_n * ctx.params.cubemap_n),
+          n_(ctx.params.cubemap_n),
+          m_(SparseRankResolution(ctx.plan, ctx.params.cubemap_n)),
+          Tm_(static_cast<std::size_t>(6) * m_ * m_) {}
+
+    void Run() {
+      FarmReport& rep = ctx_.report;
+      rep.sparse.enabled = true;
+      fs::create_directories(SparseDir(ctx_.folder));
+      aux_ =
+          std::make_unique<SideFile>((fs::path(SparseDir(ctx_.folder)) / "dense_aux.bin").string());
+      timeout_ = ctx_.options.rank_timeout_s > 0 ? ctx_.options.rank_timeout_s
+                                                 : std::max(300.0, 50.0 * ctx_.options.job_seconds);
+      const double start = Now();
+      for (int r = 1; r < ctx_.size; ++r) slots_.push_back({r, false, false, {}, start});
+      if (ctx_.computes_here()) {
+        slots_.push_back({0, true, true, {}, start});
+        local_ = std::make_unique<SparseLocalWorker>(ctx_);
+      }
+      rep.rank_reports[0].threads = ctx_.threads;
+      rep.rank_reports[0].host = ctx_.host;
+      rep.rank_reports[0].computes = ctx_.computes_here();
+      is_dense_.assign(N_, 0);
+      low_.assign(N_, {});
+      if (FailureDue(ctx_, 0)) InjectFailure(ctx_, 0);
+
+      // §4.1: the initial random dense set, then rank-weighted rounds.
+      const std::size_t budget = SparseDenseBudget(N_, ctx_.plan);
+      std::vector<uint32_t> dense =
+          InitialDenseSet(N_, SparseInitialDenseCount(N_, ctx_.plan), ctx_.plan.seed);
+      rep.sparse.dense_initial = dense.size();
+      DensePhase("dense-initial", dense);
+      const int rounds = SparseRounds(ctx_.plan);
+      for (int it = 0; it < rounds && dense.size() < budget; ++it) {
+        const std::size_t picks = SparsePicksForRound(budget, dense.size(), rounds, it);
+        const std::vector<uint32_t> cand = SparseRankCandidates(is_dense_, picks, ctx_.plan, it);
+        const std::vector<double> weight = RankPhase(it, dense, cand);
+        const std::vector<uint32_t> next = SparsePickByRank(cand, weight, picks, ctx_.plan, it);
+        rep.sparse.candidates_ranked += cand.size();
+        rep.sparse.dense_by_rank += next.size();
+        DensePhase("dense-rank-" + std::to_string(it + 1), next);
+        dense.insert(dense.end(), next.begin(), next.end());
+      }
+
+      // §5: every other vertex from its dense neighbours; fallbacks become dense.
+      std::sort(dense.begin(), dense.end());
+      const std::vector<uint32_t> fallback = SparsePhase(dense);
+      rep.sparse.dense_fallback = fallback.size();
+      DensePhase("dense-fallback", fallback);
+
+      // Release the workers (drain the READY of a worker that never got a job).
+      for (Slot& s : slots_) {
+        if (s.local) continue;
+        if (!s.ready) {
+          ReadyMsg ready;
+          CheckMpi(MPI_Recv(&ready, sizeof ready, MPI_BYTE, s.rank, kTagReady, ctx_.comm,
+                            MPI_STATUS_IGNORE),
+                   "MPI_Recv ready");
+          ready.host[sizeof ready.host - 1] = '\0';
+          rep.rank_reports[s.rank].threads = ready.threads;
+          rep.rank_reports[s.rank].host = ready.host;
+        }
+        CheckMpi(MPI_Send(nullptr, 0, MPI_BYTE, s.rank, kTagStop, ctx_.comm),
+                 "MPI_Send stop to rank " + std::to_string(s.rank));
+      }
+      local_.reset();
+      rep.jobs_total = rep.jobs_done + rep.jobs_reused;
+    }
+
+   private:
+    // ---- dense rows (§4.2): T into the transport file, visibility + features into dense_aux.bin
+    void DensePhase(const std::string& name, const std::vector<uint32_t>& ids) {
+      PhaseJobs p;
+      p.name = name;
+      p.kind = SparseJobKind::kDense;
+      p.items = ids.size();
+      const uint64_t aux_row = 5 * T_;
+      auto apply = [&](uint32_t s, const float* row) {
+        is_dense_[s] = 1;
+        low_[s].resize(Tm_);
+        DownsampleRow(row, n_, m_, low_[s].data());
+      };
+      p.reuse = [&, aux_row](const JournalEntry& e) {
+        const std::size_t c = static_cast<std::size_t>(e.rows.count);
+        std::vector<float> tr(c * T_), vis(c * T_);
+        std::vector<uint8_t> feat(c * T_);
+        std::vector<char> buf(aux_row);
+        for (std::size_t i = 0; i < c; ++i) {
+          const uint32_t s = ids[e.rows.first + i];
+          ctx_.writer->ReadRows(s, 1, tr.data() + i * T_);
+          if (!aux_->Read(buf.data(), aux_row, s * aux_row)) return false;
+          std::memcpy(vis.data() + i * T_, buf.data(), T_ * sizeof(float));
+          std::memcpy(feat.data() + i * T_, buf.data() + T_ * sizeof(float), T_);
+        }
+        if (DenseResultChecksum(c, T_, tr.data(), vis.data(), feat.data()) != e.rows_checksum)
+          return false;
+        for (std::size_t i = 0; i < c; ++i) apply(ids[e.rows.first + i], tr.data() + i * T_);
+        return true;
+      };
+      p.make_job = [&](SparseJobHeader& h) {
+        DenseJob job;
+        job.ids.assign(ids.begin() + static_cast<std::ptrdiff_t>(h.first),
+                       ids.begin() + static_cast<std::ptrdiff_t>(h.first + h.count));
+        return EncodeDenseJob(h, job);
+      };
+      p.accept = [&, aux_row](const SparseJobResult& r, uint64_t& rows_written) {
+        const std::size_t c = static_cast<std::size_t>(r.header.count);
+        if (r.transport.size() != c * T_ || r.visibility.size() != c * T_ ||
+            r.feature.size() != c * T_)
+          throw RankFailure("a dense job came back with the wrong number of rows");
+        std::vector<char> buf(aux_row);
+        for (std::size_t i = 0; i < c; ++i) {
+          const uint32_t s = ids[r.header.first + i];
+          ctx_.writer->WriteRows(s, 1, r.transport.data() + i * T_);
+          std::memcpy(buf.data(), r.visibility.data() + i * T_, T_ * sizeof(float));
+          std::memcpy(buf.data() + T_ * sizeof(float), r.feature.data() + i * T_, T_);
+          aux_->Write(buf.data(), aux_row, s * aux_row);
+          apply(s, r.transport.data() + i * T_);
+        }
+        rows_written = c;
+        return DenseResultChecksum(c, T_, r.transport.data(), r.visibility.data(),
+                                   r.feature.data());
+      };
+      p.sync = [&] {
+        ctx_.writer->Sync();
+        aux_->Sync();
+      };
+      RunJobs(p);
+    }
+
+    // ---- local rank of candidates (§4.1)
+    std::vector<double> RankPhase(int it, const std::vector<uint32_t>& dense,
+                                  const std::vector<uint32_t>& cand) {
+      const double t0 = Now();
+      // Built once per phase over the dense positions, in the order the reference uses.
+      std::vector<Vec3> pts;
+      pts.reserve(dense.size());
+      for (uint32_t d : dense) pts.push_back(ctx_.samples[d].position);
+      const NeighborIndex index(pts, dense);
+      index_seconds_ += Now() - t0;
+      SideFile file((fs::path(SparseDir(ctx_.folder)) / ("rank-" + std::to_string(it + 1) + ".bin"))
+                        .string());
+      std::vector<double> weight(cand.size(), 0.0);
+      PhaseJobs p;
+      p.name = "rank-" + std::to_string(it + 1);
+      p.kind = SparseJobKind::kRank;
+      p.items = cand.size();
+      p.unit = "candidates";
+      p.reuse = [&](const JournalEntry& e) {
+        std::vector<int32_t> w(static_cast<std::size_t>(e.rows.count));
+        if (!file.Read(w.data(), w.size() * sizeof(int32_t), e.rows.first * sizeof(int32_t)) ||
+            Checksum64(w.data(), w.size() * sizeof(int32_t)) != e.rows_checksum)
+          return false;
+        for (std::size_t i = 0; i < w.size(); ++i) weight[e.rows.first + i] = w[i];
+        return true;
+      };
+      p.make_job = [&](SparseJobHeader& h) {
+        RankJob job;
+        job.low_dim = static_cast<uint32_t>(Tm_);
+        std::unordered_map<uint32_t, uint32_t> local;
+        job.offsets.push_back(0);
+        for (uint64_t i = h.first; i < h.first + h.count; ++i) {
+          for (uint32_t d : index.RadiusSearch(ctx_.samples[cand[i]].position, ctx_.plan.radius,
+                                               ctx_.plan.max_neighbors)) {
+            auto [at, added] = local.emplace(d, static_cast<uint32_t>(local.size()));
+            if (added) job.low_rows.insert(job.low_rows.end(), low_[d].begin(), low_[d].end());
+            job.neighbors.push_back(at->second);
+          }
+          job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
+        }
+        return EncodeRankJob(h, job);
+      };
+      p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
+        if (r.weights.size() != r.header.count)
+          throw RankFailure("a rank job came back with the wrong number of weights");
+        file.Write(r.weights.data(), r.weights.size() * sizeof(int32_t),
+                   r.header.first * sizeof(int32_t));
+        for (std::size_t i = 0; i < r.weights.size(); ++i)
+          weight[r.header.first + i] = r.weights[i];
+        rows_written = 0;
+        return Checksum64(r.weights.data(), r.weights.size() * sizeof(int32_t));
+      };
+      p.sync = [&] { file.Sync(); };
+      RunJobs(p, t0);
+      return weight;
+    }
+
+    // ---- sparse vertices (§5); returns the fallbacks, sorted
+    std::vector<uint32_t> SparsePhase(const std::vector<uint32_t>& dense) {
+      const double t0 = Now();
+      std::vector<Vec3> pts;
+      pts.reserve(dense.size());
+      for (uint32_t d : dense) pts.push_back(ctx_.samples[d].position);
+      const NeighborIndex index(pts, dense);
+      index_seconds_ += Now() - t0;
+      // Spatially coherent order: a job's vertices share most of their neighbours.
+      std::vector<std::pair<uint32_t, uint32_t>> keyed;
+      for (uint32_t s = 0; s < N_; ++s) {
+        if (!is_dense_[s]) {
+          keyed.push_back({MortonKey(ctx_.samples[s].position, ctx_.geometry.bounds_min,
+                                     ctx_.geometry.bounds_max),
+                           s});
+        }
+      }
+      std::sort(keyed.begin(), keyed.end());
+      std::vector<uint32_t> order;
+      for (const auto& k : keyed) order.push_back(k.second);
+      std::vector<uint8_t> outcome(order.size(), 0xff);
+      SideFile file((fs::path(SparseDir(ctx_.folder)) / "sparse_outcome.bin").string());
+      const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
+
+      PhaseJobs p;
+      p.name = "sparse-reconstruct";
+      p.kind = SparseJobKind::kSparse;
+      p.items = order.size();
+      p.reuse = [&](const JournalEntry& e) {
+        std::vector<uint8_t> o(static_cast<std::size_t>(e.rows.count));
+        if (!file.Read(o.data(), o.size(), e.rows.first)) return false;
+        std::vector<float> rows;
+        for (std::size_t i = 0; i < o.size(); ++i) {
+          if (o[i] != ok) continue;
+          rows.resize(rows.size() + T_);
+          ctx_.writer->ReadRows(order[e.rows.first + i], 1, rows.data() + rows.size() - T_);
+        }
+        if (SparseResultChecksum(o, rows) != e.rows_checksum) return false;
+        std::copy(o.begin(), o.end(), outcome.begin() + static_cast<std::ptrdiff_t>(e.rows.first));
+        return true;
+      };
+      p.make_job = [&](SparseJobHeader& h) {
+        SparseJob job;
+        job.texels = static_cast<uint32_t>(T_);
+        std::unordered_map<uint32_t, uint32_t> local;
+        std::vector<uint32_t> union_ids;
+        job.offsets.push_back(0);
+        std::vector<uint32_t> nbs;
+        for (uint64_t i = h.first; i < h.first + h.count; ++i) {
+          nbs = index.RadiusSearch(ctx_.samples[order[i]].position, ctx_.plan.radius,
+                                   ctx_.plan.max_neighbors);
+          std::size_t added = 0;
+          for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
+          // A job's rows stay within the job byte limit (at least one vertex per job).
+          if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxJobBytes) {
+            h.count = i - h.first;
+            break;
+          }
+          job.vertices.push_back(order[i]);
+          for (uint32_t d : nbs) {
+            auto [at, is_new] = local.emplace(d, static_cast<uint32_t>(union_ids.size()));
+            if (is_new) union_ids.push_back(d);
+            job.neighbors.push_back(at->second);
+          }
+          job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
+        }
+        // The dense neighbours' rows, read back from the run folder.
+        const std::size_t u = union_ids.size();
+        job.transport.resize(u * T_);
+        job.visibility.resize(u * T_);
+        job.feature.resize(u * T_);
+        std::vector<char> buf(5 * T_);
+        for (std::size_t k = 0; k < u; ++k) {
+          const uint32_t d = union_ids[k];
+          ctx_.writer->ReadRows(d, 1, job.transport.data() + k * T_);
+          if (!aux_->Read(buf.data(), buf.size(), d * 5 * T_))
+            throw FileIoError(SparseDir(ctx_.folder),
+                              "dense_aux.bin lacks dense sample " + std::to_string(d));
+          std::memcpy(job.visibility.data() + k * T_, buf.data(), T_ * sizeof(float));
+          std::memcpy(job.feature.data() + k * T_, buf.data() + T_ * sizeof(float), T_);
+        }
+        rows_shipped_ += u;
+        return EncodeSparseJob(h, job);
+      };
+      p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
+        const std::size_t c = static_cast<std::size_t>(r.header.count);
+        if (r.outcomes.size() != c) throw RankFailure("a sparse job came back incomplete");
+        std::size_t k = 0;
+        for (std::size_t i = 0; i < c; ++i) {
+          if (r.outcomes[i] != ok) continue;
+          if ((k + 1) * T_ > r.transport.size())
+            throw RankFailure("a sparse job came back with too few rows");
+          ctx_.writer->WriteRows(order[r.header.first + i], 1, r.transport.data() + k * T_);
+          ++k;
+        }
+        if (k * T_ != r.transport.size())
+          throw RankFailure("a sparse job came back with too many rows");
+        file.Write(r.outcomes.data(), c, r.header.first);
+        std::copy(r.outcomes.begin(), r.outcomes.end(),
+                  outcome.begin() + static_cast<std::ptrdiff_t>(r.header.first));
+        rows_written = k;
+        return SparseResultChecksum(r.outcomes, r.transport);
+      };
+      p.sync = [&] {
+        ctx_.writer->Sync();
+        file.Sync();
+      };
+      RunJobs(p, t0);
+      ctx_.report.sparse.dense_rows_shipped = rows_shipped_;
+      ctx_.report.sparse.index_seconds = index_seconds_;
+      std::vector<uint32_t> fb;
+      for (std::size_t i = 0; i < order.size(); ++i)
+        if (outcome[i] != ok) fb.push_back(order[i]);
+      std::sort(fb.begin(), fb.end());
+      return fb;
+    }
+
+    void Count(const SparseJobCounters& c, bool this_run) {
+      FarmReport& rep = ctx_.report;
+      rep.sparse.counters += c;
+      rep.rays_traced_all += c.rays_traced;
+      rep.texels_below_horizon_all += c.texels_below_horizon;
+      if (this_run) {
+        rep.rays_traced += c.rays_traced;
+        rep.texels_traced += c.texels_traced;
+        rep.texels_below_horizon += c.texels_below_horizon;
+        rep.rays_below_horizon += c.rays_below_horizon;
+      }
+    }
+
+    // The job queue of one sub-phase (dynamic, adaptive sizes, journaled; as the brute phase).
+    void RunJobs(PhaseJobs& p, double t0 = -1) {
+      if (t0 < 0) t0 = Now();
+      FarmReport& rep = ctx_.report;
+      // Journaled jobs of this phase that still verify are not redone.
+      std::vector<RowRange> done;
+      uint64_t reused_jobs = 0;
+      for (const JournalEntry& e : ctx_.sparse_entries) {
+        if (e.phase != p.name || e.rows.end() > p.items) continue;
+        const bool overlaps = std::any_of(done.begin(), done.end(), [&](const RowRange& d) {
+          return e.rows.first < d.end() && d.first < e.rows.end();
+        });
+        if (overlaps) continue;
+        if (!p.reuse(e)) {
+          ++rep.checkpoints_rejected;
+          continue;
+        }
+        done.push_back(e.rows);
+        ++reused_jobs;
+        ++rep.jobs_reused;
+        if (p.kind != SparseJobKind::kRank) {
+          rep.rows_reused += p.kind == SparseJobKind::kDense
+                                 ? e.rows.count
+                                 : SparseJobCounters::FromVector(e.counters).reconstructed;
+        }
+        Count(SparseJobCounters::FromVector(e.counters), false);
+      }
+      if (reused_jobs > 0) {
+        spdlog::info("[{}] {} job(s) re-used from checkpoints", p.name, reused_jobs);
+      }
+
+      JobSizing sizing;
+      sizing.job_seconds = ctx_.options.job_seconds;
+      sizing.workers = ctx_.computing_ranks();
+      const uint64_t per_item_bytes = p.kind == SparseJobKind::kRank ? 64 : 9 * T_;
+      sizing.max_rows = ctx_.options.max_job_rows > 0
+                            ? ctx_.options.max_job_rows
+                            : std::max<uint64_t>(1, kMaxJobBytes / per_item_bytes);
+      sizing.initial_rows = ctx_.options.initial_job_rows > 0
+                                ? ctx_.options.initial_job_rows
+                                : 4 * static_cast<uint64_t>(ctx_.threads);
+      JobPlanner planner(p.items, done, sizing);
+
+      ProgressOptions po;
+      po.unit = p.unit;
+      po.rate_unit = p.kind == SparseJobKind::kRank ? "" : "rays";
+      po.log_interval_s = ctx_.options.log_interval_s;
+      po.log = !ctx_.options.quiet;
+      po.already_done = planner.done_before_rows();
+      Progress progress(p.name, p.items, po);
+
+      std::vector<JournalEntry> pending;
+      std::string bytes;
+      auto slot_of = [&](int rank) -> Slot& {
+        for (Slot& s : slots_)
+          if (s.rank == rank) return s;
+        throw std::logic_error("no slot for rank " + std::to_string(rank));
+      };
+      auto accept = [&](int rank, const std::string& result_bytes) {
+        Slot& s = slot_of(rank);
+        SparseJobResult r;
+        try {
+          r = DecodeSparseJobResult(result_bytes);
+        } catch (const std::exception& e) {
+          throw RankFailure("rank " + std::to_string(rank) + ": " + e.what());
+        }
+        if (!s.job || s.job->first != r.header.first || s.job->count != r.header.count ||
+            r.header.phase != phase_number_) {
+          throw RankFailure("rank " + std::to_string(rank) + " returned a job it was not given");
+        }
+        uint64_t rows_written = 0;
+        JournalEntry e;
+        e.phase = p.name;
+        e.rows = {r.header.first, r.header.count};
+        e.rows_checksum = p.accept(r, rows_written);
+        e.rank = rank;
+        e.busy_seconds = r.busy_seconds;
+        e.counters = r.counters.ToVector();
+        e.rays_traced = r.counters.rays_traced;
+        e.texels_traced = r.counters.texels_traced;
+        e.texels_below_horizon = rows_written;  // (rows written; not journaled for sjob lines)
+        pending.push_back(e);
+        planner.Measured(rank, r.header.count, r.busy_seconds);
+        s.job.reset();
+      };
+      auto commit = [&] {
+        if (pending.empty()) return;
+        p.sync();                       // results durable first,
+        ctx_.journal->Append(pending);  // then the journal lines that count them
+        for (const JournalEntry& e : pending) {
+          RankReport& rr = rep.rank_reports[e.rank];
+          ++rr.jobs;
+          rr.rows += e.rows.count;
+          rr.rays_traced += e.rays_traced;
+          rr.busy_seconds += e.busy_seconds;
+          ++rep.jobs_done;
+          rep.rows_done += e.texels_below_horizon;
+          Count(SparseJobCounters::FromVector(e.counters), true);
+          progress.Advance(e.rows.count, e.rays_traced);
+          ++jobs_this_run_;
+        }
+        pending.clear();
+        if (FailureDue(ctx_, jobs_this_run_)) InjectFailure(ctx_, jobs_this_run_);
+      };
+
+      for (;;) {
+        for (Slot& s : slots_) {
+          if (s.job || !s.ready) continue;
+          std::optional<RowRange> next = planner.Next(s.rank);
+          if (!next) continue;
+          SparseJobHeader h;
+          h.kind = static_cast<uint32_t>(p.kind);
+          h.phase = phase_number_;
+          h.first = next->first;
+          h.count = next->count;
+          std::string job = p.make_job(h);
+          if (h.count < next->count) planner.Return({h.first + h.count, next->count - h.count});
+          s.job = h;
+          s.since = Now();
+          if (s.local) {
+            local_->Give(std::move(job));
+          } else {
+            CheckMpi(MPI_Send(job.data(), static_cast<int>(job.size()), MPI_BYTE, s.rank,
+                              kTagSparseJob, ctx_.comm),
+                     "MPI_Send job to rank " + std::to_string(s.rank));
+          }
+        }
+        const bool idle = std::none_of(slots_.begin(), slots_.end(),
+                                       [](const Slot& s) { return s.job.has_value(); });
+        if (idle && pending.empty() && planner.unassigned_rows() == 0) break;
+
+        bool busy = false;
+        if (local_) {
+          while (std::optional<SparseLocalWorker::Result> r = local_->Poll()) {
+            if (r->error) std::rethrow_exception(r->error);
+            accept(0, r->bytes);
+            busy = true;
+          }
+        }
+        for (;;) {
+          int flag = 0;
+          MPI_Status st;
+          CheckMpi(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, ctx_.comm, &flag, &st), "MPI_Iprobe");
+          if (!flag) break;
+          busy = true;
+          const int src = st.MPI_SOURCE;
+          if (st.MPI_TAG == kTagReady) {
+            ReadyMsg ready;
+            CheckMpi(MPI_Recv(&ready, sizeof ready, MPI_BYTE, src, kTagReady, ctx_.comm,
+                              MPI_STATUS_IGNORE),
+                     "MPI_Recv ready");
+            ready.host[sizeof ready.host - 1] = '\0';
+            rep.rank_reports[src].threads = ready.threads;
+            rep.rank_reports[src].host = ready.host;
+            slot_of(src).ready = true;
+          } else if (st.MPI_TAG == kTagSparseResult) {
+            int len = 0;
+            MPI_Get_count(&st, MPI_BYTE, &len);
+            bytes.resize(static_cast<std::size_t>(std::max(0, len)));
+            CheckMpi(MPI_Recv(bytes.data(), len, MPI_BYTE, src, kTagSparseResult, ctx_.comm,
+                              MPI_STATUS_IGNORE),
+                     "MPI_Recv result from rank " + std::to_string(src));
+            accept(src, bytes);
+          } else if (st.MPI_TAG == kTagFailed) {
+            int len = 0;
+            MPI_Get_count(&st, MPI_CHAR, &len);
+            std::string message(static_cast<std::size_t>(std::max(0, len)), '\0');
+            MPI_Recv(message.data(), len, MPI_CHAR, src, kTagFailed, ctx_.comm, MPI_STATUS_IGNORE);
+            throw RankFailure("rank " + std::to_string(src) + " failed: " + message);
+          } else {
+            throw RankFailure("unexpected message tag " + std::to_string(st.MPI_TAG) +
+                              " from rank " + std::to_string(src));
+          }
+        }
+        commit();
+
+        const double now = Now();
+        for (const Slot& s : slots_) {
+          if (!s.job || now - s.since <= timeout_) continue;
+          throw RankFailure("rank " + std::to_string(s.rank) + " has not returned its job (" +
+                            p.name + " items " + std::to_string(s.job->first) + ".." +
+                            std::to_string(s.job->first + s.job->count - 1) + ") for " +
+                            std::to_string(static_cast<int>(now - s.since)) +
+                            " s (--rank-timeout); giving up");
+        }
+        progress.Advance(0);
+        if (!busy) {
+          if (local_) {
+            local_->Wait(0.001);
+          } else {
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
+          }
+        }
+      }
+      progress.Finish();
+      ++phase_number_;
+      rep.sparse.phases.push_back({p.name, Now() - t0, p.items, reused_jobs});
+    }
+
+    FarmContext& ctx_;
+    const std::size_t N_;
+    const std::size_t T_;
+    const int n_;
+    const int m_;
+    const std::size_t Tm_;
+    std::vector<Slot> slots_;
+    std::unique_ptr<SparseLocalWorker> local_;
+    std::unique_ptr<SideFile> aux_;
+    double timeout_ = 300;
+    std::vector<uint8_t> is_dense_;
+    std::vector<std::vector<float>> low_;  // downsampled rows of the dense vertices
+    uint32_t phase_number_ = 0;
+    int jobs_this_run_ = 0;
+    uint64_t rows_shipped_ = 0;
+    double index_seconds_ = 0;
+  };
+};
+
 // ------------------------------------------------------------------------------ finalize phase
 
 class FinalizePhase : public FarmPhase {
@@ -908,12 +1710,11 @@ int RunFarm(const FarmOptions& options) {
 
   std::vector<std::unique_ptr<FarmPhase>> phases;
   phases.push_back(std::make_unique<SetupPhase>());
-  phases.push_back(std::make_unique<BruteSamplingPhase>());
-  phases.push_back(std::make_unique<FinalizePhase>());
 
   const double start = Now();
   int exit_code = kExitOk;
-  for (const auto& phase : phases) {
+  for (std::size_t i = 0; i < phases.size(); ++i) {
+    FarmPhase* phase = phases[i].get();
     const double t0 = Now();
     try {
       phase->Run(ctx);
@@ -944,6 +1745,15 @@ int RunFarm(const FarmOptions& options) {
     rep.phases.push_back({phase->name(), Now() - t0});
     if (std::string(phase->name()) == ctx.method) rep.sampling_seconds = Now() - t0;
     if (exit_code != kExitOk) break;
+    if (i == 0) {
+      // Setup told every rank the method: its sampling phase, then finalize.
+      if (ctx.params.sparse) {
+        phases.push_back(std::make_unique<SparseSamplingPhase>());
+      } else {
+        phases.push_back(std::make_unique<BruteSamplingPhase>());
+      }
+      phases.push_back(std::make_unique<FinalizePhase>());
+    }
   }
   rep.wall_seconds = Now() - start;
   rep.status = exit_code == kExitOk ? "ok" : "failed";

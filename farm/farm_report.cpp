@@ -18,6 +18,13 @@ double FarmReport::LoadImbalance() const {
   return (n == 0 || sum <= 0) ? 0.0 : max / (sum / n);
 }
 
+double SparseFarmReport::SampledFraction() const {
+  return counters.texels_above_horizon == 0
+             ? 0.0
+             : static_cast<double>(counters.texels_traced) /
+                   static_cast<double>(counters.texels_above_horizon);
+}
+
 std::string FarmReport::ToJsonText() const {
   using Json = nlohmann::ordered_json;
   Json phases_json = Json::array();
@@ -75,6 +82,37 @@ std::string FarmReport::ToJsonText() const {
       {"load_imbalance", LoadImbalance()},
       {"rank_details", ranks_json},
   };
+  if (sparse.enabled) {
+    Json sp = Json::array();
+    for (const SparsePhaseReport& p : sparse.phases) {
+      sp.push_back({{"name", p.name},
+                    {"wall_seconds", p.wall_seconds},
+                    {"items", p.items},
+                    {"jobs_reused", p.jobs_reused}});
+    }
+    const SparseJobCounters& c = sparse.counters;
+    j["sparse"] = {
+        {"phases", sp},
+        {"dense_initial", sparse.dense_initial},
+        {"dense_by_rank", sparse.dense_by_rank},
+        {"dense_fallback", sparse.dense_fallback},
+        {"dense_total", sparse.dense_initial + sparse.dense_by_rank + sparse.dense_fallback},
+        {"sparse", c.reconstructed},
+        {"candidates_ranked", sparse.candidates_ranked},
+        {"sampled_fraction", sparse.SampledFraction()},
+        {"texels_traced", c.texels_traced},
+        {"texels_above_horizon", c.texels_above_horizon},
+        {"dense_texels",
+         {{"grid", c.grid_texels}, {"feature", c.feature_texels}, {"borrowed", c.borrowed_texels}}},
+        {"features_traced", c.features_traced},
+        {"fallbacks",
+         {{"too_few_neighbors", c.fallback_too_few_neighbors},
+          {"solve_failed", c.fallback_solve_failed}}},
+        {"l1_solver", {{"lars", c.solved_lars}, {"admm", c.solved_admm}, {"zero", c.zero_systems}}},
+        {"dense_rows_shipped", sparse.dense_rows_shipped},
+        {"index_seconds", sparse.index_seconds},
+    };
+  }
   return j.dump(2) + "\n";
 }
 

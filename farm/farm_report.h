@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "farm/sparse_jobs.h"
+
 namespace prt {
 
 struct RankReport {
@@ -21,6 +23,28 @@ struct RankReport {
 struct PhaseReport {
   std::string name;
   double wall_seconds = 0;
+};
+
+// The sparse method's figures (report.json "sparse"; docs/farm.md, "Sparse method").
+struct SparsePhaseReport {
+  std::string name;  // dense-initial, rank-1, dense-rank-1, …, sparse-reconstruct, dense-fallback
+  double wall_seconds = 0;
+  uint64_t items = 0;  // samples or candidates of the phase
+  uint64_t jobs_reused = 0;
+};
+
+struct SparseFarmReport {
+  bool enabled = false;
+  std::vector<SparsePhaseReport> phases;
+  uint64_t dense_initial = 0;
+  uint64_t dense_by_rank = 0;
+  uint64_t dense_fallback = 0;
+  uint64_t candidates_ranked = 0;
+  uint64_t dense_rows_shipped = 0;  // dense neighbour rows sent with sparse jobs (this run)
+  double index_seconds = 0;         // building the neighbour indices on rank 0
+  SparseJobCounters counters;       // over the whole matrix, re-used jobs included
+  // Traced texels / texels above the horizon (what brute force would evaluate).
+  double SampledFraction() const;
 };
 
 struct FarmReport {
@@ -60,6 +84,7 @@ struct FarmReport {
   uint64_t checkpoints_rejected = 0;  // journaled jobs whose rows did not verify
 
   std::vector<RankReport> rank_reports;
+  SparseFarmReport sparse;
 
   // max / mean busy time over the computing ranks (1 = perfect balance; 0 when none computed).
   double LoadImbalance() const;

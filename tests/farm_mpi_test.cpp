@@ -21,6 +21,7 @@
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
 #include "worker/embree_scene.h"
+#include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
 
 namespace prt {
@@ -54,7 +55,8 @@ RunResult Farm(int ranks, const std::string& args) {
   ApplyMpiTestEnvironment();
   const std::string command = std::string(PRT_MPIEXEC) + " " + PRT_MPIEXEC_NUMPROC_FLAG + " " +
                               std::to_string(ranks) + " " + PRT_MPIEXEC_PREFLAGS + " " +
-                              PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args + " 2>&1";
+                              PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args +
+                              " --keep-raw 2>&1";  // these tests read transport.prtt
   RunResult r;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (!pipe) return r;
@@ -288,9 +290,186 @@ TEST(FarmMpiTest, BadInputAndUnwritableOutputGiveExitCodes2And3) {
       {1, dir + "/invalid.toml --out " + dir + "/r2", 2, "not a power of two"},
       {1, dir + "/nomesh.toml --out " + dir + "/r3", 2, "missing.off"},
       {2, kScene + " --out " + dir + "/a_file/run", 3, "cannot create the run folder"},
-      {1, kScene + " --method sparse --out " + dir + "/r4", 2, "only brute"},
   });
   EXPECT_FALSE(fs::exists(dir + "/r1"));  // nothing is created for a scene that does not load
+}
+
+// ------------------------------------------------------------------------------ sparse method
+
+// 264 samples (a box on a 16×16 ground, n = 8), method = "sparse" in the scene.
+const std::string kSparseScene = std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml";
+// Jobs of 7 items (fewer in each phase's guided tail): with one rank the job sequence is fixed.
+const std::string kSparseJobs =
+    " --initial-job-rows 7 --max-job-rows 7 --rows-per-block 16 --log-interval 0.2";
+
+struct SparseReference {
+  std::vector<float> rows;
+  SparseReport report;
+};
+
+// The in-process driver (RunSparsePrecomputation) on the same scene and settings.
+const SparseReference& SparseKernelReference() {
+  static const SparseReference ref = [] {
+    SparseReference r;
+    const SceneDescription scene = LoadSceneFile(kSparseScene);
+    const SceneGeometry geometry = BuildSceneGeometry(scene);
+    const std::vector<SpatialSample> samples = SpatialSamplesOf(geometry);
+    const EmbreeScene embree(geometry);
+    TransportSamplerOptions options;
+    options.rays_per_texel = scene.sampling.rays_per_texel;
+    options.seed = scene.sampling.seed;
+    const TransportSampler sampler(embree, scene.cubemap_n, options);
+    const SparsePlan plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
+    r.rows = RunSparsePrecomputation(sampler, samples, plan, r.report);
+    return r;
+  }();
+  return ref;
+}
+
+void ExpectEqualsSparseReference(const std::string& run) {
+  const SparseReference& ref = SparseKernelReference();
+  TransportFileReader reader(run + "/transport.prtt");
+  ASSERT_EQ(reader.info().rows, 264u);
+  ASSERT_EQ(reader.info().cols(), 384u);
+  EXPECT_EQ(reader.FindCorruptBlock(), -1);
+  std::vector<float> rows(ref.rows.size());
+  reader.ReadRows(0, reader.info().rows, rows.data());
+  ASSERT_EQ(std::memcmp(rows.data(), ref.rows.data(), rows.size() * sizeof(float)), 0)
+      << "the farmed sparse rows differ from RunSparsePrecomputation's";
+}
+
+// Journal lines per sparse phase, in journal order.
+std::vector<std::string> JournalPhases(const std::string& run) {
+  std::ifstream in(run + "/checkpoints/journal.txt");
+  std::string line;
+  std::vector<std::string> phases;
+  while (std::getline(in, line)) {
+    if (line.rfind("sjob ", 0) != 0) continue;
+    std::istringstream words(line);
+    std::string tag, phase;
+    words >> tag >> phase;
+    phases.push_back(phase);
+  }
+  return phases;
+}
+
+TEST(FarmMpiSparseTest, OneTwoAndThreeRanksGiveTheInProcessDriversBytes) {
+  const std::string dir = WorkDir("sparse_ranks");
+  const SparseReference& ref = SparseKernelReference();
+  // The scene says method = "sparse": no --method needed.
+  for (int ranks : {1, 2, 3}) {
+    const std::string run = dir + "/np" + std::to_string(ranks);
+    const RunResult r = Farm(ranks, kSparseScene + " --out " + run + kSparseJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("[sparse-reconstruct]"), std::string::npos) << r.output;
+    ExpectEqualsSparseReference(run);
+    const nlohmann::json rep = ReadReport(run);
+    EXPECT_EQ(rep["method"], "sparse");
+    EXPECT_EQ(rep["ranks"], ranks);
+    const nlohmann::json& sp = rep["sparse"];
+    EXPECT_EQ(sp["dense_initial"], ref.report.dense_initial);
+    EXPECT_EQ(sp["dense_by_rank"], ref.report.dense_by_rank);
+    EXPECT_EQ(sp["dense_fallback"], ref.report.dense_fallback);
+    EXPECT_EQ(sp["sparse"], ref.report.sparse);
+    EXPECT_EQ(sp["sparse"].get<uint64_t>() + sp["dense_total"].get<uint64_t>(), 264u);
+    EXPECT_GT(ref.report.sparse, 100u);        // most vertices are reconstructed,
+    EXPECT_GT(ref.report.dense_fallback, 0u);  // some fall back
+    EXPECT_EQ(sp["fallbacks"]["too_few_neighbors"],
+              ref.report.sparse_stats.fallback_too_few_neighbors);
+    EXPECT_EQ(sp["fallbacks"]["solve_failed"], ref.report.sparse_stats.fallback_solve_failed);
+    EXPECT_EQ(sp["l1_solver"]["lars"], ref.report.sparse_stats.solved_lars);
+    EXPECT_EQ(sp["l1_solver"]["admm"], ref.report.sparse_stats.solved_admm);
+    EXPECT_EQ(sp["l1_solver"]["zero"], ref.report.sparse_stats.zero_systems);
+    EXPECT_DOUBLE_EQ(sp["sampled_fraction"].get<double>(), ref.report.SampledFraction());
+    EXPECT_LT(sp["sampled_fraction"].get<double>(), 0.5);
+    EXPECT_EQ(rep["rays_traced"], ref.report.dense_angular.trace.rays_traced +
+                                      ref.report.sparse_stats.trace.rays_traced);
+    std::vector<std::string> phases;
+    for (const auto& p : sp["phases"]) phases.push_back(p["name"]);
+    EXPECT_EQ(phases, (std::vector<std::string>{"dense-initial", "rank-1", "dense-rank-1", "rank-2",
+                                                "dense-rank-2", "rank-3", "dense-rank-3",
+                                                "sparse-reconstruct", "dense-fallback"}));
+    std::vector<std::string> top;
+    for (const auto& p : rep["phases"]) top.push_back(p["name"]);
+    EXPECT_EQ(top, (std::vector<std::string>{"setup", "sparse", "finalize"}));
+    EXPECT_EQ(rep["jobs"]["done"], JournalPhases(run).size());
+    EXPECT_EQ(rep["jobs"]["rows_done"], 264);
+    ASSERT_EQ(rep["rank_details"].size(), static_cast<std::size_t>(ranks));
+    EXPECT_GE(rep["load_imbalance"].get<double>(), 1.0);
+  }
+  // --method brute overrides the scene's method.
+  const std::string run = dir + "/brute";
+  const RunResult r = Farm(1, kSparseScene + " --method brute --out " + run + kSparseJobs);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(ReadReport(run)["method"], "brute");
+  EXPECT_FALSE(ReadReport(run).contains("sparse"));
+}
+
+// Rank `fail_rank` dies after `fail_after` journaled jobs (which must land in `phase`); the
+// resumed run re-uses exactly the journaled jobs and writes the in-process driver's bytes.
+void SparseKillAndResume(const std::string& name, int ranks, int fail_rank, int fail_after,
+                         const std::string& phase) {
+  const std::string run = WorkDir(name) + "/run";
+  const RunResult killed =
+      Farm(ranks, kSparseScene + " --out " + run + kSparseJobs + " --fail-after-jobs " +
+                      std::to_string(fail_after) + " --fail-rank " + std::to_string(fail_rank));
+  EXPECT_EQ(killed.exit_code, 4) << killed.output;
+  EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
+  const std::vector<std::string> journaled = JournalPhases(run);
+  ASSERT_FALSE(journaled.empty());
+  if (!phase.empty()) {
+    EXPECT_EQ(journaled.back(), phase) << "the kill landed elsewhere";
+  }
+  if (fail_rank == 0) {
+    EXPECT_EQ(journaled.size(), static_cast<std::size_t>(fail_after));
+  }
+
+  const RunResult resumed = Farm(ranks, kSparseScene + " --out " + run + kSparseJobs + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  ExpectEqualsSparseReference(run);
+  const nlohmann::json rep = ReadReport(run);
+  EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], journaled.size());
+  EXPECT_EQ(rep["jobs"]["checkpoints_rejected"], 0);
+  EXPECT_EQ(rep["jobs"]["rows_done"].get<int>() + rep["jobs"]["rows_reused"].get<int>(), 264);
+  EXPECT_EQ(rep["jobs"]["done"].get<std::size_t>() + journaled.size(), JournalPhases(run).size());
+  const SparseReference& ref = SparseKernelReference();
+  EXPECT_EQ(rep["sparse"]["sparse"], ref.report.sparse);
+  EXPECT_DOUBLE_EQ(rep["sparse"]["sampled_fraction"].get<double>(), ref.report.SampledFraction());
+  EXPECT_EQ(rep["rays_traced_including_reused"],
+            ref.report.dense_angular.trace.rays_traced + ref.report.sparse_stats.trace.rays_traced);
+}
+
+// The number of journaled jobs before the first job of `phase` in a whole single-rank run
+// (its job sequence is fixed), plus `offset`.
+int SingleRankJobsBefore(const std::string& phase, int offset) {
+  static const std::vector<std::string> phases = [] {
+    const std::string probe = WorkDir("sparse_probe") + "/run";
+    const RunResult r = Farm(1, kSparseScene + " --out " + probe + kSparseJobs);
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return JournalPhases(probe);
+  }();
+  const auto at = std::find(phases.begin(), phases.end(), phase);
+  EXPECT_NE(at, phases.end()) << phase;
+  return static_cast<int>(at - phases.begin()) + offset;
+}
+
+TEST(FarmMpiSparseTest, SingleRankKilledInTheDenseAndRankPhasesThenResume) {
+  SparseKillAndResume("sparse_kill_initial", 1, 0, 1, "dense-initial");
+  SparseKillAndResume("sparse_kill_rank", 1, 0, SingleRankJobsBefore("rank-2", 2), "rank-2");
+  SparseKillAndResume("sparse_kill_dense_rank", 1, 0, SingleRankJobsBefore("dense-rank-1", 1),
+                      "dense-rank-1");
+}
+
+TEST(FarmMpiSparseTest, SingleRankKilledInTheSparseAndFallbackPhasesThenResume) {
+  SparseKillAndResume("sparse_kill_sparse", 1, 0, SingleRankJobsBefore("sparse-reconstruct", 3),
+                      "sparse-reconstruct");
+  SparseKillAndResume("sparse_kill_fallback", 1, 0, SingleRankJobsBefore("dense-fallback", 1),
+                      "dense-fallback");
+}
+
+TEST(FarmMpiSparseTest, WorkerOrCoordinatorKilledWithTwoRanksThenResume) {
+  SparseKillAndResume("sparse_kill_worker", 2, 1, 12, "");
+  SparseKillAndResume("sparse_kill_coordinator", 2, 0, 30, "");
 }
 
 // The rest of the command line is tested without MPI in farm/farm_options_test.cpp.

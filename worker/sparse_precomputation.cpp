@@ -48,6 +48,56 @@ std::vector<uint32_t> InitialDenseSet(std::size_t sample_count, std::size_t coun
   return WeightedSampleWithoutReplacement(ids, w, count, seed ^ 0x1234567ull);
 }
 
+std::size_t SparseDenseBudget(std::size_t N, const SparsePlan& plan) {
+  return std::min(N,
+                  static_cast<std::size_t>(std::ceil(plan.dense_budget * static_cast<double>(N))));
+}
+
+std::size_t SparseInitialDenseCount(std::size_t N, const SparsePlan& plan) {
+  return std::min(
+      SparseDenseBudget(N, plan),
+      std::max<std::size_t>(
+          1, static_cast<std::size_t>(std::ceil(plan.initial_fraction * static_cast<double>(N)))));
+}
+
+int SparseRounds(const SparsePlan& plan) {
+  return std::max(1, plan.iterations);
+}
+
+std::size_t SparsePicksForRound(std::size_t budget, std::size_t dense_count, int rounds, int it) {
+  const std::size_t remaining_rounds = static_cast<std::size_t>(rounds - it);
+  return (budget - dense_count + remaining_rounds - 1) / remaining_rounds;
+}
+
+std::vector<uint32_t> SparseRankCandidates(std::span<const uint8_t> is_dense, std::size_t picks,
+                                           const SparsePlan& plan, int it) {
+  std::vector<uint32_t> pool;
+  for (std::size_t s = 0; s < is_dense.size(); ++s)
+    if (!is_dense[s]) pool.push_back(static_cast<uint32_t>(s));
+  const std::size_t ncand = std::min(
+      pool.size(), picks * static_cast<std::size_t>(std::max(1, plan.candidates_per_pick)));
+  std::vector<double> ones(pool.size(), 1.0);
+  return WeightedSampleWithoutReplacement(pool, ones, ncand, plan.seed + 101 * (it + 1));
+}
+
+int SparseCandidateWeight(std::span<const float* const> rows, std::size_t low_dim,
+                          const SparsePlan& plan) {
+  // Rank ≥ 1 everywhere so that every region keeps some chance; empty neighbourhoods (no
+  // dense vertex within the radius) get the largest weight: nothing is known there.
+  return rows.empty() ? plan.max_neighbors
+                      : std::max(1, LocalRank(rows, low_dim, plan.rank_threshold));
+}
+
+std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
+                                       std::span<const double> weights, std::size_t picks,
+                                       const SparsePlan& plan, int it) {
+  return WeightedSampleWithoutReplacement(candidates, weights, picks, plan.seed + 7919 * (it + 1));
+}
+
+int SparseRankResolution(const SparsePlan& plan, int cubemap_n) {
+  return std::min(plan.rank_resolution, cubemap_n);
+}
+
 std::vector<float> RunSparsePrecomputation(
     const TransportSampler& sampler, std::span<const SpatialSample> samples, const SparsePlan& plan,
     SparseReport& report,
@@ -56,7 +106,7 @@ std::vector<float> RunSparsePrecomputation(
   const CubemapLayout& layout = sampler.layout();
   const std::size_t T = layout.texel_count();
   const int n = layout.n();
-  const int m = std::min(plan.rank_resolution, n);
+  const int m = SparseRankResolution(plan, n);
   const std::size_t Tm = static_cast<std::size_t>(6) * m * m;
   report = SparseReport{};
   report.samples = N;
@@ -91,33 +141,21 @@ std::vector<float> RunSparsePrecomputation(
   };
 
   // Phase 1: initial random set, then rank-weighted rounds.
-  const std::size_t budget =
-      std::min(N, static_cast<std::size_t>(std::ceil(plan.dense_budget * static_cast<double>(N))));
-  const std::size_t initial = std::min(
-      budget,
-      std::max<std::size_t>(
-          1, static_cast<std::size_t>(std::ceil(plan.initial_fraction * static_cast<double>(N)))));
+  const std::size_t budget = SparseDenseBudget(N, plan);
+  const std::size_t initial = SparseInitialDenseCount(N, plan);
   std::vector<uint32_t> dense = InitialDenseSet(N, initial, plan.seed);
   report.dense_initial = dense.size();
   sample_dense(dense, "dense-initial");
-  const int rounds = std::max(1, plan.iterations);
+  const int rounds = SparseRounds(plan);
   for (int it = 0; it < rounds && dense.size() < budget; ++it) {
     const double t0 = Now();
-    const std::size_t remaining_rounds = static_cast<std::size_t>(rounds - it);
-    const std::size_t picks = (budget - dense.size() + remaining_rounds - 1) / remaining_rounds;
+    const std::size_t picks = SparsePicksForRound(budget, dense.size(), rounds, it);
     std::vector<Vec3> pts;
     pts.reserve(dense.size());
     for (uint32_t d : dense) pts.push_back(samples[d].position);
     NeighborIndex index(pts, dense);
     // Candidates: a deterministic random subset of the non-dense samples.
-    std::vector<uint32_t> pool;
-    for (uint32_t s = 0; s < N; ++s)
-      if (!report.is_dense[s]) pool.push_back(s);
-    const std::size_t ncand = std::min(
-        pool.size(), picks * static_cast<std::size_t>(std::max(1, plan.candidates_per_pick)));
-    std::vector<double> ones(pool.size(), 1.0);
-    const std::vector<uint32_t> cand =
-        WeightedSampleWithoutReplacement(pool, ones, ncand, plan.seed + 101 * (it + 1));
+    const std::vector<uint32_t> cand = SparseRankCandidates(report.is_dense, picks, plan, it);
     std::vector<double> weight(cand.size(), 0.0);
     tbb::parallel_for(std::size_t{0}, cand.size(), [&](std::size_t i) {
       const std::vector<uint32_t> nb =
@@ -125,13 +163,9 @@ std::vector<float> RunSparsePrecomputation(
       std::vector<const float*> rows;
       rows.reserve(nb.size());
       for (uint32_t d : nb) rows.push_back(low[d].data());
-      // Rank ≥ 1 everywhere so that every region keeps some chance; empty neighbourhoods (no
-      // dense vertex within the radius) get the largest weight: nothing is known there.
-      weight[i] = nb.empty() ? static_cast<double>(plan.max_neighbors)
-                             : std::max(1, LocalRank(rows, Tm, plan.rank_threshold));
+      weight[i] = SparseCandidateWeight(rows, Tm, plan);
     });
-    const std::vector<uint32_t> next =
-        WeightedSampleWithoutReplacement(cand, weight, picks, plan.seed + 7919 * (it + 1));
+    const std::vector<uint32_t> next = SparsePickByRank(cand, weight, picks, plan, it);
     for (std::size_t i = 0; i < cand.size(); ++i)
       report.local_rank[cand[i]] = static_cast<int>(weight[i]);
     report.seconds_rank += Now() - t0;

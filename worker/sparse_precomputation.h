@@ -58,6 +58,31 @@ struct SparseReport {
 // Deterministic initial dense set: `count` distinct sample indices, sorted.
 std::vector<uint32_t> InitialDenseSet(std::size_t sample_count, std::size_t count, uint64_t seed);
 
+// The per-phase steps of the dense-vertex selection (§4.1), shared by RunSparsePrecomputation
+// and the farm's MPI driver (farm/sparse_farm_phases.cpp) so that both produce the same T.
+// Total number of dense vertices aimed for: ceil(dense_budget · N), at most N.
+std::size_t SparseDenseBudget(std::size_t sample_count, const SparsePlan& plan);
+// Size of the initial random dense set: ceil(initial_fraction · N) in [1, budget].
+std::size_t SparseInitialDenseCount(std::size_t sample_count, const SparsePlan& plan);
+// Rounds of rank-weighted picks: max(1, iterations).
+int SparseRounds(const SparsePlan& plan);
+// Dense vertices to pick in round `it` (0-based) when `dense_count` are dense already.
+std::size_t SparsePicksForRound(std::size_t budget, std::size_t dense_count, int rounds, int it);
+// The candidates of round `it`: a deterministic random subset of the non-dense samples
+// (candidates_per_pick per pick), sorted.
+std::vector<uint32_t> SparseRankCandidates(std::span<const uint8_t> is_dense, std::size_t picks,
+                                           const SparsePlan& plan, int it);
+// A candidate's weight from its dense neighbours' downsampled rows (6·m·m floats each): the
+// local rank, at least 1; max_neighbors when it has no dense neighbour (nothing is known there).
+int SparseCandidateWeight(std::span<const float* const> neighbor_low_rows, std::size_t low_dim,
+                          const SparsePlan& plan);
+// The next dense vertices of round `it`, drawn with weight = rank; sorted.
+std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
+                                       std::span<const double> weights, std::size_t picks,
+                                       const SparsePlan& plan, int it);
+// Resolution m of the downsampled rows used for rank estimation at cubemap resolution n.
+int SparseRankResolution(const SparsePlan& plan, int cubemap_n);
+
 // Runs every phase in this process (TBB threads). Returns T as sample_count rows of
 // texel_count floats. `progress` (may be empty) receives (phase name, done, total).
 std::vector<float> RunSparsePrecomputation(

@@ -1,0 +1,385 @@
+// Jobs of the farm's sparse method (see sparse_jobs.h).
+#include "farm/sparse_jobs.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <stdexcept>
+#include <type_traits>
+
+#include "vocabulary/errors.h"
+#include "vocabulary/transport_file.h"
+
+namespace prt {
+
+namespace {
+
+constexpr uint32_t kJobMagic = 0x4a535250u;     // "PRSJ"
+constexpr uint32_t kResultMagic = 0x52535250u;  // "PRSR"
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+class ByteWriter {
+ public:
+  template <typename T>
+  void Put(const T& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    const auto* p = reinterpret_cast<const char*>(&v);
+    bytes_.append(p, sizeof(T));
+  }
+  template <typename T>
+  void PutVector(const std::vector<T>& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    Put(static_cast<uint64_t>(v.size()));
+    bytes_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+  }
+  std::string& bytes() { return bytes_; }
+
+ private:
+  std::string bytes_;
+};
+
+class ByteReader {
+ public:
+  ByteReader(const std::string& bytes, std::size_t at) : bytes_(bytes), at_(at) {}
+  template <typename T>
+  T Get() {
+    T v;
+    Need(sizeof(T));
+    std::memcpy(&v, bytes_.data() + at_, sizeof(T));
+    at_ += sizeof(T);
+    return v;
+  }
+  template <typename T>
+  std::vector<T> GetVector() {
+    const uint64_t n = Get<uint64_t>();
+    if (n > (bytes_.size() - at_) / sizeof(T)) throw std::runtime_error("truncated sparse job");
+    std::vector<T> v(static_cast<std::size_t>(n));
+    std::memcpy(v.data(), bytes_.data() + at_, v.size() * sizeof(T));
+    at_ += v.size() * sizeof(T);
+    return v;
+  }
+
+ private:
+  void Need(std::size_t n) const {
+    if (bytes_.size() - at_ < n || at_ > bytes_.size())
+      throw std::runtime_error("truncated sparse job message");
+  }
+  const std::string& bytes_;
+  std::size_t at_;
+};
+
+void PutHeader(ByteWriter& w, uint32_t magic, const SparseJobHeader& h) {
+  w.Put(magic);
+  w.Put(h);
+}
+
+SparseJobHeader GetHeader(ByteReader& r, uint32_t magic) {
+  if (r.Get<uint32_t>() != magic) throw std::runtime_error("not a sparse job message");
+  return r.Get<SparseJobHeader>();
+}
+
+// A neighbour list is well-formed: offsets start at 0, never decrease, end at neighbors.size(),
+// and every neighbour index is inside the union.
+void CheckLists(std::size_t items, const std::vector<uint32_t>& offsets,
+                const std::vector<uint32_t>& neighbors, std::size_t union_rows) {
+  if (offsets.size() != items + 1 || offsets.front() != 0 || offsets.back() != neighbors.size())
+    throw std::runtime_error("malformed neighbour lists in a sparse job");
+  for (std::size_t i = 0; i < items; ++i)
+    if (offsets[i] > offsets[i + 1]) throw std::runtime_error("malformed neighbour offsets");
+  for (uint32_t n : neighbors)
+    if (n >= union_rows) throw std::runtime_error("neighbour index outside the job's rows");
+}
+
+void CheckFinite(const float* v, std::size_t count, const char* what, uint32_t sample) {
+  for (std::size_t i = 0; i < count; ++i)
+    if (!std::isfinite(v[i]))
+      throw NumericalError(std::string("non-finite ") + what + " value for sample " +
+                           std::to_string(sample));
+}
+
+}  // namespace
+
+std::vector<uint64_t> SparseJobCounters::ToVector() const {
+  return {rays_traced,           texels_traced,
+          texels_below_horizon,  rays_below_horizon,
+          texels_above_horizon,  grid_texels,
+          feature_texels,        borrowed_texels,
+          reconstructed,         fallback_too_few_neighbors,
+          fallback_solve_failed, solved_lars,
+          solved_admm,           zero_systems,
+          features_traced};
+}
+
+SparseJobCounters SparseJobCounters::FromVector(std::span<const uint64_t> v) {
+  uint64_t a[kCount] = {};
+  for (std::size_t i = 0; i < std::min(kCount, v.size()); ++i) a[i] = v[i];
+  SparseJobCounters c;
+  c.rays_traced = a[0];
+  c.texels_traced = a[1];
+  c.texels_below_horizon = a[2];
+  c.rays_below_horizon = a[3];
+  c.texels_above_horizon = a[4];
+  c.grid_texels = a[5];
+  c.feature_texels = a[6];
+  c.borrowed_texels = a[7];
+  c.reconstructed = a[8];
+  c.fallback_too_few_neighbors = a[9];
+  c.fallback_solve_failed = a[10];
+  c.solved_lars = a[11];
+  c.solved_admm = a[12];
+  c.zero_systems = a[13];
+  c.features_traced = a[14];
+  return c;
+}
+
+SparseJobCounters& SparseJobCounters::operator+=(const SparseJobCounters& o) {
+  const std::vector<uint64_t> a = ToVector(), b = o.ToVector();
+  std::vector<uint64_t> s(kCount);
+  for (std::size_t i = 0; i < kCount; ++i) s[i] = a[i] + b[i];
+  *this = FromVector(s);
+  return *this;
+}
+
+std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job) {
+  ByteWriter w;
+  PutHeader(w, kJobMagic, h);
+  w.PutVector(job.ids);
+  return std::move(w.bytes());
+}
+
+std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job) {
+  ByteWriter w;
+  PutHeader(w, kJobMagic, h);
+  w.Put(job.low_dim);
+  w.PutVector(job.offsets);
+  w.PutVector(job.neighbors);
+  w.PutVector(job.low_rows);
+  return std::move(w.bytes());
+}
+
+std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job) {
+  ByteWriter w;
+  PutHeader(w, kJobMagic, h);
+  w.Put(job.texels);
+  w.PutVector(job.vertices);
+  w.PutVector(job.offsets);
+  w.PutVector(job.neighbors);
+  w.PutVector(job.transport);
+  w.PutVector(job.visibility);
+  w.PutVector(job.feature);
+  return std::move(w.bytes());
+}
+
+SparseJobHeader PeekSparseJobHeader(const std::string& job_bytes) {
+  ByteReader r(job_bytes, 0);
+  return GetHeader(r, kJobMagic);
+}
+
+std::string EncodeSparseJobResult(const SparseJobResult& res) {
+  ByteWriter w;
+  PutHeader(w, kResultMagic, res.header);
+  w.Put(res.busy_seconds);
+  w.PutVector(res.counters.ToVector());
+  w.PutVector(res.transport);
+  w.PutVector(res.visibility);
+  w.PutVector(res.feature);
+  w.PutVector(res.weights);
+  w.PutVector(res.outcomes);
+  std::string& b = w.bytes();
+  const uint64_t sum = Checksum64(b.data(), b.size());
+  b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
+  return std::move(b);
+}
+
+SparseJobResult DecodeSparseJobResult(const std::string& bytes) {
+  if (bytes.size() < sizeof(uint64_t)) throw std::runtime_error("truncated sparse job result");
+  const std::size_t body = bytes.size() - sizeof(uint64_t);
+  uint64_t sum;
+  std::memcpy(&sum, bytes.data() + body, sizeof sum);
+  if (Checksum64(bytes.data(), body) != sum)
+    throw std::runtime_error("sparse job result arrived damaged (checksum mismatch)");
+  ByteReader r(bytes, 0);
+  SparseJobResult res;
+  res.header = GetHeader(r, kResultMagic);
+  res.busy_seconds = r.Get<double>();
+  const std::vector<uint64_t> counters = r.GetVector<uint64_t>();
+  res.counters = SparseJobCounters::FromVector(counters);
+  res.transport = r.GetVector<float>();
+  res.visibility = r.GetVector<float>();
+  res.feature = r.GetVector<uint8_t>();
+  res.weights = r.GetVector<int32_t>();
+  res.outcomes = r.GetVector<uint8_t>();
+  return res;
+}
+
+std::string ComputeSparseJob(const TransportSampler& sampler,
+                             std::span<const SpatialSample> samples, const SparsePlan& plan,
+                             const std::string& job_bytes) {
+  ByteReader r(job_bytes, 0);
+  SparseJobResult res;
+  res.header = GetHeader(r, kJobMagic);
+  const double t0 = Now();
+  const std::size_t T = sampler.layout().texel_count();
+  std::mutex mutex;
+  switch (static_cast<SparseJobKind>(res.header.kind)) {
+    case SparseJobKind::kDense: {
+      const std::vector<uint32_t> ids = r.GetVector<uint32_t>();
+      for (uint32_t s : ids)
+        if (s >= samples.size()) throw std::runtime_error("dense job names a missing sample");
+      res.transport.resize(ids.size() * T);
+      res.visibility.resize(ids.size() * T);
+      res.feature.resize(ids.size() * T);
+      AngularStats total;
+      tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
+        DenseRow row;
+        const AngularStats st =
+            SampleDenseRowAdaptive(sampler, samples[ids[i]], ids[i], plan.angular, row);
+        std::copy(row.transport.begin(), row.transport.end(), res.transport.begin() + i * T);
+        std::copy(row.visibility.begin(), row.visibility.end(), res.visibility.begin() + i * T);
+        std::copy(row.feature.begin(), row.feature.end(), res.feature.begin() + i * T);
+        std::lock_guard lock(mutex);
+        total += st;
+      });
+      for (std::size_t i = 0; i < ids.size(); ++i) {
+        CheckFinite(res.transport.data() + i * T, T, "transport", ids[i]);
+        CheckFinite(res.visibility.data() + i * T, T, "visibility", ids[i]);
+      }
+      SparseJobCounters& c = res.counters;
+      c.rays_traced = total.trace.rays_traced;
+      c.texels_traced = total.trace.texels_traced;
+      c.texels_below_horizon = total.trace.texels_below_horizon;
+      c.rays_below_horizon = total.trace.rays_below_horizon;
+      c.texels_above_horizon = total.texels_above_horizon;
+      c.grid_texels = total.grid_texels;
+      c.feature_texels = total.feature_texels;
+      c.borrowed_texels = total.borrowed_texels;
+      break;
+    }
+    case SparseJobKind::kRank: {
+      const auto low_dim = r.Get<uint32_t>();
+      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>();
+      const std::vector<uint32_t> nb = r.GetVector<uint32_t>();
+      const std::vector<float> low = r.GetVector<float>();
+      if (low_dim == 0 || low.size() % low_dim != 0)
+        throw std::runtime_error("malformed rank job rows");
+      if (offsets.empty()) throw std::runtime_error("malformed rank job");
+      const std::size_t count = offsets.size() - 1;
+      CheckLists(count, offsets, nb, low.size() / low_dim);
+      res.weights.resize(count);
+      tbb::parallel_for(std::size_t{0}, count, [&](std::size_t i) {
+        std::vector<const float*> rows;
+        for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k)
+          rows.push_back(low.data() + static_cast<std::size_t>(nb[k]) * low_dim);
+        res.weights[i] = SparseCandidateWeight(rows, low_dim, plan);
+      });
+      break;
+    }
+    case SparseJobKind::kSparse: {
+      const auto texels = r.Get<uint32_t>();
+      if (texels != T) throw std::runtime_error("sparse job for another cubemap resolution");
+      const std::vector<uint32_t> vertices = r.GetVector<uint32_t>();
+      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>();
+      const std::vector<uint32_t> nb = r.GetVector<uint32_t>();
+      const std::vector<float> tr = r.GetVector<float>();
+      const std::vector<float> vis = r.GetVector<float>();
+      const std::vector<uint8_t> feat = r.GetVector<uint8_t>();
+      const std::size_t rows = tr.size() / T;
+      if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T)
+        throw std::runtime_error("malformed sparse job rows");
+      CheckLists(vertices.size(), offsets, nb, rows);
+      for (uint32_t s : vertices)
+        if (s >= samples.size()) throw std::runtime_error("sparse job names a missing sample");
+      std::vector<float> out(vertices.size() * T, 0.0f);
+      res.outcomes.assign(vertices.size(), 0);
+      tbb::enumerable_thread_specific<L1Solver> solvers([&] {
+        L1Options o;
+        o.lambda = plan.sparse.lambda;
+        return L1Solver(o);
+      });
+      SparseStats total;
+      tbb::parallel_for(std::size_t{0}, vertices.size(), [&](std::size_t i) {
+        std::vector<DenseNeighbor> nbs;
+        for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
+          const std::size_t u = nb[k];
+          nbs.push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T});
+        }
+        SparseStats st;
+        const SparseOutcome o =
+            ReconstructSparseRow(sampler, samples[vertices[i]], vertices[i], nbs, plan.sparse,
+                                 solvers.local(), out.data() + i * T, st);
+        res.outcomes[i] = static_cast<uint8_t>(o);
+        std::lock_guard lock(mutex);
+        total += st;
+      });
+      for (std::size_t i = 0; i < vertices.size(); ++i) {
+        if (res.outcomes[i] != static_cast<uint8_t>(SparseOutcome::kReconstructed)) continue;
+        CheckFinite(out.data() + i * T, T, "transport", vertices[i]);
+        res.transport.insert(res.transport.end(), out.begin() + static_cast<std::ptrdiff_t>(i * T),
+                             out.begin() + static_cast<std::ptrdiff_t>((i + 1) * T));
+      }
+      SparseJobCounters& c = res.counters;
+      c.rays_traced = total.trace.rays_traced;
+      c.texels_traced = total.trace.texels_traced;
+      c.texels_below_horizon = total.trace.texels_below_horizon;
+      c.rays_below_horizon = total.trace.rays_below_horizon;
+      c.texels_above_horizon = total.texels_above_horizon;
+      c.reconstructed = total.reconstructed;
+      c.fallback_too_few_neighbors = total.fallback_too_few_neighbors;
+      c.fallback_solve_failed = total.fallback_solve_failed;
+      c.solved_lars = total.solved_lars;
+      c.solved_admm = total.solved_admm;
+      c.zero_systems = total.zero_systems;
+      c.features_traced = total.features_traced;
+      break;
+    }
+    default:
+      throw std::runtime_error("unknown sparse job kind " + std::to_string(res.header.kind));
+  }
+  res.busy_seconds = Now() - t0;
+  return EncodeSparseJobResult(res);
+}
+
+uint64_t DenseResultChecksum(std::size_t rows, std::size_t texels, const float* transport,
+                             const float* visibility, const uint8_t* feature) {
+  std::string buf;
+  buf.reserve(rows * texels * 9);
+  for (std::size_t i = 0; i < rows; ++i) {
+    buf.append(reinterpret_cast<const char*>(transport + i * texels), texels * sizeof(float));
+    buf.append(reinterpret_cast<const char*>(visibility + i * texels), texels * sizeof(float));
+    buf.append(reinterpret_cast<const char*>(feature + i * texels), texels);
+  }
+  return Checksum64(buf.data(), buf.size());
+}
+
+uint64_t SparseResultChecksum(std::span<const uint8_t> outcomes, std::span<const float> rows) {
+  std::string buf(reinterpret_cast<const char*>(outcomes.data()), outcomes.size());
+  buf.append(reinterpret_cast<const char*>(rows.data()), rows.size() * sizeof(float));
+  return Checksum64(buf.data(), buf.size());
+}
+
+uint32_t MortonKey(const Vec3& p, const Vec3& lo, const Vec3& hi) {
+  auto q = [](double v, double a, double b) -> uint32_t {
+    const double t = b > a ? (v - a) / (b - a) : 0.0;
+    return static_cast<uint32_t>(std::clamp(t, 0.0, 1.0) * 1023.0);
+  };
+  auto spread = [](uint32_t x) {
+    x &= 0x3ffu;
+    x = (x | (x << 16)) & 0x030000ffu;
+    x = (x | (x << 8)) & 0x0300f00fu;
+    x = (x | (x << 4)) & 0x030c30c3u;
+    x = (x | (x << 2)) & 0x09249249u;
+    return x;
+  };
+  return spread(q(p.x, lo.x, hi.x)) | (spread(q(p.y, lo.y, hi.y)) << 1) |
+         (spread(q(p.z, lo.z, hi.z)) << 2);
+}
+
+}  // namespace prt

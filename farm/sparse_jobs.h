@@ -1,0 +1,119 @@
+// The jobs of prt-farm's sparse method (docs/farm.md, "Sparse method"; Huang & Ramamoorthi 2010
+// §4–5) as self-contained byte messages, and the kernel a worker runs on one. No MPI here: rank 0
+// encodes a job with everything the worker needs (sample ids, neighbour lists, the dense rows a
+// job reads), any rank computes it with ComputeSparseJob, and rank 0 decodes the result.
+//
+//   dense   sample ids                         → T, visibility and feature rows (§4.2)
+//   rank    candidates' neighbour lists and the
+//           union of their downsampled dense rows → one weight (local rank, §4.1) per candidate
+//   sparse  sparse vertices, neighbour lists and
+//           the union of their dense neighbours'
+//           T, visibility and feature rows      → outcome per vertex, rows of the reconstructed
+//                                                 ones (§5)
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "worker/sparse_precomputation.h"
+
+namespace prt {
+
+enum class SparseJobKind : uint32_t { kDense = 1, kRank = 2, kSparse = 3 };
+
+// What a job did (journaled with it, summed into report.json's "sparse" object).
+struct SparseJobCounters {
+  uint64_t rays_traced = 0;
+  uint64_t texels_traced = 0;
+  uint64_t texels_below_horizon = 0;
+  uint64_t rays_below_horizon = 0;
+  uint64_t texels_above_horizon = 0;  // dense rows, and reconstructed sparse rows
+  uint64_t grid_texels = 0;           // dense: first pass
+  uint64_t feature_texels = 0;        // dense: second pass
+  uint64_t borrowed_texels = 0;       // dense: filled from neighbours without tracing
+  uint64_t reconstructed = 0;         // sparse outcomes
+  uint64_t fallback_too_few_neighbors = 0;
+  uint64_t fallback_solve_failed = 0;
+  uint64_t solved_lars = 0;
+  uint64_t solved_admm = 0;
+  uint64_t zero_systems = 0;
+  uint64_t features_traced = 0;
+
+  static constexpr std::size_t kCount = 15;
+  std::vector<uint64_t> ToVector() const;
+  // Missing trailing values read as 0.
+  static SparseJobCounters FromVector(std::span<const uint64_t> v);
+  SparseJobCounters& operator+=(const SparseJobCounters& o);
+};
+
+// The envelope every job and result starts with.
+struct SparseJobHeader {
+  uint32_t kind = 0;   // SparseJobKind
+  uint32_t phase = 0;  // rank 0's phase number (echoed back)
+  uint64_t first = 0;  // item range in the phase's list (echoed back)
+  uint64_t count = 0;
+};
+
+// ---- jobs (rank 0 → worker)
+struct DenseJob {
+  std::vector<uint32_t> ids;  // samples to sample densely
+};
+struct RankJob {
+  uint32_t low_dim = 0;             // 6·m·m
+  std::vector<uint32_t> offsets;    // candidate c's neighbours: nb[offsets[c] .. offsets[c+1])
+  std::vector<uint32_t> neighbors;  // indices into the union below, nearest first
+  std::vector<float> low_rows;      // union of downsampled dense rows, low_dim each
+};
+struct SparseJob {
+  uint32_t texels = 0;              // texel_count
+  std::vector<uint32_t> vertices;   // sample ids to reconstruct
+  std::vector<uint32_t> offsets;    // as in RankJob
+  std::vector<uint32_t> neighbors;  // indices into the union, nearest first
+  std::vector<float> transport;     // union rows, texels each
+  std::vector<float> visibility;    // union rows
+  std::vector<uint8_t> feature;     // union rows
+};
+
+// ---- results (worker → rank 0)
+struct SparseJobResult {
+  SparseJobHeader header;
+  double busy_seconds = 0;
+  SparseJobCounters counters;
+  // dense: ids.size() rows each of transport / visibility / feature
+  std::vector<float> transport;
+  std::vector<float> visibility;
+  std::vector<uint8_t> feature;
+  // rank: one weight per candidate
+  std::vector<int32_t> weights;
+  // sparse: one SparseOutcome per vertex; `transport` holds the reconstructed rows in order
+  std::vector<uint8_t> outcomes;
+};
+
+std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job);
+std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job);
+std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job);
+std::string EncodeSparseJobResult(const SparseJobResult& r);
+// Throws std::runtime_error on a truncated or foreign message (and on a checksum mismatch).
+SparseJobResult DecodeSparseJobResult(const std::string& bytes);
+SparseJobHeader PeekSparseJobHeader(const std::string& job_bytes);
+
+// Runs one encoded job on this rank (TBB threads) and returns the encoded result. Throws
+// NumericalError for a non-finite value, std::runtime_error for a malformed job.
+std::string ComputeSparseJob(const TransportSampler& sampler,
+                             std::span<const SpatialSample> samples, const SparsePlan& plan,
+                             const std::string& job_bytes);
+
+// XXH64 of what a dense job leaves on disk, per sample in order: T row, visibility row, feature
+// row. `rows` samples, `texels` each.
+uint64_t DenseResultChecksum(std::size_t rows, std::size_t texels, const float* transport,
+                             const float* visibility, const uint8_t* feature);
+// XXH64 of a sparse job's outcomes followed by its reconstructed rows.
+uint64_t SparseResultChecksum(std::span<const uint8_t> outcomes, std::span<const float> rows);
+
+// Morton key (10 bits per axis, interleaved into 30) of p in the box [lo, hi]: the order of
+// the sparse vertices, so that a job's vertices are close together and share neighbours.
+uint32_t MortonKey(const Vec3& p, const Vec3& lo, const Vec3& hi);
+
+}  // namespace prt
