@@ -1,0 +1,354 @@
+#include "viewer/viewer_session.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <stdexcept>
+
+#include "packager/prtpack_reader.h"
+#include "packager/prtpack_transport.h"
+#include "viewer/per_band_incremental.h"
+#include "viewer/rasterizer.h"
+#include "vocabulary/errors.h"
+
+namespace prt {
+
+LightingMode ParseLightingMode(const std::string& s) {
+  if (s == "nwa") return LightingMode::kNwa;
+  if (s == "bi") return LightingMode::kBi;
+  if (s == "pbi") return LightingMode::kPbi;
+  throw std::invalid_argument("unknown lighting mode '" + s + "' (nwa, bi or pbi)");
+}
+
+const char* ToString(LightingMode mode) {
+  switch (mode) {
+    case LightingMode::kNwa:
+      return "nwa";
+    case LightingMode::kBi:
+      return "bi";
+    case LightingMode::kPbi:
+      return "pbi";
+  }
+  return "?";
+}
+
+namespace {
+
+Vec3 JsonVec3(const nlohmann::json& j, const std::string& name, const char* key) {
+  if (!j.is_array() || j.size() != 3)
+    throw InputError(name,
+                     std::string("metadata scene.camera.") + key + " is not an array of 3 numbers");
+  Vec3 v;
+  for (int i = 0; i < 3; ++i) {
+    if (!j[static_cast<std::size_t>(i)].is_number())
+      throw InputError(name, std::string("metadata scene.camera.") + key + " is not numeric");
+    const double x = j[static_cast<std::size_t>(i)].get<double>();
+    if (!std::isfinite(x))
+      throw InputError(name, std::string("metadata scene.camera.") + key + " is not finite");
+    (i == 0 ? v.x : (i == 1 ? v.y : v.z)) = x;
+  }
+  return v;
+}
+
+}  // namespace
+
+bool CameraFromMetadata(const std::string& metadata_json, const std::string& name, Camera& camera) {
+  const nlohmann::json meta = nlohmann::json::parse(metadata_json, nullptr, false);
+  if (meta.is_discarded() || !meta.is_object() || !meta.contains("scene")) return false;
+  const nlohmann::json& scene = meta["scene"];
+  if (!scene.is_object()) return false;
+  nlohmann::json cam;
+  if (scene.contains("camera") && scene["camera"].is_object()) {
+    cam = scene["camera"];
+  } else if (scene.contains("toml") && scene["toml"].is_string()) {
+    // scene.toml kept as text (run_folder_pack.cpp's fallback): parse it with the scene parser.
+    try {
+      const SceneDescription d =
+          ParseScene(scene["toml"].get<std::string>(), name + ":scene.toml", "");
+      camera = d.camera;
+      return true;
+    } catch (const InputError&) {
+      return false;
+    }
+  } else {
+    return false;
+  }
+  Camera c = camera;
+  if (cam.contains("eye")) c.eye = JsonVec3(cam["eye"], name, "eye");
+  if (cam.contains("target")) c.target = JsonVec3(cam["target"], name, "target");
+  if (cam.contains("up")) c.up = JsonVec3(cam["up"], name, "up");
+  if (cam.contains("fov")) {
+    if (!cam["fov"].is_number()) throw InputError(name, "metadata scene.camera.fov is not numeric");
+    c.fov_deg = cam["fov"].get<double>();
+  }
+  for (const char* key : {"width", "height"}) {
+    if (!cam.contains(key)) continue;
+    if (!cam[key].is_number_integer() || cam[key].get<int64_t>() < 1 ||
+        cam[key].get<int64_t>() > 16384)
+      throw InputError(
+          name, std::string("metadata scene.camera.") + key + " is not an integer in 1..16384");
+    (std::string(key) == "width" ? c.width : c.height) = cam[key].get<int>();
+  }
+  camera = c;
+  return true;
+}
+
+Camera ParseCameraSpec(const std::string& spec, const Camera& base) {
+  std::vector<double> v;
+  std::stringstream ss(spec);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    char* end = nullptr;
+    const double x = std::strtod(item.c_str(), &end);
+    if (item.empty() || end == item.c_str() || *end != '\0' || !std::isfinite(x))
+      throw std::invalid_argument("--camera: '" + item + "' is not a finite number");
+    v.push_back(x);
+  }
+  if (v.size() != 6 && v.size() != 9 && v.size() != 10)
+    throw std::invalid_argument(
+        "--camera takes eye_x,eye_y,eye_z,target_x,target_y,target_z[,up_x,up_y,up_z[,fov]] "
+        "(6, 9 or 10 numbers), got " +
+        std::to_string(v.size()));
+  Camera c = base;
+  c.eye = {v[0], v[1], v[2]};
+  c.target = {v[3], v[4], v[5]};
+  if (v.size() >= 9) c.up = {v[6], v[7], v[8]};
+  if (v.size() == 10) c.fov_deg = v[9];
+  return c;
+}
+
+std::unique_ptr<ViewerSession> ViewerSession::Open(const std::string& pack_path) {
+  const pack::PackReader reader = pack::PackReader::OpenFile(pack_path);
+  std::unique_ptr<ViewerSession> s(new ViewerSession());
+  s->path_ = pack_path;
+  if (!reader.has_transport())
+    throw InputError(pack_path, "the pack has no transport (TRNS) section; nothing to relight");
+  s->camera_from_metadata_ = CameraFromMetadata(reader.ReadMetadata(), pack_path, s->camera_);
+
+  std::size_t offset = 0;
+  for (std::size_t m = 0; m < reader.mesh_count(); ++m) {
+    const pack::UnpackedMesh mesh = reader.ReadMesh(m);
+    const std::size_t nv = mesh.vertex_count();
+    for (std::size_t v = 0; v < nv; ++v) {
+      s->positions_.push_back(
+          {mesh.positions[3 * v], mesh.positions[3 * v + 1], mesh.positions[3 * v + 2]});
+      s->albedo_.push_back(mesh.albedo);
+    }
+    for (std::size_t t = 0; t < mesh.triangle_count(); ++t)
+      s->triangles_.push_back({static_cast<uint32_t>(offset + mesh.triangles[3 * t]),
+                               static_cast<uint32_t>(offset + mesh.triangles[3 * t + 1]),
+                               static_cast<uint32_t>(offset + mesh.triangles[3 * t + 2])});
+    offset += nv;
+  }
+  s->compressed_ = std::make_unique<CompressedTransport>(pack::ReadCompressedTransport(reader));
+  const CompressedTransportHeader& h = s->compressed_->header;
+  if (h.sample_count != s->albedo_.size())
+    throw InputError(pack_path, "the transport has " + std::to_string(h.sample_count) +
+                                    " rows but the meshes have " +
+                                    std::to_string(s->albedo_.size()) + " vertices");
+  if (h.row_wavelet != RowWavelet::kHaar)
+    throw InputError(pack_path, std::string("the transport's row wavelet is ") +
+                                    ToString(h.row_wavelet) +
+                                    "; the viewer's lighting basis is Haar");
+  s->transport_terms_ = s->compressed_->term_count();
+  s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_);
+  s->operator_ = std::make_unique<CompressedTransportOperator>(*s->relighter_);
+  return s;
+}
+
+ViewerSession::~ViewerSession() = default;
+
+const CompressedTransportHeader& ViewerSession::transport_header() const {
+  return compressed_->header;
+}
+
+SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) const {
+  const std::size_t cols = relighter_->column_count();
+  if (lighting.size() != cols)
+    throw std::invalid_argument("RelightExact: lighting has " + std::to_string(lighting.size()) +
+                                " coefficients, the transport " + std::to_string(cols));
+  std::vector<float> l(3 * cols);
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t j = 0; j < cols; ++j)
+      l[c * cols + j] = static_cast<float>(lighting.coefficient[c][j]);
+  const std::size_t ns = sample_count();
+  std::vector<float> b(3 * ns);
+  relighter_->Relight(l, 3, b);
+  SampleRadiance out(ns);
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t s = 0; s < ns; ++s) {
+      const double v = b[c * ns + s];
+      out.channel[c][s] = std::isfinite(v) ? v : 0.0;
+    }
+  return out;
+}
+
+std::vector<float> ViewerSession::Shade(const SampleRadiance& radiance) const {
+  return ShadeSamples(radiance, albedo_);
+}
+
+ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
+                               const CubemapRgb* background) const {
+  RasterOptions options;
+  if (background != nullptr) options.background = CubemapBackground(*background);
+  const RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
+  ImageRgb image(r.width, r.height);
+  image.pixels = r.rgb;
+  return image;
+}
+
+double RelativeRmsError(std::span<const float> b, std::span<const float> ref) {
+  if (b.size() != ref.size()) throw std::invalid_argument("RelativeRmsError: sizes differ");
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double d = static_cast<double>(b[i]) - ref[i];
+    num += d * d;
+    den += static_cast<double>(ref[i]) * ref[i];
+  }
+  if (den == 0) return num == 0 ? 0.0 : 1.0;
+  return std::sqrt(num / den);
+}
+
+SampleRadiance RelightApproximate(const TransportOperator& transport, const WaveletLighting& l,
+                                  LightingMode mode, std::size_t terms) {
+  switch (mode) {
+    case LightingMode::kNwa:
+      return transport.Apply(NonlinearLightingApproximation(l, HaarLightingBasis(l.n), terms));
+    case LightingMode::kBi: {
+      BasicIncrementalRelighter r(transport, l.n, terms);
+      r.Clear();
+      r.Update(l);
+      return r.Radiance();
+    }
+    case LightingMode::kPbi: {
+      PerBandIncrementalRelighter r(transport, l.n, terms);
+      r.Clear();
+      r.Update(l);
+      return r.Radiance();
+    }
+  }
+  return {};
+}
+
+std::vector<RotationFrame> RunRotation(
+    const ViewerSession& session, const EnvironmentImage& env, const RotationOptions& options,
+    const std::function<void(const RotationFrameView&)>& on_frame) {
+  if (options.rotate_frames < 0 || options.hold_frames < 0 || options.terms == 0 ||
+      !std::isfinite(options.degrees_per_frame))
+    throw std::invalid_argument("RunRotation: frames ≥ 0, terms ≥ 1, finite rotation");
+  const int n = session.cubemap_n();
+  const TransportOperator& t = session.transport();
+  const HaarLightingBasis basis(n);
+  BasicIncrementalRelighter bi(t, n, options.terms);
+  PerBandIncrementalRelighter pbi(t, n, options.terms);
+  std::vector<RotationFrame> frames;
+  CubemapRgb cube;
+  WaveletLighting lighting;
+  double last_angle = std::nan("");
+  const int total = options.rotate_frames + options.hold_frames;
+  for (int f = 0; f <= total; ++f) {
+    const double angle_deg = std::min(f, options.rotate_frames) * options.degrees_per_frame;
+    if (!(angle_deg == last_angle)) {
+      cube = ResampleToCubemap(env, n, angle_deg * 3.14159265358979323846 / 180.0);
+      lighting = ProjectLighting(cube);
+      last_angle = angle_deg;
+    }
+    const std::vector<float> exact = session.Shade(session.RelightExact(lighting));
+    const std::vector<LightingTerm> nwa_terms =
+        NonlinearLightingApproximation(lighting, basis, options.terms);
+    const std::vector<float> nwa = session.Shade(t.Apply(nwa_terms));
+    if (f == 0) {
+      bi.Initialize(lighting);
+      pbi.Initialize(lighting);
+    } else {
+      bi.Update(lighting);
+      pbi.Update(lighting);
+    }
+    const std::vector<float> bi_rgb = session.Shade(bi.Radiance());
+    const std::vector<float> pbi_rgb = session.Shade(pbi.Radiance());
+    RotationFrame r;
+    r.frame = f;
+    r.angle_deg = angle_deg;
+    r.lighting_error = {RelativeLightingError(lighting, nwa_terms),
+                        RelativeLightingError(lighting, ExactLightingTerms(bi.Represented())),
+                        RelativeLightingError(lighting, ExactLightingTerms(pbi.Represented()))};
+    r.image_error = {RelativeRmsError(nwa, exact), RelativeRmsError(bi_rgb, exact),
+                     RelativeRmsError(pbi_rgb, exact)};
+    frames.push_back(r);
+    if (on_frame) on_frame(RotationFrameView{frames.back(), cube, exact, {nwa, bi_rgb, pbi_rgb}});
+  }
+  return frames;
+}
+
+void WriteRotationCsv(const std::vector<RotationFrame>& frames, std::size_t terms,
+                      const std::string& path) {
+  std::ofstream out(path);
+  if (!out) throw InputError(path, "cannot be written");
+  out << "# terms per frame: " << terms << "; errors relative to exact lighting\n";
+  out << "frame,angle_deg,lighting_error_nwa,lighting_error_bi,lighting_error_pbi,"
+         "image_error_nwa,image_error_bi,image_error_pbi\n";
+  char line[512];
+  for (const RotationFrame& f : frames) {
+    std::snprintf(line, sizeof line, "%d,%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", f.frame,
+                  f.angle_deg, f.lighting_error[0], f.lighting_error[1], f.lighting_error[2],
+                  f.image_error[0], f.image_error[1], f.image_error[2]);
+    out << line;
+  }
+  if (!out) throw InputError(path, "write failed");
+}
+
+bool PlotRotationErrors(const std::string& csv_path, const std::string& png_path,
+                        const RotationOptions& options) {
+  const std::string script_path = png_path + ".gp";
+  {
+    std::ofstream gp(script_path);
+    if (!gp) throw InputError(script_path, "cannot be written");
+    gp << "# Generated by prt-view: image error per frame (Overbeck et al. 2006, Figure 7)\n"
+       << "set terminal pngcairo size 900,540 noenhanced\n"
+       << "set output '" << png_path << "'\n"
+       << "set datafile separator ','\n"
+       << "set key top right\n"
+       << "set logscale y\n"
+       << "set format y '%.0e'\n"
+       << "set xlabel 'frame'\n"
+       << "set ylabel 'relative RMS image error vs exact lighting'\n"
+       << "set title 'Environment rotating " << options.degrees_per_frame << " deg/frame for "
+       << options.rotate_frames << " frames, then still; " << options.terms << " terms per frame'\n"
+       << "set arrow from " << options.rotate_frames << ", graph 0 to " << options.rotate_frames
+       << ", graph 1 nohead dashtype 2\n"
+       << "plot '" << csv_path << "' every ::0 using 1:($6>1e-7?$6:1e-7) with lines lw 2 "
+       << "title 'NWA', '' using 1:($7>1e-7?$7:1e-7) with lines lw 2 title 'BI', '' using "
+          "1:($8>1e-7?$8:1e-7) with lines lw 2 title 'PBI'\n";
+  }
+  if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return false;
+  const std::string cmd = "gnuplot '" + script_path + "' 2>/dev/null";
+  if (std::system(cmd.c_str()) != 0) {
+    // pngcairo may be missing from a minimal gnuplot: retry with the plain png terminal.
+    std::ifstream in(script_path);
+    std::stringstream text;
+    text << in.rdbuf();
+    std::string s = text.str();
+    const std::string from = "pngcairo";
+    s.replace(s.find(from), from.size(), "png");
+    std::ofstream(script_path) << s;
+    if (std::system(cmd.c_str()) != 0) return false;
+  }
+  std::ifstream check(png_path);
+  return static_cast<bool>(check);
+}
+
+int FramesToConverge(const std::vector<RotationFrame>& frames, const RotationOptions& options,
+                     int index, double threshold) {
+  for (const RotationFrame& f : frames)
+    if (f.frame > options.rotate_frames &&
+        f.image_error[static_cast<std::size_t>(index)] < threshold)
+      return f.frame - options.rotate_frames;
+  return -1;
+}
+
+}  // namespace prt

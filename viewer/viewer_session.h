@@ -1,0 +1,156 @@
+// What `prt-view`, its tests and the viewer benchmark share: a .prtpack opened for relighting
+// (meshes, per-sample albedo, the scene's camera, the compressed transport behind a
+// TransportOperator), lighting from an environment map, shading B = albedo ⊙ (T·L̂), software
+// rasterisation, and the rotating-environment experiment of Overbeck et al. 2006 §5/Figure 7
+// (NWA, BI and PBI at the same term budget, each against exact lighting, frame by frame).
+//
+// Relighting runs straight from the pack's adaptively compressed columns (Cheslack-Postava et
+// al. 2008 §4.5, Eq. 8) through CompressedRelighter; the pack's transport is never decompressed
+// to a dense matrix. "Exact" lighting means every non-zero Haar coefficient of L through that
+// same compressed T, so the lighting and image errors reported here measure the lighting
+// approximation alone.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "viewer/lighting.h"
+#include "viewer/relight.h"
+#include "vocabulary/compressed_relight.h"
+#include "vocabulary/envmap.h"
+#include "vocabulary/image_io.h"
+#include "vocabulary/scene.h"
+#include "vocabulary/vec3.h"
+
+namespace prt {
+
+enum class LightingMode { kNwa, kBi, kPbi };
+// "nwa" | "bi" | "pbi" (throws std::invalid_argument otherwise), and back.
+LightingMode ParseLightingMode(const std::string& s);
+const char* ToString(LightingMode mode);
+
+// A pack opened for relighting. Not copyable or movable (the operator refers to the relighter).
+class ViewerSession {
+ public:
+  // Reads meshes, materials, metadata and the whole compressed transport. Throws
+  // prt::InputError naming the file on: an unreadable or corrupt pack (PackReader's errors), no
+  // transport, a transport whose row count differs from the meshes' vertex count, a row wavelet
+  // other than Haar (the lighting basis of viewer/lighting.h).
+  static std::unique_ptr<ViewerSession> Open(const std::string& pack_path);
+
+  ViewerSession(const ViewerSession&) = delete;
+  ViewerSession& operator=(const ViewerSession&) = delete;
+  ~ViewerSession();
+
+  const std::string& path() const { return path_; }
+  int cubemap_n() const { return static_cast<int>(transport_header().cubemap_n); }
+  std::size_t sample_count() const { return albedo_.size(); }
+  // The scene's [camera] from the pack's metadata ("scene" → "camera"), else Camera{}.
+  const Camera& camera() const { return camera_; }
+  bool camera_from_metadata() const { return camera_from_metadata_; }
+  const CompressedTransportHeader& transport_header() const;
+  std::size_t transport_terms() const { return transport_terms_; }
+  const CompressedRelighter& relighter() const { return *relighter_; }
+  const TransportOperator& transport() const { return *operator_; }
+  // Albedo per spatial sample (meshes in pack order, each mesh's vertices in order).
+  const std::vector<Rgb>& albedo() const { return albedo_; }
+  std::span<const Vec3> positions() const { return positions_; }
+  std::span<const std::array<uint32_t, 3>> triangles() const { return triangles_; }
+
+  // T·L with every coefficient of L (Eq. 8 with dense lighting: one inverse column transform).
+  SampleRadiance RelightExact(const WaveletLighting& lighting) const;
+  // albedo ⊙ radiance, interleaved RGB per sample (ShadeSamples).
+  std::vector<float> Shade(const SampleRadiance& radiance) const;
+  // Rasterises the meshes with per-sample colours (3 floats per sample) from `camera`, over the
+  // lighting cubemap as background when `background` is non-null.
+  ImageRgb Render(const Camera& camera, std::span<const float> sample_rgb,
+                  const CubemapRgb* background) const;
+
+ private:
+  ViewerSession() = default;
+  std::string path_;
+  Camera camera_;
+  bool camera_from_metadata_ = false;
+  std::unique_ptr<CompressedTransport> compressed_;
+  std::size_t transport_terms_ = 0;
+  std::unique_ptr<CompressedRelighter> relighter_;
+  std::unique_ptr<CompressedTransportOperator> operator_;
+  std::vector<Rgb> albedo_;
+  std::vector<Vec3> positions_;
+  std::vector<std::array<uint32_t, 3>> triangles_;
+};
+
+// The scene's camera from a pack's metadata JSON: "scene" → "camera" (eye, target, up, fov,
+// width, height; missing keys keep Camera{}'s defaults). Returns false (camera untouched) when
+// there is none; throws prt::InputError(name, ...) on a camera whose values have the wrong type.
+bool CameraFromMetadata(const std::string& metadata_json, const std::string& name, Camera& camera);
+
+// "ex,ey,ez,tx,ty,tz" with optionally ",ux,uy,uz" and then ",fov": overrides those fields of
+// `base`. Throws std::invalid_argument on any other count or a non-finite number.
+Camera ParseCameraSpec(const std::string& spec, const Camera& base);
+
+// ‖b − ref‖ / ‖ref‖ over all entries (double); 0 when both are zero, 1 when only ref is.
+double RelativeRmsError(std::span<const float> b, std::span<const float> ref);
+
+// A lighting approximation of `terms` terms from zero: NWA directly; BI or PBI as the first
+// frame of an incremental run started from L̃ = 0 (Clear, one Update).
+SampleRadiance RelightApproximate(const TransportOperator& transport, const WaveletLighting& l,
+                                  LightingMode mode, std::size_t terms);
+
+// ---- Rotating environment (Overbeck et al. 2006 §5, Figure 7) ----
+
+struct RotationOptions {
+  double degrees_per_frame = 1.0;  // about +Y (envmap.h RotateAboutY)
+  int rotate_frames = 120;         // frames 1..K rotate; frame 0 is the unrotated start
+  int hold_frames = 30;            // then S frames with the environment still
+  std::size_t terms = 30;          // the per-frame budget N of NWA, BI and PBI alike
+};
+
+// One frame's errors, index 0 = NWA, 1 = BI, 2 = PBI, against exact lighting of that frame:
+// lighting error ‖L − L̂‖/‖L‖ (L̂: the NWA terms, or the L̃ an incremental relighter
+// represents) and image error RelativeRmsError of the shaded samples.
+struct RotationFrame {
+  int frame = 0;
+  double angle_deg = 0;
+  std::array<double, 3> lighting_error{};
+  std::array<double, 3> image_error{};
+};
+
+// What the callback may look at for each frame (valid during the call only).
+struct RotationFrameView {
+  const RotationFrame& errors;
+  const CubemapRgb& cube;                            // the rotated lighting
+  std::span<const float> exact_rgb;                  // shaded samples, exact lighting
+  std::array<std::span<const float>, 3> approx_rgb;  // NWA, BI, PBI
+};
+
+// Runs frames 0..K+S: frame f's environment is rotated by min(f, K)·degrees_per_frame. BI and
+// PBI start from the exact frame 0 (Initialize, the paper's full first multiply), then spend N
+// terms per frame; NWA takes N terms of each frame's lighting afresh. The environment is
+// resampled once per distinct angle. `on_frame` (optional) sees every frame as it is made.
+std::vector<RotationFrame> RunRotation(
+    const ViewerSession& session, const EnvironmentImage& env, const RotationOptions& options,
+    const std::function<void(const RotationFrameView&)>& on_frame = {});
+
+// Writes the frames as CSV: frame, angle_deg, then lighting and image error of nwa, bi, pbi.
+void WriteRotationCsv(const std::vector<RotationFrame>& frames, std::size_t terms,
+                      const std::string& path);
+// Plots the CSV like Overbeck et al. Figure 7 (image error against frame for NWA, BI and PBI,
+// log scale, the rotation's end marked) into `png_path` with gnuplot, from a generated script
+// written next to it. Returns false (and writes nothing but the script) when gnuplot is not on
+// the PATH or fails.
+bool PlotRotationErrors(const std::string& csv_path, const std::string& png_path,
+                        const RotationOptions& options);
+
+// First hold frame (counted from the frame the rotation stopped, 1 = the first still frame)
+// whose image error for mode `index` (0 NWA, 1 BI, 2 PBI) is below `threshold`; -1 if none.
+int FramesToConverge(const std::vector<RotationFrame>& frames, const RotationOptions& options,
+                     int index, double threshold);
+
+}  // namespace prt

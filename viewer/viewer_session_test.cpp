@@ -1,0 +1,374 @@
+// Tests for viewer_session.h, npy_writer.h and the prt-view executable, on a small pack built
+// here: tests/data/tiny.toml (a box on an 8×8 ground grid, n = 8, 72 samples) ray traced with the
+// worker's TransportSampler, compressed (adaptive 4D, every coefficient kept, 16 bits) and
+// packed with the packager's writer.
+#include "viewer/viewer_session.h"
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "packager/prtpack_transport.h"
+#include "packager/prtpack_writer.h"
+#include "viewer/npy_writer.h"
+#include "viewer/per_band_incremental.h"
+#include "vocabulary/compressed_relight.h"
+#include "vocabulary/errors.h"
+#include "worker/column_order.h"
+#include "worker/embree_scene.h"
+#include "worker/transport_compressor.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path WorkDir() {
+  const fs::path d = fs::path(::testing::TempDir()) / "viewer_session_test";
+  fs::create_directories(d);
+  return d;
+}
+
+struct TinyScene {
+  SceneGeometry geometry;
+  std::vector<float> rows;  // samples × 6n², texel basis, albedo-free
+  int n = 8;
+  std::string pack;
+};
+
+// Traces, compresses and packs the tiny scene once per test process.
+const TinyScene& Tiny() {
+  static const TinyScene scene = [] {
+    TinyScene t;
+    const SceneDescription d = LoadSceneFile(std::string(PRT_SOURCE_DIR) + "/tests/data/tiny.toml");
+    t.n = d.cubemap_n;
+    t.geometry = BuildSceneGeometry(d);
+    const EmbreeScene embree(t.geometry);
+    const TransportSampler sampler(embree, t.n, {16, 1});
+    const std::vector<SpatialSample> samples = SpatialSamplesOf(t.geometry);
+    t.rows.resize(samples.size() * sampler.layout().texel_count());
+    sampler.ComputeRows(samples, 0, t.rows.data());
+    CompressionOptions o;
+    o.bits = 16;
+    o.keep_fraction = 1.0;
+    const CompressedTransport ct =
+        CompressTransport(t.rows.data(), t.n, SpatialDomainOf(t.geometry), o);
+    pack::PackInput in;
+    in.metadata_json =
+        R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],
+           "target": [0.0, 0.3, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64,
+           "height": 48}}})";
+    for (const SceneMesh& m : t.geometry.meshes) {
+      pack::PackMeshInput pm;
+      pm.name = m.name;
+      pm.mesh = m.mesh;
+      pm.albedo = m.albedo;
+      pm.is_ground = m.is_ground;
+      pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
+      in.meshes.push_back(std::move(pm));
+    }
+    in.transport = pack::MakeTransportInput(ct, 64);
+    t.pack = (WorkDir() / "tiny.prtpack").string();
+    pack::WritePackFile(t.pack, in);
+    return t;
+  }();
+  return scene;
+}
+
+// A lat-long environment: constant `base` plus a small bright "sun" around (sun_x, sun_y).
+EnvironmentImage SunSky(float base, float sun, int sun_x = 40, int sun_y = 10) {
+  EnvironmentImage e = EnvironmentImage::Zero(EnvmapLayout::kLatLong, 64, 32);
+  for (int y = 0; y < e.height; ++y)
+    for (int x = 0; x < e.width; ++x) {
+      const bool in_sun = std::abs(x - sun_x) <= 1 && std::abs(y - sun_y) <= 1;
+      const float v = base + (in_sun ? sun : 0.f);
+      e.r[e.Index(x, y)] = v;
+      e.g[e.Index(x, y)] = 0.9f * v;
+      e.b[e.Index(x, y)] = 0.7f * v + 0.05f * static_cast<float>(y) / 32.f;
+    }
+  return e;
+}
+
+std::vector<float> ReadFile(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  std::vector<float> out;
+  if (bytes.size() < 10) return out;
+  const std::size_t header =
+      10 + (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8));
+  out.resize((bytes.size() - header) / 4);
+  std::memcpy(out.data(), bytes.data() + header, 4 * out.size());
+  return out;
+}
+
+int RunViewer(const std::string& args, std::string* output = nullptr) {
+  const std::string log = (WorkDir() / "prt_view_output.txt").string();
+  const std::string cmd = std::string("'") + PRT_VIEW_EXE + "' " + args + " > '" + log + "' 2>&1";
+  const int status = std::system(cmd.c_str());
+  if (output != nullptr) {
+    std::ifstream f(log);
+    std::stringstream s;
+    s << f.rdbuf();
+    *output = s.str();
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST(NpyWriterTest, HeaderIsVersion1AlignedAndDataFollows) {
+  const std::vector<float> v = {1.f, -2.5f, 3.f, 0.f, 1e-3f, 7.f};
+  const std::vector<char> b = EncodeNpyFloat32(v, 2, 3);
+  ASSERT_GE(b.size(), 10u);
+  EXPECT_EQ(std::memcmp(b.data(), "\x93NUMPY", 6), 0);
+  EXPECT_EQ(b[6], 1);
+  EXPECT_EQ(b[7], 0);
+  const std::size_t len = static_cast<unsigned char>(b[8]) |
+                          (static_cast<std::size_t>(static_cast<unsigned char>(b[9])) << 8);
+  EXPECT_EQ((10 + len) % 64, 0u);
+  const std::string header(b.data() + 10, len);
+  EXPECT_NE(header.find("'descr': '<f4'"), std::string::npos);
+  EXPECT_NE(header.find("'fortran_order': False"), std::string::npos);
+  EXPECT_NE(header.find("'shape': (2, 3)"), std::string::npos);
+  EXPECT_EQ(header.back(), '\n');
+  ASSERT_EQ(b.size(), 10 + len + 4 * v.size());
+  std::vector<float> back(v.size());
+  std::memcpy(back.data(), b.data() + 10 + len, 4 * v.size());
+  EXPECT_EQ(back, v);
+  EXPECT_THROW(EncodeNpyFloat32(v, 4, 2), std::invalid_argument);
+}
+
+TEST(ViewerSessionTest, CameraSpecAndMetadata) {
+  const Camera base;
+  const Camera c = ParseCameraSpec("1,2,3,0,0.5,0", base);
+  EXPECT_EQ(c.eye.x, 1);
+  EXPECT_EQ(c.eye.z, 3);
+  EXPECT_EQ(c.target.y, 0.5);
+  EXPECT_EQ(c.fov_deg, base.fov_deg);
+  const Camera d = ParseCameraSpec("1,2,3,0,0.5,0,0,0,1,60", base);
+  EXPECT_EQ(d.up.z, 1);
+  EXPECT_EQ(d.fov_deg, 60);
+  EXPECT_THROW(ParseCameraSpec("1,2,3,4", base), std::invalid_argument);
+  EXPECT_THROW(ParseCameraSpec("1,2,3,0,x,0", base), std::invalid_argument);
+  EXPECT_THROW(ParseCameraSpec("1,2,3,0,nan,0", base), std::invalid_argument);
+
+  Camera m;
+  EXPECT_TRUE(CameraFromMetadata(R"({"scene": {"camera": {"eye": [0, 1.2, 3.2], "fov": 35,
+                                    "width": 320}}})",
+                                 "x", m));
+  EXPECT_EQ(m.eye.z, 3.2);
+  EXPECT_EQ(m.fov_deg, 35);
+  EXPECT_EQ(m.width, 320);
+  EXPECT_EQ(m.height, Camera{}.height);
+  Camera none;
+  EXPECT_FALSE(CameraFromMetadata(R"({"report": {}})", "x", none));
+  EXPECT_THROW(CameraFromMetadata(R"({"scene": {"camera": {"eye": [0, 1]}}})", "x", none),
+               InputError);
+}
+
+// Under a uniform environment of radiance 1 an unoccluded vertex gets B = albedo (DESIGN.md
+// "Conventions"); the ground's far corners see (nearly) the whole sky past a 1-unit box.
+TEST(ViewerSessionTest, UniformSkyGivesAlbedoOnUnoccludedGround) {
+  const TinyScene& tiny = Tiny();
+  const auto s = ViewerSession::Open(tiny.pack);
+  ASSERT_EQ(s->sample_count(), tiny.geometry.vertex_count());
+  EXPECT_TRUE(s->camera_from_metadata());
+  EXPECT_EQ(s->camera().width, 64);
+  EXPECT_EQ(s->cubemap_n(), 8);
+  const WaveletLighting l = ProjectLighting(ResampleToCubemap(SunSky(1.f, 0.f), 8));
+  // Blue has a gradient; use red (constant 1).
+  const std::vector<float> rgb = s->Shade(s->RelightExact(l));
+  const std::size_t ground0 = tiny.geometry.meshes[0].mesh.positions.size();
+  const std::size_t res = 8;
+  for (std::size_t corner :
+       {ground0, ground0 + res - 1, ground0 + res * (res - 1), ground0 + res * res - 1}) {
+    EXPECT_NEAR(rgb[3 * corner], 0.8, 0.8 * 0.03) << "corner sample " << corner;
+  }
+  // A ground vertex next to the box sees less sky than a corner.
+  double centre_min = 1e9;
+  for (std::size_t k = 0; k < res * res; ++k)
+    centre_min = std::min(centre_min, double(rgb[3 * (ground0 + k)]));
+  EXPECT_LT(centre_min, 0.7);
+}
+
+// Exact relighting from the pack equals the traced rows' T·L up to compression (every term
+// kept at 16 bits) and the dense path equals the per-term operator.
+TEST(ViewerSessionTest, ExactRelightMatchesTracedTransport) {
+  const TinyScene& tiny = Tiny();
+  const auto s = ViewerSession::Open(tiny.pack);
+  const CubemapRgb cube = ResampleToCubemap(SunSky(0.3f, 40.f), tiny.n);
+  const WaveletLighting l = ProjectLighting(cube);
+  const SampleRadiance dense = s->RelightExact(l);
+  const SampleRadiance terms = s->transport().Apply(ExactLightingTerms(l));
+  const std::size_t ns = s->sample_count(), texels = 6u * 64u;
+  std::vector<float> ref(3 * ns), a(3 * ns), b(3 * ns);
+  for (std::size_t v = 0; v < ns; ++v)
+    for (int c = 0; c < 3; ++c) {
+      double sum = 0;
+      for (std::size_t j = 0; j < texels; ++j)
+        sum += double(tiny.rows[v * texels + j]) * cube.Channel(c)[j];
+      ref[3 * v + c] = static_cast<float>(sum);
+      a[3 * v + c] = static_cast<float>(dense.channel[c][v]);
+      b[3 * v + c] = static_cast<float>(terms.channel[c][v]);
+    }
+  EXPECT_LT(RelativeRmsError(a, b), 1e-5);
+  EXPECT_LT(RelativeRmsError(a, ref), 2e-3);
+  EXPECT_GT(RelativeRmsError(a, ref), 0.0);  // it really went through compression
+}
+
+// NWA with every non-zero coefficient is exact; fewer terms are not. BI/PBI from zero with N
+// terms equal NWA's first frame up to the ranking they share (area-weighted |L|).
+TEST(ViewerSessionTest, ApproximationsConvergeToExact) {
+  const TinyScene& tiny = Tiny();
+  const auto s = ViewerSession::Open(tiny.pack);
+  const WaveletLighting l = ProjectLighting(ResampleToCubemap(SunSky(0.3f, 40.f), tiny.n));
+  const std::vector<float> exact = s->Shade(s->RelightExact(l));
+  const std::vector<float> all =
+      s->Shade(RelightApproximate(s->transport(), l, LightingMode::kNwa, 6 * 64));
+  EXPECT_LT(RelativeRmsError(all, exact), 1e-5);
+  const std::vector<float> nwa10 =
+      s->Shade(RelightApproximate(s->transport(), l, LightingMode::kNwa, 10));
+  const std::vector<float> pbi10 =
+      s->Shade(RelightApproximate(s->transport(), l, LightingMode::kPbi, 10));
+  const double e_nwa = RelativeRmsError(nwa10, exact);
+  EXPECT_GT(e_nwa, 1e-3);
+  EXPECT_LT(e_nwa, 1.0);
+  EXPECT_GT(RelativeRmsError(pbi10, exact), 1e-3);
+}
+
+// Overbeck et al. §5: BI and PBI start exact (frame 0 is the full multiply), track a rotation
+// with N terms per frame, and once the environment is still reach the exact image within
+// ⌈384 / N⌉ frames (per_band_incremental.h), to float rounding of the compressed path.
+TEST(ViewerSessionTest, RotationThenHoldConverges) {
+  const TinyScene& tiny = Tiny();
+  const auto s = ViewerSession::Open(tiny.pack);
+  RotationOptions o;
+  o.degrees_per_frame = 5;
+  o.rotate_frames = 6;
+  o.hold_frames = 16;
+  o.terms = 30;
+  int calls = 0;
+  const std::vector<RotationFrame> f =
+      RunRotation(*s, SunSky(0.3f, 40.f), o, [&](const RotationFrameView& v) {
+        ++calls;
+        EXPECT_EQ(v.exact_rgb.size(), 3 * s->sample_count());
+      });
+  ASSERT_EQ(f.size(), 23u);
+  EXPECT_EQ(calls, 23);
+  EXPECT_LT(f[0].image_error[1], 1e-5);
+  EXPECT_LT(f[0].image_error[2], 1e-5);
+  EXPECT_LT(f[0].lighting_error[2], 1e-9);
+  EXPECT_GT(f[0].image_error[0], 1e-4);  // NWA-30 of 384 coefficients is not exact
+  EXPECT_DOUBLE_EQ(f[6].angle_deg, 30.0);
+  EXPECT_DOUBLE_EQ(f[22].angle_deg, 30.0);
+  EXPECT_GT(f[3].lighting_error[2], 1e-6);  // the rotation moved the sun
+  const int pbi = FramesToConverge(f, o, 2, 1e-3);
+  const int bi = FramesToConverge(f, o, 1, 1e-3);
+  EXPECT_GE(pbi, 1);
+  EXPECT_LE(pbi, 13);
+  EXPECT_GE(bi, 1);
+  EXPECT_LE(bi, 13);
+  EXPECT_LT(f.back().lighting_error[2], 1e-9);
+  EXPECT_LT(f.back().image_error[2], 1e-5);
+  EXPECT_EQ(FramesToConverge(f, o, 0, 1e-3), -1);  // NWA-30 never gets there
+
+  const std::string csv = (WorkDir() / "rotation.csv").string();
+  WriteRotationCsv(f, o.terms, csv);
+  std::ifstream in(csv);
+  std::string line;
+  int lines = 0;
+  while (std::getline(in, line)) ++lines;
+  EXPECT_EQ(lines, 2 + 23);
+}
+
+// prt-view end to end: exit codes, PNG/EXR/npy outputs, --exact radiance equal to the library's,
+// and the rotation mode's frames, CSV and plot.
+TEST(PrtViewCliTest, EndToEnd) {
+  const TinyScene& tiny = Tiny();
+  const fs::path dir = WorkDir() / "cli";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string env = (dir / "sky.exr").string();
+  WriteEnvironmentExr(SunSky(0.3f, 40.f), env);
+
+  std::string out;
+  EXPECT_EQ(RunViewer("--help", &out), 0);
+  EXPECT_NE(out.find("--radiance-out"), std::string::npos);
+  EXPECT_EQ(RunViewer("--version", &out), 0);
+  EXPECT_NE(out.find("prt-view"), std::string::npos);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + env + "' --bogus"), 1);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "'"), 1);  // --env missing
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + env + "' --out x.png --lighting foo"), 1);
+  EXPECT_EQ(RunViewer("'" + (dir / "missing.prtpack").string() + "' --env '" + env + "' --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_NE(out.find("missing.prtpack"), std::string::npos);
+  {
+    std::ofstream bad(dir / "bad.prtpack");
+    bad << "not a pack";
+  }
+  EXPECT_EQ(RunViewer("'" + (dir / "bad.prtpack").string() + "' --env '" + env + "' --out '" +
+                      (dir / "x.png").string() + "'"),
+            2);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + (dir / "nosky.exr").string() + "' --out '" +
+                      (dir / "x.png").string() + "'"),
+            2);
+
+  const std::string png = (dir / "frame.png").string(), exr = (dir / "frame.exr").string(),
+                    npy = (dir / "radiance.npy").string();
+  ASSERT_EQ(
+      RunViewer("'" + tiny.pack + "' --env '" + env + "' --exact --out '" + png + "' --exr '" +
+                    exr + "' --radiance-out '" + npy + "' --width 40 --height 30",
+                &out),
+      0)
+      << out;
+  EXPECT_TRUE(fs::exists(png));
+  EXPECT_TRUE(fs::exists(exr));
+  const std::vector<float> radiance = ReadFile(npy);
+  const auto s = ViewerSession::Open(tiny.pack);
+  const std::vector<float> expected =
+      s->Shade(s->RelightExact(ProjectLighting(ResampleToCubemap(ReadEnvironment(env), tiny.n))));
+  ASSERT_EQ(radiance.size(), expected.size());
+  EXPECT_LT(RelativeRmsError(radiance, expected), 1e-6);
+
+  ASSERT_EQ(RunViewer("'" + tiny.pack + "' --env '" + env + "' --terms 20 --lighting nwa " +
+                          "--camera 0,3,4,0,0,0 --out '" + png + "' --radiance-out '" + npy + "'",
+                      &out),
+            0)
+      << out;
+  const std::vector<float> nwa = ReadFile(npy);
+  EXPECT_GT(RelativeRmsError(nwa, expected), 1e-4);
+
+  const fs::path frames = dir / "frames";
+  ASSERT_EQ(RunViewer("'" + tiny.pack + "' --env '" + env + "' --terms 30 --rotate 5 " +
+                          "--frames 3 --hold 2 --out-dir '" + frames.string() + "'",
+                      &out),
+            0)
+      << out;
+  for (int f = 0; f <= 5; ++f) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", f);
+    EXPECT_TRUE(fs::exists(frames / name)) << name;
+  }
+  std::ifstream csv(frames / "rotation_errors.csv");
+  std::string line;
+  int lines = 0;
+  while (std::getline(csv, line)) ++lines;
+  EXPECT_EQ(lines, 2 + 6);
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_TRUE(fs::exists(frames / "rotation_errors.png"));
+  }
+}
+
+}  // namespace
+}  // namespace prt
