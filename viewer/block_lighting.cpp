@@ -1,0 +1,96 @@
+#include "viewer/block_lighting.h"
+
+#include <tbb/parallel_for.h>
+
+#include <stdexcept>
+
+#include "viewer/brdf.h"
+
+namespace prt {
+
+CubemapBlocks::CubemapBlocks(int n) : n_(n) {
+  if (n < 16 || n > 256 || n % 16 != 0)
+    throw std::invalid_argument("CubemapBlocks: n must be a multiple of 16 in [16, 256]");
+  const CubemapLayout layout(n);
+  const int side = n / 16;
+  blocks_ = 6 * side * side;
+  texel_.resize(static_cast<std::size_t>(blocks_) * 256);
+  solid_angle_.resize(texel_.size());
+  pixel_dir_.resize(texel_.size() * 3);
+  sample_dir_.resize(static_cast<std::size_t>(blocks_) * 21 * 3);
+  centre_.resize(blocks_);
+  for (int b = 0; b < blocks_; ++b) {
+    const int face = b / (side * side), rem = b % (side * side);
+    const int by = rem / side, bx = rem % side;
+    auto direction = [&](double px, double py) {  // continuous pixel position in the block
+      const double u = -1.0 + 2.0 * (bx * 16 + px + 0.5) / n;
+      const double v = -1.0 + 2.0 * (by * 16 + py + 0.5) / n;
+      return CubemapLayout::FaceDirection(face, u, v);
+    };
+    for (int k = 0; k < 256; ++k) {
+      const std::size_t j = layout.Index(face, bx * 16 + (k & 15), by * 16 + (k >> 4));
+      const std::size_t e = static_cast<std::size_t>(b) * 256 + k;
+      texel_[e] = static_cast<uint32_t>(j);
+      solid_angle_[e] = static_cast<float>(layout.TexelSolidAngle(j));
+      const Vec3 d = layout.TexelCenter(j);
+      pixel_dir_[e * 3] = static_cast<float>(d.x);
+      pixel_dir_[e * 3 + 1] = static_cast<float>(d.y);
+      pixel_dir_[e * 3 + 2] = static_cast<float>(d.z);
+    }
+    centre_[b] = direction(7.5, 7.5);
+    int s = 0;
+    for (int l : {1, 2, 4})
+      for (int j = 0; j < l; ++j)
+        for (int i = 0; i < l; ++i, ++s) {
+          const Vec3 d = direction(BlockDct::SamplePosition(l, i), BlockDct::SamplePosition(l, j));
+          float* out = &sample_dir_[(static_cast<std::size_t>(b) * 21 + s) * 3];
+          out[0] = static_cast<float>(d.x);
+          out[1] = static_cast<float>(d.y);
+          out[2] = static_cast<float>(d.z);
+        }
+  }
+}
+
+const float* CubemapBlocks::SampleDirections(int block, int l) const {
+  const int offset = l == 1 ? 0 : (l == 2 ? 1 : 5);
+  return &sample_dir_[(static_cast<std::size_t>(block) * 21 + offset) * 3];
+}
+
+// §4.3: the three lighting representations of each block.
+void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, BlockLighting& out) {
+  if (light.n != blocks.n() || light.r.size() != light.TexelCount() ||
+      light.g.size() != light.TexelCount() || light.b.size() != light.TexelCount())
+    throw std::invalid_argument("UpdateBlockLighting: lighting cubemap does not match the blocks");
+  const std::size_t entries = static_cast<std::size_t>(blocks.block_count()) * 3;
+  out.n = blocks.n();
+  out.block_count = blocks.block_count();
+  out.dct.resize(entries * 16);
+  out.suffix.resize(entries * 257);
+  out.pixels.resize(entries * 256);
+  tbb::parallel_for(0, blocks.block_count(), [&](int b) {
+    for (int c = 0; c < 3; ++c) {
+      const std::vector<float>& ch = light.Channel(c);
+      const std::size_t e = static_cast<std::size_t>(b) * 3 + c;
+      float* px = &out.pixels[e * 256];
+      for (int k = 0; k < 256; ++k)
+        px[k] = static_cast<float>(static_cast<double>(ch[blocks.Texel(b, k)]) *
+                                   blocks.SolidAngle(b, k));
+      float* suffix = &out.suffix[e * 257];
+      double acc = 0;
+      suffix[256] = 0.f;
+      for (int k = 255; k >= 0; --k) {
+        acc += px[k];
+        suffix[k] = static_cast<float>(acc);
+      }
+      BlockDct::Forward16(px, &out.dct[e * 16]);
+    }
+  });
+}
+
+BlockLighting ComputeBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks) {
+  BlockLighting out;
+  UpdateBlockLighting(light, blocks, out);
+  return out;
+}
+
+}  // namespace prt

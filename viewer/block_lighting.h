@@ -1,0 +1,85 @@
+// The lighting of triple-product relighting in the three per-block representations of Inger,
+// Farbman & Lischinski 2013, §4.3, recomputed whenever the environment changes:
+//   (i)   16 DCT coefficients of each 16×16 block (BlockDct, u, v < 4), for Algorithm 1 line 6;
+//   (ii)  the block's row-concatenated vector L projected onto the 1D integral basis,
+//         L_int = D^{−T} L (Eq. 6): suffix sums L_int[k] = Σ_{m ≥ k} L[m], with L_int[256] = 0,
+//         so that Σ_k L[k]·V[k] = Σ_k L_int[k]·V_d[k] (line 9) and Σ_{a ≤ k < b} L[k] =
+//         L_int[a] − L_int[b];
+//   (iii) the pixels themselves, row-concatenated (line 11).
+// §4: "to account for the fact that not all cubemap pixels correspond to the same solid angle,
+// we first scale the incident radiance at each pixel by a suitable correction factor": every
+// representation holds L'[k] = L_k · Ω_k, the texel's average radiance times its exact solid
+// angle, so Σ_k L'[k]·V[k]·ρ̃(ω_k) is the pixel-basis estimate of ∫ L V ρ̃ dω (Eq. 2).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "vocabulary/cubemap.h"
+#include "vocabulary/envmap.h"
+#include "vocabulary/vec3.h"
+
+namespace prt {
+
+// Geometry of the 16×16 blocks of a resolution-n cubemap (block numbering of
+// vocabulary/visibility_blocks.h): texel indices, texel-centre directions, solid angles, block
+// centres and the sample directions of Eq. 4.
+class CubemapBlocks {
+ public:
+  // n: a multiple of 16 in [16, 256] (std::invalid_argument otherwise).
+  explicit CubemapBlocks(int n);
+
+  int n() const { return n_; }
+  int block_count() const { return blocks_; }
+  std::size_t Texel(int block, int k) const {
+    return texel_[static_cast<std::size_t>(block) * 256 + k];
+  }
+  // Unit direction through the continuous centre of the block.
+  const Vec3& Centre(int block) const { return centre_[block]; }
+  // 256 unit texel-centre directions of the block, 3 floats each (x, y, z), position order.
+  const float* PixelDirections(int block) const {
+    return &pixel_dir_[static_cast<std::size_t>(block) * 768];
+  }
+  // l×l unit directions (l = 1, 2, 4) at BlockDct::SamplePosition, index j·l + i, 3 floats each.
+  const float* SampleDirections(int block, int l) const;
+  // Exact solid angle of position k of the block.
+  float SolidAngle(int block, int k) const {
+    return solid_angle_[static_cast<std::size_t>(block) * 256 + k];
+  }
+
+ private:
+  int n_, blocks_;
+  std::vector<uint32_t> texel_;
+  std::vector<Vec3> centre_;
+  std::vector<float> pixel_dir_;   // blocks × 256 × 3
+  std::vector<float> sample_dir_;  // blocks × 21 × 3 (l = 1, then 2×2, then 4×4)
+  std::vector<float> solid_angle_;
+};
+
+struct BlockLighting {
+  int n = 0;
+  int block_count = 0;
+  // Entry (block, channel) = block·3 + channel.
+  std::vector<float> dct;     // entries × 16   (i)
+  std::vector<float> suffix;  // entries × 257  (ii), L_int[256] = 0
+  std::vector<float> pixels;  // entries × 256  (iii)
+  const float* Dct(int block, int c) const {
+    return &dct[(static_cast<std::size_t>(block) * 3 + c) * 16];
+  }
+  const float* Suffix(int block, int c) const {
+    return &suffix[(static_cast<std::size_t>(block) * 3 + c) * 257];
+  }
+  const float* Pixels(int block, int c) const {
+    return &pixels[(static_cast<std::size_t>(block) * 3 + c) * 256];
+  }
+};
+
+// All three representations of `light` (its n must equal blocks.n(), std::invalid_argument
+// otherwise). Sums run in double. Parallel over blocks (TBB); deterministic.
+BlockLighting ComputeBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks);
+// The same into existing storage (no allocation when the sizes already match): call it when
+// the environment changes.
+void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, BlockLighting& out);
+
+}  // namespace prt

@@ -1,0 +1,73 @@
+// Per-block triple products for glossy relighting under changing view and lighting (Inger,
+// Farbman & Lischinski 2013, Algorithm 1, §4.1–4.4), and the pixel-basis reference it is
+// measured against.
+//
+// Outgoing radiance of a vertex x towards the eye e, per channel c (Eq. 1–2, pixel basis):
+//   B_c = Σ_k L'_c[k] · V[k] · ρ̃_c(ω_k),   ω_o = normalize(e − x),
+// L' = radiance × texel solid angle (block_lighting.h), V the vertex's visibility level / (2^bits
+// − 1) (visibility_blocks.h), ρ̃ the cosine-weighted BRDF (brdf.h) at texel centres.
+// Algorithm 1 splits the sum into 16×16 blocks and per block:
+//   line 1   visibility all zero                          → 0, nothing sampled
+//   line 6   visibility all one                           → Σ_uv A_uv L_uv over the BRDF's
+//            1/4/16 DCT coefficients A (or Σ_k L'[k] ρ̃[k] when it needs all 256 samples)
+//   line 9   visibility mixed, BRDF one coefficient ρ̃₁    → ρ̃₁ · Σ_i V_d[i] · L_int[i] over the
+//            stored changes (Eq. 5–6)
+//   line 11  visibility mixed, BRDF 4/16/256 samples      → pixel basis over the visible runs
+//            of V (§4.4), the BRDF reconstructed from its DCT coefficients or sampled per pixel.
+// Per-block products run in float; block sums accumulate in double. Vertices run in parallel
+// (TBB); results do not depend on the thread count.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "viewer/block_lighting.h"
+#include "viewer/brdf.h"
+#include "vocabulary/visibility_blocks.h"
+
+namespace prt {
+
+// What Algorithm 1 did (Tables 1 and 2 of the paper).
+struct TripleProductStats {
+  uint64_t blocks_zero = 0;              // line 1
+  uint64_t blocks_line6 = 0;             // visibility all one
+  uint64_t blocks_line9 = 0;             // mixed visibility, constant BRDF
+  uint64_t blocks_line11 = 0;            // mixed visibility, non-constant BRDF
+  uint64_t brdf_rate[4] = {0, 0, 0, 0};  // BRDF sampled 1, 4, 16, 256 times (non-zero blocks)
+  TripleProductStats& operator+=(const TripleProductStats& o);
+};
+
+// The scene as Algorithm 1 sees it: per vertex a position, a unit normal (the normal the
+// visibility was traced with), a material index, and its visibility maps.
+struct GlossyScene {
+  std::span<const Vec3> positions;
+  std::span<const Vec3> normals;
+  std::span<const uint16_t> material_index;
+  std::span<const Material> materials;
+  const VisibilityBlocks* visibility = nullptr;
+};
+
+// Algorithm 1 for one vertex seen from `eye`; adds to *stats when not null.
+std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                          const BlockLighting& light, std::size_t vertex,
+                                          const Vec3& eye, TripleProductStats* stats = nullptr);
+// Every vertex (3 floats each into out_rgb), parallel over vertices. Throws
+// std::invalid_argument when sizes disagree (vertex counts, n, material indices).
+TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                        const BlockLighting& light, const Vec3& eye,
+                                        std::span<float> out_rgb);
+
+// The reference: the same sum in the pixel basis over all 6·n·n texels (the BRDF evaluated at
+// every texel centre, the visibility decoded to pixels). skip_occluded evaluates the BRDF only
+// where V > 0 (a cheaper reference; the paper's baseline is the full sum).
+std::array<double, 3> PixelBasisReferenceVertex(const GlossyScene& scene,
+                                                const CubemapBlocks& blocks,
+                                                const BlockLighting& light, std::size_t vertex,
+                                                const Vec3& eye, bool skip_occluded = false);
+void RelightPixelBasisReference(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                const BlockLighting& light, const Vec3& eye,
+                                std::span<float> out_rgb, bool skip_occluded = false);
+
+}  // namespace prt
