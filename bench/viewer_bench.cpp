@@ -1,0 +1,389 @@
+// The viewer's benchmark (docs/viewer.md, "Benchmark"): what relighting a pack costs and how
+// good the lighting approximations are, every figure measured in this run on this machine.
+//
+//   1. Relighting frames per second for N = 30, 100, 300 NWA terms: the B = T·L step alone
+//      (Eq. 8 from the compressed columns) and the whole frame (relight, shade, rasterise), and
+//      the ratio of the measured time to the memory-bandwidth bound (bytes of T the N columns
+//      hold / copy bandwidth measured with a memcpy loop in the same run).
+//   2. Cheslack-Postava et al. 2008 Figure 9: relighting time of 2D (per-row) against adaptive
+//      4D compression at equal image error (error against the uncompressed T under the same
+//      lighting terms), over a sweep of budgets.
+//   3. Overbeck et al. 2006 §6 / Figure 7: sunrise and city rotating about +Y for 120 frames,
+//      then still: mean image error of PBI-30 against NWA-90, and the frames PBI needs after the
+//      rotation stops to reach the exact-lighting image (relative RMS < 1e-3).
+//   4. One frame side by side: exact | NWA | PBI (PNG in --out-dir).
+//
+// Usage: viewer_bench [scene.prtpack] [--n 16] [--rays 1] [--deg 0.5] [--frames 120]
+//                     [--hold 60] [--out-dir viewer_bench_out] [--quick]
+// Without a pack, the default scene (bunny on a 64×64 ground, 41,802 samples) is traced here at
+// reduced cost (cubemap n = 16, 1 ray per texel), compressed like scenes/default.toml
+// (adaptive 4D, keep 5%, 9 bits) and packed to --out-dir, so that everything below reads the
+// same pack prt-view would.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench/bench_scenes.h"
+#include "packager/prtpack_transport.h"
+#include "packager/prtpack_writer.h"
+#include "viewer/lighting.h"
+#include "viewer/per_band_incremental.h"
+#include "viewer/viewer_session.h"
+#include "vocabulary/compressed_relight.h"
+#include "worker/column_order.h"
+#include "worker/embree_scene.h"
+#include "worker/transport_compressor.h"
+#include "worker/transport_sampler.h"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+double Seconds(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Median seconds of `reps` runs of f (after one warm-up run).
+template <typename F>
+double MedianSeconds(int reps, F&& f) {
+  f();
+  std::vector<double> t;
+  for (int r = 0; r < reps; ++r) {
+    const auto t0 = Clock::now();
+    f();
+    t.push_back(Seconds(t0));
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+// Copy bandwidth (bytes read + bytes written per second) of memcpy over 256 MiB buffers.
+double MeasureBandwidth() {
+  const std::size_t bytes = std::size_t{256} << 20;
+  std::vector<char> a(bytes, 1), b(bytes, 2);
+  const double s = MedianSeconds(5, [&] {
+    std::memcpy(b.data(), a.data(), bytes);
+    a[bytes / 2] = b[bytes / 3];
+  });
+  return 2.0 * static_cast<double>(bytes) / s;
+}
+
+struct Traced {
+  prt::SceneDescription scene;
+  prt::SceneGeometry geometry;
+  std::vector<float> rows;
+  double trace_s = 0;
+};
+
+Traced TraceDefaultScene(int n, int rays) {
+  Traced t;
+  t.scene = prt::bench::BenchScene("default", n);
+  t.geometry = prt::BuildSceneGeometry(t.scene);
+  const prt::EmbreeScene embree(t.geometry);
+  const prt::TransportSampler sampler(embree, n, {rays, 1});
+  const std::vector<prt::SpatialSample> samples = prt::SpatialSamplesOf(t.geometry);
+  t.rows.resize(samples.size() * sampler.layout().texel_count());
+  const auto t0 = Clock::now();
+  sampler.ComputeRows(samples, 0, t.rows.data());
+  t.trace_s = Seconds(t0);
+  return t;
+}
+
+std::string CameraJson(const prt::Camera& c) {
+  char buf[512];
+  std::snprintf(
+      buf, sizeof buf,
+      R"({"eye": [%.9g, %.9g, %.9g], "target": [%.9g, %.9g, %.9g], "up": [%.9g, %.9g, %.9g], "fov": %.9g, "width": %d, "height": %d})",
+      c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.up.x, c.up.y, c.up.z,
+      c.fov_deg, c.width, c.height);
+  return buf;
+}
+
+void WritePackOf(const Traced& t, const prt::CompressedTransport& ct, const std::string& path) {
+  prt::pack::PackInput in;
+  in.metadata_json = R"({"scene": {"scene": {"name": ")" + t.scene.name + R"("}, "camera": )" +
+                     CameraJson(t.scene.camera) + "}}";
+  for (const prt::SceneMesh& m : t.geometry.meshes) {
+    prt::pack::PackMeshInput pm;
+    pm.name = m.name;
+    pm.mesh = m.mesh;
+    pm.albedo = m.albedo;
+    pm.is_ground = m.is_ground;
+    pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
+    in.meshes.push_back(std::move(pm));
+  }
+  in.transport = prt::pack::MakeTransportInput(ct, 256);
+  prt::pack::WriterOptions wo;
+  wo.zstd_level = 3;
+  prt::pack::WritePackFile(path, in, wo);
+}
+
+// Stored bytes of T's columns (index + value, 8 bytes per stored term, as CompressedRelighter
+// holds them) for each column.
+std::vector<std::size_t> ColumnBytes(const prt::CompressedTransport& ct) {
+  std::vector<std::size_t> b(ct.header.column_count(), 0);
+  for (const prt::CompressedColumn& c : ct.columns) b[c.column] = 8 * c.q.size();
+  return b;
+}
+
+// Images of equal height next to each other, left to right.
+prt::ImageRgb Row(const std::vector<const prt::ImageRgb*>& images) {
+  int w = 0;
+  for (const prt::ImageRgb* i : images) w += i->width;
+  prt::ImageRgb out(w, images[0]->height);
+  int x0 = 0;
+  for (const prt::ImageRgb* i : images) {
+    for (int y = 0; y < i->height; ++y)
+      std::memcpy(out.At(x0, y), i->At(0, y),
+                  3 * sizeof(float) * static_cast<std::size_t>(i->width));
+    x0 += i->width;
+  }
+  return out;
+}
+
+std::vector<float> ShadeWith(const prt::ViewerSession& s, const prt::SampleRadiance& r) {
+  return s.Shade(r);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string pack_path, out_dir = "viewer_bench_out";
+  int n = 16, rays = 1, frames = 120, hold = 60;
+  double deg = 0.5;
+  bool quick = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s needs a value\n", a.c_str());
+        std::exit(1);
+      }
+      return argv[++i];
+    };
+    if (a == "--n")
+      n = std::atoi(next().c_str());
+    else if (a == "--rays")
+      rays = std::atoi(next().c_str());
+    else if (a == "--deg")
+      deg = std::atof(next().c_str());
+    else if (a == "--frames")
+      frames = std::atoi(next().c_str());
+    else if (a == "--hold")
+      hold = std::atoi(next().c_str());
+    else if (a == "--out-dir")
+      out_dir = next();
+    else if (a == "--quick")
+      quick = true;
+    else if (!a.empty() && a[0] != '-')
+      pack_path = a;
+    else {
+      std::fprintf(stderr, "unknown argument %s\n", a.c_str());
+      return 1;
+    }
+  }
+  fs::create_directories(out_dir);
+  std::printf("# viewer_bench (prtfarm viewer), %u hardware threads\n",
+              std::thread::hardware_concurrency());
+
+  // ---- The pack ----
+  Traced traced;
+  const bool own_pack = pack_path.empty();
+  if (own_pack) {
+    traced = TraceDefaultScene(n, rays);
+    std::printf("default scene traced in-process: %zu samples, n = %d, %d ray(s)/texel, %.1f s\n",
+                traced.geometry.vertex_count(), n, rays, traced.trace_s);
+    prt::CompressionOptions o = prt::CompressionOptionsFrom(traced.scene.compression, "default");
+    const auto t0 = Clock::now();
+    const prt::CompressedTransport ct =
+        prt::CompressTransport(traced.rows.data(), n, prt::SpatialDomainOf(traced.geometry), o);
+    pack_path = (fs::path(out_dir) / "default_scene.prtpack").string();
+    WritePackOf(traced, ct, pack_path);
+    std::printf("compressed (%s, keep %.3g, %d bits) and packed in %.1f s: %s\n",
+                prt::ToString(o.scheme), o.keep_fraction, o.bits, Seconds(t0), pack_path.c_str());
+  }
+  const auto session = prt::ViewerSession::Open(pack_path);
+  n = session->cubemap_n();
+  const std::size_t ns = session->sample_count();
+  std::printf("pack %s: %zu samples, n = %d (%zu coefficients), %zu stored terms (%.1f MB of T)\n",
+              pack_path.c_str(), ns, n, session->relighter().column_count(),
+              session->transport_terms(), 8e-6 * static_cast<double>(session->transport_terms()));
+
+  const auto envs = prt::bench::BenchEnvironments(n, {"sunrise", "city"});
+  const prt::WaveletLighting sunrise = prt::ProjectLighting(envs[0].cube);
+  const prt::HaarLightingBasis basis(n);
+
+  // ---- 1. Frames per second and the bandwidth bound ----
+  const double bandwidth = MeasureBandwidth();
+  std::printf("\n## 1. Relighting speed (sunrise, NWA terms; copy bandwidth %.2f GB/s)\n",
+              1e-9 * bandwidth);
+  {
+    const prt::pack::PackReader reader = prt::pack::PackReader::OpenFile(pack_path);
+    const prt::CompressedTransport ct = prt::pack::ReadCompressedTransport(reader);
+    const std::vector<std::size_t> col_bytes = ColumnBytes(ct);
+    const prt::Camera cam = session->camera();
+    std::printf(
+        "| N | T·L ms | T·L fps | frame ms (%dx%d) | frame fps | T bytes/frame | "
+        "bound ms | T·L / bound |\n|---|---|---|---|---|---|---|---|\n",
+        cam.width, cam.height);
+    for (std::size_t terms : {std::size_t{30}, std::size_t{100}, std::size_t{300}}) {
+      const std::vector<prt::LightingTerm> l =
+          prt::NonlinearLightingApproximation(sunrise, basis, terms);
+      std::size_t bytes = 0;
+      for (const prt::LightingTerm& t : l) bytes += col_bytes[t.index];
+      const int reps = quick ? 5 : 21;
+      const double relight = MedianSeconds(reps, [&] { (void)session->transport().Apply(l); });
+      const double frame = MedianSeconds(quick ? 3 : 9, [&] {
+        const std::vector<float> rgb = ShadeWith(*session, session->transport().Apply(l));
+        (void)session->Render(cam, rgb, &envs[0].cube);
+      });
+      const double bound = static_cast<double>(bytes) / bandwidth;
+      std::printf("| %zu | %.3f | %.1f | %.2f | %.1f | %zu | %.4f | %.1f |\n", terms, 1e3 * relight,
+                  1.0 / relight, 1e3 * frame, 1.0 / frame, bytes, 1e3 * bound,
+                  bound > 0 ? relight / bound : 0.0);
+    }
+    std::printf(
+        "(bound = stored bytes of the N columns / copy bandwidth; the Eq. 8 path also\n"
+        " runs one inverse column transform over 3 × %zu doubles per frame)\n",
+        ns);
+  }
+
+  // ---- 2. Figure 9: 2D against adaptive 4D at equal error ----
+  if (own_pack) {
+    std::printf(
+        "\n## 2. 2D vs adaptive 4D relighting (Cheslack-Postava et al. Fig. 9): sunrise, "
+        "NWA-300 lighting, error vs uncompressed T\n");
+    const std::vector<prt::LightingTerm> l =
+        prt::NonlinearLightingApproximation(sunrise, basis, 300);
+    // Reference: uncompressed T (texel basis) under the same 300 terms.
+    const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, l);
+    std::vector<float> ref(3 * ns);
+    {
+      const std::size_t texels = approx_cube.TexelCount();
+      for (std::size_t s = 0; s < ns; ++s)
+        for (int c = 0; c < 3; ++c) {
+          double acc = 0;
+          const float* row = traced.rows.data() + s * texels;
+          for (std::size_t j = 0; j < texels; ++j)
+            acc += double(row[j]) * approx_cube.Channel(c)[j];
+          ref[3 * s + c] =
+              static_cast<float>(acc * session->albedo()[s][static_cast<std::size_t>(c)]);
+        }
+    }
+    struct Point {
+      double error, ms;
+      std::size_t terms;
+    };
+    std::map<std::string, std::vector<Point>> curves;
+    const std::vector<double> keeps =
+        quick ? std::vector<double>{0.01, 0.05} : std::vector<double>{0.01, 0.03, 0.1};
+    std::printf(
+        "| scheme | keep | stored terms | image error | relight ms |\n|---|---|---|---|---|\n");
+    for (prt::CompressionScheme scheme :
+         {prt::CompressionScheme::k2D, prt::CompressionScheme::kAdaptive4D}) {
+      for (double keep : keeps) {
+        prt::CompressionOptions o =
+            prt::CompressionOptionsFrom(traced.scene.compression, "default");
+        o.scheme = scheme;
+        o.keep_fraction = keep;
+        const prt::CompressedTransport ct =
+            prt::CompressTransport(traced.rows.data(), n, prt::SpatialDomainOf(traced.geometry), o);
+        const prt::CompressedRelighter relighter(ct);
+        const prt::CompressedTransportOperator op(relighter);
+        const std::vector<float> rgb = prt::ShadeSamples(op.Apply(l), session->albedo());
+        const double err = prt::RelativeRmsError(rgb, ref);
+        const double ms = 1e3 * MedianSeconds(quick ? 3 : 11, [&] { (void)op.Apply(l); });
+        curves[prt::ToString(scheme)].push_back({err, ms, ct.term_count()});
+        std::printf("| %s | %.3g | %zu | %.4g | %.3f |\n", prt::ToString(scheme), keep,
+                    ct.term_count(), err, ms);
+      }
+    }
+    // Equal error: 2D's time interpolated (log-log) at each adaptive-4D point's error.
+    std::vector<Point> c2 = curves["2d"];
+    std::sort(c2.begin(), c2.end(),
+              [](const Point& a, const Point& b) { return a.error < b.error; });
+    std::printf(
+        "\n| image error | adaptive 4D ms | 2D ms (interpolated) | 2D / 4D time |\n"
+        "|---|---|---|---|\n");
+    for (const Point& p : curves["adaptive4d"]) {
+      for (std::size_t k = 0; k + 1 < c2.size(); ++k) {
+        if (p.error >= c2[k].error && p.error <= c2[k + 1].error && c2[k].error > 0) {
+          const double u =
+              std::log(p.error / c2[k].error) / std::log(c2[k + 1].error / c2[k].error);
+          const double ms2 = std::exp(std::log(c2[k].ms) + u * std::log(c2[k + 1].ms / c2[k].ms));
+          std::printf("| %.4g | %.3f | %.3f | %.2f |\n", p.error, p.ms, ms2, ms2 / p.ms);
+        }
+      }
+    }
+    std::printf("(rows appear only where 2D's measured errors bracket the 4D point)\n");
+  } else {
+    std::printf("\n## 2. skipped: the 2D/4D sweep needs the uncompressed T (run without a pack)\n");
+  }
+
+  // ---- 3. Rotation: PBI-30 vs NWA-90 ----
+  std::printf(
+      "\n## 3. Rotating environment (Overbeck et al. Fig. 7): %.2f deg/frame for %d "
+      "frames, then %d still\n",
+      deg, frames, hold);
+  std::printf(
+      "| environment | mean image error PBI-30 | NWA-90 | NWA-30 | BI-30 | PBI-30 frames "
+      "to < 1e-3 after stop | seconds |\n|---|---|---|---|---|---|---|\n");
+  for (const std::string name : {"sunrise", "city"}) {
+    const prt::EnvironmentImage env =
+        prt::ReadEnvironment(prt::bench::DataDir() + "/envmaps/" + name + ".exr");
+    prt::RotationOptions o30;
+    o30.degrees_per_frame = deg;
+    o30.rotate_frames = frames;
+    o30.hold_frames = hold;
+    o30.terms = 30;
+    prt::RotationOptions o90 = o30;
+    o90.terms = 90;
+    o90.hold_frames = 0;
+    const auto t0 = Clock::now();
+    prt::ImageRgb side;
+    const auto f30 = prt::RunRotation(*session, env, o30, [&](const prt::RotationFrameView& v) {
+      if (name == "sunrise" && v.errors.frame == frames) {
+        const prt::Camera cam = session->camera();
+        const prt::ImageRgb ex = session->Render(cam, v.exact_rgb, &v.cube);
+        const prt::ImageRgb nwa = session->Render(cam, v.approx_rgb[0], &v.cube);
+        const prt::ImageRgb pbi = session->Render(cam, v.approx_rgb[2], &v.cube);
+        side = Row({&ex, &nwa, &pbi});
+      }
+    });
+    const auto f90 = prt::RunRotation(*session, env, o90);
+    const double secs = Seconds(t0);
+    double pbi = 0, bi = 0, nwa30 = 0, nwa90 = 0;
+    for (int f = 1; f <= frames; ++f) {
+      pbi += f30[static_cast<std::size_t>(f)].image_error[2];
+      bi += f30[static_cast<std::size_t>(f)].image_error[1];
+      nwa30 += f30[static_cast<std::size_t>(f)].image_error[0];
+      nwa90 += f90[static_cast<std::size_t>(f)].image_error[0];
+    }
+    const int conv = prt::FramesToConverge(f30, o30, 2, 1e-3);
+    std::printf("| %s | %.4g | %.4g | %.4g | %.4g | %d | %.1f |\n", name.c_str(), pbi / frames,
+                nwa90 / frames, nwa30 / frames, bi / frames, conv, secs);
+    const std::string csv = (fs::path(out_dir) / ("rotation_" + name + "_30.csv")).string();
+    prt::WriteRotationCsv(f30, 30, csv);
+    prt::PlotRotationErrors(csv, (fs::path(out_dir) / ("rotation_" + name + "_30.png")).string(),
+                            o30);
+    if (!side.pixels.empty()) {
+      const std::string p = (fs::path(out_dir) / "sunrise_exact_nwa30_pbi30.png").string();
+      prt::WritePng(side, p);
+      std::printf("(frame %d of sunrise, exact | NWA-30 | PBI-30: %s)\n", frames, p.c_str());
+    }
+  }
+  std::printf(
+      "(mean over the rotating frames 1..%d; image error = relative RMS of shaded sample "
+      "radiance against exact lighting through the same compressed T)\n",
+      frames);
+  return 0;
+}
