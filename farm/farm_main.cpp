@@ -5,6 +5,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "farm/compression_phase.h"
 #include "farm/farm_coordinator.h"
 #include "farm/farm_options.h"
 
@@ -29,7 +30,13 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "prt-farm: this MPI does not provide MPI_THREAD_FUNNELED\n");
       code = prt::kExitRankFailed;
     } else {
-      code = prt::RunFarm(options);
+      // The compression phase (farm/compression_phase.h) runs once the transport is complete.
+      if (prt::CompressedRunIsComplete(options)) {
+        code = prt::kExitOk;
+      } else {
+        code = prt::RunFarm(options);
+        if (code == prt::kExitOk) code = prt::RunCompressionPhase(options);
+      }
     }
   }
   MPI_Finalize();

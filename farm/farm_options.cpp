@@ -67,6 +67,19 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_option("--fail-mode", o.fail_mode)->check(CLI::IsMember({"exit", "hang"}))->group("");
   app.add_option("--initial-job-rows", o.initial_job_rows)->group("");
   app.add_option("--max-job-rows", o.max_job_rows)->group("");
+  app.add_flag("--no-compress", o.no_compress,
+               "Stop after transport.prtt (no compressed transport.prtc)");
+  app.add_flag("--keep-raw", o.keep_raw,
+               "Keep the raw transport.prtt after writing the compressed transport.prtc");
+  app.add_option("--memory-budget", o.memory_budget_bytes,
+                 "Row data each rank buffers in the blocked transpose before spilling to disk "
+                 "(bytes; suffixes k, M, G = 2^10, 2^20, 2^30)")
+      ->transform(CLI::AsSizeValue(false))
+      ->capture_default_str();
+  app.add_option("--compression-scheme", o.compression_scheme,
+                 "Override the scene's [compression] scheme")
+      ->check(CLI::IsMember({"2d", "4d", "adaptive4d"}));
+  app.add_flag("--measure-bandwidth", o.measure_bandwidth)->group("");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -52,6 +52,13 @@ struct FarmOptions {
   std::string fail_mode = "exit";  // exit: _Exit(4) abruptly; hang: sleep forever
   uint64_t initial_job_rows = 0;   // 0: auto
   uint64_t max_job_rows = 0;       // 0: auto (a job's rows fit in 256 MiB)
+
+  // Compression phase (farm/compression_phase.h, docs/farm-compression.md).
+  bool no_compress = false;                   // stop after transport.prtt
+  bool keep_raw = false;                      // keep transport.prtt after transport.prtc
+  uint64_t memory_budget_bytes = 1ull << 30;  // per rank, for the blocked transpose
+  std::string compression_scheme;             // empty: the scene's [compression] scheme
+  bool measure_bandwidth = false;             // hidden: memcpy and disk bandwidth in the report
 };
 
 // Parses argv. Returns the exit code to leave with immediately (0 after --help/--version, 1 on a

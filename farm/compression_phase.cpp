@@ -1,0 +1,623 @@
+// prt-farm's compression phase (Cheslack-Postava et al. 2008 §4.4 steps 2–5); see
+// compression_phase.h and docs/farm-compression.md.
+#include "farm/compression_phase.h"
+
+#include <fcntl.h>
+#include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <thread>
+
+#include "farm/run_folder.h"
+#include "vocabulary/compressed_transport.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/progress.h"
+#include "vocabulary/scene.h"
+#include "vocabulary/transport_file.h"
+#include "worker/column_order.h"
+#include "worker/transport_compressor.h"
+
+namespace prt {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+void CheckMpi(int rc, const char* what) {
+  if (rc == MPI_SUCCESS) return;
+  char text[MPI_MAX_ERROR_STRING] = {};
+  int len = 0;
+  MPI_Error_string(rc, text, &len);
+  throw RankFailure(std::string(what) + " failed: " + std::string(text, static_cast<size_t>(len)));
+}
+
+int ExitCodeOfCurrent(std::string& message) {
+  try {
+    throw;
+  } catch (const UsageError& x) {
+    message = x.what();
+    return kExitUsage;
+  } catch (const InputError& x) {
+    message = x.what();
+    return kExitBadInput;
+  } catch (const FileIoError& x) {
+    message = x.what();
+    return kExitIoError;
+  } catch (const fs::filesystem_error& x) {
+    message = x.what();
+    return kExitIoError;
+  } catch (const RankFailure& x) {
+    message = x.what();
+    return kExitRankFailed;
+  } catch (const std::exception& x) {
+    message = std::string("compression phase: ") + x.what();
+    return kExitRankFailed;
+  } catch (...) {
+    message = "compression phase: unknown exception";
+    return kExitRankFailed;
+  }
+}
+
+// Threads per rank when --threads is 0: the node's cores divided by the ranks on the node.
+int AutoThreads(MPI_Comm comm) {
+  MPI_Comm node;
+  int local_ranks = 1;
+  if (MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node) == MPI_SUCCESS) {
+    MPI_Comm_size(node, &local_ranks);
+    MPI_Comm_free(&node);
+  }
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  return std::max(1, cores / std::max(1, local_ranks));
+}
+
+// The compression options every rank needs besides the header (PrepareRows' per-row budget).
+struct OptionsPod {
+  uint8_t row_wavelet, column_wavelet, scheme, bits;
+  uint32_t terms_per_column;
+  double keep_fraction;
+  uint64_t dither_seed;
+};
+
+}  // namespace
+
+std::pair<uint32_t, uint32_t> OwnedColumns(uint32_t cols, int rank, int ranks) {
+  const uint64_t c = cols, r = static_cast<uint64_t>(rank), p = static_cast<uint64_t>(ranks);
+  return {static_cast<uint32_t>(c * r / p), static_cast<uint32_t>(c * (r + 1) / p)};
+}
+
+std::pair<uint64_t, uint64_t> ChunkShare(uint64_t first, uint64_t count, int rank, int ranks) {
+  const uint64_t r = static_cast<uint64_t>(rank), p = static_cast<uint64_t>(ranks);
+  const uint64_t a = count * r / p, b = count * (r + 1) / p;
+  return {first + a, b - a};
+}
+
+uint64_t ChunkRows(uint64_t row_bytes, uint32_t rows_per_block, uint64_t memory_budget,
+                   uint64_t rows) {
+  const uint64_t block_bytes =
+      std::max<uint64_t>(1, row_bytes * std::max<uint32_t>(1, rows_per_block));
+  const uint64_t target = std::min<uint64_t>(memory_budget / 4, 64ull << 20);
+  const uint64_t blocks = std::max<uint64_t>(1, target / block_bytes);
+  return std::max<uint64_t>(
+      1, std::min<uint64_t>(rows, blocks * std::max<uint32_t>(1, rows_per_block)));
+}
+
+// §4.4 step 3, distributed: chunks of rows are scattered from rank 0, row-transformed where they
+// land, then exchanged all-to-all so that each rank receives, for every row of the chunk, the
+// slab of columns it owns; its BlockTransposer buffers (and spills) them and finally merges
+// them into column blocks. No rank holds more than one chunk, its share, the exchange buffers
+// and its transposer's budget.
+TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
+                                    uint64_t chunk_rows, const RowReader& read,
+                                    const RowPreparer& prepare, const BlockSpillOptions& spill,
+                                    const ColumnBlockSink& sink, Progress* progress) {
+  int rank = 0, size = 1;
+  CheckMpi(MPI_Comm_rank(comm, &rank), "MPI_Comm_rank");
+  CheckMpi(MPI_Comm_size(comm, &size), "MPI_Comm_size");
+  if (chunk_rows == 0) throw std::invalid_argument("DistributedTranspose: chunk_rows is 0");
+  if (chunk_rows * cols > static_cast<uint64_t>(std::numeric_limits<int>::max()))
+    throw std::invalid_argument("DistributedTranspose: chunk exceeds 2^31 floats");
+  TransposeStats st;
+  const auto [cb, ce] = OwnedColumns(cols, rank, size);
+  const uint32_t width = ce - cb;
+  std::optional<BlockTransposer> tr;
+  if (width > 0) tr.emplace(rows, cb, ce, spill);
+  std::vector<uint32_t> col_first(static_cast<std::size_t>(size)),
+      col_width(static_cast<std::size_t>(size));
+  for (int r = 0; r < size; ++r) {
+    const auto [a, b] = OwnedColumns(cols, r, size);
+    col_first[static_cast<std::size_t>(r)] = a;
+    col_width[static_cast<std::size_t>(r)] = b - a;
+  }
+  const std::size_t P = static_cast<std::size_t>(size);
+  std::vector<float> chunk, mine, sendbuf, recvbuf;
+  std::vector<int> counts(P), displs(P), scounts(P), sdispls(P), rcounts(P), rdispls(P);
+  for (uint64_t first = 0; first < rows; first += chunk_rows) {
+    const uint64_t count = std::min(chunk_rows, rows - first);
+    // Rank 0 reads the chunk; a failure is broadcast so that no rank waits forever.
+    int ok = 1;
+    std::exception_ptr failure;
+    if (rank == 0) {
+      const double t = Now();
+      try {
+        chunk.resize(count * cols);
+        read(first, count, chunk.data());
+      } catch (...) {
+        ok = 0;
+        failure = std::current_exception();
+      }
+      st.read_seconds += Now() - t;
+    }
+    double t = Now();
+    CheckMpi(MPI_Bcast(&ok, 1, MPI_INT, 0, comm), "MPI_Bcast");
+    if (!ok) {
+      if (failure) std::rethrow_exception(failure);
+      throw RankFailure("rank 0 could not read rows " + std::to_string(first) + "..");
+    }
+    // Scatter: rank r gets rows ChunkShare(r) of the chunk.
+    for (std::size_t r = 0; r < P; ++r) {
+      const auto [f, c] = ChunkShare(first, count, static_cast<int>(r), size);
+      counts[r] = static_cast<int>(c * cols);
+      displs[r] = static_cast<int>((f - first) * cols);
+      if (rank == 0 && static_cast<int>(r) != 0) st.bytes_sent += c * cols * sizeof(float);
+    }
+    const auto [my_first, my_count] = ChunkShare(first, count, rank, size);
+    mine.resize(my_count * cols);
+    if (size == 1) {
+      mine.swap(chunk);
+    } else {
+      CheckMpi(MPI_Scatterv(chunk.data(), counts.data(), displs.data(), MPI_FLOAT, mine.data(),
+                            static_cast<int>(my_count * cols), MPI_FLOAT, 0, comm),
+               "MPI_Scatterv");
+    }
+    st.exchange_seconds += Now() - t;
+    t = Now();
+    prepare(my_first, my_count, mine.data());
+    st.row_transform_seconds += Now() - t;
+    // All-to-all: rank j receives rows_i × columns_j from every rank i.
+    t = Now();
+    const float* slabs = nullptr;
+    if (size == 1) {
+      slabs = mine.data();
+    } else {
+      int so = 0, ro = 0;
+      for (std::size_t j = 0; j < P; ++j) {
+        scounts[j] = static_cast<int>(my_count * col_width[j]);
+        sdispls[j] = so;
+        so += scounts[j];
+        if (static_cast<int>(j) != rank)
+          st.bytes_sent += static_cast<uint64_t>(scounts[j]) * sizeof(float);
+        const uint64_t ci = ChunkShare(first, count, static_cast<int>(j), size).second;
+        rcounts[j] = static_cast<int>(ci * width);
+        rdispls[j] = ro;
+        ro += rcounts[j];
+      }
+      sendbuf.resize(static_cast<std::size_t>(so));
+      recvbuf.resize(static_cast<std::size_t>(ro));
+      for (std::size_t j = 0; j < P; ++j) {
+        float* dst = sendbuf.data() + sdispls[j];
+        for (uint64_t r = 0; r < my_count; ++r)
+          std::memcpy(dst + r * col_width[j], mine.data() + r * cols + col_first[j],
+                      col_width[j] * sizeof(float));
+      }
+      CheckMpi(MPI_Alltoallv(sendbuf.data(), scounts.data(), sdispls.data(), MPI_FLOAT,
+                             recvbuf.data(), rcounts.data(), rdispls.data(), MPI_FLOAT, comm),
+               "MPI_Alltoallv");
+      slabs = recvbuf.data();
+    }
+    st.exchange_seconds += Now() - t;
+    t = Now();
+    if (tr) {
+      for (std::size_t i = 0; i < P; ++i) {
+        const auto [f, c] = ChunkShare(first, count, static_cast<int>(i), size);
+        if (c == 0) continue;
+        if (size == 1) {
+          tr->AddRows(f, c, slabs, cols);
+        } else {
+          tr->AddRows(f, c, slabs + rdispls[i], width);
+        }
+      }
+    }
+    st.buffer_seconds += Now() - t;
+    if (size == 1) mine.swap(chunk);
+    if (progress) progress->Advance(count);
+  }
+  if (tr) {
+    uint32_t f = 0, c = 0;
+    std::vector<float> columns;
+    for (;;) {
+      double t = Now();
+      const bool more = tr->NextColumnBlock(f, c, columns);
+      st.merge_seconds += Now() - t;
+      if (!more) break;
+      t = Now();
+      sink(f, c, columns);
+      st.sink_seconds += Now() - t;
+    }
+    st.bytes_spilled = tr->bytes_spilled();
+    st.runs_spilled = tr->runs_spilled();
+  }
+  return st;
+}
+
+double CompressionPhaseReport::TransposeMbPerSecond() const {
+  return transpose_seconds > 0 ? static_cast<double>(raw_bytes) / transpose_seconds / 1e6 : 0;
+}
+double CompressionPhaseReport::PhaseMbPerSecond() const {
+  return wall_seconds > 0 ? static_cast<double>(raw_bytes) / wall_seconds / 1e6 : 0;
+}
+double CompressionPhaseReport::Ratio() const {
+  return raw_bytes > 0 ? static_cast<double>(compressed_bytes) / static_cast<double>(raw_bytes) : 0;
+}
+
+std::string MergeCompressionReport(const std::string& report_json, const CompressionPhaseReport& r,
+                                   const std::string& name) {
+  using Json = nlohmann::ordered_json;
+  Json j = Json::parse(report_json, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) throw InputError(name, "not a JSON object");
+  Json c;
+  c["wall_seconds"] = r.wall_seconds;
+  c["ranks"] = r.ranks;
+  c["scheme"] = r.scheme;
+  c["row_wavelet"] = r.row_wavelet;
+  c["column_wavelet"] = r.column_wavelet;
+  c["bits"] = r.bits;
+  c["keep_fraction"] = r.keep_fraction;
+  c["memory_budget_bytes"] = r.memory_budget_bytes;
+  c["raw_bytes"] = r.raw_bytes;
+  c["bytes_moved"] = r.bytes_moved;
+  c["spill_bytes"] = r.spill_bytes;
+  c["spill_runs"] = r.spill_runs;
+  c["transpose_seconds"] = r.transpose_seconds;
+  c["transpose_mb_per_second"] = r.TransposeMbPerSecond();
+  c["phase_mb_per_second"] = r.PhaseMbPerSecond();
+  c["stage_seconds"] = {
+      {"read", r.read_seconds},         {"row_transform", r.row_transform_seconds},
+      {"exchange", r.exchange_seconds}, {"buffer", r.buffer_seconds},
+      {"merge", r.merge_seconds},       {"compress", r.compress_seconds},
+      {"write", r.write_seconds}};
+  c["compressed_bytes"] = r.compressed_bytes;
+  c["terms"] = r.terms;
+  c["columns_stored"] = r.columns_stored;
+  c["ratio_to_raw"] = r.Ratio();
+  c["raw_kept"] = r.raw_kept;
+  if (r.memory_bandwidth_mb_s > 0) c["memory_bandwidth_mb_per_second"] = r.memory_bandwidth_mb_s;
+  if (r.disk_write_bandwidth_mb_s > 0)
+    c["disk_write_bandwidth_mb_per_second"] = r.disk_write_bandwidth_mb_s;
+  j["compression"] = c;
+  if (!j.contains("phases") || !j["phases"].is_array()) j["phases"] = Json::array();
+  j["phases"].push_back({{"name", "compress"}, {"wall_seconds", r.wall_seconds}});
+  if (j.contains("wall_seconds") && j["wall_seconds"].is_number())
+    j["wall_seconds"] = j["wall_seconds"].get<double>() + r.wall_seconds;
+  return j.dump(2) + "\n";
+}
+
+double MeasureMemoryBandwidth(std::size_t bytes) {
+  std::vector<char> a(bytes, 1), b(bytes, 2);
+  double best = 0;
+  for (int pass = 0; pass < 4; ++pass) {
+    const double t = Now();
+    std::memcpy(b.data(), a.data(), bytes);
+    const double dt = Now() - t;
+    if (dt > 0) best = std::max(best, static_cast<double>(bytes) / dt / 1e6);
+    a[static_cast<std::size_t>(pass) % bytes] = b[bytes / 2];  // keep the copies observable
+  }
+  return best;
+}
+
+double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
+  const std::string path = (fs::path(dir) / ".prt-farm-disk-bench.tmp").string();
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw FileIoError(path, std::strerror(errno));
+  std::vector<char> buf(8u << 20);
+  for (std::size_t i = 0; i < buf.size(); ++i) buf[i] = static_cast<char>(i * 2654435761u >> 24);
+  const double t = Now();
+  std::size_t done = 0;
+  bool failed = false;
+  while (done < bytes && !failed) {
+    const std::size_t n = std::min(buf.size(), bytes - done);
+    const ssize_t w = ::write(fd, buf.data(), n);
+    if (w <= 0)
+      failed = true;
+    else
+      done += static_cast<std::size_t>(w);
+  }
+  if (!failed && ::fsync(fd) != 0) failed = true;
+  const double dt = Now() - t;
+  const int err = errno;
+  ::close(fd);
+  std::error_code ec;
+  fs::remove(path, ec);
+  if (failed) throw FileIoError(path, std::strerror(err));
+  return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
+}
+
+bool CompressedRunIsComplete(const FarmOptions& options) {
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  int done = 0;
+  if (rank == 0) {
+    const RunFolder f(options.out_dir);
+    const std::string prtc = (fs::path(f.dir) / kCompressedTransportFile).string();
+    std::error_code ec;
+    if (options.force) {
+      fs::remove(prtc, ec);
+    } else if (options.resume && !options.no_compress && fs::exists(prtc, ec) &&
+               fs::exists(f.journal, ec) && !fs::exists(f.transport, ec) &&
+               !fs::exists(f.partial, ec)) {
+      done = 1;
+      if (!options.quiet)
+        std::fprintf(stderr,
+                     "prt-farm: --resume: %s is complete (%s written, raw matrix removed); "
+                     "nothing to do (use --force to start over)\n",
+                     f.dir.c_str(), kCompressedTransportFile);
+    }
+  }
+  MPI_Bcast(&done, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  return done != 0;
+}
+
+int RunCompressionPhase(const FarmOptions& options) {
+  if (options.no_compress) return kExitOk;
+  MPI_Comm comm = MPI_COMM_WORLD;
+  MPI_Comm_set_errhandler(comm, MPI_ERRORS_RETURN);
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const double start = Now();
+  const RunFolder folder(options.out_dir);
+  const int threads = options.threads > 0 ? options.threads : AutoThreads(comm);
+  tbb::global_control threads_limit(tbb::global_control::max_allowed_parallelism,
+                                    static_cast<std::size_t>(threads));
+
+  // Setup on rank 0: the rows' file, the scene's [compression] settings, the spatial domain.
+  std::unique_ptr<TransportFileReader> reader;
+  CompressedTransportHeader header;
+  CompressionOptions copt;
+  OptionsPod pod{};
+  std::vector<uint8_t> header_bytes;
+  uint64_t setup[3] = {0, 0, 0};  // exit code, rows per file block, header bytes
+  if (rank == 0) {
+    try {
+      reader = std::make_unique<TransportFileReader>(folder.transport);
+      const SceneDescription scene =
+          ParseScene(ReadWholeFile(folder.scene_copy), folder.scene_copy, folder.dir);
+      copt = CompressionOptionsFrom(scene.compression, folder.scene_copy);
+      if (!options.compression_scheme.empty())
+        copt.scheme = ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
+      const SpatialDomain domain = SpatialDomainOf(ReadSceneGeometryFile(folder.geometry));
+      if (domain.sample_count() != reader->info().rows)
+        throw InputError(folder.transport,
+                         std::to_string(reader->info().rows) + " rows, but " + folder.geometry +
+                             " has " + std::to_string(domain.sample_count()) + " spatial samples");
+      header = MakeCompressedHeader(copt, static_cast<int>(reader->info().cubemap_n), domain);
+      header_bytes = EncodeHeader(header);
+      pod = {static_cast<uint8_t>(copt.row_wavelet),
+             static_cast<uint8_t>(copt.column_wavelet),
+             static_cast<uint8_t>(copt.scheme),
+             static_cast<uint8_t>(copt.bits),
+             copt.terms_per_column,
+             copt.keep_fraction,
+             copt.dither_seed};
+      setup[1] = reader->info().rows_per_block;
+      setup[2] = header_bytes.size();
+    } catch (...) {
+      std::string message;
+      setup[0] = static_cast<uint64_t>(ExitCodeOfCurrent(message));
+      spdlog::error("compression: {}", message);
+    }
+  }
+  MPI_Bcast(setup, 3, MPI_UINT64_T, 0, comm);
+  if (setup[0] != kExitOk) return static_cast<int>(setup[0]);
+
+  CompressionPhaseReport rep;
+  TransposeStats st;
+  std::vector<CompressedColumn> mine;
+  try {
+    header_bytes.resize(setup[2]);
+    CheckMpi(MPI_Bcast(header_bytes.data(), static_cast<int>(setup[2]), MPI_BYTE, 0, comm),
+             "MPI_Bcast header");
+    CheckMpi(MPI_Bcast(&pod, sizeof pod, MPI_BYTE, 0, comm), "MPI_Bcast options");
+    if (rank != 0) {
+      header = DecodeHeader(header_bytes, "compressed transport header from rank 0");
+      copt.row_wavelet = static_cast<RowWavelet>(pod.row_wavelet);
+      copt.column_wavelet = static_cast<ColumnWavelet>(pod.column_wavelet);
+      copt.scheme = static_cast<CompressionScheme>(pod.scheme);
+      copt.bits = pod.bits;
+      copt.terms_per_column = pod.terms_per_column;
+      copt.keep_fraction = pod.keep_fraction;
+      copt.dither_seed = pod.dither_seed;
+    }
+    const uint64_t rows = header.sample_count;
+    const uint32_t cols = header.column_count();
+    rep.ranks = size;
+    rep.scheme = ToString(header.scheme);
+    rep.row_wavelet = ToString(header.row_wavelet);
+    rep.column_wavelet = ToString(header.column_wavelet);
+    rep.bits = header.bits;
+    rep.keep_fraction = header.keep_fraction;
+    rep.memory_budget_bytes = options.memory_budget_bytes;
+    rep.raw_bytes = rows * cols * sizeof(float);
+
+    // Spill folder of this rank: inside the run folder when this rank can write there (shared
+    // or same-named local folder), else the system's temporary folder.
+    BlockSpillOptions spill;
+    spill.memory_budget_bytes = std::max<uint64_t>(1, options.memory_budget_bytes / 2);
+    fs::path spill_dir = fs::path(folder.dir) / ("compress-spill-rank" + std::to_string(rank));
+    std::error_code ec;
+    fs::create_directories(spill_dir, ec);
+    if (ec) {
+      spill_dir = fs::temp_directory_path() /
+                  ("prt-farm-spill-" + std::to_string(::getpid()) + "-" + std::to_string(rank));
+      fs::create_directories(spill_dir);
+    }
+    spill.spill_dir = spill_dir.string();
+
+    const uint64_t chunk =
+        ChunkRows(uint64_t{cols} * sizeof(float), static_cast<uint32_t>(setup[1]),
+                  options.memory_budget_bytes, rows);
+    ProgressOptions po;
+    po.unit = "rows";
+    po.log_interval_s = options.log_interval_s;
+    po.log = rank == 0 && !options.quiet;
+    Progress progress("transpose", rows, po);
+    if (rank == 0 && !options.quiet)
+      spdlog::info(
+          "compression: {} rows x {} columns ({:.1f} MB), {} scheme, {} rank(s), "
+          "{} rows per chunk, memory budget {:.1f} MB per rank",
+          rows, cols, static_cast<double>(rep.raw_bytes) / 1e6, rep.scheme, size, chunk,
+          static_cast<double>(options.memory_budget_bytes) / 1e6);
+    const auto owned = OwnedColumns(cols, rank, size);
+    ProgressOptions pc = po;
+    pc.unit = "columns of rank 0";
+    std::optional<Progress> col_progress;
+    uint64_t terms = 0;
+    st = DistributedTranspose(
+        comm, rows, cols, chunk,
+        [&](uint64_t first, uint64_t count, float* out) { reader->ReadRows(first, count, out); },
+        [&](uint64_t, uint64_t count, float* r) { PrepareRows(header, copt, r, count); }, spill,
+        [&](uint32_t first, uint32_t count, std::vector<float>& columns) {
+          if (!col_progress) {
+            progress.Finish();
+            col_progress.emplace("compress", owned.second - owned.first, pc);
+          }
+          for (CompressedColumn& c : CompressColumnBlock(header, first, count, columns.data())) {
+            terms += c.index.size();
+            mine.push_back(std::move(c));
+          }
+          col_progress->Advance(count);
+        },
+        rank == 0 ? &progress : nullptr);
+    progress.Finish();
+    if (col_progress) col_progress->Finish();
+    fs::remove_all(spill_dir, ec);
+
+    // Gather the compressed columns on rank 0 as one encoded column block per rank.
+    const double tw = Now();
+    std::vector<uint8_t> bytes;
+    if (owned.second > owned.first) {
+      CompressedColumnBlock block;
+      block.first_column = owned.first;
+      block.column_span = owned.second - owned.first;
+      block.columns = std::move(mine);
+      bytes = EncodeColumnBlock(header, block);
+    }
+    uint64_t my_size = bytes.size();
+    std::vector<uint64_t> sizes(static_cast<std::size_t>(size));
+    CheckMpi(MPI_Gather(&my_size, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, comm),
+             "MPI_Gather");
+    constexpr uint64_t kPiece = 1ull << 30;
+    if (rank != 0) {
+      for (uint64_t off = 0; off < my_size; off += kPiece)
+        CheckMpi(MPI_Send(bytes.data() + off, static_cast<int>(std::min(kPiece, my_size - off)),
+                          MPI_BYTE, 0, 7301, comm),
+                 "MPI_Send columns");
+    }
+    uint64_t sums[4] = {st.bytes_sent, st.bytes_spilled, st.runs_spilled, terms};
+    uint64_t total[4] = {};
+    CheckMpi(MPI_Reduce(sums, total, 4, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
+    double secs[7] = {st.read_seconds,
+                      st.row_transform_seconds,
+                      st.exchange_seconds,
+                      st.buffer_seconds,
+                      st.merge_seconds,
+                      st.sink_seconds,
+                      st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
+    double maxs[7] = {};
+    CheckMpi(MPI_Reduce(secs, maxs, 7, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+    if (rank == 0) {
+      CompressedTransport t;
+      t.header = header;
+      for (int r = 0; r < size; ++r) {
+        std::vector<uint8_t> in;
+        if (r == 0) {
+          in.swap(bytes);
+        } else {
+          in.resize(sizes[static_cast<std::size_t>(r)]);
+          for (uint64_t off = 0; off < in.size(); off += kPiece)
+            CheckMpi(MPI_Recv(in.data() + off, static_cast<int>(std::min(kPiece, in.size() - off)),
+                              MPI_BYTE, r, 7301, comm, MPI_STATUS_IGNORE),
+                     "MPI_Recv columns");
+        }
+        if (in.empty()) continue;
+        for (CompressedColumn& c :
+             DecodeColumnBlock(header, in, "column block of rank " + std::to_string(r)).columns)
+          t.columns.push_back(std::move(c));
+      }
+      const std::vector<uint8_t> file = EncodeCompressedTransport(t);
+      const std::string prtc = (fs::path(folder.dir) / kCompressedTransportFile).string();
+      WriteFileDurably(prtc,
+                       std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
+      rep.write_seconds = Now() - tw;
+      rep.bytes_moved = total[0];
+      rep.spill_bytes = total[1];
+      rep.spill_runs = total[2];
+      rep.terms = total[3];
+      rep.columns_stored = t.columns.size();
+      rep.compressed_bytes = file.size();
+      rep.read_seconds = maxs[0];
+      rep.row_transform_seconds = maxs[1];
+      rep.exchange_seconds = maxs[2];
+      rep.buffer_seconds = maxs[3];
+      rep.merge_seconds = maxs[4];
+      rep.compress_seconds = maxs[5];
+      rep.transpose_seconds = maxs[6];
+      rep.raw_kept = options.keep_raw;
+      if (options.measure_bandwidth) {
+        rep.memory_bandwidth_mb_s = MeasureMemoryBandwidth(256u << 20);
+        rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
+      }
+      rep.wall_seconds = Now() - start;
+      // The report, then (the compressed file being durable) the raw matrix goes.
+      std::string report_text = "{}";
+      if (fs::exists(folder.report, ec)) report_text = ReadWholeFile(folder.report);
+      WriteFileDurably(folder.report, MergeCompressionReport(report_text, rep, folder.report));
+      if (!options.keep_raw) {
+        fs::remove(folder.transport);
+        SyncDirectory(folder.dir);
+      }
+      if (!options.quiet) {
+        spdlog::info(
+            "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), {} terms in {} "
+            "columns; transpose {:.0f} MB/s ({:.1f} MB moved between ranks, {:.1f} MB spilled "
+            "in {} runs){}",
+            prtc, Progress::FormatDuration(rep.wall_seconds),
+            static_cast<double>(rep.raw_bytes) / 1e6,
+            static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(), rep.terms,
+            rep.columns_stored, rep.TransposeMbPerSecond(),
+            static_cast<double>(rep.bytes_moved) / 1e6, static_cast<double>(rep.spill_bytes) / 1e6,
+            rep.spill_runs,
+            options.keep_raw ? "" : "; raw transport.prtt removed (--keep-raw keeps it)");
+        if (options.measure_bandwidth)
+          spdlog::info("compression: memcpy {:.0f} MB/s, disk write+fsync {:.0f} MB/s in {}",
+                       rep.memory_bandwidth_mb_s, rep.disk_write_bandwidth_mb_s, folder.dir);
+      }
+    }
+  } catch (...) {
+    std::string message;
+    const int code = ExitCodeOfCurrent(message);
+    spdlog::error(
+        "rank {}: compression: {} (the transport is complete: rerun with --resume to "
+        "redo only the compression)",
+        rank, message);
+    spdlog::default_logger()->flush();
+    MPI_Abort(comm, code);
+    return code;
+  }
+  int code = kExitOk;
+  MPI_Bcast(&code, 1, MPI_INT, 0, comm);
+  return code;
+}
+
+}  // namespace prt

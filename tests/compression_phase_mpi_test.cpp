@@ -1,0 +1,167 @@
+// prt-farm's compression phase end to end under mpirun (farm/compression_phase.h,
+// docs/farm-compression.md): on the tiny scene of tests/data, run/transport.prtc is byte-identical
+// to the in-process compressor (CompressTransport on the rows of transport.prtt, the scene's
+// [compression] settings, the domain of geometry.prtg) for 1, 2 and 3 ranks, with a budget that
+// forces every rank to spill and with the default budget; the scheme override is honoured; the
+// raw matrix is removed unless --keep-raw; an interrupted compression is redone by --resume
+// without redoing any job, and --resume on a finished, compressed run does nothing.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "vocabulary/compressed_transport.h"
+#include "vocabulary/scene.h"
+#include "vocabulary/transport_file.h"
+#include "worker/column_order.h"
+#include "worker/transport_compressor.h"
+
+namespace prt {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kScene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
+const std::string kArgs = " --rows-per-block 16 --max-job-rows 9 --quiet --force";
+
+struct RunResult {
+  int exit_code = -1;
+  std::string output;
+};
+
+RunResult Farm(int ranks, const std::string& args) {
+  std::stringstream env(PRT_MPI_TEST_ENV_LIST);
+  std::string item;
+  while (std::getline(env, item, ';')) {
+    const std::size_t eq = item.find('=');
+    if (eq != std::string::npos)
+      ::setenv(item.substr(0, eq).c_str(), item.substr(eq + 1).c_str(), 0);
+  }
+  const std::string command = std::string(PRT_MPIEXEC) + " " + PRT_MPIEXEC_NUMPROC_FLAG + " " +
+                              std::to_string(ranks) + " " + PRT_MPIEXEC_PREFLAGS + " " +
+                              PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args + " 2>&1";
+  RunResult r;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return r;
+  char buf[4096];
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return r;
+}
+
+std::string WorkDir(const std::string& name) {
+  const fs::path dir = fs::path(PRT_TEST_WORK_DIR) / ("compression_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+nlohmann::json Report(const std::string& run) {
+  return nlohmann::json::parse(ReadWholeFile(run + "/report.json"));
+}
+
+// The in-process compressor on the farmed rows (the reference the farm must equal).
+std::string InProcess(const std::string& run, const std::string& scheme = "") {
+  TransportFileReader reader(run + "/transport.prtt");
+  std::vector<float> T(reader.info().rows * reader.info().cols());
+  reader.ReadRows(0, reader.info().rows, T.data());
+  const SceneDescription scene = LoadSceneFile(kScene);
+  CompressionOptions o = CompressionOptionsFrom(scene.compression, kScene);
+  if (!scheme.empty()) o.scheme = ParseCompressionScheme(scheme, "test");
+  const SpatialDomain domain = SpatialDomainOf(ReadSceneGeometryFile(run + "/geometry.prtg"));
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(
+      CompressTransport(T.data(), static_cast<int>(reader.info().cubemap_n), domain, o));
+  return std::string(bytes.begin(), bytes.end());
+}
+
+// 1, 2 and 3 ranks, with a 4 KiB budget (every rank spills) and the default (none does): the
+// same bytes, equal to the in-process compressor; the report carries the phase's figures.
+TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
+  const std::string first = WorkDir("np2_spill");
+  const RunResult r =
+      Farm(2, kScene + " --out " + first + kArgs + " --keep-raw --memory-budget 4k");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string expected = InProcess(first);
+  const std::string got = ReadWholeFile(first + "/transport.prtc");
+  ASSERT_EQ(got.size(), expected.size());
+  EXPECT_TRUE(got == expected) << "transport.prtc differs from the in-process compressor";
+  const nlohmann::json c = Report(first)["compression"];
+  EXPECT_EQ(c["ranks"], 2);
+  EXPECT_EQ(c["raw_bytes"], 72u * 384u * 4u);
+  EXPECT_EQ(c["compressed_bytes"], got.size());
+  EXPECT_GT(c["spill_bytes"].get<uint64_t>(), 0u);
+  EXPECT_GT(c["spill_runs"].get<uint64_t>(), 2u);
+  // 2 ranks: rank 0 scatters half the rows, then each rank sends the other half its slab.
+  EXPECT_EQ(c["bytes_moved"], 72u * 384u * 4u);
+  EXPECT_EQ(c["terms"],
+            DecodeCompressedTransport(
+                std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(got.data()), got.size()),
+                "prtc")
+                .term_count());
+  EXPECT_NEAR(c["ratio_to_raw"].get<double>(), static_cast<double>(got.size()) / (72 * 384 * 4),
+              1e-12);
+  EXPECT_GT(c["transpose_mb_per_second"].get<double>(), 0);
+  EXPECT_EQ(Report(first)["phases"].back()["name"], "compress");
+
+  for (const auto& [ranks, budget] :
+       std::vector<std::pair<int, std::string>>{{1, "2k"}, {1, "1G"}, {2, "1G"}, {3, "3k"}}) {
+    const std::string run = WorkDir("np" + std::to_string(ranks) + "_" + budget);
+    const RunResult q =
+        Farm(ranks, kScene + " --out " + run + kArgs + " --memory-budget " + budget);
+    ASSERT_EQ(q.exit_code, 0) << q.output;
+    EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected)
+        << ranks << " rank(s), budget " << budget;
+    EXPECT_EQ(Report(run)["compression"]["spill_bytes"] == 0, budget.back() == 'G') << budget;
+    // Without --keep-raw the raw matrix is gone once the compressed one is durable.
+    EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
+    EXPECT_FALSE(Report(run)["compression"]["raw_kept"].get<bool>());
+  }
+}
+
+TEST(CompressionPhase, SchemeOverrideAndNoCompress) {
+  const std::string run = WorkDir("scheme2d");
+  const RunResult r =
+      Farm(2, kScene + " --out " + run + kArgs + " --keep-raw --compression-scheme 2d");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == InProcess(run, "2d"));
+  EXPECT_EQ(Report(run)["compression"]["scheme"], "2d");
+  const std::string none = WorkDir("none");
+  ASSERT_EQ(Farm(1, kScene + " --out " + none + kArgs + " --no-compress").exit_code, 0);
+  EXPECT_TRUE(fs::exists(none + "/transport.prtt"));
+  EXPECT_FALSE(fs::exists(none + "/transport.prtc"));
+  EXPECT_FALSE(Report(none).contains("compression"));
+  EXPECT_EQ(Farm(1, kScene + " --out " + none + " --compression-scheme 3d").exit_code, 1);
+}
+
+// The compression was interrupted (no transport.prtc, raw still there): --resume re-uses every
+// journaled job and redoes only the compression. On a compressed run without the raw matrix,
+// --resume has nothing to do.
+TEST(CompressionPhase, ResumeRedoesOnlyTheCompression) {
+  const std::string run = WorkDir("resume");
+  ASSERT_EQ(Farm(2, kScene + " --out " + run + kArgs + " --keep-raw").exit_code, 0);
+  const std::string expected = ReadWholeFile(run + "/transport.prtc");
+  fs::remove(run + "/transport.prtc");
+  const std::string args = " --rows-per-block 16 --max-job-rows 9 --quiet --resume";
+  const RunResult r = Farm(2, kScene + " --out " + run + args);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json rep = Report(run);
+  EXPECT_EQ(rep["jobs"]["done"], 0) << rep.dump();
+  EXPECT_GT(rep["jobs"]["reused_from_checkpoints"].get<int>(), 0);
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
+  EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
+  const RunResult again = Farm(1, kScene + " --out " + run + " --resume");
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_NE(again.output.find("nothing to do"), std::string::npos) << again.output;
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
+}
+
+}  // namespace
+}  // namespace prt
