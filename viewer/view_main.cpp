@@ -20,7 +20,8 @@
 #ifdef PRT_VIEW_HAS_SDL2
 int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentImage& env,
                     const prt::Camera& camera, std::size_t terms, prt::LightingMode mode,
-                    double exposure);  // view_window_main.cpp
+                    double exposure, int max_frames,
+                    const std::string& screenshot);  // view_window_main.cpp
 #endif
 
 namespace {
@@ -36,7 +37,8 @@ struct Options {
   std::string pack, env, out, exr, out_dir, radiance_out, camera, lighting = "pbi";
   std::size_t terms = 100;
   bool exact = false, window = false, quiet = false;
-  int width = 0, height = 0, frames = 0, hold = 0;
+  int width = 0, height = 0, frames = 0, hold = 0, window_frames = 0;
+  std::string screenshot;
   double exposure = 1.0, rotate = 0.0;
 };
 
@@ -58,7 +60,8 @@ int Run(const Options& o) {
 
   if (o.window) {
 #ifdef PRT_VIEW_HAS_SDL2
-    return RunViewerWindow(*session, env, camera, o.terms, mode, o.exposure);
+    return RunViewerWindow(*session, env, camera, o.terms, mode, o.exposure, o.window_frames,
+                           o.screenshot);
 #else
     throw std::invalid_argument("--window: prt-view was built without SDL2");
 #endif
@@ -160,6 +163,12 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 100000));
   app.add_option("--out-dir", o.out_dir, "folder for frames, CSV and plot");
   app.add_flag("--window", o.window, "interactive SDL2 window");
+  app.add_option("--window-frames", o.window_frames,
+                 "--window: close after this many frames (0: run until closed)")
+      ->check(CLI::Range(0, 1000000));
+  app.add_option(
+      "--screenshot", o.screenshot,
+      "--window: the last frame as the window shows it: PNG, or .npy of its 8-bit codes");
   app.add_flag("--quiet", o.quiet, "no progress output");
   try {
     app.parse(argc, argv);

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -368,6 +369,38 @@ TEST(PrtViewCliTest, EndToEnd) {
   if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
     EXPECT_TRUE(fs::exists(frames / "rotation_errors.png"));
   }
+}
+
+// prt-view --window under Xvfb: after a few frames of PBI under still lighting (exact from frame 0,
+// Initialize) the window shows the headless exact render, to one 8-bit code per channel.
+TEST(PrtViewCliTest, WindowScreenshotMatchesHeadlessRender) {
+#ifndef PRT_VIEW_HAS_SDL2
+  GTEST_SKIP() << "prt-view built without SDL2";
+#else
+  if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0) GTEST_SKIP() << "no xvfb-run";
+  const TinyScene& tiny = Tiny();
+  const fs::path dir = WorkDir() / "window";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string env = (dir / "sky.exr").string();
+  WriteEnvironmentExr(SunSky(0.3f, 40.f), env);
+  const std::string shot = (dir / "shot.npy").string();
+  const std::string cmd = "xvfb-run -a -s '-screen 0 320x240x24' '" + std::string(PRT_VIEW_EXE) +
+                          "' '" + tiny.pack + "' --env '" + env +
+                          "' --window --window-frames 5 --lighting pbi --terms 50 --screenshot '" +
+                          shot + "' > '" + (dir / "log.txt").string() + "' 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::vector<float> codes = ReadFile(shot);
+  const auto s = ViewerSession::Open(tiny.pack);
+  const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(env), tiny.n);
+  const ImageRgb image =
+      s->Render(s->camera(), s->Shade(s->RelightExact(ProjectLighting(cube))), &cube);
+  ASSERT_EQ(codes.size(), image.pixels.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < codes.size(); ++i)
+    worst = std::max(worst, std::abs(codes[i] - double(ToSrgb8(image.pixels[i]))));
+  EXPECT_LE(worst, 1.0);
+#endif
 }
 
 }  // namespace

@@ -1,0 +1,188 @@
+// prt-view --window: an interactive SDL2 view of the relit pack (docs/viewer.md, "The window").
+// Built into the prt-view executable only (the *_main.cpp name keeps it out of prt_viewer, so
+// that the library never links SDL2).
+//
+// Each displayed frame: the environment rotated by the current drag angle is resampled and
+// projected (only when the angle changed), relit with NWA, BI or PBI at the current budget (BI
+// and PBI keep updating while the lighting is still, so they converge to the exact image, Overbeck
+// et al. 2006 §5), shaded, rasterised from the orbiting camera and shown.
+#include <SDL.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "viewer/npy_writer.h"
+#include "viewer/per_band_incremental.h"
+#include "viewer/viewer_session.h"
+#include "vocabulary/image_io.h"
+
+namespace {
+
+struct WindowState {
+  double env_deg = 0;    // environment rotation about +Y
+  double orbit_deg = 0;  // camera orbit about the target, about +Y
+  std::size_t terms = 100;
+  prt::LightingMode mode = prt::LightingMode::kPbi;
+  bool exact = false;
+};
+
+prt::Camera Orbit(const prt::Camera& c, double deg) {
+  const double a = deg * 3.14159265358979323846 / 180.0;
+  const prt::Vec3 d = c.eye - c.target;
+  prt::Camera out = c;
+  out.eye = c.target + prt::Vec3{std::cos(a) * d.x + std::sin(a) * d.z, d.y,
+                                 -std::sin(a) * d.x + std::cos(a) * d.z};
+  return out;
+}
+
+}  // namespace
+
+int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentImage& env,
+                    const prt::Camera& camera, std::size_t terms, prt::LightingMode mode,
+                    double exposure, int max_frames, const std::string& screenshot) {
+  if (SDL_Init(SDL_INIT_VIDEO) != 0)
+    throw std::runtime_error(std::string("--window: SDL_Init failed: ") + SDL_GetError());
+  struct Quit {
+    ~Quit() { SDL_Quit(); }
+  } quit;
+  SDL_Window* window =
+      SDL_CreateWindow("prt-view", SDL_WINDOWPOS_UNDEFINED, SDL_WINDOWPOS_UNDEFINED, camera.width,
+                       camera.height, SDL_WINDOW_SHOWN);
+  if (window == nullptr)
+    throw std::runtime_error(std::string("--window: cannot open a window: ") + SDL_GetError());
+  SDL_Renderer* renderer = SDL_CreateRenderer(window, -1, SDL_RENDERER_SOFTWARE);
+  if (renderer == nullptr) renderer = SDL_CreateRenderer(window, -1, 0);
+  if (renderer == nullptr)
+    throw std::runtime_error(std::string("--window: no renderer: ") + SDL_GetError());
+  SDL_Texture* texture = SDL_CreateTexture(
+      renderer, SDL_PIXELFORMAT_RGB24, SDL_TEXTUREACCESS_STREAMING, camera.width, camera.height);
+
+  const int n = session.cubemap_n();
+  const std::size_t max_terms = 6u * static_cast<std::size_t>(n) * static_cast<std::size_t>(n);
+  WindowState st;
+  st.terms = std::min(terms, max_terms);
+  st.mode = mode;
+  const prt::ToneMapOptions tone{exposure, prt::ToneMap::kClamp};
+  prt::CubemapRgb cube;
+  prt::WaveletLighting lighting;
+  double lit_deg = std::nan("");
+  std::unique_ptr<prt::BasicIncrementalRelighter> bi;
+  std::unique_ptr<prt::PerBandIncrementalRelighter> pbi;
+  std::vector<unsigned char> rgb8(3 * static_cast<std::size_t>(camera.width) *
+                                  static_cast<std::size_t>(camera.height));
+  double fps = 0;
+  bool running = true;
+  for (int frame = 0; running && (max_frames <= 0 || frame < max_frames); ++frame) {
+    const auto t0 = std::chrono::steady_clock::now();
+    SDL_Event e;
+    while (SDL_PollEvent(&e)) {
+      if (e.type == SDL_QUIT) running = false;
+      if (e.type == SDL_MOUSEMOTION && (e.motion.state & SDL_BUTTON_LMASK))
+        st.env_deg += 0.5 * e.motion.xrel;
+      if (e.type == SDL_MOUSEMOTION && (e.motion.state & SDL_BUTTON_RMASK))
+        st.orbit_deg += 0.5 * e.motion.xrel;
+      if (e.type == SDL_KEYDOWN) {
+        switch (e.key.keysym.sym) {
+          case SDLK_ESCAPE:
+          case SDLK_q:
+            running = false;
+            break;
+          case SDLK_n:
+            st.mode = prt::LightingMode::kNwa;
+            break;
+          case SDLK_b:
+            st.mode = prt::LightingMode::kBi;
+            break;
+          case SDLK_p:
+            st.mode = prt::LightingMode::kPbi;
+            break;
+          case SDLK_e:
+            st.exact = !st.exact;
+            break;
+          case SDLK_PLUS:
+          case SDLK_EQUALS:
+          case SDLK_KP_PLUS:
+            st.terms = std::min(max_terms, 2 * st.terms);
+            bi.reset();
+            pbi.reset();
+            break;
+          case SDLK_MINUS:
+          case SDLK_KP_MINUS:
+            st.terms = std::max<std::size_t>(1, st.terms / 2);
+            bi.reset();
+            pbi.reset();
+            break;
+          default:
+            break;
+        }
+      }
+    }
+    if (!(st.env_deg == lit_deg)) {
+      cube = prt::ResampleToCubemap(env, n, st.env_deg * 3.14159265358979323846 / 180.0);
+      lighting = prt::ProjectLighting(cube);
+      lit_deg = st.env_deg;
+    }
+    prt::SampleRadiance radiance;
+    if (st.exact) {
+      radiance = session.RelightExact(lighting);
+    } else if (st.mode == prt::LightingMode::kNwa) {
+      radiance = prt::RelightApproximate(session.transport(), lighting, st.mode, st.terms);
+    } else if (st.mode == prt::LightingMode::kBi) {
+      if (!bi) {
+        bi = std::make_unique<prt::BasicIncrementalRelighter>(session.transport(), n, st.terms);
+        bi->Initialize(lighting);
+      } else {
+        bi->Update(lighting);
+      }
+      radiance = bi->Radiance();
+    } else {
+      if (!pbi) {
+        pbi = std::make_unique<prt::PerBandIncrementalRelighter>(session.transport(), n, st.terms);
+        pbi->Initialize(lighting);
+      } else {
+        pbi->Update(lighting);
+      }
+      radiance = pbi->Radiance();
+    }
+    const prt::ImageRgb image =
+        session.Render(Orbit(camera, st.orbit_deg), session.Shade(radiance), &cube);
+    for (std::size_t i = 0; i < rgb8.size(); ++i) rgb8[i] = prt::ToSrgb8(image.pixels[i], tone);
+    SDL_UpdateTexture(texture, nullptr, rgb8.data(), 3 * camera.width);
+    SDL_RenderClear(renderer);
+    SDL_RenderCopy(renderer, texture, nullptr, nullptr);
+    if (!screenshot.empty() && (frame + 1 == max_frames || !running)) {
+      // What the window shows, read back from the renderer (for the Xvfb test).
+      std::vector<unsigned char> shot(rgb8.size());
+      if (SDL_RenderReadPixels(renderer, nullptr, SDL_PIXELFORMAT_RGB24, shot.data(),
+                               3 * camera.width) == 0) {
+        if (screenshot.size() > 4 && screenshot.substr(screenshot.size() - 4) == ".npy") {
+          // The 8-bit sRGB codes as float32, (width·height) × 3, row-major from the top-left.
+          const std::vector<float> codes(shot.begin(), shot.end());
+          prt::WriteNpyFloat32(screenshot, codes, codes.size() / 3, 3);
+        } else {
+          prt::ImageRgb out(camera.width, camera.height);
+          for (std::size_t i = 0; i < shot.size(); ++i)
+            out.pixels[i] = static_cast<float>(prt::SrgbDecode(shot[i] / 255.0));
+          prt::WritePng(out, screenshot);
+        }
+      }
+    }
+    SDL_RenderPresent(renderer);
+    const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    fps = fps == 0 ? 1.0 / dt : 0.9 * fps + 0.1 / dt;
+    char title[160];
+    std::snprintf(title, sizeof title, "prt-view — %s — %zu terms — %.1f fps",
+                  st.exact ? "exact" : prt::ToString(st.mode), st.terms, fps);
+    SDL_SetWindowTitle(window, title);
+  }
+  SDL_DestroyTexture(texture);
+  SDL_DestroyRenderer(renderer);
+  SDL_DestroyWindow(window);
+  return 0;
+}
