@@ -67,6 +67,7 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
   out.dct.resize(entries * 16);
   out.suffix.resize(entries * 257);
   out.pixels.resize(entries * 256);
+  out.suffix_vec.resize(entries * 257 * 3);
   tbb::parallel_for(0, blocks.block_count(), [&](int b) {
     for (int c = 0; c < 3; ++c) {
       const std::vector<float>& ch = light.Channel(c);
@@ -83,6 +84,18 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
         suffix[k] = static_cast<float>(acc);
       }
       BlockDct::Forward16(px, &out.dct[e * 16]);
+      float* sv = &out.suffix_vec[e * 257 * 3];
+      const float* dirs = blocks.PixelDirections(b);
+      double vx = 0, vy = 0, vz = 0;
+      sv[256 * 3] = sv[256 * 3 + 1] = sv[256 * 3 + 2] = 0.f;
+      for (int k = 255; k >= 0; --k) {
+        vx += static_cast<double>(px[k]) * dirs[3 * k];
+        vy += static_cast<double>(px[k]) * dirs[3 * k + 1];
+        vz += static_cast<double>(px[k]) * dirs[3 * k + 2];
+        sv[3 * k] = static_cast<float>(vx);
+        sv[3 * k + 1] = static_cast<float>(vy);
+        sv[3 * k + 2] = static_cast<float>(vz);
+      }
     }
   });
 }

@@ -6,6 +6,10 @@
 //         so that Σ_k L[k]·V[k] = Σ_k L_int[k]·V_d[k] (line 9) and Σ_{a ≤ k < b} L[k] =
 //         L_int[a] − L_int[b];
 //   (iii) the pixels themselves, row-concatenated (line 11).
+// An extension beyond the paper (used when TripleProductOptions::exact_cosine is set):
+//   (iv)  suffix sums of the vector L'[k]·ω_k (ω_k the texel-centre direction), so that the
+//         diffuse cosine, which is linear in ω above the horizon, is integrated exactly against
+//         any visibility: Σ_k L'[k]·V[k]·(n·ω_k) = n · Σ_i V_d[i]·Lω_int[i].
 // §4: "to account for the fact that not all cubemap pixels correspond to the same solid angle,
 // we first scale the incident radiance at each pixel by a suitable correction factor": every
 // representation holds L'[k] = L_k · Ω_k, the texel's average radiance times its exact solid
@@ -61,9 +65,13 @@ struct BlockLighting {
   int n = 0;
   int block_count = 0;
   // Entry (block, channel) = block·3 + channel.
-  std::vector<float> dct;     // entries × 16   (i)
-  std::vector<float> suffix;  // entries × 257  (ii), L_int[256] = 0
-  std::vector<float> pixels;  // entries × 256  (iii)
+  std::vector<float> dct;         // entries × 16   (i)
+  std::vector<float> suffix;      // entries × 257  (ii), L_int[256] = 0
+  std::vector<float> pixels;      // entries × 256  (iii)
+  std::vector<float> suffix_vec;  // entries × 257 × 3  (iv), (x, y, z) per position
+  const float* SuffixVec(int block, int c) const {
+    return &suffix_vec[(static_cast<std::size_t>(block) * 3 + c) * 257 * 3];
+  }
   const float* Dct(int block, int c) const {
     return &dct[(static_cast<std::size_t>(block) * 3 + c) * 16];
   }

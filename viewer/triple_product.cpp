@@ -64,7 +64,8 @@ TripleProductStats& TripleProductStats::operator+=(const TripleProductStats& o) 
 // Algorithm 1, block by block (see triple_product.h).
 std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const CubemapBlocks& blocks,
                                           const BlockLighting& light, std::size_t vertex,
-                                          const Vec3& eye, TripleProductStats* stats) {
+                                          const Vec3& eye, TripleProductStats* stats,
+                                          const TripleProductOptions& options) {
   const VisibilityBlocks& vis = *scene.visibility;
   const Material& m = scene.materials[scene.material_index[vertex]];
   const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
@@ -73,6 +74,15 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
   const float ks[3] = {spec ? m.specular[0] : 0.f, spec ? m.specular[1] : 0.f,
                        spec ? m.specular[2] : 0.f};
   const float inv_max = 1.0f / static_cast<float>(vis.max_level());
+  const bool exact = options.exact_cosine;
+  constexpr float kInvPi = 0.318309886f;
+  const float nx = static_cast<float>(f.normal.x) * kInvPi,
+              ny = static_cast<float>(f.normal.y) * kInvPi,
+              nz = static_cast<float>(f.normal.z) * kInvPi;
+  // (n/π)·Lω_int[k]: the exact diffuse integral of the suffix from position k.
+  auto cosine_suffix = [&](const float* sv, int k) {
+    return nx * sv[3 * k] + ny * sv[3 * k + 1] + nz * sv[3 * k + 2];
+  };
   TripleProductStats st;
   double total[3] = {0, 0, 0};
   alignas(32) float coef[16];
@@ -110,7 +120,8 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
       if (rate <= 16) {
         for (int c = 0; c < 3; ++c) {
           const float* ld = light.Dct(b, c);
-          float acc = kd[c] * d0 * 16.f * ld[0];
+          float acc =
+              exact ? kd[c] * cosine_suffix(light.SuffixVec(b, c), 0) : kd[c] * d0 * 16.f * ld[0];
           if (spec) {
             float sp = 0;
             for (int v = 0; v < l; ++v)
@@ -146,7 +157,23 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
             acc += static_cast<float>(vis.change_value[i]) * li[vis.change_pos[i]];
           acc *= inv_max;
         }
-        out[c] = (kd[c] * d0 + ks[c] * s0) * acc;
+        if (!exact) {
+          out[c] = (kd[c] * d0 + ks[c] * s0) * acc;
+        } else {
+          const float* sv = light.SuffixVec(b, c);
+          float dif = 0;
+          if (vis.bits == 1) {
+            for (uint64_t i = first; i < last; ++i) {
+              const float t = cosine_suffix(sv, vis.change_pos[i]);
+              dif += ((i - first) & 1) ? -t : t;
+            }
+          } else {
+            for (uint64_t i = first; i < last; ++i)
+              dif += static_cast<float>(vis.change_value[i]) * cosine_suffix(sv, vis.change_pos[i]);
+            dif *= inv_max;
+          }
+          out[c] = kd[c] * dif + ks[c] * s0 * acc;
+        }
       }
     } else {  // line 11: Decompress-Integrate in the pixel basis over the visible runs (§4.4)
       ++st.blocks_line11;
@@ -155,13 +182,14 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
         for (int c = 0; c < 3; ++c) {
           const float* li = light.Suffix(b, c);
           const float* lp = light.Pixels(b, c);
+          const float* sv = light.SuffixVec(b, c);
           float dif = 0, sp = 0;
           ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
             const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
-            dif += w * (li[a] - li[z]);
+            dif += w * (exact ? cosine_suffix(sv, a) - cosine_suffix(sv, z) : d0 * (li[a] - li[z]));
             sp += w * DotRange(lp, spix, a, z);
           });
-          out[c] = kd[c] * d0 * dif + ks[c] * sp;
+          out[c] = kd[c] * dif + ks[c] * sp;
         }
       } else {
         const float* dirs = blocks.PixelDirections(b);
@@ -193,7 +221,8 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
 
 TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapBlocks& blocks,
                                         const BlockLighting& light, const Vec3& eye,
-                                        std::span<float> out_rgb) {
+                                        std::span<float> out_rgb,
+                                        const TripleProductOptions& options) {
   CheckScene(scene, blocks, light);
   if (out_rgb.size() != scene.positions.size() * 3)
     throw std::invalid_argument("RelightTripleProduct: output size");
@@ -202,7 +231,8 @@ TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapB
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       TripleProductStats& st = local.local();
                       for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                        const auto b = TripleProductVertex(scene, blocks, light, v, eye, &st);
+                        const auto b =
+                            TripleProductVertex(scene, blocks, light, v, eye, &st, options);
                         for (int c = 0; c < 3; ++c) out_rgb[v * 3 + c] = static_cast<float>(b[c]);
                       }
                     });

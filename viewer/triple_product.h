@@ -29,6 +29,14 @@
 
 namespace prt {
 
+struct TripleProductOptions {
+  // false: the paper — the diffuse lobe is one DCT coefficient (its value at the block centre)
+  // in every block. true: the diffuse cosine is integrated exactly in lines 6, 9 and 11 through
+  // the vector suffix sums of block_lighting.h (iv) (the cosine is linear in ω wherever V > 0,
+  // since visibility is 0 below the horizon); the specular lobe is treated as in the paper.
+  bool exact_cosine = false;
+};
+
 // What Algorithm 1 did (Tables 1 and 2 of the paper).
 struct TripleProductStats {
   uint64_t blocks_zero = 0;              // line 1
@@ -52,12 +60,14 @@ struct GlossyScene {
 // Algorithm 1 for one vertex seen from `eye`; adds to *stats when not null.
 std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const CubemapBlocks& blocks,
                                           const BlockLighting& light, std::size_t vertex,
-                                          const Vec3& eye, TripleProductStats* stats = nullptr);
+                                          const Vec3& eye, TripleProductStats* stats = nullptr,
+                                          const TripleProductOptions& options = {});
 // Every vertex (3 floats each into out_rgb), parallel over vertices. Throws
 // std::invalid_argument when sizes disagree (vertex counts, n, material indices).
 TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapBlocks& blocks,
                                         const BlockLighting& light, const Vec3& eye,
-                                        std::span<float> out_rgb);
+                                        std::span<float> out_rgb,
+                                        const TripleProductOptions& options = {});
 
 // The reference: the same sum in the pixel basis over all 6·n·n texels (the BRDF evaluated at
 // every texel centre, the visibility decoded to pixels). skip_occluded evaluates the BRDF only
