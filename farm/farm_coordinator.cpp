@@ -251,6 +251,16 @@ std::string SparseDir(const RunFolder& f) {
   return (fs::path(f.dir) / "sparse").string();
 }
 
+// --fail-after-jobs K on rank 0: when several finished jobs are committed together, journal only
+// those up to the K-th, so that the kill lands after exactly K journaled jobs.
+void KeepJobsBeforeFailure(const FarmContext& ctx, int jobs_so_far,
+                           std::vector<JournalEntry>& pending) {
+  if (ctx.options.fail_after_jobs < 0 || ctx.rank != ctx.options.fail_rank) return;
+  const int left = std::max(0, ctx.options.fail_after_jobs - jobs_so_far);
+  if (pending.size() > static_cast<std::size_t>(left))
+    pending.resize(static_cast<std::size_t>(left));
+}
+
 // ------------------------------------------------------------------------------- setup phase
 
 class SetupPhase : public FarmPhase {
@@ -722,6 +732,7 @@ class BruteSamplingPhase : public FarmPhase {
 
     auto commit = [&] {
       if (pending.empty()) return;
+      KeepJobsBeforeFailure(ctx, jobs_this_run, pending);
       ctx.writer->Sync();            // rows durable first,
       ctx.journal->Append(pending);  // then the journal line that counts them
       for (const JournalEntry& e : pending) {
@@ -1480,6 +1491,7 @@ class SparseSamplingPhase : public FarmPhase {
       };
       auto commit = [&] {
         if (pending.empty()) return;
+        KeepJobsBeforeFailure(ctx_, jobs_this_run_, pending);
         p.sync();                       // results durable first,
         ctx_.journal->Append(pending);  // then the journal lines that count them
         for (const JournalEntry& e : pending) {
