@@ -52,9 +52,10 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-// Median seconds of `reps` runs of f (after one warm-up run).
+// Fastest of `reps` runs of f (after one warm-up run): on a shared, loaded machine the minimum
+// is the least disturbed estimate of the work itself.
 template <typename F>
-double MedianSeconds(int reps, F&& f) {
+double BestSeconds(int reps, F&& f) {
   f();
   std::vector<double> t;
   for (int r = 0; r < reps; ++r) {
@@ -62,15 +63,14 @@ double MedianSeconds(int reps, F&& f) {
     f();
     t.push_back(Seconds(t0));
   }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
+  return *std::min_element(t.begin(), t.end());
 }
 
 // Copy bandwidth (bytes read + bytes written per second) of memcpy over 256 MiB buffers.
 double MeasureBandwidth() {
   const std::size_t bytes = std::size_t{256} << 20;
   std::vector<char> a(bytes, 1), b(bytes, 2);
-  const double s = MedianSeconds(5, [&] {
+  const double s = BestSeconds(5, [&] {
     std::memcpy(b.data(), a.data(), bytes);
     a[bytes / 2] = b[bytes / 3];
   });
@@ -241,8 +241,8 @@ int main(int argc, char** argv) {
       std::size_t bytes = 0;
       for (const prt::LightingTerm& t : l) bytes += col_bytes[t.index];
       const int reps = quick ? 5 : 21;
-      const double relight = MedianSeconds(reps, [&] { (void)session->transport().Apply(l); });
-      const double frame = MedianSeconds(quick ? 3 : 9, [&] {
+      const double relight = BestSeconds(reps, [&] { (void)session->transport().Apply(l); });
+      const double frame = BestSeconds(quick ? 3 : 9, [&] {
         const std::vector<float> rgb = ShadeWith(*session, session->transport().Apply(l));
         (void)session->Render(cam, rgb, &envs[0].cube);
       });
@@ -301,7 +301,7 @@ int main(int argc, char** argv) {
         const prt::CompressedTransportOperator op(relighter);
         const std::vector<float> rgb = prt::ShadeSamples(op.Apply(l), session->albedo());
         const double err = prt::RelativeRmsError(rgb, ref);
-        const double ms = 1e3 * MedianSeconds(quick ? 3 : 11, [&] { (void)op.Apply(l); });
+        const double ms = 1e3 * BestSeconds(quick ? 3 : 11, [&] { (void)op.Apply(l); });
         curves[prt::ToString(scheme)].push_back({err, ms, ct.term_count()});
         std::printf("| %s | %.3g | %zu | %.4g | %.3f |\n", prt::ToString(scheme), keep,
                     ct.term_count(), err, ms);

@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -36,7 +37,9 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path WorkDir() {
-  const fs::path d = fs::path(::testing::TempDir()) / "viewer_session_test";
+  // One folder per process: CTest runs these tests as parallel processes.
+  const fs::path d =
+      fs::path(::testing::TempDir()) / ("viewer_session_test_" + std::to_string(::getpid()));
   fs::create_directories(d);
   return d;
 }
