@@ -231,6 +231,14 @@ int main(int argc, char** argv) {
     const prt::CompressedTransport ct = prt::pack::ReadCompressedTransport(reader);
     const std::vector<std::size_t> col_bytes = ColumnBytes(ct);
     const prt::Camera cam = session->camera();
+    // The rasteriser's share of a frame (the same for every N).
+    const std::vector<float> rgb0 = ShadeWith(
+        *session,
+        session->transport().Apply(prt::NonlinearLightingApproximation(sunrise, basis, 30)));
+    const double raster =
+        BestSeconds(quick ? 3 : 9, [&] { (void)session->Render(cam, rgb0, &envs[0].cube); });
+    std::printf("rasterising %zu triangles at %dx%d over the environment: %.2f ms\n",
+                session->triangles().size(), cam.width, cam.height, 1e3 * raster);
     std::printf(
         "| N | T·L ms | T·L fps | frame ms (%dx%d) | frame fps | T bytes/frame | "
         "bound ms | T·L / bound |\n|---|---|---|---|---|---|---|---|\n",
