@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
+# machine (against raw Embree, against brute force, against the 2D baseline), because the
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy] [--quick]
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+"$ROOT/scripts/install-deps.sh"
+configure_and_build
+export PRT_DATA_PATH="$BUILD_DIR/data${PRT_DATA_PATH:+:$PRT_DATA_PATH}"
+OUT="${PRT_BENCH_OUT:-$ROOT/bench-out}"
+WHAT="${1:-all}"
+QUICK=""
+[ "${2:-}" = "--quick" ] && QUICK="--quick"
+mkdir -p "$OUT"
+
+run_transport() {
+  echo "== transport sampling against raw Embree on the same rays =="
+  "$BUILD_DIR/bench/transport_bench"
+}
+
+# The farm's 1 → 2 rank speed-up on the default scene (brute force, one thread per rank), from
+# the wall time of the sampling phase in each run's report.json.
+run_scaling() {
+  echo "== prt-farm scaling: mpirun -np 1 and -np 2, one thread per rank =="
+  local rpt="${PRT_SCALING_RAYS_PER_TEXEL:-1}"
+  for np in 1 2; do
+    mpirun -np "$np" --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$OUT/scaling-np$np" --force \
+      --threads 1 --method brute --rays-per-texel "$rpt" --no-compress -q
+  done
+  python3 - "$OUT" <<'PY'
+import json, sys
+out = sys.argv[1]
+def phase(d, name):
+    return next(p["wall_seconds"] for p in d["phases"] if p["name"] == name)
+r = {np: json.load(open(f"{out}/scaling-np{np}/report.json")) for np in (1, 2)}
+t1, t2 = phase(r[1], "brute"), phase(r[2], "brute")
+print(f"rays traced            {r[1]['rays_traced']:.4g}")
+print(f"np 1: brute phase {t1:8.2f} s  {r[1]['rays_per_second']/1e6:6.2f} Mrays/s (1 core)")
+print(f"np 2: brute phase {t2:8.2f} s  {r[2]['rays_per_second']/1e6:6.2f} Mrays/s, load imbalance {r[2]['load_imbalance']:.3f}")
+print(f"speed-up 1 -> 2 ranks  {t1/t2:.3f}")
+PY
+}
+
+run_sparse() { "$BUILD_DIR/bench/prt-sparse-bench" --out "$OUT/sparse" $QUICK; }
+run_compression() { "$BUILD_DIR/bench/compression_bench"; }
+run_viewer() { [ -x "$BUILD_DIR/bench/viewer_bench" ] && "$BUILD_DIR/bench/viewer_bench" || echo "viewer_bench not built"; }
+run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
+
+case "$WHAT" in
+  all) run_transport; run_scaling; run_sparse; run_compression; run_viewer; run_glossy ;;
+  transport|scaling|sparse|compression|viewer|glossy) "run_$WHAT" ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy] [--quick]" >&2; exit 1 ;;
+esac
