@@ -20,8 +20,8 @@
 #ifdef PRT_VIEW_HAS_SDL2
 int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentImage& env,
                     const prt::Camera& camera, std::size_t terms, prt::LightingMode mode,
-                    double exposure, int max_frames,
-                    const std::string& screenshot);  // view_window_main.cpp
+                    double exposure, int max_frames, const std::string& screenshot,
+                    bool exact);  // view_window_main.cpp
 #endif
 
 namespace {
@@ -61,7 +61,7 @@ int Run(const Options& o) {
   if (o.window) {
 #ifdef PRT_VIEW_HAS_SDL2
     return RunViewerWindow(*session, env, camera, o.terms, mode, o.exposure, o.window_frames,
-                           o.screenshot);
+                           o.screenshot, o.exact);
 #else
     throw std::invalid_argument("--window: prt-view was built without SDL2");
 #endif

@@ -45,7 +45,7 @@ prt::Camera Orbit(const prt::Camera& c, double deg) {
 
 int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentImage& env,
                     const prt::Camera& camera, std::size_t terms, prt::LightingMode mode,
-                    double exposure, int max_frames, const std::string& screenshot) {
+                    double exposure, int max_frames, const std::string& screenshot, bool exact) {
   if (SDL_Init(SDL_INIT_VIDEO) != 0)
     throw std::runtime_error(std::string("--window: SDL_Init failed: ") + SDL_GetError());
   struct Quit {
@@ -68,6 +68,7 @@ int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentIma
   WindowState st;
   st.terms = std::min(terms, max_terms);
   st.mode = mode;
+  st.exact = exact;
   const prt::ToneMapOptions tone{exposure, prt::ToneMap::kClamp};
   prt::CubemapRgb cube;
   prt::WaveletLighting lighting;
