@@ -517,13 +517,6 @@ int RunCompressionPhase(const FarmOptions& options) {
     std::vector<uint64_t> sizes(static_cast<std::size_t>(size));
     CheckMpi(MPI_Gather(&my_size, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, comm),
              "MPI_Gather");
-    constexpr uint64_t kPiece = 1ull << 30;
-    if (rank != 0) {
-      for (uint64_t off = 0; off < my_size; off += kPiece)
-        CheckMpi(MPI_Send(bytes.data() + off, static_cast<int>(std::min(kPiece, my_size - off)),
-                          MPI_BYTE, 0, 7301, comm),
-                 "MPI_Send columns");
-    }
     uint64_t sums[4] = {st.bytes_sent, st.bytes_spilled, st.runs_spilled, terms};
     uint64_t total[4] = {};
     CheckMpi(MPI_Reduce(sums, total, 4, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
@@ -536,6 +529,13 @@ int RunCompressionPhase(const FarmOptions& options) {
                       st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
     double maxs[7] = {};
     CheckMpi(MPI_Reduce(secs, maxs, 7, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+    constexpr uint64_t kPiece = 1ull << 30;
+    if (rank != 0) {
+      for (uint64_t off = 0; off < my_size; off += kPiece)
+        CheckMpi(MPI_Send(bytes.data() + off, static_cast<int>(std::min(kPiece, my_size - off)),
+                          MPI_BYTE, 0, 7301, comm),
+                 "MPI_Send columns");
+    }
     if (rank == 0) {
       CompressedTransport t;
       t.header = header;

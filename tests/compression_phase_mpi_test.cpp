@@ -43,6 +43,9 @@ RunResult Farm(int ranks, const std::string& args) {
     if (eq != std::string::npos)
       ::setenv(item.substr(0, eq).c_str(), item.substr(eq + 1).c_str(), 0);
   }
+  // Small eager limit: the column blocks sent to rank 0 (a few KB here) take MPI's rendezvous
+  // path, as on real scenes, so that a send/collective ordering deadlock would show.
+  ::setenv("OMPI_MCA_btl_vader_eager_limit", "1024", 0);
   const std::string command = std::string(PRT_MPIEXEC) + " " + PRT_MPIEXEC_NUMPROC_FLAG + " " +
                               std::to_string(ranks) + " " + PRT_MPIEXEC_PREFLAGS + " " +
                               PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args + " 2>&1";
