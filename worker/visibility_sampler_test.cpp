@@ -57,6 +57,7 @@ TEST(VisibilitySampler, RealMeshRoundTripIsLossless) {
   std::vector<SpatialSample> samples;
   for (std::size_t i = 0; i < all.size(); i += all.size() / 40) samples.push_back(all[i]);
   for (int bits : {1, 6}) {
+    if (bits > 1) samples.resize(samples.size() / 2);  // 4 rays per texel: fewer vertices
     const VisibilitySampler sampler(scene,
                                     {.n = 64, .supersample = bits == 1 ? 1 : 2, .bits = bits});
     const VisibilityBlocks blocks = sampler.ComputeBlocks(samples);
