@@ -97,6 +97,10 @@ BlockTransposer::BlockTransposer(uint64_t rows, uint32_t column_begin, uint32_t 
   m.opt = std::move(options);
   m.nblocks = (column_end - column_begin + m.opt.columns_per_block - 1) / m.opt.columns_per_block;
   m.seen.assign(rows, 0);
+  // Reserve the row buffer once (growing a budget-sized vector by doubling dominated the
+  // in-memory transpose: reallocation copies and repeated page faults).
+  m.pool.reserve(static_cast<std::size_t>(
+      std::min<uint64_t>(m.opt.memory_budget_bytes, rows * (column_end - column_begin) * 4) / 4));
   m.id = g_transposer_id++;
 }
 
