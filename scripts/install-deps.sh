@@ -8,7 +8,7 @@ PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git
   libembree-dev libopenmpi-dev openmpi-bin libopenexr-dev libflann-dev liblz4-dev libdraco-dev
   libzstd-dev libeigen3-dev libtbb-dev libgtest-dev libgmock-dev libbenchmark-dev
-  libcli11-dev libtomlplusplus-dev libspdlog-dev libassimp-dev nlohmann-json3-dev libxxhash-dev
+  libcli11-dev libtomlplusplus-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev
   libpng-dev libsdl2-dev
   clang libclang-rt-14-dev gnuplot-nox xvfb
   libcgal-demo blender-data
