@@ -90,6 +90,24 @@ struct OptionsPod {
   uint64_t dither_seed;
 };
 
+// BlockTransposer reports a failed spill write or read as std::runtime_error: that is an I/O
+// error of the spill folder (exit code 3); its std::invalid_argument (a row missing or added
+// twice) stays an internal error.
+struct SpillIo {
+  std::string dir;
+  explicit SpillIo(std::string d) : dir(std::move(d)) {}
+  template <class F>
+  void operator()(F&& f) const {
+    try {
+      f();
+    } catch (const std::invalid_argument&) {
+      throw;
+    } catch (const std::runtime_error& e) {
+      throw FileIoError(dir, e.what());
+    }
+  }
+};
+
 }  // namespace
 
 std::pair<uint32_t, uint32_t> OwnedColumns(uint32_t cols, int rank, int ranks) {
@@ -219,14 +237,13 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
     st.exchange_seconds += Now() - t;
     t = Now();
     if (tr) {
+      SpillIo io(spill.spill_dir);
       for (std::size_t i = 0; i < P; ++i) {
         const auto [f, c] = ChunkShare(first, count, static_cast<int>(i), size);
         if (c == 0) continue;
-        if (size == 1) {
-          tr->AddRows(f, c, slabs, cols);
-        } else {
-          tr->AddRows(f, c, slabs + rdispls[i], width);
-        }
+        io([&] {
+          tr->AddRows(f, c, size == 1 ? slabs : slabs + rdispls[i], size == 1 ? cols : width);
+        });
       }
     }
     st.buffer_seconds += Now() - t;
@@ -238,7 +255,8 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
     std::vector<float> columns;
     for (;;) {
       double t = Now();
-      const bool more = tr->NextColumnBlock(f, c, columns);
+      bool more = false;
+      SpillIo(spill.spill_dir)([&] { more = tr->NextColumnBlock(f, c, columns); });
       st.merge_seconds += Now() - t;
       if (!more) break;
       t = Now();
