@@ -19,6 +19,7 @@
 #include <deque>
 #include <exception>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -498,16 +499,16 @@ class SetupPhase : public FarmPhase {
 // ----------------------------------------------------------------------- brute sampling phase
 
 // Rank 0's own worker thread (when rank 0 computes): takes one job at a time from the
-// coordinator's main thread, which alone calls MPI.
+// coordinator's main thread, which alone calls MPI, runs `compute(job, result)` on it (an
+// exception is carried in result.error) and queues the result. Result needs an
+// `std::exception_ptr error` member.
+template <class Job, class Result>
 class LocalWorker {
  public:
-  struct Result {
-    ResultMsg msg;
-    std::vector<float> rows;
-    std::exception_ptr error;
-  };
+  using Compute = std::function<void(Job&, Result&)>;
 
-  explicit LocalWorker(const FarmContext& ctx) : ctx_(ctx), thread_([this] { Loop(); }) {}
+  explicit LocalWorker(Compute compute)
+      : compute_(std::move(compute)), thread_([this] { Loop(); }) {}
   ~LocalWorker() {
     {
       std::lock_guard lock(mutex_);
@@ -517,10 +518,10 @@ class LocalWorker {
     thread_.join();
   }
 
-  void Give(const JobMsg& job) {
+  void Give(Job job) {
     {
       std::lock_guard lock(mutex_);
-      job_ = job;
+      job_ = std::move(job);
     }
     cv_.notify_all();
   }
@@ -541,17 +542,17 @@ class LocalWorker {
  private:
   void Loop() {
     for (;;) {
-      JobMsg job;
+      Job job;
       {
         std::unique_lock lock(mutex_);
         cv_.wait(lock, [&] { return stop_ || job_.has_value(); });
         if (stop_) return;
-        job = *job_;
+        job = std::move(*job_);
         job_.reset();
       }
       Result r;
       try {
-        r.msg = ComputeJob(ctx_, job, r.rows);
+        compute_(job, r);
       } catch (...) {
         r.error = std::current_exception();
       }
@@ -563,14 +564,23 @@ class LocalWorker {
     }
   }
 
-  const FarmContext& ctx_;
+  Compute compute_;
   std::mutex mutex_;
   std::condition_variable cv_, cv_done_;
-  std::optional<JobMsg> job_;
+  std::optional<Job> job_;
   std::deque<Result> results_;
   bool stop_ = false;
-  std::thread thread_;
+  std::thread thread_;  // last: starts after every other member exists
 };
+
+// ----------------------------------------------------------------------- brute sampling phase
+
+struct BruteLocalResult {
+  ResultMsg msg;
+  std::vector<float> rows;
+  std::exception_ptr error;
+};
+using BruteLocalWorker = LocalWorker<JobMsg, BruteLocalResult>;
 
 class BruteSamplingPhase : public FarmPhase {
  public:
@@ -684,10 +694,11 @@ class BruteSamplingPhase : public FarmPhase {
     const double start = Now();
     std::vector<Slot> slots;
     for (int r = 1; r < ctx.size; ++r) slots.push_back({r, false, false, false, {}, start});
-    std::unique_ptr<LocalWorker> local;
+    std::unique_ptr<BruteLocalWorker> local;
     if (ctx.computes_here()) {
       slots.push_back({0, true, true, false, {}, start});
-      local = std::make_unique<LocalWorker>(ctx);
+      local = std::make_unique<BruteLocalWorker>(
+          [&ctx](JobMsg& job, BruteLocalResult& r) { r.msg = ComputeJob(ctx, job, r.rows); });
     }
     auto slot_of = [&](int rank) -> Slot& {
       for (Slot& s : slots) {
@@ -786,7 +797,7 @@ class BruteSamplingPhase : public FarmPhase {
 
       bool busy = false;
       if (local) {
-        while (std::optional<LocalWorker::Result> r = local->Poll()) {
+        while (std::optional<BruteLocalResult> r = local->Poll()) {
           if (r->error) std::rethrow_exception(r->error);
           accept(0, r->msg, r->rows.data());
           busy = true;
@@ -920,75 +931,12 @@ class SideFile {
   bool dirty_ = false;
 };
 
-// Rank 0's own worker thread for the sparse method (same contract as LocalWorker).
-class SparseLocalWorker {
- public:
-  struct Result {
-    std::string bytes;
-    std::exception_ptr error;
-  };
-  explicit SparseLocalWorker(const FarmContext& ctx) : ctx_(ctx), thread_([this] { Loop(); }) {}
-  ~SparseLocalWorker() {
-    {
-      std::lock_guard lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
-  void Give(std::string job) {
-    {
-      std::lock_guard lock(mutex_);
-      job_ = std::move(job);
-    }
-    cv_.notify_all();
-  }
-  std::optional<Result> Poll() {
-    std::lock_guard lock(mutex_);
-    if (results_.empty()) return std::nullopt;
-    Result r = std::move(results_.front());
-    results_.pop_front();
-    return r;
-  }
-  void Wait(double seconds) {
-    std::unique_lock lock(mutex_);
-    cv_done_.wait_for(lock, std::chrono::duration<double>(seconds),
-                      [&] { return !results_.empty(); });
-  }
-
- private:
-  void Loop() {
-    for (;;) {
-      std::string job;
-      {
-        std::unique_lock lock(mutex_);
-        cv_.wait(lock, [&] { return stop_ || job_.has_value(); });
-        if (stop_) return;
-        job = std::move(*job_);
-        job_.reset();
-      }
-      Result r;
-      try {
-        r.bytes = ComputeSparseJob(*ctx_.sampler, ctx_.samples, ctx_.plan, job);
-      } catch (...) {
-        r.error = std::current_exception();
-      }
-      {
-        std::lock_guard lock(mutex_);
-        results_.push_back(std::move(r));
-      }
-      cv_done_.notify_all();
-    }
-  }
-
-  const FarmContext& ctx_;
-  std::mutex mutex_;
-  std::condition_variable cv_, cv_done_;
-  std::optional<std::string> job_;
-  std::deque<Result> results_;
-  bool stop_ = false;
-  std::thread thread_;
+// Rank 0's own worker thread for the sparse method: serialised jobs in, serialised results out.
+struct SparseLocalResult {
+  std::string bytes;
+  std::exception_ptr error;
 };
+using SparseLocalWorker = LocalWorker<std::string, SparseLocalResult>;
 
 // The sparse method (Huang & Ramamoorthi 2010 §4–5) on the job queue; docs/farm.md, "Sparse
 // method". Rank 0 plans every sub-phase deterministically from the seed and the previous
@@ -1104,7 +1052,10 @@ class SparseSamplingPhase : public FarmPhase {
       for (int r = 1; r < ctx_.size; ++r) slots_.push_back({r, false, false, {}, start});
       if (ctx_.computes_here()) {
         slots_.push_back({0, true, true, {}, start});
-        local_ = std::make_unique<SparseLocalWorker>(ctx_);
+        local_ =
+            std::make_unique<SparseLocalWorker>([this](std::string& job, SparseLocalResult& r) {
+              r.bytes = ComputeSparseJob(*ctx_.sampler, ctx_.samples, ctx_.plan, job);
+            });
       }
       rep.rank_reports[0].threads = ctx_.threads;
       rep.rank_reports[0].host = ctx_.host;
@@ -1538,7 +1489,7 @@ class SparseSamplingPhase : public FarmPhase {
 
         bool busy = false;
         if (local_) {
-          while (std::optional<SparseLocalWorker::Result> r = local_->Poll()) {
+          while (std::optional<SparseLocalResult> r = local_->Poll()) {
             if (r->error) std::rethrow_exception(r->error);
             accept(0, r->bytes);
             busy = true;
