@@ -16,6 +16,7 @@
 #include <optional>
 #include <thread>
 
+#include "farm/mpi_support.h"
 #include "farm/run_folder.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/errors.h"
@@ -33,53 +34,6 @@ namespace {
 
 double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-void CheckMpi(int rc, const char* what) {
-  if (rc == MPI_SUCCESS) return;
-  char text[MPI_MAX_ERROR_STRING] = {};
-  int len = 0;
-  MPI_Error_string(rc, text, &len);
-  throw RankFailure(std::string(what) + " failed: " + std::string(text, static_cast<size_t>(len)));
-}
-
-int ExitCodeOfCurrent(std::string& message) {
-  try {
-    throw;
-  } catch (const UsageError& x) {
-    message = x.what();
-    return kExitUsage;
-  } catch (const InputError& x) {
-    message = x.what();
-    return kExitBadInput;
-  } catch (const FileIoError& x) {
-    message = x.what();
-    return kExitIoError;
-  } catch (const fs::filesystem_error& x) {
-    message = x.what();
-    return kExitIoError;
-  } catch (const RankFailure& x) {
-    message = x.what();
-    return kExitRankFailed;
-  } catch (const std::exception& x) {
-    message = std::string("compression phase: ") + x.what();
-    return kExitRankFailed;
-  } catch (...) {
-    message = "compression phase: unknown exception";
-    return kExitRankFailed;
-  }
-}
-
-// Threads per rank when --threads is 0: the node's cores divided by the ranks on the node.
-int AutoThreads(MPI_Comm comm) {
-  MPI_Comm node;
-  int local_ranks = 1;
-  if (MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node) == MPI_SUCCESS) {
-    MPI_Comm_size(node, &local_ranks);
-    MPI_Comm_free(&node);
-  }
-  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  return std::max(1, cores / std::max(1, local_ranks));
 }
 
 // The compression options every rank needs besides the header (PrepareRows' per-row budget).
@@ -432,7 +386,8 @@ int RunCompressionPhase(const FarmOptions& options) {
       setup[2] = header_bytes.size();
     } catch (...) {
       std::string message;
-      setup[0] = static_cast<uint64_t>(ExitCodeOfCurrent(message));
+      setup[0] =
+          static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, "compression phase"));
       spdlog::error("compression: {}", message);
     }
   }
@@ -624,7 +579,7 @@ int RunCompressionPhase(const FarmOptions& options) {
     }
   } catch (...) {
     std::string message;
-    const int code = ExitCodeOfCurrent(message);
+    const int code = ExitCodeOf(std::current_exception(), message, "compression phase");
     spdlog::error(
         "rank {}: compression: {} (the transport is complete: rerun with --resume to "
         "redo only the compression)",

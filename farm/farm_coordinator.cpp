@@ -32,6 +32,7 @@
 #include "farm/checkpoint_journal.h"
 #include "farm/farm_report.h"
 #include "farm/job_planner.h"
+#include "farm/mpi_support.h"
 #include "farm/run_folder.h"
 #include "farm/sparse_jobs.h"
 #include "vocabulary/errors.h"
@@ -104,42 +105,6 @@ static_assert(std::is_trivially_copyable_v<SparsePlan>, "SparsePlan is broadcast
 double Now() {
   using Clock = std::chrono::steady_clock;
   return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
-}
-
-void CheckMpi(int rc, const std::string& what) {
-  if (rc == MPI_SUCCESS) return;
-  char text[MPI_MAX_ERROR_STRING];
-  int len = 0;
-  MPI_Error_string(rc, text, &len);
-  throw RankFailure(what + ": " + std::string(text, static_cast<std::size_t>(len)));
-}
-
-// Exit code of the exception in flight (FarmExitCode).
-int ExitCodeOf(std::exception_ptr e, std::string& message) {
-  try {
-    std::rethrow_exception(e);
-  } catch (const UsageError& x) {
-    message = x.what();
-    return kExitUsage;
-  } catch (const InputError& x) {
-    message = x.what();
-    return kExitBadInput;
-  } catch (const FileIoError& x) {
-    message = x.what();
-    return kExitIoError;
-  } catch (const fs::filesystem_error& x) {
-    message = x.what();
-    return kExitIoError;
-  } catch (const RankFailure& x) {
-    message = x.what();
-    return kExitRankFailed;
-  } catch (const std::exception& x) {
-    message = std::string("internal error: ") + x.what();
-    return kExitRankFailed;
-  } catch (...) {
-    message = "internal error: unknown exception";
-    return kExitRankFailed;
-  }
 }
 
 // All ranks stop the run with this exit code (they have agreed on it collectively).
@@ -1611,30 +1576,6 @@ void ConfigureLogging(const FarmContext& ctx) {
   }
   const bool chatty = ctx.rank == 0 && !ctx.options.quiet;
   spdlog::set_level(chatty ? spdlog::level::info : spdlog::level::warn);
-}
-
-// CPUs this process may run on (mpirun binds each rank to one core by default when there are
-// at most 2 ranks, and to a socket otherwise).
-int AllowedCpus() {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  if (sched_getaffinity(0, sizeof set, &set) != 0) return 0;
-  return CPU_COUNT(&set);
-}
-
-// Threads per rank for --threads 0: the CPUs the rank is bound to when mpirun bound it to part
-// of the node, else the node's cores divided by the ranks on the node.
-int AutoThreads(MPI_Comm comm) {
-  MPI_Comm node;
-  int local_ranks = 1;
-  if (MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node) == MPI_SUCCESS) {
-    MPI_Comm_size(node, &local_ranks);
-    MPI_Comm_free(&node);
-  }
-  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  const int allowed = AllowedCpus();
-  if (allowed > 0 && allowed < cores) return allowed;
-  return std::max(1, cores / std::max(1, local_ranks));
 }
 
 }  // namespace
