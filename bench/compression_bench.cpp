@@ -16,6 +16,7 @@
 //                          [--bits B] [--keep f1,f2,...] [--budget column|global|both]
 // Budget "column" is the paper's N terms per column (2D: per row, Ng et al. 2003); "global" keeps
 // the largest f·samples·texels coefficients of the whole transformed matrix (not in the paper).
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -120,29 +121,18 @@ int main(int argc, char** argv) {
   int n = 16, rays = 2, ground = 32, bits = 9;
   std::string budget = "both";  // column | global | both
   std::vector<double> keeps = {0.0025, 0.005, 0.01, 0.02, 0.05};
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i], v = argv[i + 1];
-    if (a == "--run")
-      run = v;
-    else if (a == "--mesh")
-      mesh = v;
-    else if (a == "--n")
-      n = std::atoi(v.c_str());
-    else if (a == "--rays")
-      rays = std::atoi(v.c_str());
-    else if (a == "--ground")
-      ground = std::atoi(v.c_str());
-    else if (a == "--bits")
-      bits = std::atoi(v.c_str());
-    else if (a == "--budget")
-      budget = v;
-    else if (a == "--keep")
-      keeps = Split(v);
-    else {
-      std::fprintf(stderr, "unknown option %s\n", a.c_str());
-      return 2;
-    }
-  }
+  std::string keep_arg;
+  CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
+  app.add_option("--run", run, "farm run folder to read T from (instead of tracing)");
+  app.add_option("--mesh", mesh, "mesh to trace on a ground plane");
+  app.add_option("--n", n, "cubemap resolution");
+  app.add_option("--rays", rays, "rays per texel");
+  app.add_option("--ground", ground, "ground grid resolution");
+  app.add_option("--bits", bits, "quantisation bits");
+  app.add_option("--budget", budget, "column | global | both");
+  app.add_option("--keep", keep_arg, "comma-separated keep fractions");
+  CLI11_PARSE(app, argc, argv);
+  if (!keep_arg.empty()) keeps = Split(keep_arg);
   Transport tr;
   try {
     tr = run.empty() ? TraceTransport(mesh, n, rays, ground) : ReadRun(run);

@@ -12,6 +12,7 @@
 #include <tbb/parallel_for.h>
 #include <zstd.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -213,34 +214,17 @@ int main(int argc, char** argv) {
   int n = 64, views = 3;
   std::string env_name = "sunrise", out_dir = "bench-out/glossy";
   bool quick = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--scenes")
-      scenes = Split(next());
-    else if (a == "--n")
-      n = std::stoi(next());
-    else if (a == "--views")
-      views = std::stoi(next());
-    else if (a == "--env")
-      env_name = next();
-    else if (a == "--out")
-      out_dir = next();
-    else if (a == "--quick")
-      quick = true;
-    else {
-      std::fprintf(stderr,
-                   "usage: glossy_bench [--scenes a,b] [--n 64] [--views 3] [--env sunrise] [--out "
-                   "dir] [--quick]\n");
-      return 2;
-    }
-  }
+  std::string scenes_arg;
+  CLI::App app{
+      "glossy_bench: per-block triple products (Inger et al. 2013) against the pixel basis"};
+  app.add_option("--scenes", scenes_arg, "comma-separated benchmark scenes (default,armadillo)");
+  app.add_option("--n", n, "visibility cubemap resolution");
+  app.add_option("--views", views, "camera views in the flyby");
+  app.add_option("--env", env_name, "environment map name");
+  app.add_option("--out", out_dir, "output folder");
+  app.add_flag("--quick", quick, "fewer vertices for the reference");
+  CLI11_PARSE(app, argc, argv);
+  if (!scenes_arg.empty()) scenes = Split(scenes_arg);
   std::filesystem::create_directories(out_dir);
   std::ostringstream md;
   md << "# prt-glossy-bench (Inger et al. 2013, Algorithm 1), n = " << n << ", env " << env_name

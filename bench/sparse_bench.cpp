@@ -13,8 +13,8 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
-#include <ctime>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -34,7 +34,9 @@ double Seconds(Clock::time_point a) {
 }
 // Process CPU seconds (all threads): the ratio of two CPU times is robust on a shared machine
 // where wall time includes waiting for a core.
-double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+double CpuSeconds() {
+  return static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
+}
 
 std::vector<std::string> Split(const std::string& s) {
   std::vector<std::string> out;
@@ -96,11 +98,11 @@ int main(int argc, char** argv) {
     const SampleStats bst = sampler.ComputeRows(samples, 0, brute.data());
     const double brute_s = Seconds(t0);
     const double brute_cpu = CpuSeconds() - c0;
-    std::printf("brute force: %.2f s wall, %.2f s CPU, %llu texels, %.3g rays (%.2f Mrays/s wall)\n",
-                brute_s, brute_cpu,
-                static_cast<unsigned long long>(bst.texels_traced),
-                static_cast<double>(bst.rays_traced),
-                static_cast<double>(bst.rays_traced) / brute_s * 1e-6);
+    std::printf(
+        "brute force: %.2f s wall, %.2f s CPU, %llu texels, %.3g rays (%.2f Mrays/s wall)\n",
+        brute_s, brute_cpu, static_cast<unsigned long long>(bst.texels_traced),
+        static_cast<double>(bst.rays_traced),
+        static_cast<double>(bst.rays_traced) / brute_s * 1e-6);
     const auto envs = bench::BenchEnvironments(n);
     std::vector<std::vector<float>> ref;
     for (const auto& e : envs) ref.push_back(bench::RelitRadiance(geometry, brute, e.cube));
@@ -139,7 +141,8 @@ int main(int argc, char** argv) {
 
     md << "\n### " << name << " (" << samples.size() << " samples, n = " << n << ")\n\n"
        << "Brute force: " << brute_s << " s wall, " << brute_cpu << " s CPU.\n\n"
-       << "| variant | radius | wall s | CPU ×brute | dense spatial | dense angular | sparse angular | "
+       << "| variant | radius | wall s | CPU ×brute | dense spatial | dense angular | sparse "
+          "angular | "
           "total | fallbacks |";
     for (const auto& e : envs) md << " " << e.name << " model | " << e.name << " ground |";
     md << "\n|---|---|---|---|---|---|---|---|---|";
@@ -164,13 +167,14 @@ int main(int argc, char** argv) {
           static_cast<double>(rep.sparse_stats.trace.texels_traced) /
           static_cast<double>(std::max<uint64_t>(1, rep.sparse_stats.texels_above_horizon));
       std::printf(
-          "%-26s r=%.4f %.2f s wall, CPU %.3f× brute (wall %.3f×; dense %.2f rank %.2f sparse %.2f s)"
+          "%-26s r=%.4f %.2f s wall, CPU %.3f× brute (wall %.3f×; dense %.2f rank %.2f sparse %.2f "
+          "s)"
           "  dense %.1f%%  "
           "dense-ang %.1f%%  sparse-ang %.1f%%  total %.1f%%  fallbacks %llu\n",
           v.name.c_str(), v.plan.radius, sec, cpu / brute_cpu, sec / brute_s, rep.seconds_dense,
-          rep.seconds_rank,
-          rep.seconds_sparse, 100 * dense_spatial, 100 * dense_ang, 100 * sparse_ang,
-          100 * rep.SampledFraction(), static_cast<unsigned long long>(rep.dense_fallback));
+          rep.seconds_rank, rep.seconds_sparse, 100 * dense_spatial, 100 * dense_ang,
+          100 * sparse_ang, 100 * rep.SampledFraction(),
+          static_cast<unsigned long long>(rep.dense_fallback));
       md << "| " << v.name << " | " << v.plan.radius << " | " << sec << " | " << cpu / brute_cpu
          << " | " << 100 * dense_spatial << "% | " << 100 * dense_ang << "% | " << 100 * sparse_ang
          << "% | " << 100 * rep.SampledFraction() << "% | " << rep.dense_fallback << " |";

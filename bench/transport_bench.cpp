@@ -12,6 +12,7 @@
 // Usage: transport_bench [mesh file] [cubemap n] [rays per texel] [samples] [passes]
 #include <tbb/task_arena.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -86,12 +87,15 @@ prt::TriangleMesh ProceduralSphere(int rings, int segments) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string mesh_path =
-      argc > 1 ? argv[1] : std::string(PRT_DATA_DIR) + "/meshes/bunny00.off";
-  const int n = argc > 2 ? std::atoi(argv[2]) : 32;
-  const int k = argc > 3 ? std::atoi(argv[3]) : 4;
-  const int wanted = argc > 4 ? std::atoi(argv[4]) : 96;
-  const int passes = argc > 5 ? std::atoi(argv[5]) : 5;
+  std::string mesh_path = std::string(PRT_DATA_DIR) + "/meshes/bunny00.off";
+  int n = 32, k = 4, wanted = 96, passes = 5;
+  CLI::App app{"transport_bench: ComputeRows against raw Embree occlusion on the same rays"};
+  app.add_option("mesh", mesh_path, "mesh fitted on a 64x64 ground (default: the CGAL bunny)");
+  app.add_option("n", n, "cubemap resolution");
+  app.add_option("rays_per_texel", k, "rays per texel");
+  app.add_option("samples", wanted, "spatial samples traced");
+  app.add_option("passes", passes, "timing passes (best is reported)");
+  CLI11_PARSE(app, argc, argv);
 
   prt::SceneGeometry geometry;
   prt::SceneMesh object;

@@ -19,6 +19,7 @@
 // reduced cost (cubemap n = 16, 1 ray per texel), compressed like scenes/default.toml
 // (adaptive 4D, keep 5%, 9 bits) and packed to --out-dir, so that everything below reads the
 // same pack prt-view would.
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -161,36 +162,16 @@ int main(int argc, char** argv) {
   int n = 16, rays = 1, frames = 120, hold = 60;
   double deg = 0.5;
   bool quick = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", a.c_str());
-        std::exit(1);
-      }
-      return argv[++i];
-    };
-    if (a == "--n")
-      n = std::atoi(next().c_str());
-    else if (a == "--rays")
-      rays = std::atoi(next().c_str());
-    else if (a == "--deg")
-      deg = std::atof(next().c_str());
-    else if (a == "--frames")
-      frames = std::atoi(next().c_str());
-    else if (a == "--hold")
-      hold = std::atoi(next().c_str());
-    else if (a == "--out-dir")
-      out_dir = next();
-    else if (a == "--quick")
-      quick = true;
-    else if (!a.empty() && a[0] != '-')
-      pack_path = a;
-    else {
-      std::fprintf(stderr, "unknown argument %s\n", a.c_str());
-      return 1;
-    }
-  }
+  CLI::App app{"viewer_bench: relighting speed, 2D against 4D, PBI against NWA"};
+  app.add_option("pack", pack_path, "a .prtpack (default: trace the default scene in-process)");
+  app.add_option("--n", n, "cubemap resolution of the in-process pack");
+  app.add_option("--rays", rays, "rays per texel of the in-process pack");
+  app.add_option("--deg", deg, "rotation per frame, degrees");
+  app.add_option("--frames", frames, "rotating frames");
+  app.add_option("--hold", hold, "still frames");
+  app.add_option("--out-dir", out_dir, "output folder");
+  app.add_flag("--quick", quick, "fewer timing repetitions");
+  CLI11_PARSE(app, argc, argv);
   fs::create_directories(out_dir);
   std::printf("# viewer_bench (prtfarm viewer), %u hardware threads\n",
               std::thread::hardware_concurrency());
