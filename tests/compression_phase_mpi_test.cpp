@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/run_prt_farm.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
@@ -30,34 +31,14 @@ namespace fs = std::filesystem;
 const std::string kScene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
 const std::string kArgs = " --rows-per-block 16 --max-job-rows 9 --quiet --force";
 
-struct RunResult {
-  int exit_code = -1;
-  std::string output;
-};
+using testing::RunResult;
 
 RunResult Farm(int ranks, const std::string& args) {
-  std::stringstream env(PRT_MPI_TEST_ENV_LIST);
-  std::string item;
-  while (std::getline(env, item, ';')) {
-    const std::size_t eq = item.find('=');
-    if (eq != std::string::npos)
-      ::setenv(item.substr(0, eq).c_str(), item.substr(eq + 1).c_str(), 0);
-  }
+  testing::ApplyMpiTestEnvironment();
   // Small eager limit: the column blocks sent to rank 0 (a few KB here) take MPI's rendezvous
   // path, as on real scenes, so that a send/collective ordering deadlock would show.
   ::setenv("OMPI_MCA_btl_vader_eager_limit", "1024", 0);
-  const std::string command = std::string(PRT_MPIEXEC) + " " + PRT_MPIEXEC_NUMPROC_FLAG + " " +
-                              std::to_string(ranks) + " " + PRT_MPIEXEC_PREFLAGS + " " +
-                              PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args + " 2>&1";
-  RunResult r;
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
+  return testing::RunPrtFarm(ranks, args);
 }
 
 std::string WorkDir(const std::string& name) {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "farm/farm_options.h"
+#include "tests/run_prt_farm.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
@@ -33,39 +34,10 @@ const std::string kScene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
 // Small jobs and blocks so that 72 samples make many jobs and several blocks.
 const std::string kSmallJobs = " --max-job-rows 5 --rows-per-block 16 --log-interval 0.2";
 
-struct RunResult {
-  int exit_code = -1;
-  std::string output;
-};
-
-// The environment every MPI test needs in a root container (PRT_MPI_TEST_ENV of the top
-// CMakeLists.txt); set here as well in case the test runs outside CTest.
-void ApplyMpiTestEnvironment() {
-  std::stringstream env(PRT_MPI_TEST_ENV_LIST);
-  std::string item;
-  while (std::getline(env, item, ';')) {
-    const std::size_t eq = item.find('=');
-    if (eq != std::string::npos) {
-      ::setenv(item.substr(0, eq).c_str(), item.substr(eq + 1).c_str(), 0);
-    }
-  }
-}
+using testing::RunResult;
 
 RunResult Farm(int ranks, const std::string& args) {
-  ApplyMpiTestEnvironment();
-  const std::string command = std::string(PRT_MPIEXEC) + " " + PRT_MPIEXEC_NUMPROC_FLAG + " " +
-                              std::to_string(ranks) + " " + PRT_MPIEXEC_PREFLAGS + " " +
-                              PRT_FARM_EXE + " " + PRT_MPIEXEC_POSTFLAGS + " " + args +
-                              " --keep-raw 2>&1";  // these tests read transport.prtt
-  RunResult r;
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) r.output.append(buf, n);
-  const int status = ::pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
+  return testing::RunPrtFarm(ranks, args + " --keep-raw");  // these tests read transport.prtt
 }
 
 std::string WorkDir(const std::string& name) {
