@@ -68,6 +68,7 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
   out.suffix.resize(entries * 257);
   out.pixels.resize(entries * 256);
   out.suffix_vec.resize(entries * 257 * 3);
+  out.suffix_rgbxyz.assign(static_cast<std::size_t>(blocks.block_count()) * 257 * 16 + 15, 0.f);
   tbb::parallel_for(0, blocks.block_count(), [&](int b) {
     for (int c = 0; c < 3; ++c) {
       const std::vector<float>& ch = light.Channel(c);
@@ -95,6 +96,16 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
         sv[3 * k] = static_cast<float>(vx);
         sv[3 * k + 1] = static_cast<float>(vy);
         sv[3 * k + 2] = static_cast<float>(vz);
+      }
+    }
+    float* q = out.AlignedRgbXyz() + static_cast<std::size_t>(b) * 257 * 16;
+    for (int c = 0; c < 3; ++c) {
+      const std::size_t e = static_cast<std::size_t>(b) * 3 + c;
+      const float* suffix = &out.suffix[e * 257];
+      const float* sv = &out.suffix_vec[e * 257 * 3];
+      for (int k = 0; k <= 256; ++k) {
+        q[k * 16 + c] = suffix[k];
+        for (int a = 0; a < 3; ++a) q[k * 16 + 4 * (a + 1) + c] = sv[3 * k + a];
       }
     }
   });

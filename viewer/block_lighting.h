@@ -10,6 +10,9 @@
 //   (iv)  suffix sums of the vector L'[k]·ω_k (ω_k the texel-centre direction), so that the
 //         diffuse cosine, which is linear in ω above the horizon, is integrated exactly against
 //         any visibility: Σ_k L'[k]·V[k]·(n·ω_k) = n · Σ_i V_d[i]·Lω_int[i].
+// (ii) and (iv) are also kept interleaved (SuffixRgbXyz): one 64-byte line per block position
+// holding all twelve suffix sums, so that a visibility change costs one cache line for all
+// three channels and both the constant and the exact cosine (Algorithm 1 lines 6, 9, 11).
 // §4: "to account for the fact that not all cubemap pixels correspond to the same solid angle,
 // we first scale the incident radiance at each pixel by a suitable correction factor": every
 // representation holds L'[k] = L_k · Ω_k, the texel's average radiance times its exact solid
@@ -69,6 +72,19 @@ struct BlockLighting {
   std::vector<float> suffix;      // entries × 257  (ii), L_int[256] = 0
   std::vector<float> pixels;      // entries × 256  (iii)
   std::vector<float> suffix_vec;  // entries × 257 × 3  (iv), (x, y, z) per position
+  // (ii) and (iv) interleaved: blocks × 257 positions × 16 floats, 64-byte aligned rows
+  //   [L_r, L_g, L_b, 0, Lx_r, Lx_g, Lx_b, 0, Ly_r, Ly_g, Ly_b, 0, Lz_r, Lz_g, Lz_b, 0]
+  // (the vector is over-allocated by 15 floats; SuffixRgbXyz finds the aligned start).
+  std::vector<float> suffix_rgbxyz;
+  static constexpr int kRgbXyzStride = 16;
+  const float* SuffixRgbXyz(int block) const { return AlignedRgbXyz() + block * 257 * 16; }
+  float* AlignedRgbXyz() {
+    return const_cast<float*>(static_cast<const BlockLighting*>(this)->AlignedRgbXyz());
+  }
+  const float* AlignedRgbXyz() const {
+    const auto p = reinterpret_cast<std::uintptr_t>(suffix_rgbxyz.data());
+    return suffix_rgbxyz.data() + ((64 - p % 64) % 64) / sizeof(float);
+  }
   const float* SuffixVec(int block, int c) const {
     return &suffix_vec[(static_cast<std::size_t>(block) * 3 + c) * 257 * 3];
   }

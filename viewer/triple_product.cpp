@@ -25,13 +25,17 @@ inline Vec3 Dir(const float* d) {
   return {d[0], d[1], d[2]};
 }
 
-void CheckScene(const GlossyScene& s, const CubemapBlocks& blocks, const BlockLighting& light) {
+void CheckSizes(const GlossyScene& s, const CubemapBlocks& blocks, const BlockLighting& light) {
   if (s.visibility == nullptr) throw std::invalid_argument("triple product: no visibility");
   const std::size_t nv = s.positions.size();
   if (s.normals.size() != nv || s.material_index.size() != nv || s.visibility->vertex_count != nv)
     throw std::invalid_argument("triple product: vertex counts disagree");
   if (s.visibility->n != blocks.n() || light.n != blocks.n())
     throw std::invalid_argument("triple product: cubemap resolutions disagree");
+}
+
+void CheckScene(const GlossyScene& s, const CubemapBlocks& blocks, const BlockLighting& light) {
+  CheckSizes(s, blocks, light);
   for (uint16_t m : s.material_index)
     if (m >= s.materials.size()) throw std::invalid_argument("triple product: material index");
 }
@@ -50,22 +54,12 @@ inline void ForEachVisibleRun(const VisibilityBlocks& vis, std::size_t e, F&& f)
   if (level != 0) f(start, 256, level);
 }
 
-}  // namespace
-
-TripleProductStats& TripleProductStats::operator+=(const TripleProductStats& o) {
-  blocks_zero += o.blocks_zero;
-  blocks_line6 += o.blocks_line6;
-  blocks_line9 += o.blocks_line9;
-  blocks_line11 += o.blocks_line11;
-  for (int i = 0; i < 4; ++i) brdf_rate[i] += o.brdf_rate[i];
-  return *this;
-}
-
-// Algorithm 1, block by block (see triple_product.h).
-std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const CubemapBlocks& blocks,
-                                          const BlockLighting& light, std::size_t vertex,
-                                          const Vec3& eye, TripleProductStats* stats,
-                                          const TripleProductOptions& options) {
+// Algorithm 1, block by block (see triple_product.h): calls sink(block, line, rate, out[3]) for
+// every block of the vertex, zero blocks included.
+template <typename Sink>
+void Algorithm1(const GlossyScene& scene, const CubemapBlocks& blocks, const BlockLighting& light,
+                std::size_t vertex, const Vec3& eye, const TripleProductOptions& options,
+                Sink&& sink) {
   const VisibilityBlocks& vis = *scene.visibility;
   const Material& m = scene.materials[scene.material_index[vertex]];
   const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
@@ -76,59 +70,74 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
   const float inv_max = 1.0f / static_cast<float>(vis.max_level());
   const bool exact = options.exact_cosine;
   constexpr float kInvPi = 0.318309886f;
+  // n/π: (n/π)·Σ L'ω over a range of positions is the exact diffuse integral over it.
   const float nx = static_cast<float>(f.normal.x) * kInvPi,
               ny = static_cast<float>(f.normal.y) * kInvPi,
               nz = static_cast<float>(f.normal.z) * kInvPi;
-  // (n/π)·Lω_int[k]: the exact diffuse integral of the suffix from position k.
-  auto cosine_suffix = [&](const float* sv, int k) {
-    return nx * sv[3 * k] + ny * sv[3 * k + 1] + nz * sv[3 * k + 2];
+  constexpr int kS = BlockLighting::kRgbXyzStride;
+  // Diffuse of channel c from 16 interleaved suffix values (block_lighting.h).
+  auto cosine_of = [&](const float* q, int c) {
+    return nx * q[4 + c] + ny * q[8 + c] + nz * q[12 + c];
   };
-  TripleProductStats st;
-  double total[3] = {0, 0, 0};
-  alignas(32) float coef[16];
+  alignas(32) float coef[16];   // specular lobe, 1/4/16 DCT coefficients
+  alignas(32) float dcoef[16];  // diffuse lobe, 4/16 DCT coefficients (the paper's ProjectBRDF)
   alignas(32) float spix[256];
   alignas(32) float dpix[256];
+  alignas(32) float acc[kS];
+  const float zero[3] = {0, 0, 0};
   const std::size_t e0 = vis.Entry(vertex, 0);
   for (int b = 0; b < blocks.block_count(); ++b) {
     const std::size_t e = e0 + b;
     const auto kind = static_cast<VisibilityBlockKind>(vis.kind[e]);
     if (kind == VisibilityBlockKind::kZero) {  // line 1
-      ++st.blocks_zero;
+      sink(b, TripleProductCase::kZero, 0, zero);
       continue;
     }
-    // Line 4, ProjectBRDF (§4.1, Appendix A): diffuse part constant over the block, specular
-    // part at the rate the rules ask for.
+    // Line 4, ProjectBRDF (§4.1, Appendix A): ρ̃ = diffuse + specular at the rate the rules ask
+    // for; with exact_cosine the diffuse part is integrated exactly instead.
     const Vec3& centre = blocks.Centre(b);
     const int rate = BrdfSamplingRate(m, f, centre);
     const int l = rate == 1 ? 1 : (rate == 4 ? 2 : (rate == 16 ? 4 : 16));
-    ++st.brdf_rate[rate == 1 ? 0 : (rate == 4 ? 1 : (rate == 16 ? 2 : 3))];
     const float d0 = static_cast<float>(DiffuseLobe(f, centre));
     if (rate <= 16) {
+      const float* dirs = blocks.SampleDirections(b, l);
+      float samples[16];
       if (spec) {
-        const float* dirs = blocks.SampleDirections(b, l);
-        float samples[16];
         for (int i = 0; i < l * l; ++i)
           samples[i] = static_cast<float>(SpecularLobe(m, f, Dir(dirs + 3 * i)));
         BlockDct::Project(l, samples, coef);
       } else {
         coef[0] = 0.f;
       }
+      if (l > 1 && !exact) {
+        for (int i = 0; i < l * l; ++i)
+          samples[i] = static_cast<float>(DiffuseLobe(f, Dir(dirs + 3 * i)));
+        BlockDct::Project(l, samples, dcoef);
+      }
     }
+    const float* q = light.SuffixRgbXyz(b);
     float out[3] = {0, 0, 0};
+    TripleProductCase line;
     if (kind == VisibilityBlockKind::kOne) {  // line 6: Light-BRDF product
-      ++st.blocks_line6;
+      line = TripleProductCase::kLine6;
       if (rate <= 16) {
         for (int c = 0; c < 3; ++c) {
           const float* ld = light.Dct(b, c);
-          float acc =
-              exact ? kd[c] * cosine_suffix(light.SuffixVec(b, c), 0) : kd[c] * d0 * 16.f * ld[0];
-          if (spec) {
-            float sp = 0;
+          float dif;
+          if (exact) {
+            dif = cosine_of(q, c);
+          } else if (l == 1) {
+            dif = d0 * 16.f * ld[0];
+          } else {
+            dif = 0;
+            for (int v = 0; v < l; ++v)
+              for (int u = 0; u < l; ++u) dif += dcoef[v * l + u] * ld[v * 4 + u];
+          }
+          float sp = 0;
+          if (spec)
             for (int v = 0; v < l; ++v)
               for (int u = 0; u < l; ++u) sp += coef[v * l + u] * ld[v * 4 + u];
-            acc += ks[c] * sp;
-          }
-          out[c] = acc;
+          out[c] = kd[c] * dif + ks[c] * sp;
         }
       } else {
         const float* dirs = blocks.PixelDirections(b);
@@ -143,54 +152,54 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
         }
       }
     } else if (rate == 1) {  // line 9: ρ̃₁ · Light-Vis product, L_int · V_d (Eq. 5–6)
-      ++st.blocks_line9;
+      line = TripleProductCase::kLine9;
       const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
       const float s0 = spec ? coef[0] * 0.0625f : 0.f;  // the constant is A_00 / 16
-      for (int c = 0; c < 3; ++c) {
-        const float* li = light.Suffix(b, c);
-        float acc = 0;
-        if (vis.bits == 1) {
-          for (uint64_t i = first; i < last; ++i)
-            acc += ((i - first) & 1) ? -li[vis.change_pos[i]] : li[vis.change_pos[i]];
-        } else {
-          for (uint64_t i = first; i < last; ++i)
-            acc += static_cast<float>(vis.change_value[i]) * li[vis.change_pos[i]];
-          acc *= inv_max;
+      // Σ_i V_d[i]·(all twelve suffix sums at change i): one cache line per change.
+      const int width = exact ? kS : 4;
+      for (int j = 0; j < kS; ++j) acc[j] = 0.f;
+      if (vis.bits == 1) {
+        uint64_t i = first;
+        for (; i + 2 <= last; i += 2) {
+          const float* a = q + vis.change_pos[i] * kS;
+          const float* z = q + vis.change_pos[i + 1] * kS;
+          for (int j = 0; j < width; ++j) acc[j] += a[j] - z[j];
         }
-        if (!exact) {
-          out[c] = (kd[c] * d0 + ks[c] * s0) * acc;
-        } else {
-          const float* sv = light.SuffixVec(b, c);
-          float dif = 0;
-          if (vis.bits == 1) {
-            for (uint64_t i = first; i < last; ++i) {
-              const float t = cosine_suffix(sv, vis.change_pos[i]);
-              dif += ((i - first) & 1) ? -t : t;
-            }
-          } else {
-            for (uint64_t i = first; i < last; ++i)
-              dif += static_cast<float>(vis.change_value[i]) * cosine_suffix(sv, vis.change_pos[i]);
-            dif *= inv_max;
-          }
-          out[c] = kd[c] * dif + ks[c] * s0 * acc;
+        if (i < last) {
+          const float* a = q + vis.change_pos[i] * kS;
+          for (int j = 0; j < width; ++j) acc[j] += a[j];
+        }
+      } else {
+        for (uint64_t i = first; i < last; ++i) {
+          const float dv = static_cast<float>(vis.change_value[i]) * inv_max;
+          const float* a = q + vis.change_pos[i] * kS;
+          for (int j = 0; j < width; ++j) acc[j] += dv * a[j];
         }
       }
+      for (int c = 0; c < 3; ++c)
+        out[c] = exact ? kd[c] * cosine_of(acc, c) + ks[c] * s0 * acc[c]
+                       : (kd[c] * d0 + ks[c] * s0) * acc[c];
     } else {  // line 11: Decompress-Integrate in the pixel basis over the visible runs (§4.4)
-      ++st.blocks_line11;
+      line = TripleProductCase::kLine11;
       if (rate <= 16) {
         BlockDct::Reconstruct(l, coef, spix);
-        for (int c = 0; c < 3; ++c) {
-          const float* li = light.Suffix(b, c);
-          const float* lp = light.Pixels(b, c);
-          const float* sv = light.SuffixVec(b, c);
-          float dif = 0, sp = 0;
-          ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
-            const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
-            dif += w * (exact ? cosine_suffix(sv, a) - cosine_suffix(sv, z) : d0 * (li[a] - li[z]));
-            sp += w * DotRange(lp, spix, a, z);
-          });
-          out[c] = kd[c] * dif + ks[c] * sp;
-        }
+        if (!exact) BlockDct::Reconstruct(l, dcoef, dpix);
+        for (int j = 0; j < kS; ++j) acc[j] = 0.f;
+        float sp[3] = {0, 0, 0}, dif[3] = {0, 0, 0};
+        ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
+          const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
+          if (exact) {
+            const float *qa = q + a * kS, *qz = q + z * kS;
+            for (int j = 0; j < kS; ++j) acc[j] += w * (qa[j] - qz[j]);
+          }
+          for (int c = 0; c < 3; ++c) {
+            const float* lp = light.Pixels(b, c);
+            sp[c] += w * DotRange(lp, spix, a, z);
+            if (!exact) dif[c] += w * DotRange(lp, dpix, a, z);
+          }
+        });
+        for (int c = 0; c < 3; ++c)
+          out[c] = kd[c] * (exact ? cosine_of(acc, c) : dif[c]) + ks[c] * sp[c];
       } else {
         const float* dirs = blocks.PixelDirections(b);
         ForEachVisibleRun(vis, e, [&](int a, int z, int) {
@@ -202,21 +211,107 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
         });
         for (int c = 0; c < 3; ++c) {
           const float* lp = light.Pixels(b, c);
-          float acc = 0;
+          float sum = 0;
           ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
             const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
-            acc += w * (kd[c] * DotRange(lp, dpix, a, z) + ks[c] * DotRange(lp, spix, a, z));
+            sum += w * (kd[c] * DotRange(lp, dpix, a, z) + ks[c] * DotRange(lp, spix, a, z));
           });
-          out[c] = acc;
+          out[c] = sum;
         }
       }
     }
-    for (int c = 0; c < 3; ++c) total[c] += out[c];
+    sink(b, line, rate, out);
   }
+}
+
+void Count(TripleProductStats& st, TripleProductCase line, int rate) {
+  switch (line) {
+    case TripleProductCase::kZero:
+      ++st.blocks_zero;
+      return;
+    case TripleProductCase::kLine6:
+      ++st.blocks_line6;
+      break;
+    case TripleProductCase::kLine9:
+      ++st.blocks_line9;
+      break;
+    case TripleProductCase::kLine11:
+      ++st.blocks_line11;
+      break;
+  }
+  ++st.brdf_rate[rate == 1 ? 0 : (rate == 4 ? 1 : (rate == 16 ? 2 : 3))];
+}
+
+// The pixel-basis reference block by block: sink(block, rgb) in double.
+template <typename Sink>
+void Reference(const GlossyScene& scene, const CubemapBlocks& blocks, const BlockLighting& light,
+               std::size_t vertex, const Vec3& eye, bool skip_occluded, Sink&& sink) {
+  const VisibilityBlocks& vis = *scene.visibility;
+  const Material& m = scene.materials[scene.material_index[vertex]];
+  const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
+  const bool spec = HasSpecular(m);
+  const double inv_max = 1.0 / vis.max_level();
+  uint8_t levels[256];
+  for (int b = 0; b < blocks.block_count(); ++b) {
+    DecodeVisibilityBlock(vis, vertex, b, levels);
+    const float* dirs = blocks.PixelDirections(b);
+    const float* lp[3] = {light.Pixels(b, 0), light.Pixels(b, 1), light.Pixels(b, 2)};
+    double total[3] = {0, 0, 0};
+    for (int k = 0; k < 256; ++k) {
+      if (skip_occluded && levels[k] == 0) continue;
+      const Vec3 w = Dir(dirs + 3 * k);
+      const double d = DiffuseLobe(f, w);
+      const double s = spec ? SpecularLobe(m, f, w) : 0.0;
+      const double v = levels[k] * inv_max;
+      for (int c = 0; c < 3; ++c)
+        total[c] += lp[c][k] * v * (m.diffuse[c] * d + (spec ? m.specular[c] * s : 0.0));
+    }
+    sink(b, total);
+  }
+}
+
+}  // namespace
+
+TripleProductStats& TripleProductStats::operator+=(const TripleProductStats& o) {
+  blocks_zero += o.blocks_zero;
+  blocks_line6 += o.blocks_line6;
+  blocks_line9 += o.blocks_line9;
+  blocks_line11 += o.blocks_line11;
+  for (int i = 0; i < 4; ++i) brdf_rate[i] += o.brdf_rate[i];
+  return *this;
+}
+
+std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                          const BlockLighting& light, std::size_t vertex,
+                                          const Vec3& eye, TripleProductStats* stats,
+                                          const TripleProductOptions& options) {
+  TripleProductStats st;
+  double total[3] = {0, 0, 0};
+  Algorithm1(scene, blocks, light, vertex, eye, options,
+             [&](int, TripleProductCase line, int rate, const float* out) {
+               Count(st, line, rate);
+               for (int c = 0; c < 3; ++c) total[c] += out[c];
+             });
   if (stats != nullptr) *stats += st;
   std::array<double, 3> r{};
   for (int c = 0; c < 3; ++c) r[c] = std::isfinite(total[c]) ? std::max(0.0, total[c]) : 0.0;
   return r;
+}
+
+void TripleProductVertexBlocks(const GlossyScene& scene, const CubemapBlocks& blocks,
+                               const BlockLighting& light, std::size_t vertex, const Vec3& eye,
+                               std::span<TripleProductBlockTerm> out,
+                               const TripleProductOptions& options) {
+  CheckSizes(scene, blocks, light);
+  if (vertex >= scene.positions.size() || scene.material_index[vertex] >= scene.materials.size() ||
+      out.size() != static_cast<std::size_t>(blocks.block_count()))
+    throw std::invalid_argument("TripleProductVertexBlocks: vertex or output size");
+  Algorithm1(scene, blocks, light, vertex, eye, options,
+             [&](int b, TripleProductCase line, int rate, const float* rgb) {
+               out[b].line = line;
+               out[b].rate = static_cast<uint16_t>(rate);
+               for (int c = 0; c < 3; ++c) out[b].rgb[c] = std::isfinite(rgb[c]) ? rgb[c] : 0.f;
+             });
 }
 
 TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapBlocks& blocks,
@@ -245,28 +340,23 @@ std::array<double, 3> PixelBasisReferenceVertex(const GlossyScene& scene,
                                                 const CubemapBlocks& blocks,
                                                 const BlockLighting& light, std::size_t vertex,
                                                 const Vec3& eye, bool skip_occluded) {
-  const VisibilityBlocks& vis = *scene.visibility;
-  const Material& m = scene.materials[scene.material_index[vertex]];
-  const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
-  const bool spec = HasSpecular(m);
-  const double inv_max = 1.0 / vis.max_level();
-  double total[3] = {0, 0, 0};
-  uint8_t levels[256];
-  for (int b = 0; b < blocks.block_count(); ++b) {
-    DecodeVisibilityBlock(vis, vertex, b, levels);
-    const float* dirs = blocks.PixelDirections(b);
-    const float* lp[3] = {light.Pixels(b, 0), light.Pixels(b, 1), light.Pixels(b, 2)};
-    for (int k = 0; k < 256; ++k) {
-      if (skip_occluded && levels[k] == 0) continue;
-      const Vec3 w = Dir(dirs + 3 * k);
-      const double d = DiffuseLobe(f, w);
-      const double s = spec ? SpecularLobe(m, f, w) : 0.0;
-      const double v = levels[k] * inv_max;
-      for (int c = 0; c < 3; ++c)
-        total[c] += lp[c][k] * v * (m.diffuse[c] * d + (spec ? m.specular[c] * s : 0.0));
-    }
-  }
-  return {total[0], total[1], total[2]};
+  std::array<double, 3> total{0, 0, 0};
+  Reference(scene, blocks, light, vertex, eye, skip_occluded, [&](int, const double* rgb) {
+    for (int c = 0; c < 3; ++c) total[c] += rgb[c];
+  });
+  return total;
+}
+
+void PixelBasisReferenceVertexBlocks(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                     const BlockLighting& light, std::size_t vertex,
+                                     const Vec3& eye, std::span<std::array<double, 3>> out) {
+  CheckSizes(scene, blocks, light);
+  if (vertex >= scene.positions.size() || scene.material_index[vertex] >= scene.materials.size() ||
+      out.size() != static_cast<std::size_t>(blocks.block_count()))
+    throw std::invalid_argument("PixelBasisReferenceVertexBlocks: vertex or output size");
+  Reference(scene, blocks, light, vertex, eye, true, [&](int b, const double* rgb) {
+    for (int c = 0; c < 3; ++c) out[b][c] = rgb[c];
+  });
 }
 
 void RelightPixelBasisReference(const GlossyScene& scene, const CubemapBlocks& blocks,

@@ -37,6 +37,16 @@ struct TripleProductOptions {
   bool exact_cosine = false;
 };
 
+// The case of Algorithm 1 a block took (its line in the pseudocode; kZero is line 1).
+enum class TripleProductCase : uint8_t { kZero = 1, kLine6 = 6, kLine9 = 9, kLine11 = 11 };
+
+// One block's share of a vertex's radiance (TripleProductVertexBlocks).
+struct TripleProductBlockTerm {
+  TripleProductCase line = TripleProductCase::kZero;
+  uint16_t rate = 0;           // BRDF samples: 1, 4, 16 or 256; 0 in zero blocks
+  std::array<float, 3> rgb{};  // the block's contribution to B
+};
+
 // What Algorithm 1 did (Tables 1 and 2 of the paper).
 struct TripleProductStats {
   uint64_t blocks_zero = 0;              // line 1
@@ -62,6 +72,12 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
                                           const BlockLighting& light, std::size_t vertex,
                                           const Vec3& eye, TripleProductStats* stats = nullptr,
                                           const TripleProductOptions& options = {});
+// The same, block by block: out[b] is block b's case, BRDF rate and contribution (their sum is
+// TripleProductVertex before its clamp at 0). out.size() must be blocks.block_count().
+void TripleProductVertexBlocks(const GlossyScene& scene, const CubemapBlocks& blocks,
+                               const BlockLighting& light, std::size_t vertex, const Vec3& eye,
+                               std::span<TripleProductBlockTerm> out,
+                               const TripleProductOptions& options = {});
 // Every vertex (3 floats each into out_rgb), parallel over vertices. Throws
 // std::invalid_argument when sizes disagree (vertex counts, n, material indices).
 TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapBlocks& blocks,
@@ -76,6 +92,10 @@ std::array<double, 3> PixelBasisReferenceVertex(const GlossyScene& scene,
                                                 const CubemapBlocks& blocks,
                                                 const BlockLighting& light, std::size_t vertex,
                                                 const Vec3& eye, bool skip_occluded = false);
+// The reference block by block (out.size() == blocks.block_count()).
+void PixelBasisReferenceVertexBlocks(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                     const BlockLighting& light, std::size_t vertex,
+                                     const Vec3& eye, std::span<std::array<double, 3>> out);
 void RelightPixelBasisReference(const GlossyScene& scene, const CubemapBlocks& blocks,
                                 const BlockLighting& light, const Vec3& eye,
                                 std::span<float> out_rgb, bool skip_occluded = false);

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -28,8 +30,9 @@ CubemapRgb TestLight() {
 }
 
 // What Algorithm 1 computes, written out in the pixel basis: Σ_k L'[k]·V[k]·ρ̂[k] with ρ̂ the
-// block's BRDF approximation (constant diffuse at the block centre plus the specular lobe from
-// its 1/4/16 subsampled DCT coefficients, or the exact BRDF where it needs 256 samples).
+// block's BRDF approximation (diffuse and specular lobes from their 1/4/16 subsampled DCT
+// coefficients, one coefficient being the value at the block centre, or the exact BRDF where it
+// needs 256 samples).
 std::array<double, 3> ApproximatedIntegrand(const GlossyScene& s, const CubemapBlocks& blocks,
                                             const BlockLighting& light, std::size_t v,
                                             const Vec3& eye) {
@@ -40,7 +43,7 @@ std::array<double, 3> ApproximatedIntegrand(const GlossyScene& s, const CubemapB
   for (int b = 0; b < blocks.block_count(); ++b) {
     DecodeVisibilityBlock(*s.visibility, v, b, levels);
     const int rate = BrdfSamplingRate(m, f, blocks.Centre(b));
-    float spec[256];
+    float spec[256], dif[256];
     if (rate <= 16) {
       const int l = rate == 1 ? 1 : (rate == 4 ? 2 : 4);
       float samples[16], coef[16];
@@ -49,16 +52,19 @@ std::array<double, 3> ApproximatedIntegrand(const GlossyScene& s, const CubemapB
         samples[i] = static_cast<float>(SpecularLobe(m, f, {d[3 * i], d[3 * i + 1], d[3 * i + 2]}));
       BlockDct::Project(l, samples, coef);
       BlockDct::Reconstruct(l, coef, spec);
+      for (int i = 0; i < l * l; ++i)
+        samples[i] = static_cast<float>(DiffuseLobe(f, {d[3 * i], d[3 * i + 1], d[3 * i + 2]}));
+      BlockDct::Project(l, samples, coef);
+      BlockDct::Reconstruct(l, coef, dif);
     }
-    const double d0 = DiffuseLobe(f, blocks.Centre(b));
     const float* dirs = blocks.PixelDirections(b);
     for (int k = 0; k < 256; ++k) {
       const Vec3 w{dirs[3 * k], dirs[3 * k + 1], dirs[3 * k + 2]};
       const double vis = levels[k] / static_cast<double>(s.visibility->max_level());
       for (int c = 0; c < 3; ++c) {
-        const double rho = rate <= 16
-                               ? m.diffuse[c] * d0 + (HasSpecular(m) ? m.specular[c] * spec[k] : 0)
-                               : CosineWeightedBrdf(m, f, w, c);
+        const double rho =
+            rate <= 16 ? m.diffuse[c] * dif[k] + (HasSpecular(m) ? m.specular[c] * spec[k] : 0)
+                       : CosineWeightedBrdf(m, f, w, c);
         out[c] += light.Pixels(b, c)[k] * vis * rho;
       }
     }
@@ -226,6 +232,192 @@ TEST(TripleProduct, ExactCosineMakesLambertExact) {
         TripleProductVertex(scene, fx.blocks, fx.light, 5, eye, nullptr, {.exact_cosine = true});
     const auto ref = PixelBasisReferenceVertex(scene, fx.blocks, fx.light, 5, eye);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[c], ref[c], 0.05 * ref[c]);
+  }
+}
+
+}  // namespace
+}  // namespace prt
+
+namespace prt {
+namespace {
+
+// Per block and per vertex, Algorithm 1 against the pixel-basis reference with error bounds that
+// follow from the approximations the rules make (L'·V ≥ 0 throughout, so a per-texel bound on the
+// BRDF error times Σ_k L'[k]·V[k] bounds the block's error):
+//   - zero blocks: exactly 0 on both sides;
+//   - 256 samples (rate 256), and the diffuse term under exact_cosine: the same sum in float,
+//     within float rounding;
+//   - the diffuse lobe approximated by a constant (the paper: its value at the block centre c):
+//     |max(0, n·ω) − max(0, n·c)| ≤ |ω − c| ≤ r_b, the block's chord radius, so the error is
+//     ≤ k_d/π · r_b · Σ L'V; by its 4/16-coefficient interpolant (rates 4, 16): the interpolant
+//     reproduces constants, so its error is ≤ (Λ_l + 1)·r_b with Λ_l the Lebesgue constant of the
+//     l×l DCT interpolation (computed below from BlockDct);
+//   - the Phong lobe at one sample (the rules give rate 1 only where ∠(V, R_c) ≥ π/4): every texel
+//     is at least π/4 − θ_b from the mirror direction (θ_b the block's angular radius), so the lobe
+//     and its constant are both ≤ (s+2)/2π · cos^s(π/4 − θ_b) and the error is ≤ k_s times that
+//     times Σ L'V;
+//   - the Phong lobe at 4 or 16 samples: |interpolant| ≤ Λ_l·max_i lobe(ω_i) over the samples, so
+//     the error is ≤ k_s·(Λ_l·max_i lobe(ω_i) + max_k lobe(ω_k))·Σ L'V.
+double Lebesgue(int l) {
+  static const auto values = [] {
+    std::array<double, 5> out{};
+    for (int ll : {1, 2, 4}) {
+      double sums[256] = {};
+      for (int i = 0; i < ll * ll; ++i) {
+        float samples[16] = {}, coef[16], pix[256];
+        samples[i] = 1.f;
+        BlockDct::Project(ll, samples, coef);
+        BlockDct::Reconstruct(ll, coef, pix);
+        for (int k = 0; k < 256; ++k) sums[k] += std::abs(pix[k]);
+      }
+      out[ll] = *std::max_element(sums, sums + 256) * (1 + 1e-5);
+    }
+    return out;
+  }();
+  return values[l];
+}
+
+struct BlockBound {
+  double bound[3] = {0, 0, 0};
+};
+
+BlockBound BoundOf(const GlossyScene& s, const CubemapBlocks& blocks, const BlockLighting& light,
+                   std::size_t v, const Vec3& eye, int b, const TripleProductBlockTerm& term,
+                   bool exact) {
+  const Material& m = s.materials[s.material_index[v]];
+  const ShadingFrame f = MakeShadingFrame(s.normals[v], eye - s.positions[v]);
+  uint8_t levels[256];
+  DecodeVisibilityBlock(*s.visibility, v, b, levels);
+  const float* dirs = blocks.PixelDirections(b);
+  const Vec3 c = blocks.Centre(b);
+  const int l = term.rate == 4 ? 2 : (term.rate == 16 ? 4 : 1);
+  double sample_max = 0;
+  const float* sd = blocks.SampleDirections(b, l);
+  for (int i = 0; i < l * l; ++i)
+    sample_max =
+        std::max(sample_max, SpecularLobe(m, f, {sd[3 * i], sd[3 * i + 1], sd[3 * i + 2]}));
+  double chord = 0, lobe_max = 0, lv[3] = {0, 0, 0}, total_abs[3] = {0, 0, 0}, all[3] = {0, 0, 0};
+  for (int k = 0; k < 256; ++k) {
+    const Vec3 w{dirs[3 * k], dirs[3 * k + 1], dirs[3 * k + 2]};
+    chord = std::max(chord, Length(w - c));
+    lobe_max = std::max(lobe_max, SpecularLobe(m, f, w));
+    const double vis = levels[k] / static_cast<double>(s.visibility->max_level());
+    for (int ch = 0; ch < 3; ++ch) {
+      lv[ch] += light.Pixels(b, ch)[k] * vis;
+      all[ch] += light.Pixels(b, ch)[k];
+      total_abs[ch] += light.Pixels(b, ch)[k] * vis * CosineWeightedBrdf(m, f, w, ch);
+    }
+  }
+  const double theta = 2 * std::asin(std::min(1.0, chord / 2));
+  BlockBound out;
+  for (int ch = 0; ch < 3; ++ch) {
+    // Float rounding of sums over ≤ 256 positions (and of suffix differences).
+    double bound = 4e-6 * (total_abs[ch] + m.diffuse[ch] / std::numbers::pi * all[ch]) + 1e-9;
+    if (term.rate != 256) {
+      if (!exact)
+        bound +=
+            m.diffuse[ch] / std::numbers::pi * (l == 1 ? 1.0 : Lebesgue(l) + 1) * chord * lv[ch];
+      if (HasSpecular(m)) {
+        const double lobe_bound =
+            term.rate == 1
+                ? (m.exponent + 2) / (2 * std::numbers::pi) *
+                      std::pow(std::cos(std::max(0.0, std::numbers::pi / 4 - theta)), m.exponent)
+                : 1.25 * lobe_max;
+        bound += m.specular[ch] * lobe_bound * lv[ch];
+      }
+    }
+    out.bound[ch] = bound;
+  }
+  return out;
+}
+
+TEST(TripleProduct, EveryBlockWithinTheBoundOfItsCase) {
+  for (int bits : {1, 6}) {
+    Fixture fx;
+    fx.vis = MakeVisibilityBlocks(kN, bits);
+    const uint8_t top = static_cast<uint8_t>((1 << bits) - 1);
+    Material lambert;
+    lambert.diffuse = {0.9f, 0.6f, 0.3f};
+    fx.materials = {lambert, Phong(10), Phong(60), Phong(200), Phong(400)};
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const CubemapLayout layout(kN);
+    for (int v = 0; v < 20; ++v) {
+      const Vec3 normal = Normalize(Vec3{0.4 * u(rng), 1, 0.4 * u(rng)});
+      const Vec3 edge = Normalize(Vec3{u(rng), 0.3 * u(rng), u(rng)});
+      const double offset = 0.3 * u(rng);
+      std::vector<uint8_t> map(layout.texel_count());
+      for (std::size_t j = 0; j < map.size(); ++j) {
+        const Vec3 d = layout.TexelCenter(j);
+        if (Dot(d, normal) <= 0) continue;  // the horizon mask of traced maps
+        const double t = 0.5 + 6 * (Dot(d, edge) - offset);
+        map[j] = bits == 1 ? (t > 0.5 ? top : 0)
+                           : static_cast<uint8_t>(std::lround(std::clamp(t, 0.0, 1.0) * top));
+      }
+      AppendVisibilityMap(fx.vis, map);
+      fx.positions.push_back({0, 0, 0});
+      fx.normals.push_back(normal);
+      fx.material_index.push_back(static_cast<uint16_t>(v % fx.materials.size()));
+    }
+    const GlossyScene scene = fx.scene();
+    std::vector<TripleProductBlockTerm> terms(fx.blocks.block_count());
+    std::vector<std::array<double, 3>> ref(fx.blocks.block_count());
+    uint64_t seen[4][5] = {};  // [line 1/6/9/11][rate 0/1/4/16/256]
+    for (const bool exact : {false, true}) {
+      for (std::size_t v = 0; v < fx.positions.size(); ++v) {
+        const Vec3 eye = Normalize(Vec3{u(rng), 1, u(rng)}) * 5.0;
+        TripleProductVertexBlocks(scene, fx.blocks, fx.light, v, eye, terms,
+                                  {.exact_cosine = exact});
+        PixelBasisReferenceVertexBlocks(scene, fx.blocks, fx.light, v, eye, ref);
+        double sum[3] = {0, 0, 0}, ref_sum[3] = {0, 0, 0}, bound_sum[3] = {0, 0, 0};
+        for (int b = 0; b < fx.blocks.block_count(); ++b) {
+          const TripleProductBlockTerm& t = terms[b];
+          const int li = t.line == TripleProductCase::kZero
+                             ? 0
+                             : (t.line == TripleProductCase::kLine6
+                                    ? 1
+                                    : (t.line == TripleProductCase::kLine9 ? 2 : 3));
+          const int ri =
+              t.rate == 0 ? 0 : (t.rate == 1 ? 1 : (t.rate == 4 ? 2 : (t.rate == 16 ? 3 : 4)));
+          ++seen[li][ri];
+          if (t.line == TripleProductCase::kZero) {
+            for (int c = 0; c < 3; ++c) {
+              EXPECT_EQ(t.rgb[c], 0.f);
+              EXPECT_EQ(ref[b][c], 0.0);
+            }
+            continue;
+          }
+          const BlockBound bb = BoundOf(scene, fx.blocks, fx.light, v, eye, b, t, exact);
+          for (int c = 0; c < 3; ++c) {
+            EXPECT_LE(std::abs(t.rgb[c] - ref[b][c]), bb.bound[c])
+                << "vertex " << v << " block " << b << " line " << static_cast<int>(t.line)
+                << " rate " << t.rate << " bits " << bits << " exact " << exact;
+            sum[c] += t.rgb[c];
+            ref_sum[c] += ref[b][c];
+            bound_sum[c] += bb.bound[c];
+          }
+        }
+        // Per vertex: the blocks add up to TripleProductVertex and the reference, and the
+        // vertex's error is within the sum of its blocks' bounds.
+        const auto whole = TripleProductVertex(scene, fx.blocks, fx.light, v, eye, nullptr,
+                                               {.exact_cosine = exact});
+        const auto whole_ref = PixelBasisReferenceVertex(scene, fx.blocks, fx.light, v, eye);
+        for (int c = 0; c < 3; ++c) {
+          EXPECT_NEAR(whole[c], std::max(0.0, sum[c]), 1e-9 + 1e-9 * std::abs(sum[c]));
+          EXPECT_NEAR(whole_ref[c], ref_sum[c], 1e-9 + 1e-9 * std::abs(ref_sum[c]));
+          EXPECT_LE(std::abs(whole[c] - whole_ref[c]), bound_sum[c]) << v << " " << exact;
+        }
+      }
+    }
+    // Every case and rate was exercised.
+    EXPECT_GT(seen[0][0], 0u);
+    EXPECT_GT(seen[1][1], 0u);
+    EXPECT_GT(seen[1][2] + seen[1][3], 0u);
+    EXPECT_GT(seen[1][4], 0u);
+    EXPECT_GT(seen[2][1], 0u);
+    EXPECT_GT(seen[3][2], 0u);
+    EXPECT_GT(seen[3][3], 0u);
+    EXPECT_GT(seen[3][4], 0u);
   }
 }
 
