@@ -35,6 +35,7 @@
 #include "farm/mpi_support.h"
 #include "farm/run_folder.h"
 #include "farm/sparse_jobs.h"
+#include "farm/visibility_jobs.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/progress.h"
 #include "vocabulary/scene.h"
@@ -44,6 +45,7 @@
 #include "worker/neighbor_index.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
+#include "worker/visibility_sampler.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
 #define PRT_DEFAULT_DATA_DIR ""
@@ -67,8 +69,9 @@ enum Tag : int {
   kTagResult,
   kTagRows,
   kTagFailed,
-  kTagSparseJob,     // an encoded sparse-method job (farm/sparse_jobs.h), one message
-  kTagSparseResult,  // its encoded result, one message
+  kTagSparseJob,         // an encoded sparse-method job (farm/sparse_jobs.h), one message
+  kTagSparseResult,      // its encoded result, one message
+  kTagVisibilityResult,  // an encoded visibility job result (farm/visibility_jobs.h)
 };
 
 struct ReadyMsg {
@@ -98,7 +101,10 @@ struct SetupParams {
   uint64_t seed = 1;
   int32_t cubemap_n = 32;
   int32_t rays_per_texel = 4;
-  int32_t sparse = 0;  // 1: method sparse (the SparsePlan follows in a second broadcast)
+  int32_t sparse = 0;      // 1: method sparse (the SparsePlan follows in a second broadcast)
+  int32_t visibility = 0;  // 1: the visibility job (cubemap_n is then the maps' n)
+  int32_t visibility_supersample = 1;
+  int32_t visibility_bits = 1;
 };
 static_assert(std::is_trivially_copyable_v<SparsePlan>, "SparsePlan is broadcast as bytes");
 
@@ -130,8 +136,13 @@ struct FarmContext {
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
   SparsePlan plan;  // method sparse: every rank has rank 0's plan
+  std::unique_ptr<VisibilitySampler> visibility_sampler;  // the visibility job
+  // Rank 0, the visibility job: the chunks of visibility.chunks that make up the result
+  // (verified re-used ones and this run's), for the finalize phase.
+  std::vector<VisibilityChunkRef> visibility_chunks;
 
-  // Rank 0, method sparse: the journal's lines (verified per phase when the phase is planned).
+  // Rank 0, method sparse or the visibility job: the journal's lines (verified when the phase
+  // is planned).
   std::vector<JournalEntry> sparse_entries;
 
   // Rank 0 only.
@@ -253,6 +264,7 @@ class SetupPhase : public FarmPhase {
       CheckMpi(MPI_Bcast(&ctx.plan, sizeof(SparsePlan), MPI_BYTE, 0, ctx.comm), "MPI_Bcast plan");
       ctx.method = "sparse";
     }
+    if (ctx.params.visibility) ctx.method = kVisibilityPhaseName;
     BroadcastBytes(ctx, geometry_bytes, ctx.params.geometry_bytes);
 
     // Every rank, rank 0 included, samples the geometry decoded from the same bytes.
@@ -265,7 +277,14 @@ class SetupPhase : public FarmPhase {
                                " differs from the geometry's vertex count " +
                                std::to_string(ctx.params.rows));
       }
-      if (ctx.computes_here()) {
+      if (ctx.computes_here() && ctx.params.visibility) {
+        ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
+        VisibilitySamplerOptions vo;
+        vo.n = ctx.params.cubemap_n;
+        vo.supersample = ctx.params.visibility_supersample;
+        vo.bits = ctx.params.visibility_bits;
+        ctx.visibility_sampler = std::make_unique<VisibilitySampler>(*ctx.embree, vo);
+      } else if (ctx.computes_here()) {
         ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
         TransportSamplerOptions so;
         so.rays_per_texel = ctx.params.rays_per_texel;
@@ -309,13 +328,28 @@ class SetupPhase : public FarmPhase {
     if (ctx.method != "brute" && ctx.method != "sparse") {
       throw InputError(scene.file, "unknown method '" + ctx.method + "' (brute or sparse)");
     }
+    const std::string job = o.job.empty() ? scene.sampling.job : o.job;
+    if (job != "transport" && job != "visibility") {
+      throw InputError(scene.file, "unknown job '" + job + "' (transport or visibility)");
+    }
+    const bool visibility = job == "visibility";
+    if (visibility) ctx.method = kVisibilityPhaseName;
     if (scene.samples != SpatialSamples::kVertices) {
       throw InputError(scene.file,
                        "samples = \"camera\" (image relighting) is not supported by prt-farm yet");
     }
-    const int rays = o.rays_per_texel > 0 ? o.rays_per_texel : scene.sampling.rays_per_texel;
-    spdlog::info("scene {} ('{}'): n = {}, {} rays per texel, method {}", ctx.report.scene,
-                 scene.name, scene.cubemap_n, rays, ctx.method);
+    const VisibilitySettings& vis = scene.visibility;
+    const int n = visibility ? vis.n : scene.cubemap_n;
+    const int rays = visibility             ? vis.supersample * vis.supersample
+                     : o.rays_per_texel > 0 ? o.rays_per_texel
+                                            : scene.sampling.rays_per_texel;
+    if (visibility) {
+      spdlog::info("scene {} ('{}'): visibility cubemaps at n = {}, {} ray(s) per texel, {} bit(s)",
+                   ctx.report.scene, scene.name, n, rays, vis.bits);
+    } else {
+      spdlog::info("scene {} ('{}'): n = {}, {} rays per texel, method {}", ctx.report.scene,
+                   scene.name, n, rays, ctx.method);
+    }
     const SceneGeometry geometry = BuildSceneGeometry(scene);
     geometry_bytes = SerializeSceneGeometry(geometry);
     uint64_t rows = 0;
@@ -325,17 +359,22 @@ class SetupPhase : public FarmPhase {
     ctx.params.rows = rows;
     ctx.params.geometry_bytes = geometry_bytes.size();
     ctx.params.seed = scene.sampling.seed;
-    ctx.params.cubemap_n = scene.cubemap_n;
+    ctx.params.cubemap_n = n;
     ctx.params.rays_per_texel = rays;
-    if (ctx.method == "sparse") {
+    if (visibility) {
+      ctx.params.visibility = 1;
+      ctx.params.visibility_supersample = vis.supersample;
+      ctx.params.visibility_bits = vis.bits;
+    } else if (ctx.method == "sparse") {
       ctx.params.sparse = 1;
       ctx.plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
     }
 
     RunManifest manifest;
     manifest.method = ctx.method;
-    manifest.cubemap_n = scene.cubemap_n;
+    manifest.cubemap_n = n;
     manifest.rays_per_texel = rays;
+    if (visibility) manifest.visibility_bits = vis.bits;
     manifest.seed = scene.sampling.seed;
     manifest.rows = rows;
     manifest.rows_per_block = o.rows_per_block;
@@ -345,8 +384,15 @@ class SetupPhase : public FarmPhase {
     FarmReport& rep = ctx.report;
     rep.scene_name = scene.name;
     rep.method = ctx.method;
-    rep.cubemap_n = scene.cubemap_n;
+    rep.cubemap_n = n;
     rep.rays_per_texel = rays;
+    if (visibility) {
+      rep.visibility.enabled = true;
+      rep.visibility.n = n;
+      rep.visibility.supersample = vis.supersample;
+      rep.visibility.bits = vis.bits;
+      rep.visibility.vertices = rows;
+    }
     rep.seed = scene.sampling.seed;
     rep.rows = rows;
     rep.rows_per_block = o.rows_per_block;
@@ -366,7 +412,10 @@ class SetupPhase : public FarmPhase {
     fs::create_directories(f.checkpoints, ec);
     if (ec) throw FileIoError(f.checkpoints, "cannot create the run folder: " + ec.message());
 
-    const bool has_run = fs::exists(f.journal) || fs::exists(f.partial) || fs::exists(f.transport);
+    const std::string vis_final = (fs::path(f.dir) / kVisibilityFileName).string();
+    const std::string vis_chunks = (fs::path(f.dir) / kVisibilityChunksFileName).string();
+    const bool has_run = fs::exists(f.journal) || fs::exists(f.partial) ||
+                         fs::exists(f.transport) || fs::exists(vis_final);
     bool fresh = true;
     if (o.resume && fs::exists(f.manifest)) {
       const RunManifest old = RunManifest::FromJsonText(ReadWholeFile(f.manifest), f.manifest);
@@ -389,11 +438,15 @@ class SetupPhase : public FarmPhase {
                                  manifest.rows_per_block,
                                  static_cast<uint32_t>(manifest.rays_per_texel), manifest.seed};
     if (fresh) {
-      for (const std::string& p : {f.transport, f.partial, f.journal, f.manifest, f.report}) {
+      for (const std::string& p :
+           {f.transport, f.partial, f.journal, f.manifest, f.report, vis_final, vis_chunks}) {
         fs::remove(p, ec);
       }
       fs::remove_all(SparseDir(f), ec);
     }
+    // The compressed transport of an earlier run (compression_phase.h) goes only now, once the
+    // scene and settings are valid: a --force with a bad scene must not lose a finished run.
+    if (fresh) fs::remove(fs::path(f.dir) / "transport.prtc", ec);
     // From here on the folder is this run's: a failure report may replace an older report.
     ctx.folder_ready = true;
     WriteFileDurably(f.scene_copy, scene_text);
@@ -401,7 +454,18 @@ class SetupPhase : public FarmPhase {
     WriteFileDurably(f.manifest, manifest.ToJsonText());
 
     std::vector<JournalEntry> reused;
-    if (!fresh) {
+    if (!fresh && ctx.params.visibility) {
+      // The chunks are verified against visibility.chunks by the visibility phase.
+      const JournalContents journal = ReadJournal(f.journal);
+      if (journal.has_header && journal.run_key != manifest.Key()) {
+        throw InputError(f.journal, "journal of a different run; use --force to start over");
+      }
+      ctx.report.damaged_journal_lines = journal.damaged_lines;
+      for (const JournalEntry& e : journal.entries) {
+        if (e.phase == kVisibilityPhaseName) ctx.sparse_entries.push_back(e);
+      }
+      fs::remove(vis_final, ec);  // written again by the finalize phase
+    } else if (!fresh) {
       if (!fs::exists(f.partial) && fs::exists(f.transport)) {
         // A finished run: its rows are re-verified and re-used, the file finalized again.
         fs::rename(f.transport, f.partial);
@@ -445,11 +509,17 @@ class SetupPhase : public FarmPhase {
         spdlog::warn("--resume: {} is missing; every job is redone", f.partial);
       }
     }
-    if (!ctx.writer) ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
+    if (!ctx.writer && !ctx.params.visibility) {
+      ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
+    }
     ctx.journal = std::make_unique<CheckpointJournal>(
-        f.journal, manifest.Key(), ctx.params.sparse ? ctx.sparse_entries : reused);
+        f.journal, manifest.Key(),
+        ctx.params.sparse || ctx.params.visibility ? ctx.sparse_entries : reused);
     ctx.reused = std::move(reused);
-    if (!fresh && ctx.params.sparse) {
+    if (!fresh && ctx.params.visibility) {
+      spdlog::info("--resume: {} journaled visibility job(s) are verified against {}",
+                   ctx.sparse_entries.size(), vis_chunks);
+    } else if (!fresh && ctx.params.sparse) {
       spdlog::info("--resume: {} journaled sparse job(s) are verified phase by phase",
                    ctx.sparse_entries.size());
     } else if (!fresh) {
@@ -1539,6 +1609,368 @@ class SparseSamplingPhase : public FarmPhase {
   };
 };
 
+// ------------------------------------------------------------------------- visibility phase
+
+struct VisibilityLocalResult {
+  std::vector<uint8_t> bytes;
+  std::exception_ptr error;
+};
+using VisibilityLocalWorker = LocalWorker<JobMsg, VisibilityLocalResult>;
+
+std::string VisibilityChunksPath(const RunFolder& f) {
+  return (fs::path(f.dir) / kVisibilityChunksFileName).string();
+}
+
+// The visibility job (docs/farm.md, "Visibility job"): the brute phase's queue of contiguous
+// sample ranges, each job's result the block-differential encoding of its samples' visibility
+// maps (farm/visibility_jobs.h) in one message. Rank 0 appends a result to visibility.chunks,
+// fdatasyncs, then journals it ("sjob visibility …"); the finalize phase assembles the chunks in
+// sample order. A job is re-used after --resume when its chunk still hashes to its journal line.
+class VisibilityPhase : public FarmPhase {
+ public:
+  const char* name() const override { return kVisibilityPhaseName; }
+
+  void Run(FarmContext& ctx) override {
+    if (ctx.rank == 0) {
+      RunCoordinator(ctx);
+    } else {
+      RunWorker(ctx);
+    }
+  }
+
+ private:
+  static std::vector<uint8_t> Compute(const FarmContext& ctx, const JobMsg& job) {
+    return EncodeVisibilityJobResult(
+        ComputeVisibilityJob(*ctx.visibility_sampler, ctx.samples, job.first, job.count));
+  }
+
+  static void RunWorker(FarmContext& ctx) {
+    ReadyMsg ready;
+    ready.threads = ctx.threads;
+    std::snprintf(ready.host, sizeof ready.host, "%s", ctx.host.c_str());
+    CheckMpi(MPI_Send(&ready, sizeof ready, MPI_BYTE, 0, kTagReady, ctx.comm), "MPI_Send ready");
+    int jobs = 0;
+    for (;;) {
+      MPI_Status st;
+      CheckMpi(MPI_Probe(0, MPI_ANY_TAG, ctx.comm, &st), "MPI_Probe from rank 0");
+      if (st.MPI_TAG == kTagStop) {
+        CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
+                 "MPI_Recv stop");
+        return;
+      }
+      JobMsg job;
+      CheckMpi(MPI_Recv(&job, sizeof job, MPI_BYTE, 0, kTagJob, ctx.comm, MPI_STATUS_IGNORE),
+               "MPI_Recv job");
+      if (FailureDue(ctx, jobs)) InjectFailure(ctx, jobs);
+      std::vector<uint8_t> result;
+      try {
+        result = Compute(ctx, job);
+      } catch (const std::exception& e) {
+        const std::string message = e.what();
+        spdlog::error("rank {}: {}", ctx.rank, message);
+        MPI_Send(message.data(), static_cast<int>(message.size()), MPI_CHAR, 0, kTagFailed,
+                 ctx.comm);
+        MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE);
+        throw CollectiveStop{kExitRankFailed};
+      }
+      if (result.size() > static_cast<std::size_t>(INT32_MAX)) {
+        throw RankFailure("a visibility job result exceeds 2 GiB; lower --job-seconds");
+      }
+      CheckMpi(MPI_Send(result.data(), static_cast<int>(result.size()), MPI_BYTE, 0,
+                        kTagVisibilityResult, ctx.comm),
+               "MPI_Send visibility result");
+      ++jobs;
+    }
+  }
+
+  struct Slot {
+    int rank = 0;
+    bool local = false;
+    bool ready = false;
+    bool stopped = false;
+    std::optional<JobMsg> job;
+    double since = 0;
+  };
+
+  static void RunCoordinator(FarmContext& ctx) {
+    const uint64_t total = ctx.params.rows;
+    FarmReport& rep = ctx.report;
+    const std::string path = VisibilityChunksPath(ctx.folder);
+    SideFile chunks(path);
+    std::error_code ec;
+    uint64_t append_at = fs::file_size(path, ec);
+    if (ec) append_at = 0;
+
+    // Journaled chunks that still verify are re-used (overlapping lines: the first wins).
+    std::vector<RowRange> done;
+    std::vector<uint8_t> buffer;
+    for (const JournalEntry& e : ctx.sparse_entries) {
+      VisibilityChunkRef ref;
+      const bool overlaps = std::any_of(done.begin(), done.end(), [&](const RowRange& d) {
+        return e.rows.first < d.end() && d.first < e.rows.end();
+      });
+      bool ok = ChunkOfJournalEntry(e, ref) && !overlaps && e.rows.count > 0 &&
+                e.rows.end() <= total && ref.length <= kMaxJobBytes * 4;
+      if (ok) {
+        buffer.resize(static_cast<std::size_t>(ref.length));
+        ok = chunks.Read(buffer.data(), buffer.size(), ref.offset) &&
+             Checksum64(buffer.data(), buffer.size()) == ref.checksum;
+      }
+      if (!ok) {
+        ++rep.checkpoints_rejected;
+        continue;
+      }
+      done.push_back(e.rows);
+      ctx.visibility_chunks.push_back(ref);
+      rep.rows_reused += e.rows.count;
+      rep.rays_traced_all += ref.rays_traced;
+      rep.texels_below_horizon_all += ref.texels_below_horizon;
+      ++rep.jobs_reused;
+    }
+    if (!ctx.sparse_entries.empty()) {
+      spdlog::info("--resume: {} visibility job(s) re-used, {} rejected", rep.jobs_reused,
+                   rep.checkpoints_rejected);
+    }
+
+    JobSizing sizing;
+    sizing.job_seconds = ctx.options.job_seconds;
+    sizing.workers = ctx.computing_ranks();
+    // A map costs at most ~2 bytes per texel encoded (all positions changing): bound the job.
+    const uint64_t map_bytes = 2 * 6ull * ctx.params.cubemap_n * ctx.params.cubemap_n;
+    sizing.max_rows = ctx.options.max_job_rows > 0
+                          ? ctx.options.max_job_rows
+                          : std::max<uint64_t>(1, kMaxJobBytes / map_bytes);
+    sizing.initial_rows = ctx.options.initial_job_rows > 0 ? ctx.options.initial_job_rows
+                                                           : 4 * static_cast<uint64_t>(ctx.threads);
+    JobPlanner planner(total, done, sizing);
+
+    ProgressOptions po;
+    po.unit = "samples";
+    po.rate_unit = "rays";
+    po.log_interval_s = ctx.options.log_interval_s;
+    po.log = !ctx.options.quiet;
+    po.already_done = planner.done_before_rows();
+    Progress progress(kVisibilityPhaseName, total, po);
+
+    const double timeout = ctx.options.rank_timeout_s > 0
+                               ? ctx.options.rank_timeout_s
+                               : std::max(300.0, 50.0 * ctx.options.job_seconds);
+    const double start = Now();
+    std::vector<Slot> slots;
+    for (int r = 1; r < ctx.size; ++r) slots.push_back({r, false, false, false, {}, start});
+    std::unique_ptr<VisibilityLocalWorker> local;
+    if (ctx.computes_here()) {
+      slots.push_back({0, true, true, false, {}, start});
+      local = std::make_unique<VisibilityLocalWorker>(
+          [&ctx](JobMsg& job, VisibilityLocalResult& r) { r.bytes = Compute(ctx, job); });
+    }
+    auto slot_of = [&](int rank) -> Slot& {
+      for (Slot& s : slots) {
+        if (s.rank == rank) return s;
+      }
+      throw std::logic_error("no slot for rank " + std::to_string(rank));
+    };
+    rep.rank_reports[0].threads = ctx.threads;
+    rep.rank_reports[0].host = ctx.host;
+    rep.rank_reports[0].computes = ctx.computes_here();
+
+    std::vector<JournalEntry> pending;
+    std::vector<uint8_t> bytes;
+    int jobs_this_run = 0;
+
+    auto accept = [&](int rank, std::span<const uint8_t> message) {
+      Slot& s = slot_of(rank);
+      VisibilityJobResult r;
+      try {
+        r = DecodeVisibilityJobResult(message);
+      } catch (const std::exception& e) {
+        throw RankFailure("rank " + std::to_string(rank) + ": " + e.what());
+      }
+      if (!s.job || s.job->first != r.first || s.job->count != r.count) {
+        throw RankFailure("rank " + std::to_string(rank) + " returned visibility of samples " +
+                          std::to_string(r.first) + "+" + std::to_string(r.count) +
+                          " it was not given");
+      }
+      const uint64_t sum = Checksum64(r.chunk.data(), r.chunk.size());
+      chunks.Write(r.chunk.data(), r.chunk.size(), append_at);
+      pending.push_back(VisibilityJournalEntry(r, rank, append_at, sum));
+      append_at += r.chunk.size();
+      planner.Measured(rank, r.count, r.busy_seconds);
+      s.job.reset();
+    };
+
+    auto commit = [&] {
+      if (pending.empty()) return;
+      KeepJobsBeforeFailure(ctx, jobs_this_run, pending);
+      chunks.Sync();                 // chunks durable first,
+      ctx.journal->Append(pending);  // then the journal lines that count them
+      for (const JournalEntry& e : pending) {
+        VisibilityChunkRef ref;
+        ChunkOfJournalEntry(e, ref);
+        ctx.visibility_chunks.push_back(ref);
+        RankReport& rr = rep.rank_reports[e.rank];
+        ++rr.jobs;
+        rr.rows += e.rows.count;
+        rr.rays_traced += e.rays_traced;
+        rr.busy_seconds += e.busy_seconds;
+        ++rep.jobs_done;
+        rep.rows_done += e.rows.count;
+        rep.rays_traced += e.rays_traced;
+        rep.texels_traced += 6ull * ctx.params.cubemap_n * ctx.params.cubemap_n * e.rows.count -
+                             e.texels_below_horizon;
+        rep.texels_below_horizon += e.texels_below_horizon;
+        rep.rays_traced_all += e.rays_traced;
+        rep.texels_below_horizon_all += e.texels_below_horizon;
+        progress.Advance(e.rows.count, e.rays_traced);
+        ++jobs_this_run;
+      }
+      pending.clear();
+      if (FailureDue(ctx, jobs_this_run)) InjectFailure(ctx, jobs_this_run);
+    };
+
+    if (FailureDue(ctx, 0)) InjectFailure(ctx, 0);
+    for (;;) {
+      for (Slot& s : slots) {
+        if (s.stopped || s.job || !s.ready) continue;
+        const std::optional<RowRange> next = planner.Next(s.rank);
+        if (next) {
+          s.job = JobMsg{next->first, next->count};
+          s.since = Now();
+          if (s.local) {
+            local->Give(*s.job);
+          } else {
+            CheckMpi(MPI_Send(&*s.job, sizeof(JobMsg), MPI_BYTE, s.rank, kTagJob, ctx.comm),
+                     "MPI_Send job to rank " + std::to_string(s.rank));
+          }
+        } else {
+          s.stopped = true;
+          if (!s.local) {
+            CheckMpi(MPI_Send(nullptr, 0, MPI_BYTE, s.rank, kTagStop, ctx.comm),
+                     "MPI_Send stop to rank " + std::to_string(s.rank));
+          }
+        }
+      }
+      if (std::all_of(slots.begin(), slots.end(), [](const Slot& s) { return s.stopped; }) &&
+          pending.empty()) {
+        break;
+      }
+
+      bool busy = false;
+      if (local) {
+        while (std::optional<VisibilityLocalResult> r = local->Poll()) {
+          if (r->error) std::rethrow_exception(r->error);
+          accept(0, r->bytes);
+          busy = true;
+        }
+      }
+      for (;;) {
+        int flag = 0;
+        MPI_Status st;
+        CheckMpi(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, ctx.comm, &flag, &st), "MPI_Iprobe");
+        if (!flag) break;
+        busy = true;
+        const int src = st.MPI_SOURCE;
+        if (st.MPI_TAG == kTagReady) {
+          ReadyMsg ready;
+          CheckMpi(
+              MPI_Recv(&ready, sizeof ready, MPI_BYTE, src, kTagReady, ctx.comm, MPI_STATUS_IGNORE),
+              "MPI_Recv ready");
+          ready.host[sizeof ready.host - 1] = '\0';
+          rep.rank_reports[src].threads = ready.threads;
+          rep.rank_reports[src].host = ready.host;
+          slot_of(src).ready = true;
+        } else if (st.MPI_TAG == kTagVisibilityResult) {
+          int len = 0;
+          MPI_Get_count(&st, MPI_BYTE, &len);
+          bytes.resize(static_cast<std::size_t>(std::max(0, len)));
+          CheckMpi(MPI_Recv(bytes.data(), len, MPI_BYTE, src, kTagVisibilityResult, ctx.comm,
+                            MPI_STATUS_IGNORE),
+                   "MPI_Recv visibility result from rank " + std::to_string(src));
+          accept(src, bytes);
+        } else if (st.MPI_TAG == kTagFailed) {
+          int len = 0;
+          MPI_Get_count(&st, MPI_CHAR, &len);
+          std::string message(static_cast<std::size_t>(std::max(0, len)), '\0');
+          MPI_Recv(message.data(), len, MPI_CHAR, src, kTagFailed, ctx.comm, MPI_STATUS_IGNORE);
+          throw RankFailure("rank " + std::to_string(src) + " failed: " + message);
+        } else {
+          throw RankFailure("unexpected message tag " + std::to_string(st.MPI_TAG) + " from rank " +
+                            std::to_string(src));
+        }
+      }
+      commit();
+
+      const double now = Now();
+      for (const Slot& s : slots) {
+        if (s.stopped || (s.ready && !s.job) || now - s.since <= timeout) continue;
+        throw RankFailure("rank " + std::to_string(s.rank) +
+                          (s.job ? " has not returned its job (samples " +
+                                       std::to_string(s.job->first) + ".." +
+                                       std::to_string(s.job->first + s.job->count - 1) + ")"
+                                 : std::string(" never reported ready")) +
+                          " for " + std::to_string(static_cast<int>(now - s.since)) +
+                          " s (--rank-timeout); giving up");
+      }
+      progress.Advance(0);
+      if (!busy) {
+        if (local) {
+          local->Wait(0.001);
+        } else {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+      }
+    }
+    progress.Finish();
+    rep.jobs_total = rep.jobs_done + rep.jobs_reused;
+  }
+};
+
+// Rank 0 assembles visibility.prtv from the journaled chunks (in sample order, so the file does
+// not depend on ranks or job boundaries) and writes it durably. visibility.chunks is kept, so
+// that --resume of a finished run re-uses every job.
+class VisibilityFinalizePhase : public FarmPhase {
+ public:
+  const char* name() const override { return "visibility-finalize"; }
+  void Run(FarmContext& ctx) override {
+    if (ctx.rank != 0) return;
+    const std::string path = VisibilityChunksPath(ctx.folder);
+    SideFile chunks(path);
+    std::vector<std::vector<uint8_t>> data(ctx.visibility_chunks.size());
+    std::vector<VisibilityChunk> parts;
+    for (std::size_t i = 0; i < data.size(); ++i) {
+      const VisibilityChunkRef& ref = ctx.visibility_chunks[i];
+      data[i].resize(static_cast<std::size_t>(ref.length));
+      if (!chunks.Read(data[i].data(), data[i].size(), ref.offset) ||
+          Checksum64(data[i].data(), data[i].size()) != ref.checksum) {
+        throw FileIoError(path, "chunk of samples " + std::to_string(ref.first) + "+" +
+                                    std::to_string(ref.count) + " changed on disk");
+      }
+      parts.push_back({ref.first, ref.count, data[i]});
+    }
+    VisibilityBlockCounts counts;
+    const std::vector<uint8_t> file =
+        AssembleVisibilityChunks(std::move(parts), ctx.params.rows, ctx.params.cubemap_n,
+                                 ctx.params.visibility_bits, path, &counts);
+    const std::string out = (fs::path(ctx.folder.dir) / kVisibilityFileName).string();
+    WriteFileDurably(out,
+                     std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
+    VisibilityFarmReport& v = ctx.report.visibility;
+    v.raw_bytes = ctx.params.rows * 6ull * ctx.params.cubemap_n * ctx.params.cubemap_n *
+                  static_cast<uint64_t>(ctx.params.visibility_bits) / 8;
+    v.encoded_bytes = file.size();
+    v.blocks_zero = counts.zero;
+    v.blocks_one = counts.one;
+    v.blocks_mixed = counts.mixed;
+    v.changes = counts.changes;
+    spdlog::info(
+        "wrote {} ({} maps at n = {}: {} bytes, {:.1f} per vertex; {:.1f}x smaller than "
+        "bitmaps)",
+        out, ctx.params.rows, ctx.params.cubemap_n, file.size(),
+        double(file.size()) / double(ctx.params.rows),
+        file.empty() ? 0.0 : double(v.raw_bytes) / double(file.size()));
+  }
+};
+
 // ------------------------------------------------------------------------------ finalize phase
 
 class FinalizePhase : public FarmPhase {
@@ -1580,7 +2012,7 @@ void ConfigureLogging(const FarmContext& ctx) {
 
 }  // namespace
 
-int RunFarm(const FarmOptions& options) {
+int RunFarm(const FarmOptions& options, bool* transport_job) {
   FarmContext ctx;
   ctx.options = options;
   ctx.folder = RunFolder(options.out_dir);
@@ -1651,18 +2083,24 @@ int RunFarm(const FarmOptions& options) {
     if (exit_code != kExitOk) break;
     if (i == 0) {
       // Setup told every rank the method: its sampling phase, then finalize.
-      if (ctx.params.sparse) {
-        phases.push_back(std::make_unique<SparseSamplingPhase>());
+      if (ctx.params.visibility) {
+        phases.push_back(std::make_unique<VisibilityPhase>());
+        phases.push_back(std::make_unique<VisibilityFinalizePhase>());
       } else {
-        phases.push_back(std::make_unique<BruteSamplingPhase>());
+        if (ctx.params.sparse) {
+          phases.push_back(std::make_unique<SparseSamplingPhase>());
+        } else {
+          phases.push_back(std::make_unique<BruteSamplingPhase>());
+        }
+        phases.push_back(std::make_unique<FinalizePhase>());
       }
-      phases.push_back(std::make_unique<FinalizePhase>());
     }
   }
   rep.wall_seconds = Now() - start;
   rep.status = exit_code == kExitOk ? "ok" : "failed";
   rep.exit_code = exit_code;
   rep.cols = 6ull * rep.cubemap_n * rep.cubemap_n;
+  if (transport_job != nullptr) *transport_job = ctx.params.visibility == 0;
   WriteReport(ctx);
   if (ctx.rank == 0 && exit_code == kExitOk) {
     spdlog::info(

@@ -9,7 +9,9 @@
 //             into transport.prtt.partial, fdatasyncs, then journals the job (CheckpointJournal)
 //   finalize  rank 0 computes the block checksums and renames the file to transport.prtt
 // More phases (dense/sparse sampling, transpose, compression) plug in as further FarmPhase
-// objects between these.
+// objects between these. The visibility job (scene [sampling] job = "visibility" or --job
+// visibility) runs setup, visibility (the same queue, per-vertex visibility cubemaps) and
+// visibility-finalize (assembles visibility.prtv) instead.
 #pragma once
 
 #include "farm/farm_options.h"
@@ -19,7 +21,9 @@ namespace prt {
 // Runs the farm on MPI_COMM_WORLD (MPI must be initialised with at least
 // MPI_THREAD_FUNNELED). Returns this rank's exit code (FarmExitCode); the ranks agree on it.
 // A rank that must stop the whole job (a dead or hung worker, an I/O error after the workers
-// started) calls MPI_Abort with the exit code instead of returning.
-int RunFarm(const FarmOptions& options);
+// started) calls MPI_Abort with the exit code instead of returning. `transport_job` (optional)
+// is set on every rank to whether the run computed transport (the compression phase follows)
+// rather than visibility (docs/farm.md, "Visibility job").
+int RunFarm(const FarmOptions& options, bool* transport_job = nullptr);
 
 }  // namespace prt

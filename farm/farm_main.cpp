@@ -34,8 +34,9 @@ int main(int argc, char** argv) {
       if (prt::CompressedRunIsComplete(options)) {
         code = prt::kExitOk;
       } else {
-        code = prt::RunFarm(options);
-        if (code == prt::kExitOk) code = prt::RunCompressionPhase(options);
+        bool transport = true;
+        code = prt::RunFarm(options, &transport);
+        if (code == prt::kExitOk && transport) code = prt::RunCompressionPhase(options);
       }
     }
   }

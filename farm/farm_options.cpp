@@ -40,6 +40,10 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_flag("--force", o.force, "Discard a run already in --out and start over");
   app.add_option("--method", o.method, "Sampling method (default: the scene's; brute)")
       ->check(CLI::IsMember({"brute", "sparse"}));
+  app.add_option("--job", o.job,
+                 "What to compute: transport (the matrix T) or visibility (per-vertex visibility "
+                 "cubemaps for glossy relighting); default: the scene's [sampling] job")
+      ->check(CLI::IsMember({"transport", "visibility"}));
   app.add_option("--rays-per-texel", o.rays_per_texel,
                  "Occlusion rays per cubemap texel (default: the scene's)")
       ->check(CLI::Range(1, 1024));

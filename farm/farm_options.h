@@ -38,6 +38,7 @@ struct FarmOptions {
   bool resume = false;                 // continue from run/checkpoints (fresh if none)
   bool force = false;                  // discard an existing run in out_dir
   std::string method;                  // empty: the scene's [sampling] method
+  std::string job;                     // empty: the scene's [sampling] job (transport|visibility)
   int rays_per_texel = 0;              // 0: the scene's value
   double job_seconds = 4.0;            // target wall time of one job
   uint32_t rows_per_block = 256;       // rows per checksummed block of transport.prtt

@@ -113,6 +113,21 @@ std::string FarmReport::ToJsonText() const {
         {"index_seconds", sparse.index_seconds},
     };
   }
+  if (visibility.enabled) {
+    const VisibilityFarmReport& v = visibility;
+    j["visibility"] = {
+        {"n", v.n},
+        {"supersample", v.supersample},
+        {"bits", v.bits},
+        {"vertices", v.vertices},
+        {"raw_bytes", v.raw_bytes},
+        {"encoded_bytes", v.encoded_bytes},
+        {"encoded_bytes_per_vertex",
+         v.vertices ? double(v.encoded_bytes) / double(v.vertices) : 0.0},
+        {"blocks", {{"zero", v.blocks_zero}, {"one", v.blocks_one}, {"mixed", v.blocks_mixed}}},
+        {"changes", v.changes},
+    };
+  }
   return j.dump(2) + "\n";
 }
 

@@ -47,6 +47,18 @@ struct SparseFarmReport {
   double SampledFraction() const;
 };
 
+// The visibility job's figures (report.json "visibility"; docs/farm.md, "Visibility job").
+struct VisibilityFarmReport {
+  bool enabled = false;
+  int n = 0;
+  int supersample = 1;
+  int bits = 1;
+  uint64_t vertices = 0;
+  uint64_t raw_bytes = 0;      // the maps as plain bitmaps: vertices · 6n² · bits / 8
+  uint64_t encoded_bytes = 0;  // visibility.prtv
+  uint64_t blocks_zero = 0, blocks_one = 0, blocks_mixed = 0, changes = 0;
+};
+
 struct FarmReport {
   std::string status = "running";  // ok | failed | running
   int exit_code = 0;
@@ -85,6 +97,7 @@ struct FarmReport {
 
   std::vector<RankReport> rank_reports;
   SparseFarmReport sparse;
+  VisibilityFarmReport visibility;
 
   // max / mean busy time over the computing ranks (1 = perfect balance; 0 when none computed).
   double LoadImbalance() const;

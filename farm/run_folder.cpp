@@ -24,15 +24,17 @@ RunFolder::RunFolder(const std::string& d) : dir(d) {
 namespace {
 
 nlohmann::json ToJson(const RunManifest& m) {
-  return nlohmann::json{{"format_version", m.format_version},
-                        {"method", m.method},
-                        {"cubemap_n", m.cubemap_n},
-                        {"rays_per_texel", m.rays_per_texel},
-                        {"seed", m.seed},
-                        {"rows", m.rows},
-                        {"rows_per_block", m.rows_per_block},
-                        {"scene_xxh64", m.scene_checksum},
-                        {"geometry_xxh64", m.geometry_checksum}};
+  nlohmann::json j{{"format_version", m.format_version},
+                   {"method", m.method},
+                   {"cubemap_n", m.cubemap_n},
+                   {"rays_per_texel", m.rays_per_texel},
+                   {"seed", m.seed},
+                   {"rows", m.rows},
+                   {"rows_per_block", m.rows_per_block},
+                   {"scene_xxh64", m.scene_checksum},
+                   {"geometry_xxh64", m.geometry_checksum}};
+  if (m.method == "visibility") j["visibility_bits"] = m.visibility_bits;
+  return j;
 }
 
 }  // namespace
@@ -54,6 +56,7 @@ RunManifest RunManifest::FromJsonText(const std::string& text, const std::string
     m.rows_per_block = j.at("rows_per_block").get<uint32_t>();
     m.scene_checksum = j.at("scene_xxh64").get<uint64_t>();
     m.geometry_checksum = j.at("geometry_xxh64").get<uint64_t>();
+    m.visibility_bits = j.value("visibility_bits", 0);
   } catch (const nlohmann::json::exception& e) {
     throw InputError(file, std::string("not a prt-farm checkpoint manifest: ") + e.what());
   }
@@ -70,7 +73,7 @@ std::string RunManifest::DifferencesFrom(const RunManifest& older) const {
   const nlohmann::json before = ToJson(older);
   std::string out;
   for (auto it = now.begin(); it != now.end(); ++it) {
-    const nlohmann::json& b = before.at(it.key());
+    const nlohmann::json b = before.contains(it.key()) ? before.at(it.key()) : nlohmann::json();
     if (b != it.value()) {
       if (!out.empty()) out += ", ";
       out += it.key() + " " + b.dump() + " -> " + it.value().dump();

@@ -32,6 +32,9 @@ struct RunManifest {
   uint32_t rows_per_block = 256;
   uint64_t scene_checksum = 0;     // XXH64 of the scene text
   uint64_t geometry_checksum = 0;  // XXH64 of geometry.prtg
+  // method "visibility" only (written only then): levels of the visibility maps. cubemap_n is
+  // then the maps' n and rays_per_texel supersample².
+  int visibility_bits = 0;
 
   std::string ToJsonText() const;
   // Throws InputError naming `file` when the text is not a manifest.

@@ -56,8 +56,8 @@ std::string TryRead(const std::vector<uint8_t>& bytes, testing::FullRead* out) {
   }
 }
 
-TEST(PrtpackCorruption, EveryFlippedByteIsPaddingOrDetected) {
-  const std::vector<uint8_t> file = WritePack(testing::MakeSmallInput());
+void ExpectEveryFlippedByteIsPaddingOrDetected(const PackInput& input) {
+  const std::vector<uint8_t> file = WritePack(input);
   testing::FullRead reference;
   ASSERT_EQ(TryRead(file, &reference), "");
   const std::vector<bool> padding = PaddingMask(file);
@@ -84,8 +84,18 @@ TEST(PrtpackCorruption, EveryFlippedByteIsPaddingOrDetected) {
   EXPECT_GT(detected, file.size() / 2);
 }
 
-TEST(PrtpackCorruption, EveryTruncationFailsClearly) {
-  const std::vector<uint8_t> file = WritePack(testing::MakeSmallInput());
+TEST(PrtpackCorruption, EveryFlippedByteIsPaddingOrDetected) {
+  ExpectEveryFlippedByteIsPaddingOrDetected(testing::MakeSmallInput());
+}
+
+// The same with VISB sections (docs/prtpack-format.md, VISB): a flip in them is caught by the
+// checksum, and the visibility of every accepted read equals the original maps exactly.
+TEST(PrtpackCorruption, EveryFlippedByteOfAGlossyPackIsPaddingOrDetected) {
+  ExpectEveryFlippedByteIsPaddingOrDetected(testing::MakeSmallGlossyInput());
+}
+
+void ExpectEveryTruncationFailsClearly(const PackInput& input) {
+  const std::vector<uint8_t> file = WritePack(input);
   for (std::size_t n = 0; n < file.size(); ++n) {
     std::vector<uint8_t> cut(file.begin(), file.begin() + std::ptrdiff_t(n));
     testing::FullRead got;
@@ -101,13 +111,81 @@ TEST(PrtpackCorruption, EveryTruncationFailsClearly) {
   EXPECT_NE(TryRead(longer, &got).find("trailing bytes"), std::string::npos);
 }
 
+TEST(PrtpackCorruption, EveryTruncationFailsClearly) {
+  ExpectEveryTruncationFailsClearly(testing::MakeSmallInput());
+  ExpectEveryTruncationFailsClearly(testing::MakeSmallGlossyInput());
+}
+
+// Hostile VISB payloads behind valid checksums (ResealChecksums): every byte of each VISB
+// section's decoded content replaced, re-compressed and resealed, must read back or fail with
+// an InputError, never crash or allocate without bound.
+TEST(PrtpackCorruption, HostileVisibilityPayloadsAreRefusedClearly) {
+  const PackInput glossy = testing::MakeSmallGlossyInput();
+  const std::vector<uint8_t> good = glossy.visibility->per_mesh[0];
+  // The writer validates visibility, so hostile payloads go in as unknown sections (codec
+  // none) whose type is then patched to VISB and the checksums resealed.
+  auto pack_with = [&](const std::vector<uint8_t>& mesh0) {
+    PackInput in = testing::MakeSmallInput();
+    in.extra_sections.push_back({"XVIS", 0, 0, mesh0});
+    in.extra_sections.push_back({"XVIS", 0, 1, glossy.visibility->per_mesh[1]});
+    std::vector<uint8_t> file = WritePack(in);
+    const uint32_t sections = LoadU32(file.data() + kHdrSectionCount);
+    for (uint32_t i = 0; i < sections; ++i) {
+      uint8_t* entry = file.data() + kHeaderSize + std::size_t(i) * kEntrySize;
+      if (LoadU32(entry + kSecType) == FourCC("XVIS")) StoreU32(entry + kSecType, kTypeVisibility);
+    }
+    ResealChecksums(file);
+    return file;
+  };
+  testing::FullRead reference;
+  const std::vector<uint8_t> base = pack_with(good);
+  ASSERT_EQ(TryRead(base, &reference), "");
+  ASSERT_EQ(reference.visibility.size(), 12u);
+  // Where mesh 0's payload lies in `base` (same length edits are patched in place).
+  const PackReader r = PackReader::OpenMemory(base.data(), base.size());
+  uint64_t at = 0;
+  for (const SectionInfo& s : r.sections())
+    if (s.type_code == kTypeVisibility && s.id == 0) at = s.offset;
+  ASSERT_GT(at, 0u);
+  std::size_t refused = 0, read_ok = 0;
+  for (std::size_t i = 0; i < good.size(); ++i) {
+    for (uint8_t value : {uint8_t(0x00), uint8_t(0x7F), uint8_t(0xFF)}) {
+      if (good[i] == value) continue;
+      std::vector<uint8_t> bad = base;
+      bad[at + i] = value;
+      ResealChecksums(bad);
+      testing::FullRead got;
+      const std::string error = TryRead(bad, &got);
+      (error.empty() ? read_ok : refused)++;
+      if (!error.empty()) {
+        EXPECT_NE(error.find("VISB"), std::string::npos) << "byte " << i << ": " << error;
+      }
+    }
+  }
+  // Truncated and extended payloads.
+  for (std::size_t n = 0; n < good.size(); ++n) {
+    testing::FullRead got;
+    EXPECT_NE(
+        TryRead(pack_with(std::vector<uint8_t>(good.begin(), good.begin() + std::ptrdiff_t(n))),
+                &got),
+        "")
+        << "VISB cut at " << n;
+  }
+  std::vector<uint8_t> longer = good;
+  longer.push_back(0);
+  testing::FullRead got;
+  EXPECT_NE(TryRead(pack_with(longer), &got), "");
+  std::printf("hostile VISB payloads: %zu refused with InputError, %zu read\n", refused, read_ok);
+  EXPECT_GT(refused, 0u);
+}
+
 // The seed corpus in packager/fuzz_corpus/ is written by this test when PRT_WRITE_FUZZ_CORPUS
 // is set (run it after a format change); otherwise it only checks the generator still works.
 TEST(PrtpackCorruption, WriteSeedCorpus) {
   std::vector<std::pair<std::string, std::vector<uint8_t>>> seeds;
   PackInput in = testing::MakeSmallInput();
   seeds.emplace_back("small.prtpack", WritePack(in));
-  in.extra_sections.push_back({"VISB", 0, 0, {1, 2, 3, 4}});
+  in.extra_sections.push_back({"XTRA", 0, 0, {1, 2, 3, 4}});
   seeds.emplace_back("extra_section.prtpack", WritePack(in));
   in.transport.reset();
   in.extra_sections.clear();
@@ -115,6 +193,7 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
   in = testing::MakeSmallInput();
   in.transport = testing::MakeSmallCompressedTransportInput();
   seeds.emplace_back("compressed_transport.prtpack", WritePack(in));
+  seeds.emplace_back("visibility.prtpack", WritePack(testing::MakeSmallGlossyInput()));
   PackInput real;
   // A real mesh from the Debian data package the build extracts (always present, unlike
   // ../shared/data); the committed corpus also holds bunny_lowres.prtpack from an earlier run.

@@ -49,6 +49,7 @@ inline constexpr uint32_t kTypeMeta = FourCC("META");
 inline constexpr uint32_t kTypeMesh = FourCC("MESH");
 inline constexpr uint32_t kTypeMaterial = FourCC("MATL");
 inline constexpr uint32_t kTypeTransport = FourCC("TRNS");
+inline constexpr uint32_t kTypeVisibility = FourCC("VISB");
 
 inline std::string FourCCString(uint32_t v) {
   std::string s(4, ' ');

@@ -68,11 +68,15 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
   if (type == kTypeMeta) return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   if (type == kTypeMesh) return codec == uint32_t(Codec::kDraco);
   if (type == kTypeMaterial || type == kTypeTransport) return codec == uint32_t(Codec::kNone);
+  if (type == kTypeVisibility) {
+    return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
+  }
   return true;
 }
 
 bool IsKnownType(uint32_t type) {
-  return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial || type == kTypeTransport;
+  return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial ||
+         type == kTypeTransport || type == kTypeVisibility;
 }
 
 }  // namespace
@@ -84,7 +88,7 @@ struct PackReader::Impl {
   uint16_t major = 0, minor = 0;
   std::vector<SectionInfo> sections;
   std::size_t meta = 0;
-  std::vector<std::size_t> mesh_sections, material_sections;
+  std::vector<std::size_t> mesh_sections, material_sections, visibility_sections;
   bool has_transport = false;
   std::size_t transport = 0;
 
@@ -106,6 +110,7 @@ struct PackReader::Impl {
   MeshMaterial Material(std::size_t i) const;
   UnpackedMesh Mesh(std::size_t i) const;
   TransportIndex Transport() const;
+  VisibilityBlocks Visibility(std::size_t i) const;
   void Block(const TransportIndex& index, std::size_t b, uint8_t* dst) const;
 };
 
@@ -159,7 +164,7 @@ void PackReader::Impl::Parse() {
   }
   uint64_t previous_end = table_offset + table_size;
   int metas = 0, transports = 0;
-  std::vector<int64_t> mesh_by_id, material_by_id;
+  std::vector<int64_t> mesh_by_id, material_by_id, visibility_by_id;
   for (uint32_t i = 0; i < count; ++i) {
     const uint8_t* e = d + table_offset + uint64_t(i) * entry_size;
     SectionInfo s;
@@ -200,7 +205,9 @@ void PackReader::Impl::Parse() {
       ++transports;
       transport = i;
     } else {
-      auto& by_id = s.type_code == kTypeMesh ? mesh_by_id : material_by_id;
+      auto& by_id = s.type_code == kTypeMesh       ? mesh_by_id
+                    : s.type_code == kTypeMaterial ? material_by_id
+                                                   : visibility_by_id;
       if (s.id >= count) Fail(where + " has id " + std::to_string(s.id) + " out of range");
       if (by_id.size() <= s.id) by_id.resize(s.id + 1, -1);
       if (by_id[s.id] >= 0) Fail(where + " repeats id " + std::to_string(s.id));
@@ -218,6 +225,18 @@ void PackReader::Impl::Parse() {
     }
     mesh_sections.push_back(std::size_t(mesh_by_id[m]));
     material_sections.push_back(std::size_t(material_by_id[m]));
+  }
+  if (!visibility_by_id.empty()) {
+    if (visibility_by_id.size() > mesh_by_id.size()) {
+      Fail("VISB id " + std::to_string(visibility_by_id.size() - 1) + " has no mesh");
+    }
+    visibility_by_id.resize(mesh_by_id.size(), -1);
+    for (std::size_t m = 0; m < mesh_by_id.size(); ++m) {
+      if (visibility_by_id[m] < 0) {
+        Fail("mesh " + std::to_string(m) + " lacks its VISB section (VISB must cover every mesh)");
+      }
+      visibility_sections.push_back(std::size_t(visibility_by_id[m]));
+    }
   }
 }
 
@@ -395,6 +414,34 @@ void PackReader::Impl::Block(const TransportIndex& index, std::size_t b, uint8_t
   }
 }
 
+VisibilityBlocks PackReader::Impl::Visibility(std::size_t i) const {
+  if (visibility_sections.empty()) Fail("has no VISB (visibility) sections");
+  if (i >= visibility_sections.size())
+    Fail("visibility of mesh " + std::to_string(i) + " out of range");
+  const std::size_t si = visibility_sections[i];
+  const SectionInfo& s = sections[si];
+  const std::string where = SectionName(si);
+  // The mesh's vertex count from its Draco header (cheap; checked against raw_size when read).
+  const SectionInfo& mesh = sections[mesh_sections[i]];
+  const DracoMeshCounts counts =
+      PeekDracoMeshCounts(CheckedBytes(mesh_sections[i]), mesh.stored_size,
+                          name + ": " + SectionName(mesh_sections[i]));
+  const uint8_t* p = CheckedBytes(si);
+  std::vector<uint8_t> raw;
+  if (s.codec == uint32_t(Codec::kZstd)) {
+    raw.resize(s.raw_size);
+    Unzstd(p, s.stored_size, raw.data(), s.raw_size, where);
+  } else {
+    raw.assign(p, p + s.stored_size);
+  }
+  VisibilityBlocks v = DecodeVisibilityBlocks(raw, name + ": " + where);
+  if (v.vertex_count != counts.points) {
+    Fail(where + " holds " + std::to_string(v.vertex_count) + " visibility maps for a mesh of " +
+         std::to_string(counts.points) + " vertices");
+  }
+  return v;
+}
+
 PackReader::PackReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 PackReader::PackReader(PackReader&&) noexcept = default;
 PackReader& PackReader::operator=(PackReader&&) noexcept = default;
@@ -465,6 +512,28 @@ bool PackReader::has_transport() const {
   return impl_->has_transport;
 }
 
+bool PackReader::has_visibility() const {
+  return !impl_->visibility_sections.empty();
+}
+
+VisibilityBlocks PackReader::ReadVisibility(std::size_t i) const {
+  return impl_->Visibility(i);
+}
+
+VisibilityBlocks PackReader::ReadAllVisibility() const {
+  if (!has_visibility()) impl_->Fail("has no VISB (visibility) sections");
+  VisibilityBlocks all = impl_->Visibility(0);
+  for (std::size_t m = 1; m < mesh_count(); ++m) {
+    const VisibilityBlocks v = impl_->Visibility(m);
+    if (v.n != all.n || v.bits != all.bits) {
+      impl_->Fail(impl_->SectionName(impl_->visibility_sections[m]) +
+                  ": n or bits differ from mesh 0's visibility");
+    }
+    AppendVisibilityBlocks(all, v);
+  }
+  return all;
+}
+
 std::string PackReader::ReadMetadata() const {
   return impl_->Metadata();
 }
@@ -509,6 +578,7 @@ void PackReader::VerifyAll() const {
   for (std::size_t i = 0; i < impl_->sections.size(); ++i) impl_->CheckedBytes(i);
   impl_->Metadata();
   for (std::size_t m = 0; m < mesh_count(); ++m) impl_->Mesh(m);
+  if (has_visibility()) ReadAllVisibility();
   if (impl_->has_transport) {
     const TransportIndex t = impl_->Transport();
     std::vector<uint8_t> buffer;

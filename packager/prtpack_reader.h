@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "vocabulary/mesh.h"
+#include "vocabulary/visibility_blocks.h"
 
 namespace prt::pack {
 
@@ -109,6 +110,8 @@ class PackReader {
   const std::vector<SectionInfo>& sections() const;
   std::size_t mesh_count() const;
   bool has_transport() const;
+  // True when the pack has VISB sections (one per mesh: the reader refuses anything else).
+  bool has_visibility() const;
 
   // The META section's JSON text. Verifies the section checksum and the decompressed size;
   // throws InputError if either fails or the text is not a JSON object.
@@ -131,6 +134,15 @@ class PackReader {
   // Same, into caller memory of exactly block.raw_size bytes (`dst_size` must equal it).
   void ReadTransportBlockInto(const TransportIndex& index, std::size_t b, void* dst,
                               std::size_t dst_size) const;
+
+  // Mesh `i`'s visibility maps (the VISB section with id i), decoded and validated: checksum,
+  // zstd frame of exactly raw_size bytes, DecodeVisibilityBlocks (safe on hostile bytes), and
+  // one map per vertex of the mesh (its Draco header's point count). Throws InputError naming
+  // the pack and the section on any failure, or when the pack has no visibility.
+  VisibilityBlocks ReadVisibility(std::size_t i) const;
+  // Every mesh's maps concatenated in mesh order (the spatial-sample order); InputError also when
+  // the meshes' n or bits differ.
+  VisibilityBlocks ReadAllVisibility() const;
 
   // Checks every rule of docs/prtpack-format.md ("Verification"): every section checksum and
   // every section decoding. Throws InputError with the first failure's reason.

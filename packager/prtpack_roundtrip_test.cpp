@@ -103,6 +103,58 @@ TEST(PrtpackRoundTrip, SmallPackReadsBackWhatWasWritten) {
   EXPECT_THROW(r.ReadMesh(2), InputError);
 }
 
+// VISB (docs/prtpack-format.md): one zstd section per mesh, decoded maps equal to the input's
+// exactly; the writer refuses visibility that does not fit the meshes; the reader refuses a pack
+// whose VISB sections do not cover every mesh.
+TEST(PrtpackRoundTrip, VisibilitySectionsAreLossless) {
+  const PackInput in = testing::MakeSmallGlossyInput();
+  const std::vector<uint8_t> bytes = WritePack(in);
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+  ASSERT_TRUE(r.has_visibility());
+  std::size_t visb = 0;
+  for (const SectionInfo& s : r.sections()) {
+    if (s.type != "VISB") continue;
+    ++visb;
+    EXPECT_TRUE(s.known);
+    EXPECT_EQ(s.flags, 0u);  // not critical: older readers skip it
+    EXPECT_EQ(s.codec, 1u);  // zstd
+    EXPECT_EQ(s.raw_size, in.visibility->per_mesh[s.id].size());
+    EXPECT_LT(s.stored_size, s.raw_size);
+  }
+  EXPECT_EQ(visb, 2u);
+  for (std::size_t m = 0; m < 2; ++m) {
+    const VisibilityBlocks got = r.ReadVisibility(m);
+    EXPECT_EQ(EncodeVisibilityBlocks(got), in.visibility->per_mesh[m]);  // bit for bit
+  }
+  const testing::FullRead all = testing::ReadEverything(r);
+  ASSERT_EQ(all.visibility.size(), 12u);
+  const VisibilityBlocks mesh1 = DecodeVisibilityBlocks(in.visibility->per_mesh[1]);
+  EXPECT_EQ(all.visibility[6 + 2], DecodeVisibilityMap(mesh1, 2));
+  EXPECT_THROW(r.ReadVisibility(2), InputError);
+  const std::vector<uint8_t> plain = WritePack(MakeSmallInput());
+  EXPECT_FALSE(PackReader::OpenMemory(plain.data(), plain.size()).has_visibility());
+  EXPECT_THROW(PackReader::OpenMemory(plain.data(), plain.size()).ReadAllVisibility(), InputError);
+
+  PackInput bad = in;
+  bad.visibility->per_mesh.pop_back();
+  EXPECT_THROW(WritePack(bad), InputError);  // not one per mesh
+  bad = in;
+  bad.visibility->per_mesh[1] = testing::MakeSmallVisibility(5, 1);
+  EXPECT_THROW(WritePack(bad), InputError);  // 5 maps for 6 vertices
+  bad = in;
+  bad.visibility->per_mesh[0].pop_back();
+  EXPECT_THROW(WritePack(bad), InputError);  // does not decode
+
+  // Mesh 1's VISB relabelled as a second id 0: refused at open.
+  std::vector<uint8_t> twice = bytes;
+  for (std::size_t i = 0; i < r.sections().size(); ++i) {
+    uint8_t* entry = twice.data() + kHeaderSize + i * kEntrySize;
+    if (r.sections()[i].type == "VISB" && r.sections()[i].id == 1) StoreU32(entry + kSecId, 0);
+  }
+  ResealChecksums(twice);
+  EXPECT_THROW(PackReader::OpenMemory(twice.data(), twice.size()), InputError);
+}
+
 TEST(PrtpackRoundTrip, WritingIsDeterministic) {
   EXPECT_EQ(WritePack(MakeSmallInput()), WritePack(MakeSmallInput()));
 }
@@ -182,16 +234,18 @@ TEST(PrtpackRoundTrip, UnknownMajorVersionIsRefusedAndMinorIsRead) {
 
 TEST(PrtpackRoundTrip, UnknownSectionsAreSkippedUnlessCritical) {
   PackInput in = MakeSmallInput();
-  in.extra_sections.push_back({"VISB", 0, 0, {9, 8, 7}});
+  in.extra_sections.push_back({"XTRA", 0, 0, {9, 8, 7}});
   std::vector<uint8_t> bytes = WritePack(in);
   const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
   ASSERT_EQ(r.sections().size(), 7u);
-  EXPECT_EQ(r.sections()[5].type, "VISB");
+  EXPECT_EQ(r.sections()[5].type, "XTRA");
   EXPECT_FALSE(r.sections()[5].known);
   EXPECT_EQ(ErrorOf(bytes), "");
   in.extra_sections[0].flags = kFlagCritical;
-  EXPECT_EQ(ErrorOf(WritePack(in)), "<memory>: unknown critical section 'VISB'");
+  EXPECT_EQ(ErrorOf(WritePack(in)), "<memory>: unknown critical section 'XTRA'");
   in.extra_sections[0].type = "MESH";
+  EXPECT_THROW(WritePack(in), InputError);
+  in.extra_sections[0].type = "VISB";  // known now: only through PackInput::visibility
   EXPECT_THROW(WritePack(in), InputError);
 }
 

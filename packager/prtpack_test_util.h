@@ -63,6 +63,35 @@ inline PackInput MakeSmallInput() {
   return in;
 }
 
+// Visibility maps at n = 16 for `vertices` vertices with every block kind: face 0 all visible,
+// face 1 occluded, the other faces a vertex-dependent pattern (mixed blocks).
+inline std::vector<uint8_t> MakeSmallVisibility(std::size_t vertices, uint32_t seed) {
+  VisibilityBlocks b = MakeVisibilityBlocks(16, 1);
+  std::vector<uint8_t> levels(6 * 16 * 16);
+  for (std::size_t v = 0; v < vertices; ++v) {
+    for (std::size_t t = 0; t < levels.size(); ++t) {
+      const std::size_t face = t / 256, x = t % 16, y = (t / 16) % 16;
+      levels[t] = face == 0   ? 1
+                  : face == 1 ? 0
+                              : static_cast<uint8_t>((x * (v + 1) + y * seed + face) % 5 < 2);
+    }
+    AppendVisibilityMap(b, levels);
+  }
+  return EncodeVisibilityBlocks(b);
+}
+
+// MakeSmallInput with visibility for both meshes (one VISB section each).
+inline PackInput MakeSmallGlossyInput() {
+  PackInput in = MakeSmallInput();
+  VisibilityInput vis;
+  for (std::size_t m = 0; m < in.meshes.size(); ++m) {
+    vis.per_mesh.push_back(
+        MakeSmallVisibility(in.meshes[m].mesh.positions.size(), static_cast<uint32_t>(m + 3)));
+  }
+  in.visibility = std::move(vis);
+  return in;
+}
+
 // A valid compressed transport (vocabulary/compressed_transport.h) for 12 samples at n = 2,
 // split into blocks of 5 columns.
 inline TransportInput MakeSmallCompressedTransportInput() {
@@ -90,6 +119,7 @@ struct FullRead {
   std::vector<UnpackedMesh> meshes;
   TransportIndex index;
   std::vector<std::vector<uint8_t>> blocks;
+  std::vector<std::vector<uint8_t>> visibility;  // per vertex, all meshes: decoded levels
 };
 
 inline FullRead ReadEverything(const PackReader& r) {
@@ -103,13 +133,19 @@ inline FullRead ReadEverything(const PackReader& r) {
       out.blocks.push_back(r.ReadTransportBlock(out.index, b));
     }
   }
+  if (r.has_visibility()) {
+    const VisibilityBlocks v = r.ReadAllVisibility();
+    for (std::size_t i = 0; i < v.vertex_count; ++i)
+      out.visibility.push_back(DecodeVisibilityMap(v, i));
+  }
   return out;
 }
 
 inline bool SameRead(const FullRead& a, const FullRead& b) {
   if (a.metadata != b.metadata || a.meshes.size() != b.meshes.size() || a.blocks != b.blocks ||
       a.index.params != b.index.params || a.index.encoding != b.index.encoding ||
-      a.index.row_count != b.index.row_count || a.index.column_count != b.index.column_count) {
+      a.index.row_count != b.index.row_count || a.index.column_count != b.index.column_count ||
+      a.visibility != b.visibility) {
     return false;
   }
   for (std::size_t i = 0; i < a.meshes.size(); ++i) {

@@ -14,6 +14,7 @@
 #include "packager/draco_mesh_codec.h"
 #include "packager/prtpack_format.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/visibility_blocks.h"
 
 namespace prt::pack {
 namespace {
@@ -186,7 +187,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     PendingSection s;
     s.type = LoadU32(reinterpret_cast<const uint8_t*>(x.type.data()));
     if (s.type == kTypeMeta || s.type == kTypeMesh || s.type == kTypeMaterial ||
-        s.type == kTypeTransport) {
+        s.type == kTypeTransport || s.type == kTypeVisibility) {
       throw InputError("extra section", "type " + x.type + " is reserved");
     }
     s.flags = x.flags;
@@ -194,6 +195,35 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     s.bytes = x.bytes;
     s.raw_size = x.bytes.size();
     sections.push_back(std::move(s));
+  }
+  if (input.visibility) {
+    const std::vector<std::vector<uint8_t>>& v = input.visibility->per_mesh;
+    if (v.size() != input.meshes.size()) {
+      throw InputError("visibility", "has " + std::to_string(v.size()) + " entries for " +
+                                         std::to_string(input.meshes.size()) + " meshes");
+    }
+    int n = 0, bits = 0;
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      const std::string what = "visibility of mesh " + std::to_string(i);
+      const VisibilityBlocks blocks = DecodeVisibilityBlocks(v[i], what);
+      if (blocks.vertex_count != input.meshes[i].mesh.positions.size()) {
+        throw InputError(what, "holds " + std::to_string(blocks.vertex_count) + " maps for " +
+                                   std::to_string(input.meshes[i].mesh.positions.size()) +
+                                   " vertices");
+      }
+      if (i > 0 && (blocks.n != n || blocks.bits != bits)) {
+        throw InputError(what, "n or bits differ from mesh 0's");
+      }
+      n = blocks.n;
+      bits = blocks.bits;
+      PendingSection s;
+      s.type = kTypeVisibility;
+      s.codec = Codec::kZstd;
+      s.id = static_cast<uint32_t>(i);
+      s.raw_size = v[i].size();
+      s.bytes = ZstdCompress(v[i].data(), v[i].size(), options.zstd_level, what);
+      sections.push_back(std::move(s));
+    }
   }
   if (input.transport) sections.push_back(TransportSection(*input.transport, options));
 

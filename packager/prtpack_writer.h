@@ -43,12 +43,20 @@ struct ExtraSectionInput {
   std::vector<uint8_t> bytes;
 };
 
+// Per-mesh visibility cubemaps for glossy triple-product relighting (the VISB sections,
+// docs/prtpack-format.md): for mesh i, EncodeVisibilityBlocks (vocabulary/visibility_blocks.h)
+// of its vertices' maps in vertex order. The writer zstd-compresses each on its own.
+struct VisibilityInput {
+  std::vector<std::vector<uint8_t>> per_mesh;
+};
+
 struct PackInput {
   // A JSON object (scene, parameters, report ...); the writer adds "format", "writer" and a
   // per-mesh summary "meshes". Empty means {}.
   std::string metadata_json;
   std::vector<PackMeshInput> meshes;
   std::optional<TransportInput> transport;
+  std::optional<VisibilityInput> visibility;      // one entry per mesh when present
   std::vector<ExtraSectionInput> extra_sections;  // written after the materials, before TRNS
 };
 
@@ -61,7 +69,9 @@ struct WriterOptions {
 
 // Builds the whole file in memory. Throws prt::InputError (naming the mesh or "metadata") on
 // invalid inputs: metadata that is not a JSON object, no meshes, a mesh the codec rejects
-// (see draco_mesh_codec.h), a transport block with no columns,
+// (see draco_mesh_codec.h), a transport block with no columns, visibility that does not decode,
+// has not one entry per mesh, a map count other than the mesh's vertex count, or n/bits that
+// differ between meshes,
 // albedo outside [0, 1], bad options.
 std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options = {});
 // WritePack, then writes the bytes to `path` (via a temporary file renamed into place).

@@ -7,13 +7,16 @@
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 
 #include "packager/prtpack_format.h"
 #include "packager/prtpack_transport.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
+#include "vocabulary/visibility_blocks.h"
 
 namespace prt::pack {
 namespace {
@@ -71,6 +74,56 @@ const char* CodecName(uint32_t c) {
   }
 }
 
+// Vertices [first, first + count) of `all` as blocks of their own (the arrays sliced, offsets
+// rebased): one mesh's share of the run's visibility.
+VisibilityBlocks SliceVisibility(const VisibilityBlocks& all, std::size_t first,
+                                 std::size_t count) {
+  VisibilityBlocks out = MakeVisibilityBlocks(all.n, all.bits);
+  out.vertex_count = count;
+  const std::size_t e0 = all.Entry(first, 0), e1 = all.Entry(first + count, 0);
+  out.kind.assign(all.kind.begin() + static_cast<std::ptrdiff_t>(e0),
+                  all.kind.begin() + static_cast<std::ptrdiff_t>(e1));
+  const uint64_t c0 = all.change_begin[e0], c1 = all.change_begin[e1];
+  out.change_begin.resize(e1 - e0 + 1);
+  for (std::size_t e = e0; e <= e1; ++e) out.change_begin[e - e0] = all.change_begin[e] - c0;
+  out.change_pos.assign(all.change_pos.begin() + static_cast<std::ptrdiff_t>(c0),
+                        all.change_pos.begin() + static_cast<std::ptrdiff_t>(c1));
+  if (!all.change_value.empty()) {
+    out.change_value.assign(all.change_value.begin() + static_cast<std::ptrdiff_t>(c0),
+                            all.change_value.begin() + static_cast<std::ptrdiff_t>(c1));
+  }
+  return out;
+}
+
+// Each mesh's glossy material (docs/scene-format.md, "Glossy materials") from the run's scene
+// copy, in pack order; Lambert with the mesh's albedo where the scene says nothing (or cannot be
+// parsed any more).
+nlohmann::json MaterialsJson(const SceneGeometry& geometry, const std::string& scene_text,
+                             const std::string& scene_file) {
+  std::optional<SceneDescription> scene;
+  try {
+    scene = ParseScene(scene_text, scene_file, "");
+  } catch (const std::exception&) {
+  }
+  nlohmann::json out = nlohmann::json::array();
+  for (const SceneMesh& m : geometry.meshes) {
+    GlossyMaterialSettings g;
+    if (scene && m.is_ground) {
+      g = scene->ground.glossy;
+    } else if (scene) {
+      for (const MeshInstance& mi : scene->meshes)
+        if (mi.name == m.name) g = mi.glossy;
+    }
+    out.push_back({{"name", m.name},
+                   {"brdf", g.brdf},
+                   {"diffuse", {m.albedo[0], m.albedo[1], m.albedo[2]}},
+                   {"specular", {g.specular[0], g.specular[1], g.specular[2]}},
+                   {"exponent", g.exponent},
+                   {"exponent_v", g.exponent_v}});
+  }
+  return out;
+}
+
 bool IsCompressedTransportHeader(const std::vector<uint8_t>& params) {
   return params.size() >= 8 && std::string(params.begin(), params.begin() + 8) == "PRTCTHD1";
 }
@@ -88,13 +141,52 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
   }
   nlohmann::json meta = nlohmann::json::object();
   const fs::path scene = dir / kSceneCopyFileName;
-  if (fs::exists(scene)) meta["scene"] = SceneJson(ReadWholeFile(scene.string()), scene.string());
+  std::string scene_text;
+  if (fs::exists(scene)) {
+    scene_text = ReadWholeFile(scene.string());
+    meta["scene"] = SceneJson(scene_text, scene.string());
+  }
+  meta["materials"] = MaterialsJson(geometry, scene_text, scene.string());
+  const fs::path visibility = dir / kVisibilityFileName;
+  if (fs::exists(visibility)) {
+    const std::string bytes = ReadWholeFile(visibility.string());
+    const VisibilityBlocks all = DecodeVisibilityBlocks(
+        std::span(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
+        visibility.string());
+    if (all.vertex_count != geometry.vertex_count()) {
+      throw InputError(visibility.string(),
+                       "holds " + std::to_string(all.vertex_count) + " visibility maps but the " +
+                           "geometry has " + std::to_string(geometry.vertex_count()) + " vertices");
+    }
+    VisibilityInput vis;
+    std::size_t first = 0;
+    for (const SceneMesh& m : geometry.meshes) {
+      vis.per_mesh.push_back(
+          EncodeVisibilityBlocks(SliceVisibility(all, first, m.mesh.positions.size())));
+      first += m.mesh.positions.size();
+    }
+    in.visibility = std::move(vis);
+    const VisibilityBlockCounts c = CountVisibilityBlocks(all);
+    nlohmann::json v = {{"n", all.n},
+                        {"bits", all.bits},
+                        {"vertices", all.vertex_count},
+                        {"raw_bitmap_bytes", all.vertex_count * all.texels_per_map() *
+                                                 static_cast<std::size_t>(all.bits) / 8},
+                        {"encoded_bytes", bytes.size()},
+                        {"blocks", {{"zero", c.zero}, {"one", c.one}, {"mixed", c.mixed}}},
+                        {"changes", c.changes}};
+    meta["visibility"] = std::move(v);
+  }
   const fs::path report = dir / kReportFileName;
   if (fs::exists(report)) {
     const std::string text = ReadWholeFile(report.string());
     nlohmann::json r = nlohmann::json::parse(text, nullptr, false);
     if (r.is_discarded()) throw InputError(report.string(), "not valid JSON");
     meta["report"] = std::move(r);
+  }
+  if (meta.contains("visibility") && meta.contains("report") && meta["report"].is_object() &&
+      meta["report"].contains("visibility") && meta["report"]["visibility"].is_object()) {
+    meta["visibility"]["supersample"] = meta["report"]["visibility"].value("supersample", 1);
   }
   const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
                                                             : fs::path(options.transport_file);
@@ -111,10 +203,10 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
     }
     in.transport = MakeTransportInput(t, options.columns_per_block);
     meta["parameters"] = ParametersJson(t.header, options.columns_per_block);
-  } else if (!options.geometry_only) {
+  } else if (!options.geometry_only && !in.visibility) {
     throw InputError(transport.string(),
-                     "no compressed transport in the run folder (pass --geometry-only to pack "
-                     "geometry and metadata without it)");
+                     "no compressed transport (nor visibility.prtv) in the run folder (pass "
+                     "--geometry-only to pack geometry and metadata without it)");
   }
   in.metadata_json = meta.dump();
   return in;
@@ -194,6 +286,35 @@ std::string InspectPack(const PackReader& r) {
   } else {
     out << "transport: none\n";
   }
+  if (r.has_visibility()) {
+    uint64_t vraw = 0, vstored = 0;
+    for (const SectionInfo& s : r.sections()) {
+      if (s.type_code != kTypeVisibility) continue;
+      vraw += s.raw_size;
+      vstored += s.stored_size;
+    }
+    out << "visibility: " << r.mesh_count() << " VISB sections, " << Bytes(vraw)
+        << " block-coded -> " << Bytes(vstored) << " stored (zstd)";
+    if (meta.contains("visibility") && meta["visibility"].is_object()) {
+      const nlohmann::json& v = meta["visibility"];
+      const double verts = v.value("vertices", 0.0);
+      const double bitmap = v.value("raw_bitmap_bytes", 0.0);
+      std::snprintf(line, sizeof line,
+                    "; n = %d, %d bit(s), %.0f maps; bitmaps %s (%.0f B/vertex), stored %.1f "
+                    "B/vertex (%.1fx smaller)",
+                    v.value("n", 0), v.value("bits", 0), verts,
+                    Bytes(static_cast<uint64_t>(bitmap)).c_str(), verts > 0 ? bitmap / verts : 0.0,
+                    verts > 0 ? double(vstored) / verts : 0.0,
+                    vstored > 0 ? bitmap / double(vstored) : 0.0);
+      out << line;
+    }
+    out << "\n";
+    if (meta.contains("visibility"))
+      out << "visibility blocks: " << meta["visibility"].dump() << "\n";
+  } else {
+    out << "visibility: none\n";
+  }
+  if (meta.contains("materials")) out << "materials: " << meta["materials"].dump() << "\n";
   if (meta.contains("report")) out << "report: " << meta["report"].dump() << "\n";
   return out.str();
 }
@@ -207,6 +328,10 @@ std::string VerifyPack(const PackReader& r) {
       const CompressedTransport ct = ReadCompressedTransport(r);
       extra = ", " + std::to_string(ct.columns.size()) + " compressed columns decoded";
     }
+  }
+  if (r.has_visibility()) {
+    const VisibilityBlocks v = r.ReadAllVisibility();
+    extra += ", " + std::to_string(v.vertex_count) + " visibility maps decoded";
   }
   return r.name() + ": OK (" + std::to_string(r.sections().size()) +
          " sections, every checksum and structural rule holds" + extra + ")";

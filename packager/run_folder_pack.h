@@ -13,6 +13,9 @@ namespace prt::pack {
 // The compressed transport inside a run folder: EncodeCompressedTransport's bytes
 // (vocabulary/compressed_transport.h).
 inline constexpr const char* kCompressedTransportFileName = "transport.prtc";
+// The farm's visibility job output (farm/visibility_jobs.h): EncodeVisibilityBlocks of every
+// spatial sample's map.
+inline constexpr const char* kVisibilityFileName = "visibility.prtv";
 
 struct RunPackOptions {
   // Compressed transport file; empty means <run>/transport.prtc.
@@ -23,10 +26,12 @@ struct RunPackOptions {
 };
 
 // Reads <run>/geometry.prtg (meshes, albedo, ground grid), <run>/scene.toml (stored in META as
-// "scene", converted to JSON), <run>/report.json (as "report") and the compressed transport
-// (its header's settings as "parameters", its columns as TRNS blocks). Throws prt::InputError
-// naming the file on: a missing geometry file, a damaged file, no compressed transport (unless
-// geometry_only), a transport whose sample count differs from the geometry's vertex count.
+// "scene", converted to JSON, and each mesh's glossy material as "materials"), <run>/report.json
+// (as "report"), the compressed transport (its header's settings as "parameters", its columns
+// as TRNS blocks) and the visibility maps <run>/visibility.prtv (one VISB section per mesh, a
+// summary as META "visibility"). Throws prt::InputError naming the file on: a missing geometry
+// file, a damaged file, neither compressed transport nor visibility (unless geometry_only), a
+// transport or visibility whose sample count differs from the geometry's vertex count.
 PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOptions& options);
 
 // prt-pack inspect: version, sections (raw vs stored sizes, compression ratios), meshes and the

@@ -134,5 +134,57 @@ TEST(RunFolderPack, MissingOrMismatchedTransportIsAnError) {
   EXPECT_THROW(PackInputFromRunFolder(f.dir.string(), {}), InputError);
 }
 
+// A visibility run (farm job "visibility"): visibility.prtv and no transport packs into one
+// VISB section per mesh whose maps decode to exactly the run's; the scene's glossy materials
+// go to META "materials"; inspect and verify report the visibility.
+TEST(RunFolderPack, VisibilityRunPacksLosslesslyWithItsMaterials) {
+  const RunFolderFixture f = MakeRunFolder("prtpack_run_folder_test_vis");
+  fs::remove(f.dir / kCompressedTransportFileName);
+  const std::vector<uint8_t> vis = testing::MakeSmallVisibility(12, 5);
+  WriteFileDurably((f.dir / kVisibilityFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(vis.data()), vis.size()));
+  WriteFileDurably((f.dir / kSceneCopyFileName).string(),
+                   "[[mesh]]\nname = \"octa\"\npath = \"octa.off\"\nalbedo = [0.6, 0.5, 0.4]\n"
+                   "brdf = \"phong\"\nspecular = [0.3, 0.3, 0.3]\nexponent = 30\n"
+                   "[ground]\nbrdf = \"ashikhmin-shirley\"\nspecular = [0.2, 0.2, 0.2]\n"
+                   "exponent = 10\nexponent_v = 100\n");
+  const PackInput in = PackInputFromRunFolder(f.dir.string(), {});
+  EXPECT_FALSE(in.transport.has_value());
+  ASSERT_TRUE(in.visibility.has_value());
+  ASSERT_EQ(in.visibility->per_mesh.size(), 2u);
+  const std::vector<uint8_t> bytes = WritePack(in);
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size(), "vis.prtpack");
+  ASSERT_TRUE(r.has_visibility());
+  const VisibilityBlocks back = r.ReadAllVisibility();
+  const VisibilityBlocks original = DecodeVisibilityBlocks(vis);
+  ASSERT_EQ(back.vertex_count, 12u);
+  for (std::size_t v = 0; v < 12; ++v)
+    EXPECT_EQ(DecodeVisibilityMap(back, v), DecodeVisibilityMap(original, v)) << v;
+  EXPECT_EQ(r.ReadVisibility(1).vertex_count, 6u);
+  const nlohmann::json meta = nlohmann::json::parse(r.ReadMetadata());
+  ASSERT_EQ(meta["materials"].size(), 2u);
+  EXPECT_EQ(meta["materials"][0]["brdf"], "phong");
+  EXPECT_EQ(meta["materials"][0]["exponent"], 30.0);
+  EXPECT_EQ(meta["materials"][1]["brdf"], "ashikhmin-shirley");
+  EXPECT_EQ(meta["materials"][1]["exponent_v"], 100.0);
+  EXPECT_EQ(meta["visibility"]["n"], 16);
+  EXPECT_EQ(meta["visibility"]["raw_bitmap_bytes"], 12 * 6 * 16 * 16 / 8);
+  const std::string inspect = InspectPack(r);
+  EXPECT_NE(inspect.find("visibility: 2 VISB sections"), std::string::npos) << inspect;
+  EXPECT_NE(VerifyPack(r).find("12 visibility maps decoded"), std::string::npos);
+
+  // Maps for another vertex count are refused, naming the file.
+  const std::vector<uint8_t> wrong = testing::MakeSmallVisibility(10, 5);
+  WriteFileDurably((f.dir / kVisibilityFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(wrong.data()), wrong.size()));
+  try {
+    PackInputFromRunFolder(f.dir.string(), {});
+    FAIL() << "accepted visibility for another geometry";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("visibility.prtv"), std::string::npos) << e.what();
+  }
+  fs::remove_all(f.dir);
+}
+
 }  // namespace
 }  // namespace prt::pack

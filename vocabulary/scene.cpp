@@ -248,6 +248,21 @@ Mat3 EulerRotation(const Vec3& deg) {
 
 const char* const kUpAxes[] = {"+x", "-x", "+y", "-y", "+z", "-z"};
 
+// The glossy-material keys of a [[mesh]] or [ground] table (docs/scene-format.md).
+template <class S>
+void ParseGlossy(S& s, const toml::table& t, const Rgb& albedo, GlossyMaterialSettings& g) {
+  g.brdf = s.Choice("brdf", g.brdf, {"lambert", "phong", "ashikhmin-shirley"});
+  g.specular = s.Albedo("specular", g.specular);
+  g.exponent = s.Number("exponent", g.exponent, 0, 1e6, true);
+  g.exponent_v = s.Number("exponent_v", g.exponent, 0, 1e6, true);
+  for (int c = 0; c < 3; ++c) {
+    if (albedo[c] + g.specular[c] > 1.0f + 1e-6f) {
+      s.Fail(t.get("specular"), "specular",
+             "albedo + specular must not exceed 1 in any channel (energy conservation)");
+    }
+  }
+}
+
 SceneDescription ParseTable(const toml::table& root, const std::string& file,
                             const std::vector<std::string>& search_dirs) {
   SceneDescription scene;
@@ -281,6 +296,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     g.size = s.Number("size", g.size, 0, 1e30, true);
     g.resolution = static_cast<int>(s.Integer("resolution", g.resolution, 2, 4096));
     g.albedo = s.Albedo("albedo", g.albedo);
+    ParseGlossy(s, t ? *t : kEmpty, g.albedo, g.glossy);
     s.RejectUnknown();
   }
   {
@@ -323,6 +339,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
         m.rotate_deg = s.Vector("rotate_deg", m.rotate_deg);
         m.translate = s.Vector("translate", m.translate);
         m.flip_winding = s.Bool("flip_winding", m.flip_winding);
+        ParseGlossy(s, mt, m.albedo, m.glossy);
         s.RejectUnknown();
         scene.meshes.push_back(std::move(m));
       }
@@ -355,6 +372,23 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.rays_per_texel = static_cast<int>(s.Integer("rays_per_texel", p.rays_per_texel, 1, 65536));
     p.seed = static_cast<uint64_t>(s.Integer("seed", 1, 0, INT64_MAX));
     p.method = s.Choice("method", p.method, {"brute", "sparse"});
+    p.job = s.Choice("job", p.job, {"transport", "visibility"});
+    s.RejectUnknown();
+  }
+  {
+    const toml::table* t = section("visibility");
+    Section s(t ? *t : kEmpty, "[visibility]", file);
+    VisibilitySettings& v = scene.visibility;
+    const toml::node* nn = t ? t->get("n") : nullptr;
+    const int64_t n = s.Integer("n", v.n, 16, 256);
+    if (!IsPowerOfTwo(n)) s.Fail(nn, "n", std::to_string(n) + " is not a power of two (16..256)");
+    v.n = static_cast<int>(n);
+    v.supersample = static_cast<int>(s.Integer("supersample", v.supersample, 1, 16));
+    v.bits = static_cast<int>(s.Integer("bits", v.bits, 1, 8));
+    if (v.bits > 1 && v.supersample == 1) {
+      s.Fail(t ? t->get("bits") : nullptr, "bits",
+             "anti-aliased levels (bits > 1) need supersample > 1");
+    }
     s.RejectUnknown();
   }
   {

@@ -28,6 +28,16 @@ struct FitBox {
   std::string up_axis = "+y";  // one of +x -x +y -y +z -z
 };
 
+// A mesh's material for glossy (triple-product) relighting, docs/scene-format.md "Glossy
+// materials": the mesh's albedo is the diffuse part, `specular` weighs the lobe of `brdf`
+// (viewer/brdf.h). Transport runs ignore it (their BRDF is diffuse).
+struct GlossyMaterialSettings {
+  std::string brdf = "lambert";  // lambert | phong | ashikhmin-shirley
+  Rgb specular{0.f, 0.f, 0.f};   // albedo + specular ≤ 1 per channel
+  double exponent = 1.0;         // Phong s; Ashikhmin–Shirley n_u
+  double exponent_v = 1.0;       // Ashikhmin–Shirley n_v (default: exponent)
+};
+
 struct MeshInstance {
   std::string name;
   std::string path;           // as written in the scene file
@@ -41,6 +51,7 @@ struct MeshInstance {
   Vec3 rotate_deg{0, 0, 0};
   Vec3 translate{0, 0, 0};
   bool flip_winding = false;  // reverse triangles and negate normals (inward-wound meshes)
+  GlossyMaterialSettings glossy;
 };
 
 struct GroundPlane {
@@ -50,6 +61,7 @@ struct GroundPlane {
   double size = 4.0;     // side length
   int resolution = 64;   // grid vertices per side
   Rgb albedo{0.8f, 0.8f, 0.8f};
+  GlossyMaterialSettings glossy;
 };
 
 struct Camera {
@@ -67,6 +79,17 @@ struct SamplingSettings {
   int rays_per_texel = 4;  // stratified jittered occlusion rays per cubemap texel
   uint64_t seed = 1;
   std::string method = "brute";  // brute | sparse
+  // What prt-farm computes: the transport matrix, or per-vertex visibility cubemaps for glossy
+  // triple-product relighting ([visibility] settings, docs/farm.md "Visibility job").
+  std::string job = "transport";  // transport | visibility
+};
+
+// Per-vertex binary (or anti-aliased) visibility cubemaps, Inger et al. 2013 §4.2
+// (worker/visibility_sampler.h); used when [sampling] job = "visibility".
+struct VisibilitySettings {
+  int n = 64;           // cubemap resolution: 16, 32, 64, 128 or 256
+  int supersample = 1;  // rays per texel side (1: one ray through the texel centre)
+  int bits = 1;         // 1: binary; 2…8: anti-aliased levels (needs supersample > 1)
 };
 
 // Huang & Ramamoorthi 2010 parameters, the paper's values as defaults (docs/scene-format.md
@@ -102,6 +125,7 @@ struct SceneDescription {
   SamplingSettings sampling;
   SparseSettings sparse;
   CompressionSettings compression;
+  VisibilitySettings visibility;
   // Environment maps for the demo and benchmarks: resolved where found at parse time, else as
   // written (they are only checked when used: call ResolveScenePath for a precise error).
   std::vector<std::string> environments;
