@@ -360,7 +360,8 @@ int main(int argc, char** argv) {
           "(frame) | PSNR dB (linear) | rel. RMS |\n|---|---|---|---|---|---|---|---|---|---|---|"
           "---|---|\n";
   attribution << "| scene | materials | diffuse term | blocks | % of non-zero blocks | % of "
-                 "squared error | PSNR dB, only these approximated |\n|---|---|---|---|---|---|"
+                 "squared linear error | PSNR dB (covered), only these approximated "
+                 "|\n|---|---|---|---|---|---|"
                  "---|\n";
   breakdown
       << "| scene | materials | zero % | line 6 % | line 9 % | line 11 % | 1 | 4 | 16 | 256 |\n"

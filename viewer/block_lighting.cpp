@@ -68,7 +68,7 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
   out.suffix.resize(entries * 257);
   out.pixels.resize(entries * 256);
   out.suffix_vec.resize(entries * 257 * 3);
-  out.suffix_rgbxyz.assign(static_cast<std::size_t>(blocks.block_count()) * 257 * 16 + 15, 0.f);
+  out.suffix_rgbxyz.assign(static_cast<std::size_t>(blocks.block_count()) * 257, {});
   tbb::parallel_for(0, blocks.block_count(), [&](int b) {
     for (int c = 0; c < 3; ++c) {
       const std::vector<float>& ch = light.Channel(c);
@@ -98,7 +98,8 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
         sv[3 * k + 2] = static_cast<float>(vz);
       }
     }
-    float* q = out.AlignedRgbXyz() + static_cast<std::size_t>(b) * 257 * 16;
+    float* q =
+        reinterpret_cast<float*>(out.suffix_rgbxyz.data() + static_cast<std::size_t>(b) * 257);
     for (int c = 0; c < 3; ++c) {
       const std::size_t e = static_cast<std::size_t>(b) * 3 + c;
       const float* suffix = &out.suffix[e * 257];

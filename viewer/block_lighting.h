@@ -72,18 +72,18 @@ struct BlockLighting {
   std::vector<float> suffix;      // entries × 257  (ii), L_int[256] = 0
   std::vector<float> pixels;      // entries × 256  (iii)
   std::vector<float> suffix_vec;  // entries × 257 × 3  (iv), (x, y, z) per position
-  // (ii) and (iv) interleaved: blocks × 257 positions × 16 floats, 64-byte aligned rows
+  // (ii) and (iv) interleaved: blocks × 257 positions, one 64-byte aligned line each:
   //   [L_r, L_g, L_b, 0, Lx_r, Lx_g, Lx_b, 0, Ly_r, Ly_g, Ly_b, 0, Lz_r, Lz_g, Lz_b, 0]
-  // (the vector is over-allocated by 15 floats; SuffixRgbXyz finds the aligned start).
-  std::vector<float> suffix_rgbxyz;
-  static constexpr int kRgbXyzStride = 16;
-  const float* SuffixRgbXyz(int block) const { return AlignedRgbXyz() + block * 257 * 16; }
-  float* AlignedRgbXyz() {
-    return const_cast<float*>(static_cast<const BlockLighting*>(this)->AlignedRgbXyz());
-  }
-  const float* AlignedRgbXyz() const {
-    const auto p = reinterpret_cast<std::uintptr_t>(suffix_rgbxyz.data());
-    return suffix_rgbxyz.data() + ((64 - p % 64) % 64) / sizeof(float);
+  struct alignas(64) SuffixLine {
+    float v[16];
+  };
+  static_assert(sizeof(SuffixLine) == 16 * sizeof(float));
+  std::vector<SuffixLine> suffix_rgbxyz;
+  static constexpr int kRgbXyzStride = 16;  // floats from one position to the next
+  const float* SuffixRgbXyz(int block) const {
+    // The lines are contiguous floats (sizeof(SuffixLine) == 16 floats).
+    return reinterpret_cast<const float*>(suffix_rgbxyz.data() +
+                                          static_cast<std::size_t>(block) * 257);
   }
   const float* SuffixVec(int block, int c) const {
     return &suffix_vec[(static_cast<std::size_t>(block) * 3 + c) * 257 * 3];

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -84,6 +85,18 @@ TEST(BlockLighting, PrefixSumIdentityAndDct) {
   EXPECT_EQ(again.dct, bl.dct);
   EXPECT_EQ(again.suffix, bl.suffix);
   EXPECT_THROW(ComputeBlockLighting(RandomLight(16, 1), blocks), std::invalid_argument);
+  // The interleaved table holds the same suffix sums, 64-byte aligned rows, also in a copy.
+  const BlockLighting copy = bl;
+  for (const BlockLighting* p : {&bl, static_cast<const BlockLighting*>(&again), &copy}) {
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(p->SuffixRgbXyz(0)) % 64, 0u);
+    for (int b = 0; b < blocks.block_count(); b += 7)
+      for (int k = 0; k <= 256; k += 5)
+        for (int c = 0; c < 3; ++c) {
+          const float* q = p->SuffixRgbXyz(b) + k * BlockLighting::kRgbXyzStride;
+          EXPECT_EQ(q[c], bl.Suffix(b, c)[k]);
+          for (int a = 0; a < 3; ++a) EXPECT_EQ(q[4 * (a + 1) + c], bl.SuffixVec(b, c)[3 * k + a]);
+        }
+  }
 }
 
 }  // namespace
