@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
 #include <chrono>
 #include <cmath>
@@ -481,14 +482,19 @@ TEST(MeshTest, VertexIEqualsTheIthVertexLineOfTheFile) {
   }
 }
 
+// The bound is multiplied by PRT_TEST_TIME_SCALE when set: scripts/sanitize.sh sets it, since an
+// ASan/UBSan build read the bunny in 1.35 s on a loaded 2-core machine (docs/testing.md).
 TEST(MeshTest, ReadingTheBunnyTakesWellUnderASecond) {
   const std::string path = DataPath(PRT_DATA_DIR, "bunny00.off");
   if (!fs::exists(path)) GTEST_SKIP() << path << " is absent";
+  double scale = 1.0;
+  if (const char* env = std::getenv("PRT_TEST_TIME_SCALE"); env != nullptr && *env != '\0')
+    scale = std::max(1.0, std::atof(env));
   const auto t0 = std::chrono::steady_clock::now();
   const TriangleMesh m = LoadMesh(path);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::cout << "             bunny00.off (" << m.positions.size() << " vertices): " << s << " s\n";
-  EXPECT_LT(s, 0.5);
+  EXPECT_LT(s, 0.5 * scale);
 }
 
 }  // namespace
