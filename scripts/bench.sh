@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep] [--quick]
+# `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
+# and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 "$ROOT/scripts/install-deps.sh"
@@ -44,10 +46,16 @@ PY
 run_sparse() { "$BUILD_DIR/bench/prt-sparse-bench" --out "$OUT/sparse" $QUICK; }
 run_compression() { "$BUILD_DIR/bench/compression_bench"; }
 run_viewer() { [ -x "$BUILD_DIR/bench/viewer_bench" ] && "$BUILD_DIR/bench/viewer_bench" || echo "viewer_bench not built"; }
+run_sweep() {
+  local np="${PRT_BENCH_NP:-1}" launch=()
+  [ "$np" -gt 1 ] && launch=(mpirun -np "$np" --bind-to none)
+  # shellcheck disable=SC2086
+  "${launch[@]}" "$BUILD_DIR/bench/prt-bench" --out "$OUT/prt-bench" $QUICK ${PRT_BENCH_ARGS:-}
+}
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_viewer; run_glossy ;;
-  transport|scaling|sparse|compression|viewer|glossy) "run_$WHAT" ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy] [--quick]" >&2; exit 1 ;;
+  transport|scaling|sparse|compression|viewer|glossy|sweep) "run_$WHAT" ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep] [--quick]" >&2; exit 1 ;;
 esac
