@@ -1,7 +1,9 @@
 #include "viewer/npy_writer.h"
 
 #include <bit>
+#include <cerrno>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <stdexcept>
@@ -39,10 +41,22 @@ std::vector<char> EncodeNpyFloat32(std::span<const float> data, std::size_t rows
 void WriteNpyFloat32(const std::string& path, std::span<const float> data, std::size_t rows,
                      std::size_t cols) {
   const std::vector<char> bytes = EncodeNpyFloat32(data, rows, cols);
-  std::ofstream f(path, std::ios::binary);
-  if (!f) throw InputError(path, "cannot be written");
+  // Written to path.tmp and renamed, so that a failed write (a full disk) keeps an earlier file.
+  const std::string tmp = path + ".tmp";
+  std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+  if (!f) throw InputError(path, std::string("cannot be written: ") + std::strerror(errno));
   f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  if (!f) throw InputError(path, "write failed");
+  f.close();
+  if (!f) {
+    const int e = errno;
+    std::remove(tmp.c_str());
+    throw InputError(path, std::string("write failed: ") + std::strerror(e));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
+    std::remove(tmp.c_str());
+    throw InputError(path, std::string("cannot rename the temporary file: ") + std::strerror(e));
+  }
 }
 
 }  // namespace prt

@@ -4,12 +4,16 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStdIO.h>
 #include <png.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <stdexcept>
 
 #include "vocabulary/errors.h"
@@ -44,44 +48,77 @@ unsigned char ToSrgb8(double linear, const ToneMapOptions& options) {
   return static_cast<unsigned char>(std::lround(255.0 * SrgbEncode(x)));
 }
 
+namespace {
+
+// Images are written to `path`.tmp and renamed over `path` once complete, so that a failed
+// write (a full disk) never destroys an earlier image at `path`.
+void ReplaceWithTemporary(const std::string& tmp, const std::string& path) {
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
+    std::remove(tmp.c_str());
+    throw InputError(path, std::string("cannot rename the temporary file: ") + std::strerror(e));
+  }
+}
+
+}  // namespace
+
 void WritePng(const ImageRgb& image, const std::string& path, const ToneMapOptions& options) {
   CheckImage(image, "WritePng");
   std::vector<std::uint8_t> bytes(image.pixels.size());
   for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = ToSrgb8(image.pixels[i], options);
-  // libpng's simplified API reports errors through its return value, not longjmp.
+  // libpng's simplified API reports errors through its return value, not longjmp; it removes
+  // the file it failed to write.
   png_image png;
   std::memset(&png, 0, sizeof(png));
   png.version = PNG_IMAGE_VERSION;
   png.width = static_cast<png_uint_32>(image.width);
   png.height = static_cast<png_uint_32>(image.height);
   png.format = PNG_FORMAT_RGB;
+  const std::string tmp = path + ".tmp";
+  errno = 0;
   const int ok =
-      png_image_write_to_file(&png, path.c_str(), 0, bytes.data(), 3 * image.width, nullptr);
+      png_image_write_to_file(&png, tmp.c_str(), 0, bytes.data(), 3 * image.width, nullptr);
   if (!ok) {
-    const std::string msg = png.message;
+    // libpng says only "Write Error"; errno says why (a full disk, a read-only folder).
+    const int e = errno;
+    const std::string msg =
+        std::string(png.message) + (e != 0 ? std::string(": ") + std::strerror(e) : "");
     png_image_free(&png);
+    std::remove(tmp.c_str());
     throw InputError(path, "cannot write PNG: " + msg);
   }
+  ReplaceWithTemporary(tmp, path);
 }
 
 void WriteExr(const ImageRgb& image, const std::string& path) {
   CheckImage(image, "WriteExr");
+  const std::string tmp = path + ".tmp";
+  std::ofstream os(tmp, std::ios::binary | std::ios::trunc);
   try {
-    Imf::Header header(image.width, image.height);
-    header.compression() = Imf::ZIP_COMPRESSION;
-    for (const char* c : {"R", "G", "B"}) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
-    Imf::OutputFile file(path.c_str(), header);
-    Imf::FrameBuffer fb;
-    const Imath::Box2i dw = header.dataWindow();
-    const std::size_t xs = 3 * sizeof(float), ys = xs * image.width;
-    fb.insert("R", Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + 0, dw, xs, ys));
-    fb.insert("G", Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + 1, dw, xs, ys));
-    fb.insert("B", Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + 2, dw, xs, ys));
-    file.setFrameBuffer(fb);
-    file.writePixels(image.height);
+    if (!os) throw std::runtime_error(std::string("cannot create: ") + std::strerror(errno));
+    {
+      Imf::StdOFStream stream(os, tmp.c_str());
+      Imf::Header header(image.width, image.height);
+      header.compression() = Imf::ZIP_COMPRESSION;
+      for (const char* c : {"R", "G", "B"}) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+      Imf::OutputFile file(stream, header);
+      Imf::FrameBuffer fb;
+      const Imath::Box2i dw = header.dataWindow();
+      const std::size_t xs = 3 * sizeof(float), ys = xs * image.width;
+      fb.insert("R", Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + 0, dw, xs, ys));
+      fb.insert("G", Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + 1, dw, xs, ys));
+      fb.insert("B", Imf::Slice::Make(Imf::FLOAT, image.pixels.data() + 2, dw, xs, ys));
+      file.setFrameBuffer(fb);
+      file.writePixels(image.height);
+    }  // ~OutputFile writes the line offsets and swallows errors: the stream's state tells.
+    os.close();
+    if (!os) throw std::runtime_error(std::string("write failed: ") + std::strerror(errno));
   } catch (const std::exception& e) {
+    os.close();
+    std::remove(tmp.c_str());
     throw InputError(path, std::string("cannot write OpenEXR: ") + e.what());
   }
+  ReplaceWithTemporary(tmp, path);
 }
 
 ImageRgb AbsDifference(const ImageRgb& a, const ImageRgb& b, double scale) {
