@@ -543,11 +543,14 @@ void WriteFileDurably(const std::string& path, std::string_view bytes) {
     if (::fsync(fd) != 0) throw FileIoError(tmp, SystemReason("fsync failed"));
   } catch (...) {
     ::close(fd);
+    ::unlink(tmp.c_str());  // a full disk leaves no stray temporary file behind
     throw;
   }
   ::close(fd);
   if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    throw FileIoError(path, SystemReason("cannot rename " + tmp + " to it"));
+    const FileIoError error(path, SystemReason("cannot rename " + tmp + " to it"));
+    ::unlink(tmp.c_str());
+    throw error;
   }
   SyncDirectory(std::filesystem::path(path).parent_path().string());
 }
