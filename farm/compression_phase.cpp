@@ -323,11 +323,9 @@ bool CompressedRunIsComplete(const FarmOptions& options) {
     const RunFolder f(options.out_dir);
     const std::string prtc = (fs::path(f.dir) / kCompressedTransportFile).string();
     std::error_code ec;
-    if (options.force) {
-      fs::remove(prtc, ec);
-    } else if (options.resume && !options.no_compress && fs::exists(prtc, ec) &&
-               fs::exists(f.journal, ec) && !fs::exists(f.transport, ec) &&
-               !fs::exists(f.partial, ec)) {
+    // With --force, the setup phase removes transport.prtc once the new scene proved valid.
+    if (!options.force && options.resume && !options.no_compress && fs::exists(prtc, ec) &&
+        fs::exists(f.journal, ec) && !fs::exists(f.transport, ec) && !fs::exists(f.partial, ec)) {
       done = 1;
       if (!options.quiet)
         std::fprintf(stderr,
