@@ -5,7 +5,9 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -267,16 +269,27 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
 
 void WritePackFile(const std::string& path, const PackInput& input, const WriterOptions& options) {
   const std::vector<uint8_t> bytes = WritePack(input, options);
+  // Written to path.tmp and renamed: a failed write (a full disk) keeps an earlier pack intact.
   const std::string tmp = path + ".tmp";
+  std::error_code ec;
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw InputError(path, "cannot open for writing");
+    if (!out)
+      throw InputError(path, std::string("cannot open for writing: ") + std::strerror(errno));
     out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
-    if (!out) throw InputError(path, "write failed");
+    out.close();  // the last buffered bytes are written here
+    if (!out) {
+      const int e = errno;
+      std::filesystem::remove(tmp, ec);
+      throw InputError(path, std::string("write failed: ") + std::strerror(e));
+    }
   }
-  std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
-  if (ec) throw InputError(path, "cannot rename temporary file: " + ec.message());
+  if (ec) {
+    const std::string reason = ec.message();
+    std::filesystem::remove(tmp, ec);
+    throw InputError(path, "cannot rename temporary file: " + reason);
+  }
 }
 
 }  // namespace prt::pack
