@@ -178,6 +178,8 @@ int main(int argc, char** argv) {
   }
   try {
     if (!std::isfinite(o.rotate)) throw std::invalid_argument("--rotate must be finite");
+    if (!std::isfinite(o.exposure))  // CLI::PositiveNumber lets NaN and Inf through
+      throw std::invalid_argument("--exposure must be a finite positive number");
     return Run(o);
   } catch (const std::invalid_argument& e) {
     std::fprintf(stderr, "prt-view: %s\n", e.what());
