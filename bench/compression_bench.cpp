@@ -1,21 +1,28 @@
 // compression_bench: storage against relit-radiance error for 2D (Ng et al. 2003), full 4D and
-// adaptive 4D compression of a real transport matrix (Cheslack-Postava et al. 2008 §5.2, Fig. 7
+// adaptive 4D compression of real transport matrices (Cheslack-Postava et al. 2008 §5.2, Fig. 7
 // and Fig. 8), all through the same code (worker/transport_compressor.h).
 //
-// T comes from a farm run folder (run/transport.prtt + run/geometry.prtg) when one is given;
-// otherwise it is traced here with TransportSampler: a mesh fitted to a unit box standing on a
-// res×res ground grid (default ChineseDragon-10kv, 32×32 grid, n = 16, 2 rays per texel).
-// For each scheme and budget it prints the stored terms, encoded bytes (and % of raw float32 T),
-// the relative Frobenius error of T, and the relative RMS error of relit radiance B = T·L over
-// the environment maps (each channel, all environments together), where B is computed from the
-// compressed columns by Eq. 8 (relight_ms: one 3-channel Eq. 8 relighting with dense lighting,
-// averaged over the environments) and the reference from the uncompressed T in double. It then
-// prints the average chosen column depth per row-transform level (Fig. 8) for adaptive 4D.
+// For each benchmark scene (bench_scenes.h: the default scene, i.e. the bunny on a 64×64 ground
+// grid, and real meshes on the same ground) and cubemap size n, T is traced here with
+// TransportSampler (or read from a cache file written by an earlier run, or from a farm run
+// folder). For each scheme, budget (column: the paper's N terms per column, 2D per row; global:
+// one magnitude threshold over the matrix) and keep fraction it prints the stored terms, the
+// encoded bytes of transport.prtc (and % of raw float32 T), the relative Frobenius error of T, and
+// the relative RMS error of relit radiance B = albedo ⊙ (T·L) over the real environment maps
+// (every channel of every environment together), B computed from the compressed columns by Eq. 8
+// and the reference from the uncompressed T in double. Then, per scene and n:
+//   * the matched-error table: bytes of each curve at relit errors 1%, 2%, 5% (log-log
+//     interpolation between measured points; "-" outside the measured range) and the ratio
+//     best 2D / adaptive 4D, plus the smallest such ratio over the errors both reach;
+//   * the average chosen column depth per row-transform level (Fig. 8);
+//   * with --out DIR: DIR/<scene>_n<n>.csv, a gnuplot script and its PNG (Fig. 7-like curves).
 //
-// Usage: compression_bench [--run DIR] [--mesh FILE] [--n N] [--rays K] [--ground RES]
-//                          [--bits B] [--keep f1,f2,...] [--budget column|global|both]
-// Budget "column" is the paper's N terms per column (2D: per row, Ng et al. 2003); "global" keeps
-// the largest f·samples·texels coefficients of the whole transformed matrix (not in the paper).
+// Usage: compression_bench [--scenes default,dragon,armadillo] [--n 32,64] [--rays K]
+//          [--cache DIR] [--run DIR] [--bits B] [--keep f1,f2,...] [--budget column|global|both]
+//          [--column-keep f1,...] [--schemes 2d,4d,adaptive4d] [--light-weight W] [--t-error]
+//          [--out DIR]
+#include <spdlog/spdlog.h>
+
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
@@ -23,6 +30,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -30,7 +39,7 @@
 #include "vocabulary/compressed_relight.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/envmap.h"
-#include "vocabulary/mesh.h"
+#include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
 #include "worker/column_order.h"
@@ -39,10 +48,6 @@
 #include "worker/transport_compressor.h"
 #include "worker/transport_sampler.h"
 
-#ifndef PRT_DATA_DIR
-#define PRT_DATA_DIR "data"
-#endif
-
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -50,47 +55,97 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+#ifndef PRT_DATA_DIR
+#define PRT_DATA_DIR "data"
+#endif
+
+std::string DataDir() {
+  if (const char* d = std::getenv("PRT_DATA_DIR"); d != nullptr && *d != '\0') return d;
+  return PRT_DATA_DIR;
+}
+
+// The benchmark scenes of bench/bench_scenes.h (BenchScene; repeated here so that this benchmark
+// does not link the viewer): the default scene, or another mesh in its place.
+prt::SceneDescription BenchScene(const std::string& name, int n) {
+  std::string text = prt::DefaultSceneText();
+  const std::map<std::string, std::string> meshes = {{"default", "bunny00.off"},
+                                                     {"dragon", "ChineseDragon-10kv.off"},
+                                                     {"armadillo", "armadillo.off"},
+                                                     {"camel", "camel.off"},
+                                                     {"lion", "lion-head.off"}};
+  const auto it = meshes.find(name);
+  if (it == meshes.end())
+    throw prt::InputError("--scenes",
+                          "unknown scene '" + name + "' (default, dragon, armadillo, camel, lion)");
+  const std::string from = "meshes/bunny00.off";
+  const auto pos = text.find(from);
+  if (pos == std::string::npos)
+    throw prt::InputError("<bench scene>", "default scene lacks " + from);
+  text.replace(pos, from.size(), "meshes/" + it->second);
+  prt::SceneDescription scene =
+      prt::ParseScene(text, "<bench scene " + name + ">", "", {DataDir()});
+  scene.cubemap_n = n;
+  return scene;
+}
+
 struct Transport {
+  std::string name;
   std::vector<float> T;
-  int n = 16;
+  int n = 32;
   std::size_t S = 0;
   prt::SpatialDomain domain;
+  std::vector<float> albedo;  // 3 per sample
   std::string source;
 };
 
-Transport TraceTransport(const std::string& mesh_path, int n, int rays, int ground_res) {
+std::vector<float> AlbedoPerSample(const prt::SceneGeometry& g) {
+  std::vector<float> a;
+  for (const prt::SceneMesh& m : g.meshes)
+    for (std::size_t v = 0; v < m.mesh.positions.size(); ++v)
+      for (int c = 0; c < 3; ++c) a.push_back(m.albedo[c]);
+  return a;
+}
+
+// T of a benchmark scene at n: from `cache` (<scene>_n<n>_r<rays>.f32) when present, else
+// traced (and written there).
+Transport SceneTransport(const std::string& name, int n, int rays, const std::string& cache) {
   Transport t;
+  t.name = name;
   t.n = n;
-  prt::SceneGeometry geometry;
-  prt::SceneMesh object;
-  object.name = "object";
-  object.mesh = prt::LoadMesh(mesh_path);
-  prt::MeshInstance instance;
-  instance.fit = prt::FitBox{};
-  prt::TransformInstance(instance, object.mesh);
-  geometry.meshes.push_back(std::move(object));
-  prt::GroundPlane ground;
-  ground.enabled = true;
-  ground.resolution = ground_res;
-  ground.size = 3.0;
-  prt::SceneMesh g;
-  g.name = "ground";
-  g.mesh = prt::MakeGroundGrid(ground);
-  g.is_ground = true;
-  g.grid_resolution = ground_res;
-  geometry.meshes.push_back(std::move(g));
-  const prt::EmbreeScene scene(geometry);
-  const prt::TransportSampler sampler(scene, n, {rays, 1});
+  const prt::SceneDescription scene = BenchScene(name, n);
+  const prt::SceneGeometry geometry = prt::BuildSceneGeometry(scene);
+  t.domain = prt::SpatialDomainOf(geometry);
+  t.albedo = AlbedoPerSample(geometry);
+  t.S = t.domain.sample_count();
+  const std::size_t M = static_cast<std::size_t>(6) * n * n;
+  t.T.resize(t.S * M);
+  const std::string file = cache.empty() ? std::string()
+                                         : cache + "/" + name + "_n" + std::to_string(n) + "_r" +
+                                               std::to_string(rays) + ".f32";
+  if (!file.empty() && std::filesystem::exists(file) &&
+      std::filesystem::file_size(file) == t.T.size() * sizeof(float)) {
+    std::ifstream in(file, std::ios::binary);
+    in.read(reinterpret_cast<char*>(t.T.data()),
+            static_cast<std::streamsize>(t.T.size() * sizeof(float)));
+    if (!in) throw std::runtime_error(file + ": short read of the cached transport");
+    t.source = name + " (cached " + file + ")";
+    return t;
+  }
+  const prt::EmbreeScene embree(geometry);
+  const prt::TransportSampler sampler(embree, n, {rays, 1});
   const std::vector<prt::SpatialSample> samples = prt::SpatialSamplesOf(geometry);
-  t.S = samples.size();
-  t.T.resize(t.S * sampler.layout().texel_count());
   const auto t0 = Clock::now();
   sampler.ComputeRows(samples, 0, t.T.data());
-  t.domain = prt::SpatialDomainOf(geometry);
   std::ostringstream os;
-  os << mesh_path << " + " << ground_res << "x" << ground_res << " ground, traced in "
-     << Seconds(t0) << " s";
+  os << name << ", " << rays << " rays per texel, traced in " << Seconds(t0) << " s";
   t.source = os.str();
+  if (!file.empty()) {
+    std::filesystem::create_directories(cache);
+    std::ofstream out(file, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(t.T.data()),
+              static_cast<std::streamsize>(t.T.size() * sizeof(float)));
+    if (!out) throw std::runtime_error(file + ": cannot write the transport cache");
+  }
   return t;
 }
 
@@ -101,71 +156,84 @@ Transport ReadRun(const std::string& dir) {
   t.S = reader.info().rows;
   t.T.resize(t.S * reader.info().cols());
   reader.ReadRows(0, t.S, t.T.data());
-  t.domain = prt::SpatialDomainOf(prt::ReadSceneGeometryFile(dir + "/" + prt::kGeometryFileName));
+  const prt::SceneGeometry g = prt::ReadSceneGeometryFile(dir + "/" + prt::kGeometryFileName);
+  t.domain = prt::SpatialDomainOf(g);
+  t.albedo = AlbedoPerSample(g);
+  t.name = "run";
   t.source = dir;
   return t;
 }
 
-std::vector<double> Split(const std::string& s) {
-  std::vector<double> v;
+template <class T>
+std::vector<T> SplitList(const std::string& s) {
+  std::vector<T> v;
   std::stringstream ss(s);
   std::string item;
-  while (std::getline(ss, item, ',')) v.push_back(std::atof(item.c_str()));
+  while (std::getline(ss, item, ',')) {
+    if (item.empty()) continue;
+    if constexpr (std::is_same_v<T, std::string>)
+      v.push_back(item);
+    else
+      v.push_back(static_cast<T>(std::atof(item.c_str())));
+  }
   return v;
 }
 
-}  // namespace
+struct Point {
+  prt::CompressionScheme scheme;
+  prt::CompressionBudget budget;
+  double keep = 0;
+  std::size_t terms = 0, bytes = 0;
+  double pct_raw = 0, t_err = 0, b_err = 0, secs = 0;
+};
 
-int main(int argc, char** argv) {
-  std::string run, mesh = std::string(PRT_DATA_DIR) + "/meshes/ChineseDragon-10kv.off";
-  int n = 16, rays = 2, ground = 32, bits = 9;
-  std::string budget = "both";  // column | global | both
-  std::vector<double> keeps = {0.0025, 0.005, 0.01, 0.02, 0.05};
-  std::string keep_arg;
-  CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
-  app.add_option("--run", run, "farm run folder to read T from (instead of tracing)");
-  app.add_option("--mesh", mesh, "mesh to trace on a ground plane");
-  app.add_option("--n", n, "cubemap resolution");
-  app.add_option("--rays", rays, "rays per texel");
-  app.add_option("--ground", ground, "ground grid resolution");
-  app.add_option("--bits", bits, "quantisation bits");
-  app.add_option("--budget", budget, "column | global | both");
-  app.add_option("--keep", keep_arg, "comma-separated keep fractions");
-  CLI11_PARSE(app, argc, argv);
-  if (!keep_arg.empty()) keeps = Split(keep_arg);
-  Transport tr;
-  try {
-    tr = run.empty() ? TraceTransport(mesh, n, rays, ground) : ReadRun(run);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "compression_bench: %s\n", e.what());
-    return 1;
+std::string CurveName(prt::CompressionScheme s, prt::CompressionBudget b) {
+  return std::string(prt::ToString(s)) + "/" + prt::ToString(b);
+}
+
+// Bytes of a curve at relit error e: log-log interpolation between the two measured points
+// around e (points sorted by error); < 0 outside the measured range.
+double BytesAtError(std::vector<Point> pts, double e) {
+  std::sort(pts.begin(), pts.end(),
+            [](const Point& a, const Point& b) { return a.b_err < b.b_err; });
+  // The lower envelope: for each error, the fewest bytes reaching it.
+  double best = -1;
+  for (std::size_t i = 0; i + 1 < pts.size(); ++i) {
+    const Point &a = pts[i], &b = pts[i + 1];
+    if (e < a.b_err || e > b.b_err || a.b_err <= 0) continue;
+    const double t = b.b_err > a.b_err ? std::log(e / a.b_err) / std::log(b.b_err / a.b_err) : 0;
+    const double v =
+        std::exp(std::log(static_cast<double>(a.bytes)) +
+                 t * std::log(static_cast<double>(b.bytes) / static_cast<double>(a.bytes)));
+    if (best < 0 || v < best) best = v;
   }
-  n = tr.n;
-  const std::size_t S = tr.S, M = static_cast<std::size_t>(6) * n * n;
-  std::printf("transport: %s\n  %zu samples x %zu texels (n = %d), %zu segments, raw %.1f MB\n",
-              tr.source.c_str(), S, M, n, tr.domain.segments.size(),
-              static_cast<double>(S * M) * 4.0 / 1e6);
+  if (pts.size() == 1 && std::fabs(pts[0].b_err - e) < 1e-12)
+    best = static_cast<double>(pts[0].bytes);
+  return best;
+}
 
-  // Lighting: the real environment maps resampled to the cubemap.
+void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& schemes,
+            const std::vector<prt::CompressionBudget>& budgets, const std::vector<double>& keeps,
+            const std::vector<double>& column_keeps,
+            int bits, int light_weight, bool t_error, const std::string& out_dir) {
+  const int n = tr.n;
+  const std::size_t S = tr.S, M = static_cast<std::size_t>(6) * n * n;
+  const double raw_bytes = static_cast<double>(S * M) * 4.0;
+  std::printf("\n=== %s, n = %d: %zu samples x %zu texels, %zu segments, raw %.1f MB\n",
+              tr.source.c_str(), n, S, M, tr.domain.segments.size(), raw_bytes / 1e6);
+  // The real environment maps (Blender's), resampled to the cubemap.
   std::vector<std::vector<float>> lights;
-  std::vector<std::string> names;
+  std::printf("environments:");
   for (const char* e : {"sunrise", "city", "studio", "interior"}) {
-    const std::string path = std::string(PRT_DATA_DIR) + "/envmaps/" + e + ".exr";
-    if (!std::filesystem::exists(path)) continue;
-    const prt::CubemapRgb cube = prt::ResampleToCubemap(prt::ReadEnvironment(path), n);
+    const prt::CubemapRgb cube =
+        prt::ResampleToCubemap(prt::ReadEnvironment(DataDir() + "/envmaps/" + e + ".exr"), n);
+    std::printf(" %s", e);
     std::vector<float> L;
     for (int c = 0; c < 3; ++c) L.insert(L.end(), cube.Channel(c).begin(), cube.Channel(c).end());
     lights.push_back(std::move(L));
-    names.push_back(e);
   }
-  if (lights.empty()) {
-    std::fprintf(stderr, "compression_bench: no environment maps in %s/envmaps\n", PRT_DATA_DIR);
-    return 1;
-  }
-  std::printf("environments:");
-  for (const auto& s : names) std::printf(" %s", s.c_str());
   std::printf("\n");
-  // Reference radiance from the uncompressed T, in double.
+  // Reference B = albedo ⊙ (T·L) from the uncompressed T, in double.
   std::vector<std::vector<double>> ref(lights.size(), std::vector<double>(3 * S));
   double ref_energy = 0;
   for (std::size_t e = 0; e < lights.size(); ++e)
@@ -175,6 +243,7 @@ int main(int argc, char** argv) {
         const float* row = tr.T.data() + s * M;
         const float* L = lights[e].data() + c * M;
         for (std::size_t j = 0; j < M; ++j) a += static_cast<double>(row[j]) * L[j];
+        a *= tr.albedo[3 * s + c];
         ref[e][c * S + s] = a;
         ref_energy += a * a;
       }
@@ -183,56 +252,115 @@ int main(int argc, char** argv) {
 
   const std::vector<uint8_t> row_levels = prt::RowCoefficientLevels(n);
   const int row_depth = prt::RowTransformDepth(n);
-  std::printf("\n%-11s %-7s %7s %10s %10s %7s %10s %10s %8s %10s\n", "scheme", "budget", "keep",
-              "terms", "bytes", "%raw", "T_relF", "B_relRMS", "time_s", "relight_ms");
+  std::printf("%-11s %-7s %7s %10s %10s %7s %9s %9s %7s\n", "scheme", "budget", "keep", "terms",
+              "bytes", "%raw", "T_relF", "B_relRMS", "time_s");
+  std::vector<Point> points;
   std::vector<std::string> depth_lines;
-  std::vector<bool> modes;
-  if (budget != "global") modes.push_back(false);
-  if (budget != "column") modes.push_back(true);
-  for (bool global : modes)
-    for (prt::CompressionScheme scheme : {prt::CompressionScheme::k2D, prt::CompressionScheme::k4D,
-                                          prt::CompressionScheme::kAdaptive4D}) {
-      for (double keep : keeps) {
+  // The stages of CompressTransport (transport_compressor.h), run so that what does not depend on
+  // the keep fraction is done once: the row transform, the transpose, and the column transforms
+  // of 2D and full 4D (adaptive depths depend on the per-column budget, so adaptive 4D and the
+  // per-row 2D truncation are redone per keep). Same functions, same bytes as CompressTransport.
+  std::vector<float> rows_hat(tr.T);
+  {
+    prt::CompressionOptions o;
+    o.budget = prt::CompressionBudget::kGlobal;  // no per-row truncation here
+    prt::PrepareRows(prt::MakeCompressedHeader(o, n, tr.domain), o, rows_hat.data(), S);
+  }
+  auto transpose = [&](const std::vector<float>& rows) {
+    std::vector<float> cols(S * M);
+    constexpr std::size_t kTile = 64;
+    for (std::size_t s0 = 0; s0 < S; s0 += kTile)
+      for (std::size_t j0 = 0; j0 < M; j0 += kTile)
+        for (std::size_t s = s0; s < std::min(S, s0 + kTile); ++s)
+          for (std::size_t j = j0; j < std::min(M, j0 + kTile); ++j)
+            cols[j * S + s] = rows[s * M + j];
+    return cols;
+  };
+  const std::vector<float> cols_hat = transpose(rows_hat);
+  for (prt::CompressionBudget budget : budgets)
+    for (prt::CompressionScheme scheme : schemes) {
+      std::vector<float> fixed;  // 2D / 4D columns transformed once
+      std::vector<uint8_t> fixed_depths(M);
+      for (double keep : budget == prt::CompressionBudget::kColumn ? column_keeps : keeps) {
         prt::CompressionOptions o;
         o.scheme = scheme;
         o.keep_fraction = keep;
         o.bits = bits;
-        o.global_budget = global;
+        o.budget = budget;
+        o.light_weight = light_weight;
+        const prt::CompressedTransportHeader h = prt::MakeCompressedHeader(o, n, tr.domain);
         std::vector<prt::ColumnStats> stats;
         const auto t0 = Clock::now();
-        const prt::CompressedTransport ct =
-            prt::CompressTransport(tr.T.data(), n, tr.domain, o, &stats);
-        const double secs = Seconds(t0);
-        const std::size_t bytes = prt::EncodeCompressedTransport(ct).size();
-        // Relit error by Eq. 8 from the compressed columns.
+        const bool per_row =
+            scheme == prt::CompressionScheme::k2D && budget == prt::CompressionBudget::kColumn;
+        std::vector<float> work;
+        std::vector<uint8_t> depths(M);
+        const float* transformed = nullptr;
+        if (per_row) {
+          std::vector<float> rows(rows_hat);
+          for (std::size_t r = 0; r < S; ++r)
+            prt::KeepLargestPerRow(rows.data() + r * M, 1, M, prt::RowTermBudget(o, M));
+          work = transpose(rows);
+          prt::TransformColumnBlock(h, static_cast<uint32_t>(M), work.data(), depths.data());
+          transformed = work.data();
+        } else if (scheme == prt::CompressionScheme::kAdaptive4D) {
+          work = cols_hat;
+          prt::TransformColumnBlock(h, static_cast<uint32_t>(M), work.data(), depths.data());
+          transformed = work.data();
+        } else {
+          if (fixed.empty()) {
+            fixed = cols_hat;
+            prt::TransformColumnBlock(h, static_cast<uint32_t>(M), fixed.data(),
+                                      fixed_depths.data());
+          }
+          transformed = fixed.data();
+          depths = fixed_depths;
+        }
+        float threshold = 0.0f;
+        if (budget == prt::CompressionBudget::kGlobal) {
+          std::vector<uint64_t> hist(prt::kMagnitudeBins, 0);
+          prt::AddColumnBlockHistogram(h, 0, static_cast<uint32_t>(M), transformed, hist.data());
+          threshold = prt::ThresholdFromHistogram(hist.data(), prt::GlobalTermBudget(h));
+        }
+        prt::CompressedTransport ct;
+        ct.header = h;
+        ct.columns = prt::QuantiseColumnBlock(h, 0, static_cast<uint32_t>(M), transformed,
+                                              depths.data(), threshold, &stats);
+        work = std::vector<float>();
+        Point p;
+        p.secs = Seconds(t0);
+        p.scheme = scheme;
+        p.budget = budget;
+        p.keep = keep;
+        p.terms = ct.term_count();
+        p.bytes = prt::EncodeCompressedTransport(ct).size();
+        p.pct_raw = 100.0 * static_cast<double>(p.bytes) / raw_bytes;
         const prt::CompressedRelighter relighter(ct);
-        double err = 0, relight_s = 0;
+        double err = 0;
         std::vector<float> B(3 * S);
         for (std::size_t e = 0; e < lights.size(); ++e) {
-          const std::vector<float> Lhat =
-              prt::LightingToRowWaveletBasis(o.row_wavelet, n, lights[e], 3);
-          const auto r0 = Clock::now();
-          relighter.Relight(Lhat, 3, B);
-          relight_s += Seconds(r0);
-          for (std::size_t i = 0; i < 3 * S; ++i) {
-            const double d = B[i] - ref[e][i];
-            err += d * d;
+          relighter.Relight(prt::LightingToRowWaveletBasis(o.row_wavelet, n, lights[e], 3), 3, B);
+          for (int c = 0; c < 3; ++c)
+            for (std::size_t s = 0; s < S; ++s) {
+              const double d = B[c * S + s] * tr.albedo[3 * s + c] - ref[e][c * S + s];
+              err += d * d;
+            }
+        }
+        p.b_err = std::sqrt(err / ref_energy);
+        if (t_error) {
+          const std::vector<float> back = prt::DecompressTransport(ct);
+          double terr = 0;
+          for (std::size_t i = 0; i < back.size(); ++i) {
+            const double d = static_cast<double>(back[i]) - tr.T[i];
+            terr += d * d;
           }
+          p.t_err = std::sqrt(terr / t_energy);
         }
-        const std::vector<float> back = prt::DecompressTransport(ct);
-        double terr = 0;
-        for (std::size_t i = 0; i < back.size(); ++i) {
-          const double d = static_cast<double>(back[i]) - tr.T[i];
-          terr += d * d;
-        }
-        std::printf("%-11s %-7s %7.4f %10zu %10zu %7.3f %10.5f %10.5f %8.2f %10.2f\n",
-                    prt::ToString(scheme),
-                    global ? "global" : (scheme == prt::CompressionScheme::k2D ? "row" : "column"),
-                    keep, ct.term_count(), bytes,
-                    100.0 * static_cast<double>(bytes) / (static_cast<double>(S * M) * 4.0),
-                    std::sqrt(terr / t_energy), std::sqrt(err / ref_energy), secs,
-                    1e3 * relight_s / static_cast<double>(lights.size()));
+        std::printf("%-11s %-7s %7.4f %10zu %10zu %7.3f %9.5f %9.5f %7.1f\n", prt::ToString(scheme),
+                    prt::ToString(budget), keep, p.terms, p.bytes, p.pct_raw, p.t_err, p.b_err,
+                    p.secs);
         std::fflush(stdout);
+        points.push_back(p);
         if (scheme == prt::CompressionScheme::kAdaptive4D) {
           std::vector<double> sum(row_depth + 1, 0.0), cnt(row_depth + 1, 0.0);
           for (const auto& st : stats) {
@@ -240,9 +368,10 @@ int main(int argc, char** argv) {
             cnt[row_levels[st.column]] += 1;
           }
           std::ostringstream os;
-          os << (global ? "global" : "column") << " keep " << keep << ":";
+          char buf[64];
+          std::snprintf(buf, sizeof buf, "%-7s keep %7.4f:", prt::ToString(budget), keep);
+          os << buf;
           for (int l = 0; l <= row_depth; ++l) {
-            char buf[32];
             std::snprintf(buf, sizeof buf, " %6.2f", cnt[l] > 0 ? sum[l] / cnt[l] : 0.0);
             os << buf;
           }
@@ -250,10 +379,161 @@ int main(int argc, char** argv) {
         }
       }
     }
+
+  // Matched-error table.
+  std::map<std::string, std::vector<Point>> curves;
+  for (const Point& p : points) curves[CurveName(p.scheme, p.budget)].push_back(p);
+  auto best_of = [&](prt::CompressionScheme s, double e) {
+    double best = -1;
+    for (prt::CompressionBudget b : budgets) {
+      const auto it = curves.find(CurveName(s, b));
+      if (it == curves.end()) continue;
+      const double v = BytesAtError(it->second, e);
+      if (v > 0 && (best < 0 || v < best)) best = v;
+    }
+    return best;
+  };
+  const double targets[] = {0.01, 0.02, 0.05};
+  std::printf("\nmatched relit error (%s, n = %d): bytes (%% of raw) by curve\n", tr.name.c_str(),
+              n);
+  std::printf("%-20s", "curve");
+  for (double e : targets) std::printf("   %18.0f%%", 100 * e);
+  std::printf("\n");
+  for (const auto& [name, pts] : curves) {
+    std::printf("%-20s", name.c_str());
+    for (double e : targets) {
+      const double v = BytesAtError(pts, e);
+      if (v > 0)
+        std::printf("   %10.0f (%5.3f%%)", v, 100 * v / raw_bytes);
+      else
+        std::printf("   %18s", "-");
+    }
+    std::printf("\n");
+  }
+  std::printf("%-20s", "best 2D / adaptive4d");
+  for (double e : targets) {
+    const double a = best_of(prt::CompressionScheme::kAdaptive4D, e);
+    const double d = best_of(prt::CompressionScheme::k2D, e);
+    if (a > 0 && d > 0)
+      std::printf("   %17.2fx", d / a);
+    else
+      std::printf("   %18s", "-");
+  }
+  std::printf("\n");
+  // Smallest ratio over the errors both curves reach (50 log-spaced errors).
+  double lo = 1e30, hi = 0, lo2 = 1e30, hi2 = 0;
+  for (const Point& p : points) {
+    if (p.scheme == prt::CompressionScheme::kAdaptive4D)
+      lo = std::min(lo, p.b_err), hi = std::max(hi, p.b_err);
+    if (p.scheme == prt::CompressionScheme::k2D)
+      lo2 = std::min(lo2, p.b_err), hi2 = std::max(hi2, p.b_err);
+  }
+  lo = std::max(lo, lo2);
+  hi = std::min(hi, hi2);
+  if (lo < hi) {
+    double min_ratio = 1e30, at = 0;
+    for (int i = 0; i <= 50; ++i) {
+      const double e = lo * std::pow(hi / lo, i / 50.0);
+      const double a = best_of(prt::CompressionScheme::kAdaptive4D, e);
+      const double d = best_of(prt::CompressionScheme::k2D, e);
+      if (a > 0 && d > 0 && d / a < min_ratio) min_ratio = d / a, at = e;
+    }
+    std::printf(
+        "smallest best-2D / adaptive4d ratio over relit errors %.4f..%.4f: %.2fx (at %.4f)\n", lo,
+        hi, min_ratio, at);
+  }
   std::printf(
-      "\naverage adaptive column depth by row-transform level (0 = scaling … %d = finest;"
-      " max depth %d):\n",
+      "\naverage adaptive column depth by row-transform level (Fig. 8; 0 = scaling … %d ="
+      " finest; max depth %d):\n",
       row_depth, prt::MaxColumnDepth(tr.domain));
   for (const auto& l : depth_lines) std::printf("  %s\n", l.c_str());
+  std::fflush(stdout);
+
+  if (out_dir.empty()) return;
+  std::filesystem::create_directories(out_dir);
+  const std::string base = out_dir + "/" + tr.name + "_n" + std::to_string(n);
+  {
+    std::ofstream csv(base + ".csv");
+    csv << "scheme,budget,keep,terms,bytes,pct_raw,T_relF,B_relRMS,seconds\n";
+    for (const Point& p : points)
+      csv << prt::ToString(p.scheme) << ',' << prt::ToString(p.budget) << ',' << p.keep << ','
+          << p.terms << ',' << p.bytes << ',' << p.pct_raw << ',' << p.t_err << ',' << p.b_err
+          << ',' << p.secs << '\n';
+  }
+  {
+    std::ofstream gp(base + ".gp");
+    gp << "set terminal pngcairo size 900,600\nset output '" << base << ".png'\n"
+       << "set datafile separator ','\nset logscale xy\nset grid\n"
+       << "set xlabel 'storage (% of raw float32 T)'\nset ylabel 'relative RMS error of relit "
+          "radiance'\n"
+       << "set title '" << tr.name << ", n = " << n << ", " << S << " samples (Fig. 7)'\n"
+       << "set key top right\nplot ";
+    bool first = true;
+    for (const auto& [name, pts] : curves) {
+      const std::string s = prt::ToString(pts[0].scheme), b = prt::ToString(pts[0].budget);
+      gp << (first ? "" : ", ") << "'" << base << ".csv' using ($1 eq '" << s << "' && $2 eq '" << b
+         << "' ? $6 : NaN):8 with linespoints title '" << name << "'";
+      first = false;
+    }
+    gp << "\n";
+  }
+  const std::string cmd = "gnuplot '" + base + ".gp' 2>/dev/null";
+  if (std::system(cmd.c_str()) == 0)
+    std::printf("wrote %s.csv, %s.gp, %s.png\n", base.c_str(), base.c_str(), base.c_str());
+  else
+    std::printf("wrote %s.csv, %s.gp (gnuplot failed: no PNG)\n", base.c_str(), base.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string run, scenes_arg = "default,dragon,armadillo", n_arg = "32", cache, out_dir;
+  std::string keep_arg = "0.0025,0.005,0.01,0.02,0.04,0.08", budget = "both";
+  std::string schemes_arg = "2d,4d,adaptive4d", column_keep_arg;
+  int rays = 1, bits = 9, light_weight = 0;
+  bool t_error = false;
+  CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
+  app.add_option("--run", run, "farm run folder to read T from (instead of the scenes)");
+  app.add_option("--scenes", scenes_arg, "benchmark scenes (default, dragon, armadillo, camel)");
+  app.add_option("--n", n_arg, "cubemap resolutions, comma-separated");
+  app.add_option("--rays", rays, "rays per texel when tracing");
+  app.add_option("--cache", cache, "folder for traced transport matrices (reused when present)");
+  app.add_option("--bits", bits, "quantisation bits");
+  app.add_option("--budget", budget, "column | global | both");
+  app.add_option("--schemes", schemes_arg, "2d,4d,adaptive4d");
+  app.add_option("--keep", keep_arg, "comma-separated keep fractions");
+  app.add_option("--column-keep", column_keep_arg,
+                 "keep fractions for the column budget (default: --keep)");
+  app.add_option(
+      "--light-weight", light_weight,
+      "global budget: row level l weighted by 2^(-w*l/2) (scene compression.light_weight)");
+  app.add_flag("--t-error", t_error, "also measure the relative Frobenius error of T (slower)");
+  app.add_option("--out", out_dir, "folder for CSV, gnuplot scripts and PNG curves");
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_level(spdlog::level::warn);
+  try {
+    const std::vector<double> keeps = SplitList<double>(keep_arg);
+    const std::vector<double> column_keeps =
+        column_keep_arg.empty() ? keeps : SplitList<double>(column_keep_arg);
+    std::vector<prt::CompressionBudget> budgets;
+    if (budget != "global") budgets.push_back(prt::CompressionBudget::kColumn);
+    if (budget != "column") budgets.push_back(prt::CompressionBudget::kGlobal);
+    std::vector<prt::CompressionScheme> schemes;
+    for (const std::string& s : SplitList<std::string>(schemes_arg))
+      schemes.push_back(prt::ParseCompressionScheme(s, "--schemes"));
+    if (!run.empty()) {
+      const Transport tr = ReadRun(run);
+      RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error, out_dir);
+      return 0;
+    }
+    for (const std::string& scene : SplitList<std::string>(scenes_arg))
+      for (int n : SplitList<int>(n_arg)) {
+        const Transport tr = SceneTransport(scene, n, rays, cache);
+        RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error, out_dir);
+      }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "compression_bench: %s\n", e.what());
+    return 1;
+  }
   return 0;
 }

@@ -3,7 +3,9 @@
 // against what the remaining bytes can hold before anything is allocated.
 #include "vocabulary/compressed_transport.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -17,7 +19,7 @@ namespace {
 constexpr char kHeaderMagic[8] = {'P', 'R', 'T', 'C', 'T', 'H', 'D', '1'};
 constexpr char kBlockMagic[4] = {'P', 'C', 'B', '1'};
 constexpr char kFileMagic[8] = {'P', 'R', 'T', 'C', 'T', 'F', 'L', '1'};
-constexpr uint32_t kFormatVersion = 1;
+constexpr uint32_t kFormatVersion = 2;      // 1 is still read (varint indices, column budget)
 constexpr uint32_t kMaxSamples = 1u << 28;  // consumers allocate O(samples)
 
 class Writer {
@@ -80,6 +82,11 @@ class Reader {
   }
   std::size_t remaining() const { return b_.size() - pos_; }
   std::size_t pos() const { return pos_; }
+  std::span<const uint8_t> bytes() const { return b_; }
+  void Skip(std::size_t n) {
+    Need(n, "skip");
+    pos_ += n;
+  }
   void Need(std::size_t n, const char* what) const {
     if (remaining() < n) Fail(std::string("truncated: ") + what);
   }
@@ -165,6 +172,120 @@ int MaxQ(int bits) {
   return (1 << (bits - 1)) - 1;
 }
 
+// Adaptive Golomb-Rice coding (as in JPEG-LS, LOCO-I): a value v ≥ 0 is coded with parameter
+// k = the smallest k with N·2^k ≥ A, where A sums the recent values and N counts them (halved
+// every kRiceReset values), so k follows the local density with no side information: v >> k in
+// unary (1 bits, then a 0), then its k low bits; when v >> k ≥ kRiceEscape, kRiceEscape 1 bits
+// then v in `raw_bits` bits. Bits are LSB-first.
+constexpr int kRiceEscape = 24;
+constexpr uint32_t kRiceReset = 16;
+
+struct RiceState {
+  uint64_t a, n = 1;
+  explicit RiceState(uint64_t initial) : a(std::max<uint64_t>(initial, 1)) {}
+  int k() const {
+    int k = 0;
+    while ((n << k) < a && k < 30) ++k;
+    return k;
+  }
+  void Update(uint64_t v) {
+    a += v;
+    if (++n == kRiceReset) {
+      a = (a + 1) >> 1;
+      n >>= 1;
+    }
+  }
+};
+
+class BitWriter {
+ public:
+  explicit BitWriter(std::vector<uint8_t>& out) : out_(out) {}
+  void Put(uint64_t v, int nbits) {  // nbits ≤ 32
+    for (int done = 0; done < nbits;) {
+      const int take = std::min(nbits - done, 8 - filled_);
+      acc_ |= static_cast<uint32_t>((v >> done) & ((1u << take) - 1)) << filled_;
+      filled_ += take;
+      done += take;
+      if (filled_ == 8) {
+        out_.push_back(static_cast<uint8_t>(acc_));
+        acc_ = 0;
+        filled_ = 0;
+      }
+    }
+  }
+  void Rice(uint64_t v, RiceState& st, int raw_bits) {
+    const int k = st.k();
+    const uint64_t high = v >> k;
+    if (high >= static_cast<uint64_t>(kRiceEscape)) {
+      Put((uint64_t{1} << kRiceEscape) - 1, kRiceEscape);
+      Put(v, raw_bits);
+    } else {
+      Put((uint64_t{1} << high) - 1, static_cast<int>(high));
+      Put(0, 1);
+      Put(v & ((uint64_t{1} << k) - 1), k);
+    }
+    st.Update(v);
+  }
+  void Flush() {
+    if (filled_ > 0) out_.push_back(static_cast<uint8_t>(acc_));
+    acc_ = 0;
+    filled_ = 0;
+  }
+
+ private:
+  std::vector<uint8_t>& out_;
+  uint32_t acc_ = 0;
+  int filled_ = 0;
+};
+
+// Reads what BitWriter wrote from bytes [pos, end); fails (InputError via fail) past the end.
+class BitReader {
+ public:
+  BitReader(std::span<const uint8_t> b, std::size_t pos) : b_(b), p_(pos) {}
+  template <class Fail>
+  uint64_t Get(int nbits, Fail&& fail) {
+    uint64_t v = 0;
+    for (int i = 0; i < nbits; ++i) {
+      if (filled_ == 0) {
+        if (p_ >= b_.size()) fail();
+        acc_ = b_[p_++];
+        filled_ = 8;
+      }
+      v |= static_cast<uint64_t>(acc_ & 1u) << i;
+      acc_ >>= 1;
+      --filled_;
+    }
+    return v;
+  }
+  template <class Fail>
+  uint64_t Rice(RiceState& st, int raw_bits, Fail&& fail) {
+    const int k = st.k();
+    int high = 0;
+    while (high < kRiceEscape && Get(1, fail) != 0) ++high;
+    const uint64_t v = high == kRiceEscape ? Get(raw_bits, fail)
+                                           : (static_cast<uint64_t>(high) << k) | Get(k, fail);
+    st.Update(v);
+    return v;
+  }
+  std::size_t end() const { return p_; }  // the byte after the last one read
+
+ private:
+  std::span<const uint8_t> b_;
+  std::size_t p_;
+  uint32_t acc_ = 0;
+  int filled_ = 0;
+};
+
+// Initial states: the mean gap if the terms were spread evenly; values start at a quarter of
+// the quantiser range.
+uint64_t InitialGapMean(uint64_t samples, uint64_t terms) {
+  return terms > 0 ? (samples - std::min(samples, terms)) / terms : 1;
+}
+uint64_t InitialValueMean(int bits) {
+  return uint64_t{1} << std::max(0, bits - 3);
+}
+constexpr int kGapRawBits = 28;  // gaps < kMaxSamples
+
 }  // namespace
 
 RowWavelet ParseRowWavelet(const std::string& s, const std::string& file) {
@@ -182,6 +303,14 @@ CompressionScheme ParseCompressionScheme(const std::string& s, const std::string
   if (s == "4d") return CompressionScheme::k4D;
   if (s == "adaptive4d") return CompressionScheme::kAdaptive4D;
   throw InputError(file, "unknown compression scheme '" + s + "' (expected 2d, 4d or adaptive4d)");
+}
+CompressionBudget ParseCompressionBudget(const std::string& s, const std::string& file) {
+  if (s == "column") return CompressionBudget::kColumn;
+  if (s == "global") return CompressionBudget::kGlobal;
+  throw InputError(file, "unknown compression budget '" + s + "' (expected column or global)");
+}
+const char* ToString(CompressionBudget b) {
+  return b == CompressionBudget::kColumn ? "column" : "global";
 }
 const char* ToString(RowWavelet w) {
   return w == RowWavelet::kHaar ? "haar" : "d4";
@@ -224,6 +353,9 @@ void ValidateHeader(const CompressedTransportHeader& h, const std::string& name)
   if (static_cast<uint8_t>(h.column_wavelet) > 1)
     throw InputError(name, "unknown column wavelet id");
   if (static_cast<uint8_t>(h.scheme) > 2) throw InputError(name, "unknown compression scheme id");
+  if (static_cast<uint8_t>(h.budget) > 1) throw InputError(name, "unknown compression budget id");
+  if (static_cast<uint8_t>(h.index_coding) > 1) throw InputError(name, "unknown index coding id");
+  if (h.light_weight > 16) throw InputError(name, "light weight exponent > 16");
   if (h.bits < 2 || h.bits > 24)
     throw InputError(name, "quantiser bits " + std::to_string(h.bits) + " not in [2,24]");
   if (!std::isfinite(h.keep_fraction) || h.keep_fraction < 0 || h.keep_fraction > 1)
@@ -281,8 +413,8 @@ void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& 
 
 // Header layout: magic "PRTCTHD1", u32 version, u32 n, u32 samples, u8 row wavelet,
 // u8 column wavelet, u8 scheme, u8 bits, f64 keep fraction, u32 terms per column, u64 seed,
-// u32 segment count, then per segment: u8 kind, u32 count, u32 width, u32 height,
-// u8 has_order, [count × u32 order].
+// (version 2: u8 budget, u8 index coding, u8 light weight), u32 segment count, then per segment: u8
+// kind, u32 count, u32 width, u32 height, u8 has_order, [count × u32 order].
 std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   ValidateHeader(h, "EncodeHeader");
   Writer w;
@@ -297,6 +429,9 @@ std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   w.F64(h.keep_fraction);
   w.U32(h.terms_per_column);
   w.U64(h.dither_seed);
+  w.U8(static_cast<uint8_t>(h.budget));
+  w.U8(static_cast<uint8_t>(h.index_coding));
+  w.U8(h.light_weight);
   w.U32(static_cast<uint32_t>(h.domain.segments.size()));
   for (const auto& s : h.domain.segments) {
     w.U8(static_cast<uint8_t>(s.kind));
@@ -314,7 +449,7 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
   CompressedTransportHeader h;
   r.Magic(kHeaderMagic, 8, "header magic");
   const uint32_t version = r.U32("version");
-  if (version != kFormatVersion)
+  if (version != kFormatVersion && version != 1)
     r.Fail("unsupported compressed-transport version " + std::to_string(version));
   h.cubemap_n = r.U32("cubemap size");
   h.sample_count = r.U32("sample count");
@@ -331,6 +466,17 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
   h.keep_fraction = r.F64("keep fraction");
   h.terms_per_column = r.U32("terms per column");
   h.dither_seed = r.U64("dither seed");
+  h.budget = CompressionBudget::kColumn;
+  h.index_coding = IndexCoding::kVarint;
+  if (version >= 2) {
+    const uint8_t bu = r.U8("budget");
+    const uint8_t ic = r.U8("index coding");
+    if (bu > 1) r.Fail("unknown budget id " + std::to_string(bu));
+    if (ic > 1) r.Fail("unknown index coding id " + std::to_string(ic));
+    h.budget = static_cast<CompressionBudget>(bu);
+    h.index_coding = static_cast<IndexCoding>(ic);
+    h.light_weight = r.U8("light weight");
+  }
   const uint32_t nseg = r.U32("segment count");
   // Every segment takes at least 14 bytes: bound the count before allocating.
   if (nseg == 0 || nseg > r.remaining() / 14) r.Fail("segment count " + std::to_string(nseg));
@@ -374,10 +520,28 @@ void WriteBlock(Writer& w, const CompressedTransportHeader& h, const CompressedC
     w.U8(c.depth);
     w.F32(c.scale);
     w.Varint(c.index.size());
-    uint32_t pi = 0;
-    for (std::size_t k = 0; k < c.index.size(); ++k) {
-      w.Varint(k == 0 ? c.index[0] : c.index[k] - pi - 1);
-      pi = c.index[k];
+    if (h.index_coding == IndexCoding::kAdaptiveRice) {
+      // Gaps (first index, then index − previous − 1), then (|q| − 1, sign) per term.
+      BitWriter bw(w.out());
+      RiceState gaps(InitialGapMean(h.sample_count, c.index.size()));
+      uint32_t last = 0;
+      for (std::size_t k = 0; k < c.index.size(); ++k) {
+        bw.Rice(k == 0 ? c.index[0] : c.index[k] - last - 1, gaps, kGapRawBits);
+        last = c.index[k];
+      }
+      RiceState values(InitialValueMean(h.bits));
+      for (int32_t q : c.q) {
+        bw.Rice(static_cast<uint64_t>(std::abs(q)) - 1, values, h.bits - 1);
+        bw.Put(q < 0 ? 1 : 0, 1);
+      }
+      bw.Flush();
+      continue;
+    } else {
+      uint32_t pi = 0;
+      for (std::size_t k = 0; k < c.index.size(); ++k) {
+        w.Varint(k == 0 ? c.index[0] : c.index[k] - pi - 1);
+        pi = c.index[k];
+      }
     }
     w.PackedSigned(c.q, h.bits);
   }
@@ -406,16 +570,47 @@ CompressedColumnBlock ReadBlock(Reader& r, const CompressedTransportHeader& h,
     c.depth = r.U8("depth");
     c.scale = r.F32("scale");
     const uint32_t nterms = r.Varint32("term count");
-    // Every term costs at least one index byte: never allocate beyond the input.
-    if (nterms == 0 || nterms > h.sample_count || nterms > r.remaining())
+    // Every term costs at least one index bit and `bits` value bits: never allocate beyond a
+    // constant times the input.
+    if (nterms == 0 || nterms > h.sample_count ||
+        (h.index_coding == IndexCoding::kVarint &&
+         nterms > r.remaining() * 8 / (static_cast<std::size_t>(h.bits) + 1)))
       r.Fail("term count " + std::to_string(nterms) + " impossible");
-    c.index.resize(nterms);
-    uint64_t idx = 0;
-    for (uint32_t k = 0; k < nterms; ++k) {
-      const uint64_t d = r.Varint32("index delta");
-      idx = (k == 0) ? d : idx + 1 + d;
-      if (idx >= h.sample_count) r.Fail("coefficient index out of range");
-      c.index[k] = static_cast<uint32_t>(idx);
+    if (h.index_coding == IndexCoding::kAdaptiveRice) {
+      // At least 1 bit per gap and 2 per value.
+      if (nterms > r.remaining() * 8 / 3)
+        r.Fail("term count " + std::to_string(nterms) + " impossible");
+      BitReader br(r.bytes(), r.pos());
+      auto fail = [&]() { r.Fail("truncated adaptive Rice codes"); };
+      c.index.resize(nterms);
+      c.q.resize(nterms);
+      RiceState gaps(InitialGapMean(h.sample_count, nterms));
+      uint64_t from = 0;
+      for (uint32_t k = 0; k < nterms; ++k) {
+        const uint64_t idx = from + br.Rice(gaps, kGapRawBits, fail);
+        if (idx >= h.sample_count) r.Fail("coefficient index out of range");
+        c.index[k] = static_cast<uint32_t>(idx);
+        from = idx + 1;
+      }
+      RiceState values(InitialValueMean(h.bits));
+      const uint64_t maxq = static_cast<uint64_t>(MaxQ(h.bits));
+      for (uint32_t k = 0; k < nterms; ++k) {
+        const uint64_t m = br.Rice(values, h.bits - 1, fail) + 1;
+        if (m > maxq) r.Fail("quantised value out of range");
+        c.q[k] = br.Get(1, fail) != 0 ? -static_cast<int32_t>(m) : static_cast<int32_t>(m);
+      }
+      r.Skip(br.end() - r.pos());
+      ValidateColumn(h, c, name);
+      continue;
+    } else {
+      c.index.resize(nterms);
+      uint64_t idx = 0;
+      for (uint32_t k = 0; k < nterms; ++k) {
+        const uint64_t d = r.Varint32("index delta");
+        idx = (k == 0) ? d : idx + 1 + d;
+        if (idx >= h.sample_count) r.Fail("coefficient index out of range");
+        c.index[k] = static_cast<uint32_t>(idx);
+      }
     }
     c.q = r.PackedSigned(nterms, h.bits, "quantised values");
     ValidateColumn(h, c, name);

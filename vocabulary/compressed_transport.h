@@ -30,15 +30,25 @@ enum class ColumnWavelet : uint8_t { kLeGall53 = 0, kCdf97 = 1 };
 // k2D: row transform only, per-row non-linear approximation (Ng et al. 2003).
 // k4D: every column transformed to full depth. kAdaptive4D: per-column depth (§4.2).
 enum class CompressionScheme : uint8_t { k2D = 0, k4D = 1, kAdaptive4D = 2 };
+// Which coefficients the non-linear approximation keeps: kColumn, the paper's N terms per
+// column (2D: per row); kGlobal, those above one magnitude threshold over the whole matrix.
+enum class CompressionBudget : uint8_t { kColumn = 0, kGlobal = 1 };
+// How a stored column's terms are coded: kVarint, LEB128 index gaps and `bits`-bit values
+// (format version 1); kAdaptiveRice, adaptive Golomb-Rice codes of the index gaps and of the
+// value magnitudes, and sign bits (version 2; docs/compression.md).
+enum class IndexCoding : uint8_t { kVarint = 0, kAdaptiveRice = 1 };
 
 // Parses "haar"|"d4", "legall53"|"cdf97", "2d"|"4d"|"adaptive4d" (scene.h CompressionSettings);
 // throws prt::InputError(file, ...) on anything else.
 RowWavelet ParseRowWavelet(const std::string& s, const std::string& file);
 ColumnWavelet ParseColumnWavelet(const std::string& s, const std::string& file);
 CompressionScheme ParseCompressionScheme(const std::string& s, const std::string& file);
+CompressionBudget ParseCompressionBudget(const std::string& s,
+                                         const std::string& file);  // column|global
 const char* ToString(RowWavelet w);
 const char* ToString(ColumnWavelet w);
 const char* ToString(CompressionScheme s);
+const char* ToString(CompressionBudget b);
 
 // One piece of the spatial domain: `count` consecutive spatial samples of the global order.
 struct SpatialSegment {
@@ -68,6 +78,11 @@ struct CompressedTransportHeader {
   double keep_fraction = 0.05;    // non-linear approximation budget (docs/compression.md)
   uint32_t terms_per_column = 0;  // the per-column budget actually used (0: 2D scheme)
   uint64_t dither_seed = 1;       // subtractive dither sequence (compressed_relight.h)
+  CompressionBudget budget = CompressionBudget::kColumn;  // recorded, not needed to decode
+  // Global budget: a coefficient of a column at row-wavelet level l competes with magnitude
+  // |c|·2^(−light_weight·l/2) (docs/compression.md); [0, 16]. Recorded, not needed to decode.
+  uint8_t light_weight = 0;
+  IndexCoding index_coding = IndexCoding::kAdaptiveRice;
   SpatialDomain domain;
 
   uint32_t column_count() const { return 6u * cubemap_n * cubemap_n; }

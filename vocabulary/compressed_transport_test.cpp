@@ -99,6 +99,53 @@ TEST(CompressedTransportFormat, TransportRoundTripsExactlyAtEveryBitDepth) {
   }
 }
 
+// Version 1 files (LEB128 index gaps, fixed-width values) still decode; version 2's adaptive
+// Rice codes cost about one bit per gap of 0 and two per value ±1.
+TEST(CompressedTransportFormat, VarintAndAdaptiveRiceCodingRoundTripAndRiceIsSmaller) {
+  for (IndexCoding coding : {IndexCoding::kVarint, IndexCoding::kAdaptiveRice})
+    for (int bits : {2, 9, 24}) {
+      CompressedTransportHeader h = TestHeader(bits);
+      h.index_coding = coding;
+      h.budget = CompressionBudget::kGlobal;
+      const CompressedTransport t = RandomTransport(h, static_cast<unsigned>(bits) + 7);
+      const CompressedTransport d = DecodeCompressedTransport(EncodeCompressedTransport(t), "t");
+      ExpectSameTransport(t, d);
+      EXPECT_EQ(d.header.index_coding, coding);
+      EXPECT_EQ(d.header.budget, CompressionBudget::kGlobal);
+    }
+  CompressedTransportHeader h = TestHeader(9);
+  h.cubemap_n = 2;
+  h.sample_count = 2000;
+  h.domain.segments = {SpatialSegment{SpatialSegment::Kind::kMesh1D, 2000, 0, 0, {}}};
+  CompressedColumnBlock block;
+  block.first_column = 0;
+  block.column_span = 24;
+  CompressedColumn c;
+  c.column = 3;
+  c.scale = 1.0f;
+  for (uint32_t i = 0; i < 1000; ++i) {
+    c.index.push_back(i);
+    c.q.push_back(1);
+  }
+  block.columns = {c};
+  h.index_coding = IndexCoding::kVarint;
+  const std::size_t varint = EncodeColumnBlock(h, block).size();
+  h.index_coding = IndexCoding::kAdaptiveRice;
+  const std::vector<uint8_t> rice = EncodeColumnBlock(h, block);
+  // Block head 16 bytes, column head 8 (delta, depth, scale, 2-byte count); varint: 1000 index
+  // bytes and 1000 9-bit values; adaptive Rice: 1 bit per zero gap, 2 per value of magnitude 1
+  // (plus under 256 bits while the value parameter adapts down from k = 6).
+  EXPECT_EQ(varint, 16u + 8u + 1000u + 1125u);
+  EXPECT_LE(rice.size(), 16u + 8u + (1000u + 2000u + 256u) / 8u);
+  EXPECT_EQ(DecodeColumnBlock(h, rice, "rice").columns[0].index, c.index);
+  // Large gaps round trip too.
+  c.index.clear();
+  for (uint32_t i = 0; i < 2; ++i) c.index.push_back(999 + 1000 * i);
+  c.q = {3, -4};
+  block.columns = {c};
+  EXPECT_EQ(DecodeColumnBlock(h, EncodeColumnBlock(h, block), "rice").columns[0].index, c.index);
+}
+
 TEST(CompressedTransportFormat, EveryTruncationIsRejectedWithInputError) {
   const CompressedTransport t = RandomTransport(TestHeader(), 7);
   const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, 8);

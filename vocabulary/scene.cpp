@@ -421,6 +421,8 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.scheme = s.Choice("scheme", p.scheme, {"2d", "4d", "adaptive4d"});
     p.bits = static_cast<int>(s.Integer("bits", p.bits, 1, 16));
     p.keep_fraction = s.Number("keep_fraction", p.keep_fraction, 0, 1, true);
+    p.budget = s.Choice("budget", p.budget, {"column", "global"});
+    p.light_weight = static_cast<int>(s.Integer("light_weight", p.light_weight, 0, 16));
     s.RejectUnknown();
   }
   {

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "vocabulary/compressed_relight.h"
@@ -25,6 +26,10 @@ CompressionOptions CompressionOptionsFrom(const CompressionSettings& s, const st
   if (!(s.keep_fraction > 0) || s.keep_fraction > 1)
     throw InputError(file, "compression.keep_fraction must be in (0, 1]");
   o.keep_fraction = s.keep_fraction;
+  o.budget = ParseCompressionBudget(s.budget, file);
+  if (s.light_weight < 0 || s.light_weight > 16)
+    throw InputError(file, "compression.light_weight must be in [0, 16]");
+  o.light_weight = s.light_weight;
   return o;
 }
 
@@ -52,6 +57,9 @@ CompressedTransportHeader MakeCompressedHeader(const CompressionOptions& o, int 
   h.keep_fraction = o.keep_fraction;
   h.terms_per_column = o.scheme == CompressionScheme::k2D ? 0 : ColumnTermBudget(o, h.sample_count);
   h.dither_seed = o.dither_seed;
+  h.budget = o.budget;
+  h.light_weight =
+      o.budget == CompressionBudget::kGlobal ? static_cast<uint8_t>(o.light_weight) : 0;
   h.domain = domain;
   ValidateHeader(h, "compression options");
   return h;
@@ -63,7 +71,7 @@ void PrepareRows(const CompressedTransportHeader& h, const CompressionOptions& o
   const std::size_t M = h.column_count();
   tbb::parallel_for(std::size_t{0}, count, [&](std::size_t r) {
     ForwardRowTransform(h.row_wavelet, n, rows + r * M, 1);
-    if (h.scheme == CompressionScheme::k2D && !o.global_budget)
+    if (h.scheme == CompressionScheme::k2D && h.budget == CompressionBudget::kColumn)
       KeepLargestPerRow(rows + r * M, 1, M, RowTermBudget(o, M));
   });
 }
@@ -104,10 +112,11 @@ CompressedColumn QuantiseOneColumn(const CompressedTransportHeader& h, uint32_t 
   std::vector<uint32_t> kept;
   ApproximationEnergy e;
   if (threshold > 0) {
+    const float w = ColumnWeight(h, column);
     for (std::size_t i = 0; i < S; ++i) {
       const double v = static_cast<double>(c[i]) * c[i];
       e.total += v;
-      if (c[i] != 0.0f && std::fabs(c[i]) >= threshold) {
+      if (c[i] != 0.0f && std::fabs(c[i]) * w >= threshold) {
         kept.push_back(static_cast<uint32_t>(i));
         e.kept += v;
       }
@@ -183,6 +192,59 @@ float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep
   return mag[keep - 1];
 }
 
+void AddMagnitudeHistogram(const float* coefficients, std::size_t n, uint64_t* histogram) {
+  for (std::size_t i = 0; i < n; ++i) {
+    uint32_t u;
+    std::memcpy(&u, &coefficients[i], 4);
+    u &= 0x7fffffffu;
+    if (u != 0) ++histogram[u >> 16];
+  }
+}
+
+float ColumnWeight(const CompressedTransportHeader& h, uint32_t column) {
+  if (h.light_weight == 0) return 1.0f;
+  thread_local std::vector<uint8_t> levels;
+  thread_local uint32_t levels_n = 0;
+  if (levels_n != h.cubemap_n) {
+    levels = RowCoefficientLevels(static_cast<int>(h.cubemap_n));
+    levels_n = h.cubemap_n;
+  }
+  return static_cast<float>(1.0 / ScaleFactor(h.light_weight * levels[column]));
+}
+
+void AddColumnBlockHistogram(const CompressedTransportHeader& h, uint32_t first_column,
+                             uint32_t count, const float* transformed, uint64_t* histogram) {
+  const std::size_t S = h.sample_count;
+  std::vector<float> v(S);
+  for (uint32_t k = 0; k < count; ++k) {
+    const float w = ColumnWeight(h, first_column + k);
+    const float* c = transformed + static_cast<std::size_t>(k) * S;
+    for (std::size_t i = 0; i < S; ++i) v[i] = std::fabs(c[i]) * w;
+    AddMagnitudeHistogram(v.data(), S, histogram);
+  }
+}
+
+float ThresholdFromHistogram(const uint64_t* histogram, uint64_t keep) {
+  uint64_t count = 0;
+  std::size_t bin = kMagnitudeBins;
+  while (bin > 0) {
+    --bin;
+    count += histogram[bin];
+    if (count >= keep && histogram[bin] > 0) break;
+  }
+  // Lower edge of the bin (at least the smallest positive float: zeros are never kept).
+  const uint32_t u = std::max<uint32_t>(static_cast<uint32_t>(bin) << 16, 1u);
+  float t;
+  std::memcpy(&t, &u, 4);
+  return t;
+}
+
+uint64_t GlobalTermBudget(const CompressedTransportHeader& h) {
+  const double k = std::round(h.keep_fraction * static_cast<double>(h.sample_count) *
+                              static_cast<double>(h.column_count()));
+  return static_cast<uint64_t>(std::max(1.0, k));
+}
+
 CompressedTransport CompressTransport(const float* T, int cubemap_n, const SpatialDomain& domain,
                                       const CompressionOptions& o,
                                       std::vector<ColumnStats>* stats) {
@@ -199,10 +261,10 @@ CompressedTransport CompressTransport(const float* T, int cubemap_n, const Spati
   std::vector<uint8_t> depths(M);
   TransformColumnBlock(out.header, static_cast<uint32_t>(M), cols.data(), depths.data());
   float threshold = 0.0f;
-  if (o.global_budget) {
-    const double keep = std::round(o.keep_fraction * static_cast<double>(S * M));
-    threshold = GlobalThreshold(cols.data(), S * M, static_cast<std::size_t>(std::max(1.0, keep)));
-    if (!(threshold > 0)) threshold = std::numeric_limits<float>::min();
+  if (o.budget == CompressionBudget::kGlobal) {
+    std::vector<uint64_t> hist(kMagnitudeBins, 0);
+    AddColumnBlockHistogram(out.header, 0, static_cast<uint32_t>(M), cols.data(), hist.data());
+    threshold = ThresholdFromHistogram(hist.data(), GlobalTermBudget(out.header));
   }
   out.columns = QuantiseColumnBlock(out.header, 0, static_cast<uint32_t>(M), cols.data(),
                                     depths.data(), threshold, stats);

@@ -27,10 +27,14 @@ struct CompressionOptions {
   // approximation per column (§4.4).
   double keep_fraction = 0.05;
   uint32_t terms_per_column = 0;  // when > 0, overrides keep_fraction for the column budget
-  // Not in the paper: keep the round(f·samples·columns) largest coefficients of the whole
-  // transformed matrix instead of N per column (2D: instead of per row). The per-column budget
-  // still decides each column's depth. In memory only (the farm would need a global threshold).
-  bool global_budget = false;
+  // kColumn: the paper's N terms per column (2D: per row). kGlobal (not in the paper): keep
+  // about round(f·samples·columns) coefficients of the whole transformed matrix, those at or above
+  // a magnitude threshold (MagnitudeHistogram, ThresholdFromHistogram); the per-column budget
+  // still decides each column's depth. docs/compression.md.
+  CompressionBudget budget = CompressionBudget::kColumn;
+  // Global budget only: rank magnitudes of row level l by |c|·2^(−light_weight·l/2), favouring
+  // the coarse row-wavelet columns that carry most of the relit radiance under natural lighting.
+  int light_weight = 0;
   uint64_t dither_seed = 1;
 };
 
@@ -76,8 +80,26 @@ std::vector<CompressedColumn> QuantiseColumnBlock(const CompressedTransportHeade
                                                   const float* transformed, const uint8_t* depths,
                                                   float threshold,
                                                   std::vector<ColumnStats>* stats = nullptr);
-// The keep-th largest non-zero |c| of n coefficients (the global budget's threshold).
+// The keep-th largest non-zero |c| of n coefficients (exact; tests and diagnostics).
 float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep);
+
+// Global budget, the same on any number of ranks and any block order: non-zero magnitudes are
+// counted in kMagnitudeBins bins by the top 16 bits of their float32 pattern (bins 2^-7 wide
+// relative to the value); histograms of column blocks add. The threshold is the lower edge of
+// the bin where the count from the largest bin down first reaches `keep`, so that every |c| in
+// that bin and above is kept: at least `keep` terms (all non-zeros when there are fewer), at most
+// one bin more.
+inline constexpr std::size_t kMagnitudeBins = std::size_t{1} << 15;
+void AddMagnitudeHistogram(const float* coefficients, std::size_t n, uint64_t* histogram);
+// The same for `count` transformed columns first_column… (column-major), each column's
+// magnitudes weighted by ColumnWeight (what QuantiseColumnBlock compares with the threshold).
+void AddColumnBlockHistogram(const CompressedTransportHeader& h, uint32_t first_column,
+                             uint32_t count, const float* transformed, uint64_t* histogram);
+// 2^(−light_weight·l/2) for the row level l of `column`.
+float ColumnWeight(const CompressedTransportHeader& h, uint32_t column);
+float ThresholdFromHistogram(const uint64_t* histogram, uint64_t keep);
+// Terms the global budget aims at: round(f·samples·columns), at least 1.
+uint64_t GlobalTermBudget(const CompressedTransportHeader& h);
 
 // The whole pipeline in memory: T is samples × 6n², row-major, in the cubemap texel basis.
 CompressedTransport CompressTransport(const float* T, int cubemap_n, const SpatialDomain& domain,

@@ -243,6 +243,28 @@ TEST(TransportCompressor, GlobalThresholdIsTheKthLargestMagnitude) {
   EXPECT_EQ(GlobalThreshold(c.data(), 3, 0), std::numeric_limits<float>::infinity());
 }
 
+// The histogram threshold: the lower edge of the bin where the count from the top reaches keep;
+// values sharing that bin are all kept; histograms of parts add to the histogram of the whole.
+TEST(TransportCompressor, HistogramThresholdKeepsWholeBinsAndAddsOverParts) {
+  const std::vector<float> c = {0.5f, -3.0f, 0.0f, 2.0f, -1.0f, 0.25f, 3.01f};
+  std::vector<uint64_t> hist(kMagnitudeBins, 0), part(kMagnitudeBins, 0);
+  AddMagnitudeHistogram(c.data(), c.size(), hist.data());
+  EXPECT_EQ(ThresholdFromHistogram(hist.data(), 1), 3.0f);  // 3.01 and 3 share a bin: 2 kept
+  EXPECT_EQ(ThresholdFromHistogram(hist.data(), 3), 2.0f);
+  EXPECT_EQ(ThresholdFromHistogram(hist.data(), 4), 1.0f);
+  EXPECT_EQ(ThresholdFromHistogram(hist.data(), 6), 0.25f);
+  // More than the non-zeros: every non-zero is kept (the smallest positive float).
+  EXPECT_EQ(ThresholdFromHistogram(hist.data(), 100), std::numeric_limits<float>::denorm_min());
+  AddMagnitudeHistogram(c.data(), 3, part.data());
+  AddMagnitudeHistogram(c.data() + 3, c.size() - 3, part.data());
+  EXPECT_EQ(part, hist);
+  CompressedTransportHeader h;
+  h.cubemap_n = 8;
+  h.sample_count = 1000;
+  h.keep_fraction = 0.01;
+  EXPECT_EQ(GlobalTermBudget(h), 3840u);  // 0.01 · 1000 · 384
+}
+
 // The global budget keeps the keep·S·M largest transformed coefficients: as many terms as the
 // per-column budget (before zeros drop), a smaller error of T for 4D, and relighting that still
 // agrees with the dense decompressed matrix.
@@ -256,11 +278,14 @@ TEST(TransportCompressor, GlobalBudgetKeepsTheRequestedTermsAndLowersTheError) {
     o.bits = 16;
     std::vector<ColumnStats> col_stats, glob_stats;
     const CompressedTransport per = CompressTransport(syn.T.data(), 8, syn.domain, o, &col_stats);
-    o.global_budget = true;
+    o.budget = CompressionBudget::kGlobal;
     const CompressedTransport glob = CompressTransport(syn.T.data(), 8, syn.domain, o, &glob_stats);
+    EXPECT_EQ(glob.header.budget, CompressionBudget::kGlobal);
     std::size_t kept = 0;
     for (const auto& st : glob_stats) kept += st.kept_terms;
-    EXPECT_NEAR(static_cast<double>(kept), static_cast<double>(S * M) / 32, 2.0);
+    // At least the budget, at most one histogram bin (2^-7 of the magnitude) more.
+    EXPECT_GE(static_cast<double>(kept), static_cast<double>(S * M) / 32);
+    EXPECT_LE(static_cast<double>(kept), static_cast<double>(S * M) / 32 * 1.05);
     const double e_per = RelFrobenius(DecompressTransport(per), syn.T);
     const double e_glob = RelFrobenius(DecompressTransport(glob), syn.T);
     EXPECT_LT(e_glob, e_per) << ToString(scheme);
@@ -281,6 +306,12 @@ TEST(TransportCompressor, OptionsFromSceneSettingsAreValidated) {
   EXPECT_THROW(CompressionOptionsFrom(s, "scene.toml"), InputError);
   s.bits = 9;
   s.column_wavelet = "haar";
+  EXPECT_THROW(CompressionOptionsFrom(s, "scene.toml"), InputError);
+  s.column_wavelet = "legall53";
+  EXPECT_EQ(o.budget, CompressionBudget::kColumn);
+  s.budget = "global";
+  EXPECT_EQ(CompressionOptionsFrom(s, "scene.toml").budget, CompressionBudget::kGlobal);
+  s.budget = "row";
   EXPECT_THROW(CompressionOptionsFrom(s, "scene.toml"), InputError);
   CompressionOptions b;
   b.keep_fraction = 0.05;
