@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/viewer_session.h"
@@ -39,6 +40,25 @@ prt::Camera Orbit(const prt::Camera& c, double deg) {
   out.eye = c.target + prt::Vec3{std::cos(a) * d.x + std::sin(a) * d.z, d.y,
                                  -std::sin(a) * d.x + std::cos(a) * d.z};
   return out;
+}
+
+// The window's frame as the user sees it (PNG, or .npy of its 8-bit codes), read back from the
+// renderer (for the Xvfb test).
+void SaveScreenshot(SDL_Renderer* renderer, const prt::Camera& camera, std::size_t bytes,
+                    const std::string& screenshot) {
+  std::vector<unsigned char> shot(bytes);
+  if (SDL_RenderReadPixels(renderer, nullptr, SDL_PIXELFORMAT_RGB24, shot.data(),
+                           3 * camera.width) != 0)
+    return;
+  if (screenshot.size() > 4 && screenshot.substr(screenshot.size() - 4) == ".npy") {
+    const std::vector<float> codes(shot.begin(), shot.end());
+    prt::WriteNpyFloat32(screenshot, codes, codes.size() / 3, 3);
+  } else {
+    prt::ImageRgb out(camera.width, camera.height);
+    for (std::size_t i = 0; i < shot.size(); ++i)
+      out.pixels[i] = static_cast<float>(prt::SrgbDecode(shot[i] / 255.0));
+    prt::WritePng(out, screenshot);
+  }
 }
 
 }  // namespace
@@ -180,6 +200,96 @@ int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentIma
     char title[160];
     std::snprintf(title, sizeof title, "prt-view — %s — %zu terms — %.1f fps",
                   st.exact ? "exact" : prt::ToString(st.mode), st.terms, fps);
+    SDL_SetWindowTitle(window, title);
+  }
+  SDL_DestroyTexture(texture);
+  SDL_DestroyRenderer(renderer);
+  SDL_DestroyWindow(window);
+  return 0;
+}
+
+// The glossy asset in the window (docs/viewer.md, "Glossy assets"): left drag rotates the
+// environment (block lighting recomputed), right drag orbits the camera (the view changes every
+// vertex's BRDF: Algorithm 1 runs every frame), [ and ] scale every specular exponent by 1/2 or
+// 2, r toggles the pixel-basis reference.
+int RunGlossyWindow(prt::GlossySession& session, const prt::EnvironmentImage& env,
+                    const prt::Camera& camera, double exposure, int max_frames,
+                    const std::string& screenshot, bool exact_cosine) {
+  if (SDL_Init(SDL_INIT_VIDEO) != 0)
+    throw std::runtime_error(std::string("--window: SDL_Init failed: ") + SDL_GetError());
+  struct Quit {
+    ~Quit() { SDL_Quit(); }
+  } quit;
+  SDL_Window* window =
+      SDL_CreateWindow("prt-view (glossy)", SDL_WINDOWPOS_UNDEFINED, SDL_WINDOWPOS_UNDEFINED,
+                       camera.width, camera.height, SDL_WINDOW_SHOWN);
+  if (window == nullptr)
+    throw std::runtime_error(std::string("--window: cannot open a window: ") + SDL_GetError());
+  SDL_Renderer* renderer = SDL_CreateRenderer(window, -1, SDL_RENDERER_SOFTWARE);
+  if (renderer == nullptr) renderer = SDL_CreateRenderer(window, -1, 0);
+  if (renderer == nullptr)
+    throw std::runtime_error(std::string("--window: no renderer: ") + SDL_GetError());
+  SDL_Texture* texture = SDL_CreateTexture(
+      renderer, SDL_PIXELFORMAT_RGB24, SDL_TEXTUREACCESS_STREAMING, camera.width, camera.height);
+
+  const int n = session.cubemap_n();
+  const prt::ToneMapOptions tone{exposure, prt::ToneMap::kClamp};
+  double env_deg = 0, orbit_deg = 0, lit_deg = std::nan("");
+  bool reference = false;
+  prt::CubemapRgb cube;
+  prt::BlockLighting light;
+  std::vector<float> rgb(3 * session.sample_count());
+  std::vector<unsigned char> rgb8(3 * static_cast<std::size_t>(camera.width) *
+                                  static_cast<std::size_t>(camera.height));
+  double fps = 0;
+  bool running = true;
+  for (int frame = 0; running && (max_frames <= 0 || frame < max_frames); ++frame) {
+    const auto t0 = std::chrono::steady_clock::now();
+    SDL_Event e;
+    while (SDL_PollEvent(&e)) {
+      if (e.type == SDL_QUIT) running = false;
+      if (e.type == SDL_MOUSEMOTION && (e.motion.state & SDL_BUTTON_LMASK))
+        env_deg += 0.5 * e.motion.xrel;
+      if (e.type == SDL_MOUSEMOTION && (e.motion.state & SDL_BUTTON_RMASK))
+        orbit_deg += 0.5 * e.motion.xrel;
+      if (e.type == SDL_KEYDOWN) {
+        const SDL_Keycode k = e.key.keysym.sym;
+        if (k == SDLK_ESCAPE || k == SDLK_q) running = false;
+        if (k == SDLK_r) reference = !reference;
+        if (k == SDLK_LEFTBRACKET || k == SDLK_RIGHTBRACKET) {
+          const double f = k == SDLK_RIGHTBRACKET ? 2.0 : 0.5;
+          for (prt::Material& m : session.materials()) {
+            m.exponent = std::clamp(m.exponent * f, 1.0, 1e4);
+            m.exponent_v = std::clamp(m.exponent_v * f, 1.0, 1e4);
+          }
+        }
+      }
+    }
+    if (!(env_deg == lit_deg)) {
+      cube = prt::ResampleToCubemap(env, n, env_deg * 3.14159265358979323846 / 180.0);
+      light = session.Lighting(cube);
+      lit_deg = env_deg;
+    }
+    const prt::Camera cam = Orbit(camera, orbit_deg);
+    if (reference) {
+      session.RelightReference(light, cam.eye, rgb);
+    } else {
+      session.Relight(light, cam.eye, rgb, {.exact_cosine = exact_cosine});
+    }
+    const prt::ImageRgb image = session.Render(cam, rgb, &cube);
+    for (std::size_t i = 0; i < rgb8.size(); ++i) rgb8[i] = prt::ToSrgb8(image.pixels[i], tone);
+    SDL_UpdateTexture(texture, nullptr, rgb8.data(), 3 * camera.width);
+    SDL_RenderClear(renderer);
+    SDL_RenderCopy(renderer, texture, nullptr, nullptr);
+    if (!screenshot.empty() && (frame + 1 == max_frames || !running))
+      SaveScreenshot(renderer, camera, rgb8.size(), screenshot);
+    SDL_RenderPresent(renderer);
+    const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    fps = fps == 0 ? 1.0 / dt : 0.9 * fps + 0.1 / dt;
+    char title[160];
+    std::snprintf(title, sizeof title, "prt-view — glossy %s — %zu vertices — %.1f fps",
+                  reference ? "pixel-basis reference" : "triple products", session.sample_count(),
+                  fps);
     SDL_SetWindowTitle(window, title);
   }
   SDL_DestroyTexture(texture);
