@@ -139,15 +139,34 @@ void DrawTriangle(const ScreenTriangle& t, int row0, int row1, int width, Raster
     const double dx = t.px[eb[i]] - t.px[ea[i]], dy = t.py[eb[i]] - t.py[ea[i]];
     owns[i] = OwnsEdge(-s * dy, s * dx);
   }
+  // Each edge in the canonical endpoint order of Edge(): the per-pixel value below is the same
+  // floating-point expression Edge() evaluates (bitwise), with the per-edge and per-row parts
+  // hoisted out of the pixel loop.
+  double ex0[3], ey0[3], edx[3], edy[3], esign[3];
+  for (int i = 0; i < 3; ++i) {
+    double ax = t.px[ea[i]], ay = t.py[ea[i]], bx = t.px[eb[i]], by = t.py[eb[i]];
+    esign[i] = s;
+    if (ax > bx || (ax == bx && ay > by)) {
+      std::swap(ax, bx);
+      std::swap(ay, by);
+      esign[i] = -s;
+    }
+    ex0[i] = ax;
+    ey0[i] = ay;
+    edx[i] = bx - ax;
+    edy[i] = by - ay;
+  }
   const double inv_area = 1.0 / area;
   for (int y = y0; y <= y1; ++y) {
     const double py = y + 0.5;
+    double row[3];
+    for (int i = 0; i < 3; ++i) row[i] = edx[i] * (py - ey0[i]);
     for (int x = t.xmin; x <= t.xmax; ++x) {
       const double px = x + 0.5;
       double w[3];
       bool inside = true;
       for (int i = 0; i < 3; ++i) {
-        w[i] = s * Edge(t.px[ea[i]], t.py[ea[i]], t.px[eb[i]], t.py[eb[i]], px, py);
+        w[i] = esign[i] * (row[i] - edy[i] * (px - ex0[i]));
         if (w[i] < 0.0 || (w[i] == 0.0 && !owns[i])) {
           inside = false;
           break;
@@ -193,25 +212,40 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
     }
   }
   const double near = options.near > 0.0 ? options.near : 1e-3;
-  // Clip and project every triangle (at most two screen triangles each).
-  std::vector<ScreenTriangle> screen(2 * triangles.size());
-  tbb::parallel_for(std::size_t{0}, triangles.size(), [&](std::size_t i) {
-    ClipVertex in[3];
-    for (int k = 0; k < 3; ++k) {
-      const uint32_t v = triangles[i][k];
-      in[k].view = cam.ToView(positions[v]);
-      for (int c = 0; c < 3; ++c) in[k].rgb[c] = vertex_rgb[3 * static_cast<std::size_t>(v) + c];
-    }
-    ClipVertex out[4];
-    const int n = ClipNear(in, near, out);
-    const auto id = static_cast<int32_t>(i);
-    if (n >= 3 && !SetupTriangle(cam, out[0], out[1], out[2], id, screen[2 * i])) {
-      screen[2 * i].id = -1;
-    }
-    if (n == 4 && !SetupTriangle(cam, out[0], out[2], out[3], id, screen[2 * i + 1])) {
-      screen[2 * i + 1].id = -1;
+  // Clip and project every triangle (at most two screen triangles each), in parallel over chunks
+  // of triangles; each chunk keeps only the screen triangles that cover a pixel centre, and the
+  // chunks are concatenated in triangle order (tiny and off-screen triangles cost no memory).
+  constexpr std::size_t kChunk = 4096;
+  const std::size_t chunks = (triangles.size() + kChunk - 1) / kChunk;
+  std::vector<std::vector<ScreenTriangle>> chunk_screen(chunks);
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t ch) {
+    std::vector<ScreenTriangle>& out_tris = chunk_screen[ch];
+    const std::size_t end = std::min(triangles.size(), (ch + 1) * kChunk);
+    for (std::size_t i = ch * kChunk; i < end; ++i) {
+      ClipVertex in[3];
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = triangles[i][k];
+        in[k].view = cam.ToView(positions[v]);
+        for (int c = 0; c < 3; ++c) in[k].rgb[c] = vertex_rgb[3 * static_cast<std::size_t>(v) + c];
+      }
+      ClipVertex out[4];
+      const int n = ClipNear(in, near, out);
+      const auto id = static_cast<int32_t>(i);
+      ScreenTriangle t;
+      if (n >= 3 && SetupTriangle(cam, out[0], out[1], out[2], id, t)) out_tris.push_back(t);
+      if (n == 4 && SetupTriangle(cam, out[0], out[2], out[3], id, t)) out_tris.push_back(t);
     }
   });
+  std::vector<ScreenTriangle> screen;
+  {
+    std::size_t total = 0;
+    for (const auto& c : chunk_screen) total += c.size();
+    screen.reserve(total);
+    for (auto& c : chunk_screen) {
+      screen.insert(screen.end(), c.begin(), c.end());
+      std::vector<ScreenTriangle>().swap(c);
+    }
+  }
 
   RasterImage img;
   img.width = camera.width;
@@ -221,13 +255,29 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
   img.depth.assign(pixels, std::numeric_limits<float>::max());
   img.triangle.assign(pixels, -1);
 
+  // Bin the screen triangles by row band (counting sort, triangles keep their order inside a
+  // band so that depth ties resolve as in a sequential scan), then draw the bands in parallel:
+  // each band touches only its own triangles instead of scanning all of them.
   constexpr int kBandRows = 16;
   const int bands = (img.height + kBandRows - 1) / kBandRows;
+  std::vector<uint32_t> band_start(static_cast<std::size_t>(bands) + 1, 0);
+  for (const ScreenTriangle& t : screen) {
+    for (int b = t.ymin / kBandRows; b <= t.ymax / kBandRows; ++b) ++band_start[b + 1];
+  }
+  for (int b = 0; b < bands; ++b) band_start[b + 1] += band_start[b];
+  std::vector<uint32_t> band_triangles(band_start[bands]);
+  {
+    std::vector<uint32_t> fill(band_start.begin(), band_start.end() - 1);
+    for (std::size_t i = 0; i < screen.size(); ++i) {
+      const ScreenTriangle& t = screen[i];
+      for (int b = t.ymin / kBandRows; b <= t.ymax / kBandRows; ++b)
+        band_triangles[fill[b]++] = static_cast<uint32_t>(i);
+    }
+  }
   tbb::parallel_for(0, bands, [&](int band) {
     const int row0 = band * kBandRows, row1 = std::min(img.height, row0 + kBandRows);
-    for (const ScreenTriangle& t : screen) {
-      if (t.id < 0 || t.ymax < row0 || t.ymin >= row1) continue;
-      DrawTriangle(t, row0, row1, img.width, img);
+    for (uint32_t k = band_start[band]; k < band_start[band + 1]; ++k) {
+      DrawTriangle(screen[band_triangles[k]], row0, row1, img.width, img);
     }
     if (options.background) {
       for (int y = row0; y < row1; ++y) {

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_transport.h"
@@ -196,9 +197,9 @@ ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> samp
                                const CubemapRgb* background) const {
   RasterOptions options;
   if (background != nullptr) options.background = CubemapBackground(*background);
-  const RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
+  RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
   ImageRgb image(r.width, r.height);
-  image.pixels = r.rgb;
+  image.pixels = std::move(r.rgb);
   return image;
 }
 

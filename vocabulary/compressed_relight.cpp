@@ -2,6 +2,9 @@
 // columns (Cheslack-Postava et al. 2008 §4.2, §4.3, §4.5 Eq. 5–8). docs/compression.md.
 #include "vocabulary/compressed_relight.h"
 
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -205,8 +208,7 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
   ValidateHeader(header_, "CompressedRelighter");
   const std::size_t S = header_.sample_count;
   slot_.assign(header_.column_count(), -1);
-  index_.reserve(t.term_count());
-  value_.reserve(t.term_count());
+  terms_.reserve(t.term_count());
   std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
   for (const auto& c : t.columns) {
     ValidateColumn(header_, c, "CompressedRelighter");
@@ -217,14 +219,14 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
       ColumnScaleMap(header_.domain, c.depth, lv.data());
     }
     slot_[c.column] = static_cast<int32_t>(columns_.size());
-    Column col{c.depth, static_cast<uint32_t>(index_.size()), 0};
+    Column col{c.depth, static_cast<uint32_t>(terms_.size()), 0};
     for (std::size_t k = 0; k < c.index.size(); ++k) {
       const uint32_t i = c.index[k];
-      index_.push_back(i);
-      value_.push_back(static_cast<float>(DequantiseTerm(
-          c.q[k], DitherOffset(header_.dither_seed, c.column, i), c.scale, header_.bits, lv[i])));
+      terms_.push_back({i, static_cast<float>(DequantiseTerm(
+                               c.q[k], DitherOffset(header_.dither_seed, c.column, i), c.scale,
+                               header_.bits, lv[i]))});
     }
-    col.end = static_cast<uint32_t>(index_.size());
+    col.end = static_cast<uint32_t>(terms_.size());
     columns_.push_back(col);
   }
 }
@@ -234,46 +236,95 @@ int CompressedRelighter::ColumnDepth(uint32_t column) const {
   return columns_[slot_[column]].depth;
 }
 
-void CompressedRelighter::Accumulate(uint32_t column, const float* w, int channels,
-                                     std::vector<std::vector<double>>& acc) const {
-  if (column >= slot_.size()) throw std::out_of_range("CompressedRelighter: column index");
-  const int32_t s = slot_[column];
-  if (s < 0) return;
-  const Column& c = columns_[s];
-  const std::size_t S = header_.sample_count;
-  std::vector<double>& a = acc[c.depth];
-  if (a.empty()) a.assign(S * channels, 0.0);
-  for (int ch = 0; ch < channels; ++ch) {
-    const double wc = w[ch];
-    if (wc == 0.0) continue;
-    double* dst = a.data() + ch * S;
-    for (uint32_t k = c.begin; k < c.end; ++k) dst[index_[k]] += wc * value_[k];
-  }
-}
+// One light of Eq. 8: a stored column and its weight per channel.
+struct CompressedRelighter::Light {
+  int32_t slot;
+  const float* weight;
+};
 
 // Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
-// deepest level to depth 0, then undo the Hilbert permutation.
-void CompressedRelighter::Finish(std::vector<std::vector<double>>& acc, int channels,
-                                 std::span<float> radiance) const {
+// deepest level to depth 0, then undo the Hilbert permutation. One coefficient-domain buffer X per
+// channel (float) receives every light of a depth directly, so the frame pays one full inverse
+// transform whatever the number of lights, and nothing of size S is allocated per depth.
+// The scatter of a depth's lights runs in parallel over disjoint ranges of coefficient indices
+// (each column's indices are sorted, so a binary search finds its part of a range) and updates
+// every channel in one pass over the column; the inverse steps and the final permutation run in
+// parallel over channels.
+void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels,
+                                        std::span<float> radiance) const {
   const std::size_t S = header_.sample_count;
-  std::vector<float> x(S), tmp(S);
-  for (int ch = 0; ch < channels; ++ch) {
-    bool any = false;
-    std::fill(x.begin(), x.end(), 0.0f);
-    for (int d = max_depth_; d >= 0; --d) {
-      if (any && d < max_depth_) {
-        // x is at depth d + 1: one single inverse step brings it to depth d.
-        InverseColumnTransformStep(header_.domain, header_.column_wavelet, d + 1, x.data());
-      }
-      if (!acc[d].empty()) {
-        const double* a = acc[d].data() + ch * S;
-        for (std::size_t i = 0; i < S; ++i) x[i] = static_cast<float>(x[i] + a[i]);
-        any = true;
-      }
+  const auto C = static_cast<std::size_t>(channels);
+  // Not thread_local: a thread waiting in the parallel loops below may run another relight.
+  std::vector<float> scratch(S * C, 0.0f);
+  float* x = scratch.data();
+  // Deepest lights first (stable: lights of one depth keep their order, so sums are
+  // reproducible).
+  std::stable_sort(lights.begin(), lights.end(), [&](const Light& a, const Light& b) {
+    return columns_[a.slot].depth > columns_[b.slot].depth;
+  });
+  // Ranges of coefficient indices, one per thread: each column is then read in as few
+  // sequential pieces as there are threads (short pieces defeat the hardware prefetcher), and a
+  // thread's part of X stays in its own cache.
+  const std::size_t ranges =
+      std::clamp<std::size_t>(static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1,
+                              std::max<std::size_t>(1, S / 1024));
+  bool any = false;
+  std::size_t next = 0;
+  for (int d = max_depth_; d >= 0; --d) {
+    if (any && d < max_depth_) {
+      // x is at depth d + 1: one single inverse step brings it to depth d.
+      tbb::parallel_for(std::size_t{0}, C, [&](std::size_t c) {
+        InverseColumnTransformStep(header_.domain, header_.column_wavelet, d + 1, x + c * S);
+      });
     }
-    CoefficientOrderToSamples(header_.domain, x.data(), tmp.data());
-    std::copy(tmp.begin(), tmp.end(), radiance.begin() + ch * S);
+    const std::size_t first = next;
+    while (next < lights.size() && columns_[lights[next].slot].depth == d) ++next;
+    if (next == first) continue;
+    any = true;
+    tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
+      const auto lo = static_cast<uint32_t>(S * r / ranges);
+      const auto hi = static_cast<uint32_t>(S * (r + 1) / ranges);
+      const auto below = [](const Term& t, uint32_t i) { return t.index < i; };
+      for (std::size_t k = first; k < next; ++k) {
+        const Column& col = columns_[lights[k].slot];
+        const Term* b = terms_.data() + col.begin;
+        const Term* e = terms_.data() + col.end;
+        if (ranges > 1) {
+          b = std::lower_bound(b, e, lo, below);
+          e = std::lower_bound(b, e, hi, below);
+        }
+        if (k + 1 < next) {  // the next column's first lines, while this one is added
+          const Term* n = terms_.data() + columns_[lights[k + 1].slot].begin;
+          __builtin_prefetch(n);
+          __builtin_prefetch(n + 8);
+        }
+        const float* w = lights[k].weight;
+        if (C == 3) {
+          const float w0 = w[0], w1 = w[1], w2 = w[2];
+          float* __restrict x0 = x;
+          float* __restrict x1 = x + S;
+          float* __restrict x2 = x + 2 * S;
+          for (const Term* t = b; t != e; ++t) {
+            const uint32_t i = t->index;
+            const float v = t->value;
+            x0[i] += w0 * v;
+            x1[i] += w1 * v;
+            x2[i] += w2 * v;
+          }
+        } else {
+          for (std::size_t c = 0; c < C; ++c) {
+            const float wc = w[c];
+            if (wc == 0.0f) continue;
+            float* __restrict xc = x + c * S;
+            for (const Term* t = b; t != e; ++t) xc[t->index] += wc * t->value;
+          }
+        }
+      }
+    });
   }
+  tbb::parallel_for(std::size_t{0}, C, [&](std::size_t c) {
+    CoefficientOrderToSamples(header_.domain, x + c * S, radiance.data() + c * S);
+  });
 }
 
 void CompressedRelighter::Relight(std::span<const float> lighting_hat, int channels,
@@ -281,18 +332,20 @@ void CompressedRelighter::Relight(std::span<const float> lighting_hat, int chann
   const std::size_t S = header_.sample_count, M = header_.column_count();
   if (channels < 1 || lighting_hat.size() != M * channels || radiance.size() != S * channels)
     throw std::invalid_argument("CompressedRelighter::Relight: buffer sizes");
-  std::vector<std::vector<double>> acc(max_depth_ + 1);
-  std::vector<float> w(channels);
+  // Weights per column, channel-interleaved, for the columns that are stored and lit.
+  std::vector<float> w;
+  std::vector<Light> lights;
+  w.reserve(M * channels);
   for (uint32_t j = 0; j < M; ++j) {
     if (slot_[j] < 0) continue;
     bool nz = false;
-    for (int c = 0; c < channels; ++c) {
-      w[c] = lighting_hat[c * M + j];
-      nz = nz || w[c] != 0.0f;
-    }
-    if (nz) Accumulate(j, w.data(), channels, acc);
+    for (int c = 0; c < channels; ++c) nz = nz || lighting_hat[c * M + j] != 0.0f;
+    if (!nz) continue;
+    lights.push_back({slot_[j], nullptr});
+    for (int c = 0; c < channels; ++c) w.push_back(lighting_hat[c * M + j]);
   }
-  Finish(acc, channels, radiance);
+  for (std::size_t k = 0; k < lights.size(); ++k) lights[k].weight = w.data() + k * channels;
+  RelightLights(lights, channels, radiance);
 }
 
 void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
@@ -302,10 +355,14 @@ void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
   if (channels < 1 || weights.size() != columns.size() * channels ||
       radiance.size() != S * channels)
     throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
-  std::vector<std::vector<double>> acc(max_depth_ + 1);
-  for (std::size_t k = 0; k < columns.size(); ++k)
-    Accumulate(columns[k], weights.data() + k * channels, channels, acc);
-  Finish(acc, channels, radiance);
+  std::vector<Light> lights;
+  lights.reserve(columns.size());
+  for (std::size_t k = 0; k < columns.size(); ++k) {
+    if (columns[k] >= slot_.size()) throw std::out_of_range("CompressedRelighter: column index");
+    if (slot_[columns[k]] >= 0)
+      lights.push_back({slot_[columns[k]], weights.data() + k * channels});
+  }
+  RelightLights(lights, channels, radiance);
 }
 
 }  // namespace prt

@@ -88,10 +88,11 @@ std::vector<float> LightingToRowWaveletBasis(RowWavelet wavelet, int cubemap_n,
 // Relighting from adaptively compressed columns (§4.5, Eq. 8). Construction dequantises every
 // term once and groups columns by depth; Relight then computes, per channel,
 //   B = Σ_l S'_{l→l−1}( Σ_{j∈N(l)} L̂_j · C_j )
-// by accumulating the lights of depth-l columns in the column-wavelet domain (double), then
-// running one single-step inverse per level from the deepest level down (one full inverse
-// transform in all, whatever the number of lights). Thread-compatible (const methods are safe
-// to call from several threads with separate outputs).
+// by adding the lights of depth-l columns into one column-wavelet-domain buffer per channel
+// (float) and running one single-step inverse per level from the deepest level down (one full
+// inverse transform in all, whatever the number of lights). Parallel inside (TBB: the scatter over
+// ranges of coefficients, the inverse steps over channels). Thread-compatible (const methods are
+// safe to call from several threads with separate outputs).
 class CompressedRelighter {
  public:
   explicit CompressedRelighter(const CompressedTransport& t);
@@ -113,18 +114,22 @@ class CompressedRelighter {
  private:
   struct Column {
     uint8_t depth;
-    uint32_t begin, end;  // range in index_/value_
+    uint32_t begin, end;  // range in terms_
   };
-  void Accumulate(uint32_t column, const float* w, int channels,
-                  std::vector<std::vector<double>>& acc) const;
-  void Finish(std::vector<std::vector<double>>& acc, int channels, std::span<float> radiance) const;
+  struct Light;
+  void RelightLights(std::vector<Light>& lights, int channels, std::span<float> radiance) const;
 
   CompressedTransportHeader header_;
   int max_depth_ = 0;
   std::vector<int32_t> slot_;  // column → index into columns_, or −1
   std::vector<Column> columns_;
-  std::vector<uint32_t> index_;
-  std::vector<float> value_;
+  // A stored term: coefficient index and dequantised value side by side, so that a column is
+  // one sequential stream of 8-byte terms.
+  struct Term {
+    uint32_t index;
+    float value;
+  };
+  std::vector<Term> terms_;
 };
 
 }  // namespace prt
