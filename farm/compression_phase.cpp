@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -60,6 +61,79 @@ struct SpillIo {
       throw FileIoError(dir, e.what());
     }
   }
+};
+
+// The global budget's first pass keeps each rank's transformed column blocks (and depths) until
+// the threshold over all ranks is known: in memory up to `budget` bytes, beyond it appended to a
+// file in the spill folder and read back in the same order.
+class TransformedBlockStash {
+ public:
+  TransformedBlockStash(std::string dir, uint64_t budget) : dir_(std::move(dir)), budget_(budget) {}
+  ~TransformedBlockStash() {
+    if (file_) std::fclose(file_);
+    if (!path_.empty()) {
+      std::error_code ec;
+      fs::remove(path_, ec);
+    }
+  }
+  TransformedBlockStash(const TransformedBlockStash&) = delete;
+  TransformedBlockStash& operator=(const TransformedBlockStash&) = delete;
+
+  void Add(uint32_t first, uint32_t count, std::vector<float>& columns,
+           std::vector<uint8_t>& depths) {
+    const uint64_t bytes = columns.size() * sizeof(float) + depths.size();
+    Entry e{first, count, columns.size(), {}, {}};
+    if (in_memory_ + bytes <= budget_) {
+      in_memory_ += bytes;
+      e.columns.swap(columns);
+      e.depths.swap(depths);
+    } else {
+      if (!file_) {
+        path_ = (fs::path(dir_) / "transformed-columns.bin").string();
+        file_ = std::fopen(path_.c_str(), "w+b");
+        if (!file_) throw FileIoError(dir_, "cannot create " + path_);
+      }
+      if (std::fwrite(columns.data(), sizeof(float), columns.size(), file_) != columns.size() ||
+          std::fwrite(depths.data(), 1, depths.size(), file_) != depths.size())
+        throw FileIoError(dir_, "cannot write " + path_);
+      spilled_ += bytes;
+    }
+    entries_.push_back(std::move(e));
+  }
+  uint64_t spilled_bytes() const { return spilled_; }
+
+  // Calls f(first, count, columns, depths) for every block in the order added.
+  template <class F>
+  void Replay(F&& f) {
+    if (file_ && std::fseek(file_, 0, SEEK_SET) != 0)
+      throw FileIoError(dir_, "cannot rewind " + path_);
+    for (Entry& e : entries_) {
+      if (e.columns.size() != e.floats) {
+        e.columns.resize(e.floats);
+        e.depths.resize(e.count);
+        if (std::fread(e.columns.data(), sizeof(float), e.floats, file_) != e.floats ||
+            std::fread(e.depths.data(), 1, e.count, file_) != e.count)
+          throw FileIoError(dir_, "cannot read back " + path_);
+      }
+      f(e.first, e.count, e.columns.data(), e.depths.data());
+      e.columns = std::vector<float>();
+      e.depths = std::vector<uint8_t>();
+    }
+  }
+
+ private:
+  struct Entry {
+    uint32_t first, count;
+    std::size_t floats;
+    std::vector<float> columns;
+    std::vector<uint8_t> depths;
+  };
+  std::string dir_;
+  uint64_t budget_;
+  uint64_t in_memory_ = 0, spilled_ = 0;
+  std::vector<Entry> entries_;
+  std::string path_;
+  std::FILE* file_ = nullptr;
 };
 
 }  // namespace
@@ -454,6 +528,11 @@ int RunCompressionPhase(const FarmOptions& options) {
     pc.unit = "columns of rank 0";
     std::optional<Progress> col_progress;
     uint64_t terms = 0;
+    // Global budget: first pass transforms and histograms, the quantisation waits for the
+    // threshold over all ranks (docs/compression.md).
+    const bool global = header.budget == CompressionBudget::kGlobal;
+    std::vector<uint64_t> histogram(global ? kMagnitudeBins : 0, 0);
+    TransformedBlockStash stash(spill.spill_dir, spill.memory_budget_bytes);
     st = DistributedTranspose(
         comm, rows, cols, chunk,
         [&](uint64_t first, uint64_t count, float* out) { reader->ReadRows(first, count, out); },
@@ -463,15 +542,41 @@ int RunCompressionPhase(const FarmOptions& options) {
             progress.Finish();
             col_progress.emplace("compress", owned.second - owned.first, pc);
           }
-          for (CompressedColumn& c : CompressColumnBlock(header, first, count, columns.data())) {
-            terms += c.index.size();
-            mine.push_back(std::move(c));
+          if (global) {
+            std::vector<uint8_t> depths(count);
+            TransformColumnBlock(header, count, columns.data(), depths.data());
+            AddColumnBlockHistogram(header, first, count, columns.data(), histogram.data());
+            stash.Add(first, count, columns, depths);
+          } else {
+            for (CompressedColumn& c : CompressColumnBlock(header, first, count, columns.data())) {
+              terms += c.index.size();
+              mine.push_back(std::move(c));
+            }
           }
           col_progress->Advance(count);
         },
         rank == 0 ? &progress : nullptr);
     progress.Finish();
     if (col_progress) col_progress->Finish();
+    if (global) {
+      // Integer counts: the same sum, hence the same threshold, for any number of ranks.
+      std::vector<uint64_t> all(kMagnitudeBins, 0);
+      CheckMpi(MPI_Allreduce(histogram.data(), all.data(), static_cast<int>(kMagnitudeBins),
+                             MPI_UINT64_T, MPI_SUM, comm),
+               "MPI_Allreduce histogram");
+      const float threshold = ThresholdFromHistogram(all.data(), GlobalTermBudget(header));
+      const double tq = Now();
+      stash.Replay(
+          [&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
+            for (CompressedColumn& c :
+                 QuantiseColumnBlock(header, first, count, columns, depths, threshold)) {
+              terms += c.index.size();
+              mine.push_back(std::move(c));
+            }
+          });
+      st.sink_seconds += Now() - tq;
+      st.bytes_spilled += stash.spilled_bytes();
+    }
     fs::remove_all(spill_dir, ec);
 
     // Gather the compressed columns on rank 0 as one encoded column block per rank.

@@ -53,12 +53,13 @@ nlohmann::json Report(const std::string& run) {
 }
 
 // The in-process compressor on the farmed rows (the reference the farm must equal).
-std::string InProcess(const std::string& run, const std::string& scheme = "") {
+std::string InProcess(const std::string& run, const std::string& scheme = "",
+                      const std::string& scene_file = kScene) {
   TransportFileReader reader(run + "/transport.prtt");
   std::vector<float> T(reader.info().rows * reader.info().cols());
   reader.ReadRows(0, reader.info().rows, T.data());
-  const SceneDescription scene = LoadSceneFile(kScene);
-  CompressionOptions o = CompressionOptionsFrom(scene.compression, kScene);
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  CompressionOptions o = CompressionOptionsFrom(scene.compression, scene_file);
   if (!scheme.empty()) o.scheme = ParseCompressionScheme(scheme, "test");
   const SpatialDomain domain = SpatialDomainOf(ReadSceneGeometryFile(run + "/geometry.prtg"));
   const std::vector<uint8_t> bytes = EncodeCompressedTransport(
@@ -107,6 +108,31 @@ TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
     // Without --keep-raw the raw matrix is gone once the compressed one is durable.
     EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
     EXPECT_FALSE(Report(run)["compression"]["raw_kept"].get<bool>());
+  }
+}
+
+// The global budget (one threshold from a histogram summed over the ranks, transformed columns
+// kept until it is known, spilled beyond the budget): the same bytes as in process for 1, 2 and 3
+// ranks, spilling or not.
+TEST(CompressionPhase, GlobalBudgetIsByteIdenticalForAnyRanksAndBudget) {
+  const std::string scene = std::string(PRT_TESTS_DATA_DIR) + "/tiny_global.toml";
+  const std::string first = WorkDir("global_np2_spill");
+  const RunResult r = Farm(2, scene + " --out " + first + kArgs + " --keep-raw --memory-budget 4k");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string expected = InProcess(first, "", scene);
+  const std::string got = ReadWholeFile(first + "/transport.prtc");
+  EXPECT_TRUE(got == expected) << "transport.prtc differs from the in-process compressor";
+  const CompressedTransport t = DecodeCompressedTransport(
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(got.data()), got.size()), "prtc");
+  EXPECT_EQ(t.header.budget, CompressionBudget::kGlobal);
+  EXPECT_GT(Report(first)["compression"]["spill_bytes"].get<uint64_t>(), 0u);
+  for (const auto& [ranks, budget] :
+       std::vector<std::pair<int, std::string>>{{1, "2k"}, {1, "1G"}, {3, "3k"}}) {
+    const std::string run = WorkDir("global_np" + std::to_string(ranks) + "_" + budget);
+    const RunResult q = Farm(ranks, scene + " --out " + run + kArgs + " --memory-budget " + budget);
+    ASSERT_EQ(q.exit_code, 0) << q.output;
+    EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected)
+        << ranks << " rank(s), budget " << budget;
   }
 }
 
