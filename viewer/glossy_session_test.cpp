@@ -283,5 +283,35 @@ TEST(GlossySession, PrtViewRendersAGlossyPackAsTheLibraryDoes) {
       << out;
 }
 
+// The glossy pack in the SDL2 window (under xvfb-run): the last frame as the window shows it
+// equals the headless Algorithm 1 render from the same camera to one 8-bit code per channel.
+TEST(GlossySession, WindowScreenshotMatchesHeadlessRender) {
+#ifndef PRT_VIEW_HAS_SDL2
+  GTEST_SKIP() << "prt-view built without SDL2";
+#else
+  if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0) GTEST_SKIP() << "no xvfb-run";
+  const GlossyPack& t = TinyGlossyPack();
+  const fs::path dir = WorkDir() / "window";
+  fs::create_directories(dir);
+  const std::string shot = (dir / "shot.npy").string();
+  const std::string cmd = "xvfb-run -a -s '-screen 0 320x240x24' '" + std::string(PRT_VIEW_EXE) +
+                          "' '" + t.pack + "' --env '" + t.env +
+                          "' --window --window-frames 3 --screenshot '" + shot + "' > '" +
+                          (dir / "log.txt").string() + "' 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::vector<float> codes = ReadNpy(shot);
+  const auto s = GlossySession::Open(t.pack);
+  const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(t.env), s->cubemap_n());
+  std::vector<float> rgb(3 * s->sample_count());
+  s->Relight(s->Lighting(cube), s->camera().eye, rgb);
+  const ImageRgb image = s->Render(s->camera(), rgb, &cube);
+  ASSERT_EQ(codes.size(), image.pixels.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < codes.size(); ++i)
+    worst = std::max(worst, std::abs(codes[i] - double(ToSrgb8(image.pixels[i]))));
+  EXPECT_LE(worst, 1.0);
+#endif
+}
+
 }  // namespace
 }  // namespace prt
