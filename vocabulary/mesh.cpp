@@ -257,8 +257,13 @@ RawMesh ReadOff(std::string_view text, const std::string& name) {
     }
     rest = line;
     int64_t k = 0;
-    if (!NextToken(rest, tok) || !ParseInt(tok, k) || k < 0 || k > 1'000'000) {
+    if (!NextToken(rest, tok) || !ParseInt(tok, k)) {
       FailLine(name, lines.line(), "face " + std::to_string(f) + ": expected a corner count");
+    }
+    if (k < 0 || k > 1'000'000) {
+      FailLine(name, lines.line(),
+               "face " + std::to_string(f) + ": corner count " + std::to_string(k) +
+                   " out of range [0, 1000000]");
     }
     idx.clear();
     for (int64_t i = 0; i < k; ++i) {
