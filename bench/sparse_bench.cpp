@@ -13,11 +13,13 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 
 #include "bench/bench_scenes.h"
 #include "vocabulary/image_io.h"
@@ -51,6 +53,54 @@ struct Variant {
   SparsePlan plan;
 };
 
+// A variant from "key=value;key=value" (keys: budget, initial, iterations, radius (× the scene's),
+// features, min_features (× features when < 1), window, lambda, normal_cos, empty_weight, mode
+// (visibility| transport), solver (l1|ls)) applied to the scene's plan. Throws on an unknown key.
+Variant ParseVariant(const std::string& spec, const SparsePlan& base) {
+  Variant v{spec, base};
+  std::stringstream ss(spec);
+  for (std::string kv; std::getline(ss, kv, ';');) {
+    if (kv.empty()) continue;
+    const std::size_t eq = kv.find('=');
+    if (eq == std::string::npos)
+      throw std::invalid_argument("--variant: expected key=value: " + kv);
+    const std::string key = kv.substr(0, eq), val = kv.substr(eq + 1);
+    const double x = (val == "visibility" || val == "transport" || val == "l1" || val == "ls")
+                         ? 0.0
+                         : std::stod(val);
+    if (key == "budget") {
+      v.plan.dense_budget = x;
+    } else if (key == "initial") {
+      v.plan.initial_fraction = x;
+    } else if (key == "iterations") {
+      v.plan.iterations = static_cast<int>(x);
+    } else if (key == "radius") {
+      v.plan.radius = base.radius * x;
+    } else if (key == "features") {
+      v.plan.sparse.features = static_cast<int>(std::lround(x));
+    } else if (key == "min_features") {
+      v.plan.sparse.min_features =
+          static_cast<int>(std::lround(x < 1 ? x * v.plan.sparse.features : x));
+    } else if (key == "window") {
+      v.plan.angular.window = static_cast<int>(x);
+    } else if (key == "lambda") {
+      v.plan.sparse.lambda = x;
+    } else if (key == "normal_cos") {
+      v.plan.sparse.min_normal_cos = x;
+    } else if (key == "empty_weight") {
+      v.plan.empty_weight = static_cast<int>(x);
+    } else if (key == "mode") {
+      v.plan.sparse.mode =
+          val == "transport" ? InterpolationMode::kTransport : InterpolationMode::kVisibility;
+    } else if (key == "solver") {
+      v.plan.sparse.solver = val == "ls" ? SolverKind::kLeastSquares : SolverKind::kL1;
+    } else {
+      throw std::invalid_argument("--variant: unknown key " + key);
+    }
+  }
+  return v;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -65,7 +115,18 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_dir, "folder for the CSV, summary and images");
   app.add_option("--threads", threads, "TBB threads (0: all cores)");
   app.add_flag("--quick", quick, "only the default variant per scene (no L1/LS or radius sweep)");
+  std::string brute_cache;
+  app.add_option("--brute-cache", brute_cache,
+                 "folder to keep brute-force rows in between runs (exploration only: the timings "
+                 "of a cached brute force are those of the run that computed it)");
+  std::vector<std::string> variant_specs;
+  app.add_option(
+      "--variant", variant_specs,
+      "extra variant after the default, \"key=value;...\" (budget, initial, "
+      "iterations, radius (x scene), features, min_features, window, lambda, "
+      "normal_cos, empty_weight, mode, solver); repeatable; replaces the built-in sweep");
   CLI11_PARSE(app, argc, argv);
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // progress lines while redirected to a file
   std::unique_ptr<tbb::global_control> gc;
   if (threads > 0)
     gc = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -93,23 +154,58 @@ int main(int argc, char** argv) {
                 ranges.ground_last - ranges.ground_first, embree.triangle_count(), n);
 
     std::vector<float> brute(samples.size() * T);
-    auto t0 = Clock::now();
-    double c0 = CpuSeconds();
-    const SampleStats bst = sampler.ComputeRows(samples, 0, brute.data());
-    const double brute_s = Seconds(t0);
-    const double brute_cpu = CpuSeconds() - c0;
+    double brute_s = 0, brute_cpu = 0;
+    SampleStats bst;
+    const std::string cache_file = brute_cache.empty()
+                                       ? std::string()
+                                       : brute_cache + "/" + name + "_n" + std::to_string(n) +
+                                             "_r" + std::to_string(so.rays_per_texel) + "_s" +
+                                             std::to_string(so.seed) + ".bin";
+    bool cached = false;
+    if (!cache_file.empty()) {
+      std::ifstream in(cache_file, std::ios::binary);
+      in.read(reinterpret_cast<char*>(&brute_s), sizeof brute_s);
+      in.read(reinterpret_cast<char*>(&brute_cpu), sizeof brute_cpu);
+      in.read(reinterpret_cast<char*>(&bst), sizeof bst);
+      in.read(reinterpret_cast<char*>(brute.data()),
+              static_cast<std::streamsize>(brute.size() * sizeof(float)));
+      cached = static_cast<bool>(in);
+    }
+    if (!cached) {
+      auto t0 = Clock::now();
+      double c0 = CpuSeconds();
+      bst = sampler.ComputeRows(samples, 0, brute.data());
+      brute_s = Seconds(t0);
+      brute_cpu = CpuSeconds() - c0;
+      if (!cache_file.empty()) {
+        std::filesystem::create_directories(brute_cache);
+        std::ofstream out(cache_file, std::ios::binary);
+        out.write(reinterpret_cast<const char*>(&brute_s), sizeof brute_s);
+        out.write(reinterpret_cast<const char*>(&brute_cpu), sizeof brute_cpu);
+        out.write(reinterpret_cast<const char*>(&bst), sizeof bst);
+        out.write(reinterpret_cast<const char*>(brute.data()),
+                  static_cast<std::streamsize>(brute.size() * sizeof(float)));
+      }
+    }
     std::printf(
-        "brute force: %.2f s wall, %.2f s CPU, %llu texels, %.3g rays (%.2f Mrays/s wall)\n",
-        brute_s, brute_cpu, static_cast<unsigned long long>(bst.texels_traced),
-        static_cast<double>(bst.rays_traced),
+        "brute force%s: %.2f s wall, %.2f s CPU, %llu texels, %.3g rays (%.2f Mrays/s wall)\n",
+        cached ? " (cached)" : "", brute_s, brute_cpu,
+        static_cast<unsigned long long>(bst.texels_traced), static_cast<double>(bst.rays_traced),
         static_cast<double>(bst.rays_traced) / brute_s * 1e-6);
     const auto envs = bench::BenchEnvironments(n);
     std::vector<std::vector<float>> ref;
     for (const auto& e : envs) ref.push_back(bench::RelitRadiance(geometry, brute, e.cube));
 
     const SparsePlan base = PlanFromSettings(scene.sparse, geometry.diagonal(), n);
+    std::printf(
+        "plan: dense budget %.3f, initial %.3f, radius %.4f, features %d (min extra %d), "
+        "window %d, lambda %g\n",
+        base.dense_budget, base.initial_fraction, base.radius, base.sparse.features,
+        std::min(base.sparse.min_features, base.sparse.features), base.angular.window,
+        base.sparse.lambda);
     std::vector<Variant> variants{{"default (L1, visibility)", base}};
-    if (!quick) {
+    for (const std::string& spec : variant_specs) variants.push_back(ParseVariant(spec, base));
+    if (!quick && variant_specs.empty()) {
       Variant ls{"least squares", base};
       ls.plan.sparse.solver = SolverKind::kLeastSquares;
       Variant tm{"L1, transport interp.", base};
@@ -152,14 +248,20 @@ int main(int argc, char** argv) {
     for (std::size_t vi = 0; vi < variants.size(); ++vi) {
       const Variant& v = variants[vi];
       SparseReport rep;
-      t0 = Clock::now();
-      c0 = CpuSeconds();
+      const auto t0 = Clock::now();
+      const double c0 = CpuSeconds();
       const std::vector<float> rows = RunSparsePrecomputation(sampler, samples, v.plan, rep);
       const double sec = Seconds(t0);
       const double cpu = CpuSeconds() - c0;
       const double dense_n =
           static_cast<double>(rep.dense_initial + rep.dense_by_rank + rep.dense_fallback);
       const double dense_spatial = dense_n / static_cast<double>(samples.size());
+      auto dense_in = [&](std::size_t first, std::size_t last) {
+        std::size_t c = 0;
+        for (std::size_t i = first; i < last; ++i) c += rep.is_dense[i];
+        return last > first ? 100.0 * static_cast<double>(c) / static_cast<double>(last - first)
+                            : 0.0;
+      };
       const double dense_ang =
           static_cast<double>(rep.dense_angular.trace.texels_traced) /
           static_cast<double>(std::max<uint64_t>(1, rep.dense_angular.texels_above_horizon));
@@ -170,11 +272,14 @@ int main(int argc, char** argv) {
           "%-26s r=%.4f %.2f s wall, CPU %.3f× brute (wall %.3f×; dense %.2f rank %.2f sparse %.2f "
           "s)"
           "  dense %.1f%%  "
-          "dense-ang %.1f%%  sparse-ang %.1f%%  total %.1f%%  fallbacks %llu\n",
+          "dense-ang %.1f%%  sparse-ang %.1f%%  total %.1f%%  fallbacks %llu (model dense "
+          "%.1f%%, ground dense %.1f%%)\n",
           v.name.c_str(), v.plan.radius, sec, cpu / brute_cpu, sec / brute_s, rep.seconds_dense,
           rep.seconds_rank, rep.seconds_sparse, 100 * dense_spatial, 100 * dense_ang,
           100 * sparse_ang, 100 * rep.SampledFraction(),
-          static_cast<unsigned long long>(rep.dense_fallback));
+          static_cast<unsigned long long>(rep.dense_fallback),
+          dense_in(ranges.model_first, ranges.model_last),
+          dense_in(ranges.ground_first, ranges.ground_last));
       md << "| " << v.name << " | " << v.plan.radius << " | " << sec << " | " << cpu / brute_cpu
          << " | " << 100 * dense_spatial << "% | " << 100 * dense_ang << "% | " << 100 * sparse_ang
          << "% | " << 100 * rep.SampledFraction() << "% | " << rep.dense_fallback << " |";
@@ -192,10 +297,16 @@ int main(int argc, char** argv) {
             << dense_ang << "," << sparse_ang << "," << rep.SampledFraction() << ","
             << rep.dense_fallback << "," << envs[e].name << "," << em << "," << eg << "\n";
         if (vi == 0 && e == 0) {
-          // Relit sparse | brute force | 10× difference, under the first environment.
-          const ImageRgb a = bench::RenderVertexColours(scene, geometry, b, &envs[e].cube);
-          const ImageRgb r = bench::RenderVertexColours(scene, geometry, ref[e], &envs[e].cube);
-          WritePng(SideBySide(a, r, true, 10.0), out_dir + "/" + name + "_sparse_brute_diff10.png");
+          // Relit sparse | brute force | 10× difference, under the first environment. An image
+          // that fails is reported; the figures above it stand.
+          try {
+            const ImageRgb a = bench::RenderVertexColours(scene, geometry, b, &envs[e].cube);
+            const ImageRgb r = bench::RenderVertexColours(scene, geometry, ref[e], &envs[e].cube);
+            WritePng(SideBySide(a, r, true, 10.0),
+                     out_dir + "/" + name + "_sparse_brute_diff10.png");
+          } catch (const std::exception& ex) {
+            std::printf("    image not written: %s\n", ex.what());
+          }
         }
       }
       md << "\n";
@@ -212,8 +323,12 @@ int main(int argc, char** argv) {
             c = FalseColour(static_cast<double>(rep.local_rank[s]) / max_rank);
           for (int k = 0; k < 3; ++k) colours[s * 3 + k] = c[k];
         }
-        WritePng(bench::RenderVertexColours(scene, geometry, colours, nullptr),
-                 out_dir + "/" + name + "_dense_vertices_rank.png");
+        try {
+          WritePng(bench::RenderVertexColours(scene, geometry, colours, nullptr),
+                   out_dir + "/" + name + "_dense_vertices_rank.png");
+        } catch (const std::exception& ex) {
+          std::printf("    image not written: %s\n", ex.what());
+        }
       }
     }
   }

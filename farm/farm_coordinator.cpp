@@ -1342,6 +1342,7 @@ class SparseSamplingPhase : public FarmPhase {
           std::memcpy(job.feature.data() + k * T_, buf.data() + T_ * sizeof(float), T_);
         }
         rows_shipped_ += u;
+        job.union_ids = std::move(union_ids);
         return EncodeSparseJob(h, job);
       };
       p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {

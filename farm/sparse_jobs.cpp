@@ -175,6 +175,7 @@ std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job) {
   w.PutVector(job.transport);
   w.PutVector(job.visibility);
   w.PutVector(job.feature);
+  w.PutVector(job.union_ids);
   return std::move(w.bytes());
 }
 
@@ -291,9 +292,13 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       const std::vector<float> tr = r.GetVector<float>();
       const std::vector<float> vis = r.GetVector<float>();
       const std::vector<uint8_t> feat = r.GetVector<uint8_t>();
+      const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>();
       const std::size_t rows = tr.size() / T;
-      if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T)
+      if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T ||
+          union_ids.size() != rows)
         throw std::runtime_error("malformed sparse job rows");
+      for (uint32_t s : union_ids)
+        if (s >= samples.size()) throw std::runtime_error("sparse job names a missing sample");
       CheckLists(vertices.size(), offsets, nb, rows);
       for (uint32_t s : vertices)
         if (s >= samples.size()) throw std::runtime_error("sparse job names a missing sample");
@@ -309,7 +314,8 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
         std::vector<DenseNeighbor> nbs;
         for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
           const std::size_t u = nb[k];
-          nbs.push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T});
+          nbs.push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T,
+                         samples[union_ids[u]].normal});
         }
         SparseStats st;
         const SparseOutcome o =

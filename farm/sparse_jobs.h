@@ -74,6 +74,7 @@ struct SparseJob {
   std::vector<float> transport;     // union rows, texels each
   std::vector<float> visibility;    // union rows
   std::vector<uint8_t> feature;     // union rows
+  std::vector<uint32_t> union_ids;  // the union rows' sample ids (their normals)
 };
 
 // ---- results (worker → rank 0)

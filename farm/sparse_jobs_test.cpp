@@ -130,6 +130,7 @@ TEST_F(SparseJobsTest, RankAndSparseJobsEqualTheKernelsCalledDirectly) {
     sj.visibility.insert(sj.visibility.end(), d.visibility.begin(), d.visibility.end());
     sj.feature.insert(sj.feature.end(), d.feature.begin(), d.feature.end());
   }
+  sj.union_ids = dense;
   const SparseJobResult sr = DecodeSparseJobResult(ComputeSparseJob(
       sampler_, samples_, plan_,
       EncodeSparseJob({static_cast<uint32_t>(SparseJobKind::kSparse), 7, 20, 3}, sj)));
@@ -141,7 +142,8 @@ TEST_F(SparseJobsTest, RankAndSparseJobsEqualTheKernelsCalledDirectly) {
   for (std::size_t i = 0; i < 3; ++i) {
     std::vector<DenseNeighbor> nbs;
     for (uint32_t k : nbl[i])
-      nbs.push_back({rows[k].transport.data(), rows[k].visibility.data(), rows[k].feature.data()});
+      nbs.push_back({rows[k].transport.data(), rows[k].visibility.data(), rows[k].feature.data(),
+                     samples_[dense[k]].normal});
     std::vector<float> row(T(), 0.0f);
     SparseStats st;
     const SparseOutcome o = ReconstructSparseRow(sampler_, samples_[vertices[i]], vertices[i], nbs,
@@ -158,6 +160,22 @@ TEST_F(SparseJobsTest, RankAndSparseJobsEqualTheKernelsCalledDirectly) {
   EXPECT_EQ(sr.counters.fallback_too_few_neighbors, 1u);
   EXPECT_EQ(sr.counters.reconstructed, at);
   EXPECT_EQ(sr.counters.solved_lars + sr.counters.solved_admm + sr.counters.zero_systems, at);
+
+  // Neighbours facing away (normals at more than acos(min_normal_cos) from the vertex's) are not
+  // used: with all four turned over, vertex 5 has none left and falls back.
+  SparseOptions opt = plan_.sparse;
+  opt.min_normal_cos = 0.0;
+  std::vector<DenseNeighbor> flipped;
+  for (uint32_t k : nbl[0])
+    flipped.push_back({rows[k].transport.data(), rows[k].visibility.data(), rows[k].feature.data(),
+                       -samples_[dense[k]].normal});
+  flipped[1].normal = samples_[dense[nbl[0][1]]].normal;  // one still faces the same way
+  std::vector<float> row(T(), 0.0f);
+  SparseStats st;
+  EXPECT_EQ(ReconstructSparseRow(sampler_, samples_[5], 5, flipped, opt, solver, row.data(), st),
+            SparseOutcome::kTooFewNeighbors);
+  EXPECT_EQ(st.neighbors_dropped_by_normal, 3u);
+  EXPECT_EQ(st.fallback_too_few_neighbors, 1u);
 }
 
 TEST_F(SparseJobsTest, DamagedOrMalformedMessagesAreRejected) {

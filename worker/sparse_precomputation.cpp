@@ -82,16 +82,22 @@ std::vector<uint32_t> SparseRankCandidates(std::span<const uint8_t> is_dense, st
 
 int SparseCandidateWeight(std::span<const float* const> rows, std::size_t low_dim,
                           const SparsePlan& plan) {
-  // Rank ≥ 1 everywhere so that every region keeps some chance; empty neighbourhoods (no
-  // dense vertex within the radius) get the largest weight: nothing is known there.
-  return rows.empty() ? plan.max_neighbors
-                      : std::max(1, LocalRank(rows, low_dim, plan.rank_threshold));
+  // Rank ≥ 1 everywhere so that every region keeps some chance; an empty neighbourhood (no
+  // dense vertex within the radius) gets the largest weight by default: nothing is known there,
+  // and a sparse vertex there would fall back to dense anyway.
+  const int empty = plan.empty_weight == 0 ? plan.max_neighbors : std::max(0, plan.empty_weight);
+  return rows.empty() ? empty : std::max(1, LocalRank(rows, low_dim, plan.rank_threshold));
 }
 
 std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
                                        std::span<const double> weights, std::size_t picks,
                                        const SparsePlan& plan, int it) {
-  return WeightedSampleWithoutReplacement(candidates, weights, picks, plan.seed + 7919 * (it + 1));
+  double top = 0;
+  for (double w : weights) top = std::max(top, w);
+  std::vector<double> w(weights.begin(), weights.end());
+  for (double& x : w)
+    if (!(x > 0)) x = top > 0 ? top : 1.0;
+  return WeightedSampleWithoutReplacement(candidates, w, picks, plan.seed + 7919 * (it + 1));
 }
 
 int SparseRankResolution(const SparsePlan& plan, int cubemap_n) {
@@ -199,8 +205,8 @@ std::vector<float> RunSparsePrecomputation(
       std::vector<DenseNeighbor> nbs;
       nbs.reserve(nb.size());
       for (uint32_t d : nb)
-        nbs.push_back(
-            {out.data() + static_cast<std::size_t>(d) * T, vis[d].data(), feat[d].data()});
+        nbs.push_back({out.data() + static_cast<std::size_t>(d) * T, vis[d].data(), feat[d].data(),
+                       samples[d].normal});
       SparseStats st;
       const SparseOutcome o =
           ReconstructSparseRow(sampler, samples[s], s, nbs, plan.sparse, solvers.local(),

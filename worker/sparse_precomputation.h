@@ -30,6 +30,11 @@ struct SparsePlan {
   int rank_resolution = 8;  // rows are box-averaged to 6·m·m texels for rank estimation
   double rank_threshold = 0.05;
   int candidates_per_pick = 4;  // rank is estimated on this many random candidates per pick
+  // Weight of a candidate with no dense neighbour within the radius: 0 = max_neighbors (nothing
+  // is known there; the default), > 0 this fixed weight, < 0 the largest rank estimated in the
+  // same round. Measured on the default scene and the dragon (docs/sparse-precomputation.md):
+  // the round's largest rank gave more fallbacks and slightly larger ground errors.
+  int empty_weight = 0;
   uint64_t seed = 1;
   AngularOptions angular;
   SparseOptions sparse;
@@ -73,10 +78,12 @@ std::size_t SparsePicksForRound(std::size_t budget, std::size_t dense_count, int
 std::vector<uint32_t> SparseRankCandidates(std::span<const uint8_t> is_dense, std::size_t picks,
                                            const SparsePlan& plan, int it);
 // A candidate's weight from its dense neighbours' downsampled rows (6·m·m floats each): the
-// local rank, at least 1; max_neighbors when it has no dense neighbour (nothing is known there).
+// local rank, at least 1; with no dense neighbour, max_neighbors (or plan.empty_weight when
+// positive; 0, "unknown", when negative: SparsePickByRank resolves it to the round's largest rank).
 int SparseCandidateWeight(std::span<const float* const> neighbor_low_rows, std::size_t low_dim,
                           const SparsePlan& plan);
-// The next dense vertices of round `it`, drawn with weight = rank; sorted.
+// The next dense vertices of round `it`, drawn with weight = rank (a weight ≤ 0, unknown, counts
+// as the largest weight of the round, 1 if there is none); sorted.
 std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
                                        std::span<const double> weights, std::size_t picks,
                                        const SparsePlan& plan, int it);

@@ -114,6 +114,34 @@ TEST(LocalRank, WeightedSamplingIsDeterministicAndFollowsWeights) {
   EXPECT_EQ(b, std::vector<uint32_t>{3});
 }
 
+// §4.1: a candidate with no dense neighbour weighs max_neighbors, a fixed weight, or (empty_weight
+// < 0) is unknown (0) and drawn as if it had the round's largest rank; with no rank at all every
+// weight is 1.
+TEST(LocalRank, UnknownCandidatesWeighAsTheLargestRankOfTheRound) {
+  SparsePlan plan;
+  EXPECT_EQ(SparseCandidateWeight({}, 384, plan), plan.max_neighbors);  // the default
+  plan.empty_weight = 7;
+  EXPECT_EQ(SparseCandidateWeight({}, 384, plan), 7);
+  plan.empty_weight = -1;
+  EXPECT_EQ(SparseCandidateWeight({}, 384, plan), 0);
+  std::vector<uint32_t> cand(600);
+  std::vector<double> w(600), resolved(600);
+  for (uint32_t i = 0; i < 600; ++i) {
+    cand[i] = 3 * i;
+    w[i] = i % 3 == 0 ? 0.0 : (i % 3 == 1 ? 1.0 : 6.0);
+    resolved[i] = w[i] > 0 ? w[i] : 6.0;
+  }
+  const auto picks = SparsePickByRank(cand, w, 60, plan, 2);
+  EXPECT_EQ(picks, WeightedSampleWithoutReplacement(cand, resolved, 60, plan.seed + 7919 * 3));
+  const auto unknown =
+      std::count_if(picks.begin(), picks.end(), [](uint32_t c) { return (c / 3) % 3 == 0; });
+  EXPECT_GT(unknown, 20);  // expected share 6/13 of the first pick
+  const std::vector<double> none(600, 0.0);
+  EXPECT_EQ(SparsePickByRank(cand, none, 60, plan, 2),
+            WeightedSampleWithoutReplacement(cand, std::vector<double>(600, 1.0), 60,
+                                             plan.seed + 7919 * 3));
+}
+
 TEST(NeighborIndex, RadiusSearchMatchesBruteForce) {
   std::vector<Vec3> pts;
   std::vector<uint32_t> ids;
@@ -210,6 +238,24 @@ TEST_F(SparseScene, SparsePrecomputationIsAccurateAndCheaper) {
   std::printf("sparse: model %.4f ground %.4f sampled %.3f | L1 %.4f LS %.4f\n", err_model,
               err_ground, report.SampledFraction(), err_l1, err_ls);
   EXPECT_LE(err_l1, err_ls * 1.1);
+
+  // Adaptive feature count: the texels where the neighbours disagree plus min_features, at most
+  // `features`; fewer texels traced for a small loss.
+  SparsePlan ad = plan;
+  ad.sparse.min_features = 24;
+  SparseReport rad;
+  const std::vector<float> adaptive = RunSparsePrecomputation(sampler_, samples_, ad, rad);
+  const double ad_model = RelativeRms(adaptive, brute_, T, 0, nsphere, L);
+  const double ad_ground = RelativeRms(adaptive, brute_, T, nsphere, samples_.size(), L);
+  std::printf("adaptive features: model %.4f ground %.4f sampled %.3f, %.1f features/vertex\n",
+              ad_model, ad_ground, rad.SampledFraction(),
+              static_cast<double>(rad.sparse_stats.features_traced) /
+                  static_cast<double>(rad.sparse_stats.reconstructed + rad.dense_fallback));
+  EXPECT_LT(rad.SampledFraction(), report.SampledFraction());
+  EXPECT_LE(rad.sparse_stats.features_traced, 96 * (rad.sparse + rad.dense_fallback));
+  EXPECT_GE(rad.sparse_stats.features_traced, 24 * rad.sparse);
+  EXPECT_LT(ad_model, 0.03);
+  EXPECT_LT(ad_ground, 0.035);
 }
 
 }  // namespace

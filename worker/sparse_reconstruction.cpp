@@ -12,6 +12,7 @@ SparseStats& SparseStats::operator+=(const SparseStats& o) {
   reconstructed += o.reconstructed;
   fallback_too_few_neighbors += o.fallback_too_few_neighbors;
   fallback_solve_failed += o.fallback_solve_failed;
+  neighbors_dropped_by_normal += o.neighbors_dropped_by_normal;
   solved_lars += o.solved_lars;
   solved_admm += o.solved_admm;
   zero_systems += o.zero_systems;
@@ -21,49 +22,77 @@ SparseStats& SparseStats::operator+=(const SparseStats& o) {
 }
 
 namespace {
-// Per-texel statistics over the neighbours, neighbour-outer so that the inner loops run
-// contiguously over texels.
+// Contiguous runs [first, last) of the texels above a horizon: a horizon cuts each face row in
+// one interval, so there are at most about 6·n runs, and the loops over the neighbours' rows
+// below touch only the half of each row that matters.
+using Runs = std::vector<std::pair<uint32_t, uint32_t>>;
+Runs RunsOf(const uint8_t* above, std::size_t total) {
+  Runs runs;
+  for (std::size_t j = 0; j < total;) {
+    if (!above[j]) {
+      ++j;
+      continue;
+    }
+    const std::size_t first = j;
+    while (j < total && above[j]) ++j;
+    runs.push_back({static_cast<uint32_t>(first), static_cast<uint32_t>(j)});
+  }
+  return runs;
+}
+
+// Per-texel statistics over the neighbours on the given runs (entries outside them are left
+// 0), neighbour-outer so that the inner loops run contiguously over texels.
 void NeighbourStatistics(std::span<const DenseNeighbor> neighbors, std::size_t total,
-                         std::vector<float>& var, std::vector<uint16_t>& feat) {
+                         const Runs& runs, std::vector<float>& var, std::vector<uint16_t>& feat) {
   std::vector<float> s(total, 0.0f), s2(total, 0.0f);
   feat.assign(total, 0);
   for (const DenseNeighbor& nb : neighbors) {
     const float* t = nb.transport;
     const uint8_t* f = nb.feature;
-    for (std::size_t j = 0; j < total; ++j) {
-      s[j] += t[j];
-      s2[j] += t[j] * t[j];
-      feat[j] = static_cast<uint16_t>(feat[j] + f[j]);
+    for (const auto& [first, last] : runs) {
+      for (std::size_t j = first; j < last; ++j) {
+        s[j] += t[j];
+        s2[j] += t[j] * t[j];
+        feat[j] = static_cast<uint16_t>(feat[j] + f[j]);
+      }
     }
   }
-  var.resize(total);
+  var.assign(total, 0.0f);
   const float inv = neighbors.empty() ? 0.0f : 1.0f / static_cast<float>(neighbors.size());
-  for (std::size_t j = 0; j < total; ++j) {
-    const float m = s[j] * inv;
-    var[j] = std::max(0.0f, s2[j] * inv - m * m);
+  for (const auto& [first, last] : runs) {
+    for (std::size_t j = first; j < last; ++j) {
+      const float m = s[j] * inv;
+      var[j] = std::max(0.0f, s2[j] * inv - m * m);
+    }
   }
 }
 
+// `count` texels, best first by the keys below; with `min_extra` < count, only as many as there
+// are texels with a positive primary key plus `min_extra`, at most `count`.
 std::vector<uint32_t> ChooseFromStatistics(const uint8_t* above, std::size_t total,
                                            const std::vector<float>& var,
                                            const std::vector<uint16_t>& feat, int count,
-                                           uint64_t seed) {
+                                           int min_extra, uint64_t seed) {
   struct Cand {
     double key;
     uint32_t texel;
   };
   std::vector<Cand> cands;
   cands.reserve(total / 2 + 8);
+  std::size_t primary = 0;
   for (std::size_t j = 0; j < total; ++j) {
     if (!above[j]) continue;
     // Primary: the paper's product of variance and feature count; then variance alone; then a
     // deterministic spread so that a region where all neighbours agree still gets constraints.
     const double v = var[j];
+    primary += v * feat[j] > 0;
     cands.push_back(
         {v * feat[j] + 1e-3 * v + 1e-12 * HashUniform(seed, j), static_cast<uint32_t>(j)});
   }
-  const std::size_t take =
+  std::size_t take =
       std::min<std::size_t>(static_cast<std::size_t>(std::max(count, 0)), cands.size());
+  if (min_extra < count)
+    take = std::min(take, primary + static_cast<std::size_t>(std::max(min_extra, 0)));
   auto better = [](const Cand& a, const Cand& b) {
     return a.key != b.key ? a.key > b.key : a.texel < b.texel;
   };
@@ -85,14 +114,22 @@ std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const
   layout.AboveHorizonMask(normal, above.data());
   std::vector<float> var;
   std::vector<uint16_t> feat;
-  NeighbourStatistics(neighbors, total, var, feat);
-  return ChooseFromStatistics(above.data(), total, var, feat, count, seed);
+  NeighbourStatistics(neighbors, total, RunsOf(above.data(), total), var, feat);
+  return ChooseFromStatistics(above.data(), total, var, feat, count, count, seed);
 }
 
 SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
                                    uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
                                    const SparseOptions& options, L1Solver& solver, float* row,
                                    SparseStats& stats) {
+  std::vector<DenseNeighbor> same_side;
+  if (options.min_normal_cos > -1) {
+    const Vec3 nx = Normalize(sample.normal);
+    for (const DenseNeighbor& nb : neighbors)
+      if (Dot(nx, Normalize(nb.normal)) >= options.min_normal_cos) same_side.push_back(nb);
+    stats.neighbors_dropped_by_normal += neighbors.size() - same_side.size();
+    neighbors = same_side;
+  }
   if (static_cast<int>(neighbors.size()) < options.min_neighbors) {
     ++stats.fallback_too_few_neighbors;
     return SparseOutcome::kTooFewNeighbors;
@@ -102,11 +139,12 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   std::vector<uint8_t> above(total), fully(total);
   const std::size_t above_count =
       layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
+  const Runs runs = RunsOf(above.data(), total);
   std::vector<float> var;
   std::vector<uint16_t> featcount;
-  NeighbourStatistics(neighbors, total, var, featcount);
-  const std::vector<uint32_t> feats =
-      ChooseFromStatistics(above.data(), total, var, featcount, options.features, sample_index);
+  NeighbourStatistics(neighbors, total, runs, var, featcount);
+  const std::vector<uint32_t> feats = ChooseFromStatistics(
+      above.data(), total, var, featcount, options.features, options.min_features, sample_index);
   const int m = static_cast<int>(feats.size());
   const int k = static_cast<int>(neighbors.size());
   std::vector<float> traced(feats.size()), traced_unocc(feats.size());
@@ -164,7 +202,8 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
     if (a == 0.0f) continue;
     const DenseNeighbor& nb = neighbors[static_cast<std::size_t>(c)];
     const float* src = vis ? nb.visibility : nb.transport;
-    for (std::size_t j = 0; j < total; ++j) acc[j] += a * src[j];
+    for (const auto& [first, last] : runs)
+      for (std::size_t j = first; j < last; ++j) acc[j] += a * src[j];
   }
   for (std::size_t j = 0; j < total; ++j) {
     if (!above[j]) {

@@ -30,9 +30,17 @@ enum class InterpolationMode : uint8_t { kVisibility = 0, kTransport = 1 };
 enum class SolverKind : uint8_t { kL1 = 0, kLeastSquares = 1 };
 
 struct SparseOptions {
-  int features = 350;     // traced directions per sparse vertex (at n = 32)
+  int features = 350;  // traced directions per sparse vertex (at n = 32), at most
+  // Adaptive feature count: a vertex traces the texels where its neighbours disagree and had
+  // features (the primary key of ChooseFeatureDirections) plus `min_features` more, at most
+  // `features`. min_features ≥ features gives the paper's fixed count.
+  int min_features = 1 << 30;
   double lambda = 1e-3;   // relative L1 penalty (L1Options::lambda)
   int min_neighbors = 3;  // fewer dense neighbours: the vertex becomes dense
+  // Neighbours whose normal makes a larger angle with the vertex's own (cosine below this) are
+  // not used: across a thin part (a claw, a wing, an ear) the radius reaches the other side,
+  // whose visibility has nothing in common with this side's. ≤ −1: every neighbour is used.
+  double min_normal_cos = -2;
   InterpolationMode mode = InterpolationMode::kVisibility;
   SolverKind solver = SolverKind::kL1;
 };
@@ -42,6 +50,7 @@ struct DenseNeighbor {
   const float* transport = nullptr;   // texel_count floats
   const float* visibility = nullptr;  // texel_count floats
   const uint8_t* feature = nullptr;   // texel_count flags
+  Vec3 normal{0, 0, 0};               // the dense vertex's normal (SparseOptions::min_normal_cos)
 };
 
 enum class SparseOutcome : uint8_t {
@@ -55,6 +64,7 @@ struct SparseStats {
   uint64_t reconstructed = 0;
   uint64_t fallback_too_few_neighbors = 0;
   uint64_t fallback_solve_failed = 0;
+  uint64_t neighbors_dropped_by_normal = 0;
   uint64_t solved_lars = 0;
   uint64_t solved_admm = 0;
   uint64_t zero_systems = 0;
