@@ -113,6 +113,53 @@ TEST(SceneTest, DefaultsWhenSectionsAreAbsentAndFeaturesScaleWithN) {
   EXPECT_EQ(ParseScene("[ground]\n", "g.toml", "").sparse.features, 350);
 }
 
+// The glossy-material keys, [sampling] job and [visibility] (docs/scene-format.md).
+TEST(SceneTest, GlossyMaterialsJobAndVisibility) {
+  const SceneDescription d = ParseScene("[ground]\n", "g.toml", "");
+  EXPECT_EQ(d.sampling.job, "transport");
+  EXPECT_EQ(d.visibility.n, 64);
+  EXPECT_EQ(d.visibility.supersample, 1);
+  EXPECT_EQ(d.visibility.bits, 1);
+  EXPECT_EQ(d.ground.glossy.brdf, "lambert");
+  EXPECT_EQ(d.ground.glossy.specular, (Rgb{0, 0, 0}));
+  const SceneDescription s = ParseScene(
+      "[[mesh]]\npath = \"m.off\"\nalbedo = [0.5, 0.5, 0.5]\nbrdf = \"phong\"\n"
+      "specular = [0.5, 0.25, 0.1]\nexponent = 120\n"
+      "[ground]\nbrdf = \"ashikhmin-shirley\"\nalbedo = [0.4, 0.4, 0.4]\n"
+      "specular = [0.3, 0.3, 0.3]\nexponent = 10\nexponent_v = 200\n"
+      "[sampling]\njob = \"visibility\"\n[visibility]\nn = 128\nsupersample = 4\nbits = 3\n",
+      "g.toml", "");
+  EXPECT_EQ(s.sampling.job, "visibility");
+  EXPECT_EQ(s.visibility.n, 128);
+  EXPECT_EQ(s.visibility.supersample, 4);
+  EXPECT_EQ(s.visibility.bits, 3);
+  EXPECT_EQ(s.meshes[0].glossy.brdf, "phong");
+  EXPECT_EQ(s.meshes[0].glossy.specular, (Rgb{0.5f, 0.25f, 0.1f}));
+  EXPECT_EQ(s.meshes[0].glossy.exponent, 120.0);
+  EXPECT_EQ(s.meshes[0].glossy.exponent_v, 120.0);  // defaults to exponent
+  EXPECT_EQ(s.ground.glossy.brdf, "ashikhmin-shirley");
+  EXPECT_EQ(s.ground.glossy.exponent, 10.0);
+  EXPECT_EQ(s.ground.glossy.exponent_v, 200.0);
+  const std::string mesh = "[[mesh]]\npath = \"m.off\"\nalbedo = [0.8, 0.8, 0.8]\n";
+  for (const auto& [text, says] : std::vector<std::pair<std::string, std::string>>{
+           {mesh + "brdf = \"ward\"\n", "not one of"},
+           {mesh + "specular = [0.3, 0.1, 0.1]\n", "must not exceed 1"},
+           {mesh + "exponent = 0\n", "out of range"},
+           {mesh + "[sampling]\njob = \"both\"\n", "not one of"},
+           {mesh + "[visibility]\nn = 48\n", "power of two"},
+           {mesh + "[visibility]\nn = 8\n", "out of range"},
+           {mesh + "[visibility]\nbits = 2\n", "need supersample > 1"},
+           {mesh + "[visibility]\nrays = 2\n", "unknown key 'rays'"}}) {
+    try {
+      ParseScene(text, "bad.toml", "");
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad.toml: line"), std::string::npos) << e.what();
+    }
+  }
+}
+
 struct BadScene {
   std::string text;
   int line;
