@@ -214,8 +214,8 @@ double BytesAtError(std::vector<Point> pts, double e) {
 
 void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& schemes,
             const std::vector<prt::CompressionBudget>& budgets, const std::vector<double>& keeps,
-            const std::vector<double>& column_keeps,
-            int bits, int light_weight, bool t_error, const std::string& out_dir) {
+            const std::vector<double>& column_keeps, int bits, int light_weight, bool t_error,
+            const std::string& out_dir) {
   const int n = tr.n;
   const std::size_t S = tr.S, M = static_cast<std::size_t>(6) * n * n;
   const double raw_bytes = static_cast<double>(S * M) * 4.0;
@@ -255,7 +255,7 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
   std::printf("%-11s %-7s %7s %10s %10s %7s %9s %9s %7s\n", "scheme", "budget", "keep", "terms",
               "bytes", "%raw", "T_relF", "B_relRMS", "time_s");
   std::vector<Point> points;
-  std::vector<std::string> depth_lines;
+  std::vector<std::string> depth_lines, level_lines;
   // The stages of CompressTransport (transport_compressor.h), run so that what does not depend on
   // the keep fraction is done once: the row transform, the transpose, and the column transforms
   // of 2D and full 4D (adaptive depths depend on the per-column budget, so adaptive 4D and the
@@ -361,6 +361,22 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
                     p.secs);
         std::fflush(stdout);
         points.push_back(p);
+        {
+          // Where the stored terms go: share by row-transform level.
+          std::vector<double> per_level(row_depth + 1, 0.0);
+          for (const auto& st : stats) per_level[row_levels[st.column]] += st.stored_terms;
+          std::ostringstream os;
+          char buf[64];
+          std::snprintf(buf, sizeof buf, "%-11s %-7s keep %7.4f:", prt::ToString(scheme),
+                        prt::ToString(budget), keep);
+          os << buf;
+          for (int l = 0; l <= row_depth; ++l) {
+            std::snprintf(buf, sizeof buf, " %5.1f%%",
+                          p.terms > 0 ? 100.0 * per_level[l] / static_cast<double>(p.terms) : 0.0);
+            os << buf;
+          }
+          level_lines.push_back(os.str());
+        }
         if (scheme == prt::CompressionScheme::kAdaptive4D) {
           std::vector<double> sum(row_depth + 1, 0.0), cnt(row_depth + 1, 0.0);
           for (const auto& st : stats) {
@@ -442,6 +458,8 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
         "smallest best-2D / adaptive4d ratio over relit errors %.4f..%.4f: %.2fx (at %.4f)\n", lo,
         hi, min_ratio, at);
   }
+  std::printf("\nstored terms by row-transform level (0 = scaling … %d = finest):\n", row_depth);
+  for (const auto& l : level_lines) std::printf("  %s\n", l.c_str());
   std::printf(
       "\naverage adaptive column depth by row-transform level (Fig. 8; 0 = scaling … %d ="
       " finest; max depth %d):\n",
