@@ -107,13 +107,18 @@ double CosineWeightedBrdf(const Material& m, const ShadingFrame& f, const Vec3& 
 
 // Appendix A (see brdf.h).
 int BrdfSamplingRate(const Material& m, const ShadingFrame& f, const Vec3& block_centre) {
+  return BrdfSamplingRate(m, f, block_centre, 250.0);
+}
+
+int BrdfSamplingRate(const Material& m, const ShadingFrame& f, const Vec3& block_centre,
+                     double full_rate_exponent) {
   if (!HasSpecular(m)) return 1;
   const Vec3 r = 2.0 * Dot(f.normal, block_centre) * f.normal - block_centre;
   const double cos_angle = Dot(Normalize(r), f.view);
   constexpr double kCosPi4 = 0.70710678118654752, kCosPi8 = 0.92387953251128676;
   const double s = EffectiveExponent(m);
   if (s < 30) return cos_angle > kCosPi4 ? 4 : 1;
-  if (cos_angle > kCosPi8) return s < 250 ? 16 : 256;
+  if (cos_angle > kCosPi8) return s < full_rate_exponent ? 16 : 256;
   return cos_angle > kCosPi4 ? 4 : 1;
 }
 

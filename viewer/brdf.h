@@ -63,6 +63,10 @@ double EffectiveExponent(const Material& m);
 //   30 ≤ s < 250:      16 if ∠ < π/8, 4 if π/8 ≤ ∠ < π/4, else 1
 //   s ≥ 250:           256 if ∠ < π/8, 4 if π/8 ≤ ∠ < π/4 (not in the paper), else 1
 int BrdfSamplingRate(const Material& m, const ShadingFrame& f, const Vec3& block_centre);
+// The same with the exponent from which the lobe near the mirror direction takes all 256 samples
+// instead of 16 (the paper: 250) as a parameter.
+int BrdfSamplingRate(const Material& m, const ShadingFrame& f, const Vec3& block_centre,
+                     double full_rate_exponent);
 
 // The orthonormal 16×16 DCT-II of a block, position k = y·16 + x:
 //   φ_u(x) = α_u cos(π(2x + 1)u / 32), α_0 = 1/4, α_u = √2/4,   F_uv = Σ_xy f(x, y) φ_u(x) φ_v(y)

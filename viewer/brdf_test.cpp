@@ -148,7 +148,16 @@ TEST(Brdf, AppendixASamplingRates) {
   EXPECT_EQ(BrdfSamplingRate(m, f, centre(60)), 1);
   m.exponent = 300;
   EXPECT_EQ(BrdfSamplingRate(m, f, centre(10)), 256);
+  EXPECT_EQ(BrdfSamplingRate(m, f, centre(30)), 4);
   EXPECT_EQ(BrdfSamplingRate(m, f, centre(60)), 1);
+  // The 256-sample threshold as a parameter (the paper's 250 by default).
+  m.exponent = 200;
+  EXPECT_EQ(BrdfSamplingRate(m, f, centre(10)), 16);
+  EXPECT_EQ(BrdfSamplingRate(m, f, centre(10), 250.0), 16);
+  EXPECT_EQ(BrdfSamplingRate(m, f, centre(10), 100.0), 256);
+  EXPECT_EQ(BrdfSamplingRate(m, f, centre(30), 100.0), 4);
+  m.exponent = 20;
+  EXPECT_EQ(BrdfSamplingRate(m, f, centre(10), 10.0), 4);  // s < 30 never takes 16 or 256
 }
 
 }  // namespace

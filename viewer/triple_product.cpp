@@ -96,7 +96,7 @@ void Algorithm1(const GlossyScene& scene, const CubemapBlocks& blocks, const Blo
     // Line 4, ProjectBRDF (§4.1, Appendix A): ρ̃ = diffuse + specular at the rate the rules ask
     // for; with exact_cosine the diffuse part is integrated exactly instead.
     const Vec3& centre = blocks.Centre(b);
-    const int rate = BrdfSamplingRate(m, f, centre);
+    const int rate = BrdfSamplingRate(m, f, centre, options.full_rate_exponent);
     const int l = rate == 1 ? 1 : (rate == 4 ? 2 : (rate == 16 ? 4 : 16));
     const float d0 = static_cast<float>(DiffuseLobe(f, centre));
     if (rate <= 16) {

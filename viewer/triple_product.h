@@ -35,6 +35,9 @@ struct TripleProductOptions {
   // the vector suffix sums of block_lighting.h (iv) (the cosine is linear in ω wherever V > 0,
   // since visibility is 0 below the horizon); the specular lobe is treated as in the paper.
   bool exact_cosine = false;
+  // Appendix A samples the specular lobe at all 256 texels within π/8 of the mirror direction
+  // from this exponent on, at 16 below it (the paper: 250).
+  double full_rate_exponent = 250.0;
 };
 
 // The case of Algorithm 1 a block took (its line in the pseudocode; kZero is line 1).
