@@ -276,13 +276,14 @@ int main(int argc, char** argv) {
   if (own_pack) {
     std::printf(
         "\n## 2. 2D vs adaptive 4D relighting (Cheslack-Postava et al. Fig. 9): sunrise, "
-        "NWA-300 lighting, error vs uncompressed T\n");
-    const std::vector<prt::LightingTerm> l =
-        prt::NonlinearLightingApproximation(sunrise, basis, 300);
-    // Reference: uncompressed T (texel basis) under the same 300 terms.
-    const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, l);
-    std::vector<float> ref(3 * ns);
-    {
+        "NWA-N lighting, error vs uncompressed T under the same N terms\n");
+    const std::vector<std::size_t> term_counts = {30, 100, 300};
+    std::vector<std::vector<prt::LightingTerm>> lights;
+    std::vector<std::vector<float>> refs;  // uncompressed T (texel basis) under each lighting
+    for (std::size_t terms : term_counts) {
+      lights.push_back(prt::NonlinearLightingApproximation(sunrise, basis, terms));
+      const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, lights.back());
+      std::vector<float> ref(3 * ns);
       const std::size_t texels = approx_cube.TexelCount();
       for (std::size_t s = 0; s < ns; ++s)
         for (int c = 0; c < 3; ++c) {
@@ -293,18 +294,22 @@ int main(int argc, char** argv) {
           ref[3 * s + c] =
               static_cast<float>(acc * session->albedo()[s][static_cast<std::size_t>(c)]);
         }
+      refs.push_back(std::move(ref));
     }
     struct Point {
       double error, ms;
-      std::size_t terms;
     };
-    std::map<std::string, std::vector<Point>> curves;
-    const std::vector<double> keeps =
-        quick ? std::vector<double>{0.01, 0.05} : std::vector<double>{0.01, 0.03, 0.1};
+    // curves[scheme][N index]
+    std::map<std::string, std::vector<std::vector<Point>>> curves;
+    const std::vector<double> keeps = quick ? std::vector<double>{0.003, 0.01, 0.05}
+                                            : std::vector<double>{0.003, 0.01, 0.03, 0.1};
     std::printf(
-        "| scheme | keep | stored terms | image error | relight ms |\n|---|---|---|---|---|\n");
+        "| scheme | keep | stored terms | N | image error | relight ms | relight CPU ms |\n"
+        "|---|---|---|---|---|---|---|\n");
     for (prt::CompressionScheme scheme :
          {prt::CompressionScheme::k2D, prt::CompressionScheme::kAdaptive4D}) {
+      auto& curve = curves[prt::ToString(scheme)];
+      curve.resize(term_counts.size());
       for (double keep : keeps) {
         prt::CompressionOptions o =
             prt::CompressionOptionsFrom(traced.scene.compression, "default");
@@ -314,37 +319,48 @@ int main(int argc, char** argv) {
             prt::CompressTransport(traced.rows.data(), n, prt::SpatialDomainOf(traced.geometry), o);
         const prt::CompressedRelighter relighter(ct);
         const prt::CompressedTransportOperator op(relighter);
-        const std::vector<float> rgb = prt::ShadeSamples(op.Apply(l), session->albedo());
-        const double err = prt::RelativeRmsError(rgb, ref);
-        const double ms = 1e3 * BestSeconds(quick ? 3 : 11, [&] { (void)op.Apply(l); });
-        curves[prt::ToString(scheme)].push_back({err, ms, ct.term_count()});
-        std::printf("| %s | %.3g | %zu | %.4g | %.3f |\n", prt::ToString(scheme), keep,
-                    ct.term_count(), err, ms);
-      }
-    }
-    // Equal error: 2D's time interpolated (log-log) at each adaptive-4D point's error.
-    std::vector<Point> c2 = curves["2d"];
-    std::sort(c2.begin(), c2.end(),
-              [](const Point& a, const Point& b) { return a.error < b.error; });
-    std::printf(
-        "\n| image error | adaptive 4D ms | 2D ms (interpolated) | 2D / 4D time |\n"
-        "|---|---|---|---|\n");
-    for (const Point& p : curves["adaptive4d"]) {
-      for (std::size_t k = 0; k + 1 < c2.size(); ++k) {
-        if (p.error >= c2[k].error && p.error <= c2[k + 1].error && c2[k].error > 0) {
-          const double u =
-              std::log(p.error / c2[k].error) / std::log(c2[k + 1].error / c2[k].error);
-          const double ms2 = std::exp(std::log(c2[k].ms) + u * std::log(c2[k + 1].ms / c2[k].ms));
-          std::printf("| %.4g | %.3f | %.3f | %.2f |\n", p.error, p.ms, ms2, ms2 / p.ms);
+        for (std::size_t q = 0; q < term_counts.size(); ++q) {
+          const std::vector<float> rgb = prt::ShadeSamples(op.Apply(lights[q]), session->albedo());
+          const double err = prt::RelativeRmsError(rgb, refs[q]);
+          const Timing t = BestTiming(quick ? 3 : 11, [&] { (void)op.Apply(lights[q]); });
+          curve[q].push_back({err, 1e3 * std::min(t.wall, t.cpu)});
+          std::printf("| %s | %.3g | %zu | %zu | %.4g | %.3f | %.3f |\n", prt::ToString(scheme),
+                      keep, ct.term_count(), term_counts[q], err, 1e3 * t.wall, 1e3 * t.cpu);
         }
       }
     }
-    std::printf("(rows appear only where 2D's measured errors bracket the 4D point)\n");
+    // Equal error: 2D's time interpolated (log-log) at each adaptive-4D point's error.
+    std::printf(
+        "\n| N | image error | adaptive 4D ms | 2D ms (interpolated) | 2D / 4D time |\n"
+        "|---|---|---|---|---|\n");
+    for (std::size_t q = 0; q < term_counts.size(); ++q) {
+      std::vector<Point> c2 = curves["2d"][q];
+      std::sort(c2.begin(), c2.end(),
+                [](const Point& a, const Point& b) { return a.error < b.error; });
+      for (const Point& p : curves["adaptive4d"][q]) {
+        for (std::size_t k = 0; k + 1 < c2.size(); ++k) {
+          if (p.error >= c2[k].error && p.error <= c2[k + 1].error && c2[k].error > 0) {
+            const double u =
+                std::log(p.error / c2[k].error) / std::log(c2[k + 1].error / c2[k].error);
+            const double ms2 = std::exp(std::log(c2[k].ms) + u * std::log(c2[k + 1].ms / c2[k].ms));
+            std::printf("| %zu | %.4g | %.3f | %.3f | %.2f |\n", term_counts[q], p.error, p.ms, ms2,
+                        ms2 / p.ms);
+          }
+        }
+      }
+    }
+    std::printf(
+        "(times: the lesser of wall and CPU time, fastest of the repetitions; rows appear only\n"
+        " where 2D's measured errors bracket the 4D point)\n");
   } else {
     std::printf("\n## 2. skipped: the 2D/4D sweep needs the uncompressed T (run without a pack)\n");
   }
 
   // ---- 3. Rotation: PBI-30 vs NWA-90 ----
+  if (frames < 1) {
+    std::printf("\n## 3. skipped (--frames 0)\n");
+    return 0;
+  }
   std::printf(
       "\n## 3. Rotating environment (Overbeck et al. Fig. 7): %.2f deg/frame for %d "
       "frames, then %d still\n",
