@@ -797,12 +797,15 @@ bool Plot(const std::vector<Record>& all, const std::string& scene, const std::s
     if (r->bits > 0) bit_set.insert(r->bits);
   const std::string base = dir + "/" + scene;
   std::ostringstream gp;
-  gp << "set terminal pngcairo size 900,600 noenhanced\nset logscale xy\nset grid\nset key "
-        "outside right top\nset ylabel 'relit relative RMS error (mean over environments)'\n";
+  gp << "set terminal pngcairo size 900,700 noenhanced\nset logscale xy\nset grid\nset key below "
+        "maxrows 4 font ',10'\nset ylabel 'relit relative RMS error (mean over environments)'\n";
   // 1. Precomputation time.
   WriteDat(base + "_sparse_time.dat", of("sparse"), CpuOf);
+  double max_cpu = brute->cpu_s;
+  for (const Record* r : of("sparse")) max_cpu = std::max(max_cpu, r->cpu_s);
   gp << "set output '" << base << "_time_error.png'\nset title '" << scene
      << ": precomputation time vs error (n = " << brute->n << ")'\n"
+     << "set xrange [" << Fmt(brute->cpu_s / 6) << ":" << Fmt(max_cpu * 1.5) << "]\n"
      << "set xlabel 'CPU seconds, all threads (brute force " << Fmt3(brute->cpu_s) << " s)'\n"
      << "set arrow 1 from " << Fmt(brute->cpu_s) << ", graph 0 to " << Fmt(brute->cpu_s)
      << ", graph 1 nohead lw 2 lc rgb 'black'\n"
@@ -813,10 +816,10 @@ bool Plot(const std::vector<Record>& all, const std::string& scene, const std::s
      << "set label 2 'Huang 2010: 4-5x faster at ~11% sampled' at " << Fmt(brute->cpu_s / 5)
      << ", graph 0.06 tc rgb '#cc0000'\n"
      << "plot '" << base << "_sparse_time.dat' u 1:2 w p pt 7 ps 1.3 t 'sparse (budget, "
-     << "features, radius sweep)'\nunset arrow\nunset label\n";
+     << "features, radius sweep)'\nunset arrow\nunset label\nset autoscale x\n";
   // 2. Size.
   gp << "set output '" << base << "_size_error.png'\nset title '" << scene
-     << ": bytes stored vs error'\nset xlabel 'bytes (raw float T = "
+     << ": bytes stored vs error'\nset format x '%.0s%c'\nset xlabel 'bytes (raw float T = "
      << Fmt3(static_cast<double>(brute->bytes)) << ")'\nplot ";
   bool first = true;
   int pt = 4;
@@ -846,7 +849,7 @@ bool Plot(const std::vector<Record>& all, const std::string& scene, const std::s
   gp << "\n";
   // 3. Relighting time.
   gp << "set output '" << base << "_relight_error.png'\nset title '" << scene
-     << ": relighting time vs error'\nset xlabel 'ms per relighting'\nplot ";
+     << ": relighting time vs error'\nset format x '%g'\nset xlabel 'ms per relighting'\nplot ";
   first = true;
   pt = 4;
   for (const char* fam : {"2d", "4d", "adaptive4d"}) {
@@ -860,7 +863,7 @@ bool Plot(const std::vector<Record>& all, const std::string& scene, const std::s
     const std::string dat = base + "_" + fam + "_relight.dat";
     WriteDat(dat, of(fam), RelightOf);
     gp << ", '" << dat << "' u 1:2 w lp pt " << pt++ << " t '" << fam
-       << "-N, rotating' , '' u 1:2:3 w labels offset 1.2,0.6 notitle";
+       << "-N, rotating', '' u 1:2:3 w labels offset 1.2,0.6 notitle";
   }
   // Overbeck 2006: PBI-30 beats NWA-90.
   {
