@@ -265,7 +265,7 @@ TEST(GlossySession, PrtViewRendersAGlossyPackAsTheLibraryDoes) {
   const BlockLighting light =
       s->Lighting(ResampleToCubemap(ReadEnvironment(t.env), s->cubemap_n()));
   std::vector<float> expected(3 * s->sample_count());
-  s->Relight(light, s->camera().eye, expected);
+  s->Relight(light, s->camera().eye, expected, {.exact_cosine = true});  // prt-view's default
   EXPECT_EQ(ReadNpy(npy), expected);
   // --reference writes the pixel-basis sum; --camera moves the eye.
   ASSERT_EQ(RunViewer("'" + t.pack + "' --env '" + t.env + "' --reference --camera 2,1.5,2,0,0,0 " +
@@ -303,7 +303,7 @@ TEST(GlossySession, WindowScreenshotMatchesHeadlessRender) {
   const auto s = GlossySession::Open(t.pack);
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(t.env), s->cubemap_n());
   std::vector<float> rgb(3 * s->sample_count());
-  s->Relight(s->Lighting(cube), s->camera().eye, rgb);
+  s->Relight(s->Lighting(cube), s->camera().eye, rgb, {.exact_cosine = true});
   const ImageRgb image = s->Render(s->camera(), rgb, &cube);
   ASSERT_EQ(codes.size(), image.pixels.size());
   double worst = 0;
