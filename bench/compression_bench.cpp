@@ -489,8 +489,8 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
     bool first = true;
     for (const auto& [name, pts] : curves) {
       const std::string s = prt::ToString(pts[0].scheme), b = prt::ToString(pts[0].budget);
-      gp << (first ? "" : ", ") << "'" << base << ".csv' using (strcol(1) eq '" << s << "' && strcol(2) eq '" << b
-         << "' ? $6 : NaN):8 with linespoints title '" << name << "'";
+      gp << (first ? "" : ", ") << "'" << base << ".csv' using (strcol(1) eq '" << s
+         << "' && strcol(2) eq '" << b << "' ? $6 : NaN):8 with linespoints title '" << name << "'";
       first = false;
     }
     gp << "\n";
