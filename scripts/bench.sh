@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep|stress] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -52,10 +52,16 @@ run_sweep() {
   # shellcheck disable=SC2086
   "${launch[@]}" "$BUILD_DIR/bench/prt-bench" --out "$OUT/prt-bench" $QUICK ${PRT_BENCH_ARGS:-}
 }
+# Issue 9's long stress versions of suite tests: 100,000 frames of incremental lighting (BI and
+# PBI) without drift.
+run_stress() {
+  PRT_STRESS_FRAMES="${PRT_STRESS_FRAMES:-100000}" "$BUILD_DIR/viewer/viewer_tests" \
+    --gtest_filter='PerBandIncrementalTest.*Drift*'
+}
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_viewer; run_glossy ;;
-  transport|scaling|sparse|compression|viewer|glossy|sweep) "run_$WHAT" ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep] [--quick]" >&2; exit 1 ;;
+  transport|scaling|sparse|compression|viewer|glossy|sweep|stress) "run_$WHAT" ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
 esac
