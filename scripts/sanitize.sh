@@ -23,8 +23,11 @@ cmake --build "$BUILD_DIR" -j "$JOBS"
 # Leaks: OpenMPI, hwloc, PMIx and libevent keep allocations until exit by design; those library
 # frames are suppressed (scripts/lsan.supp), never prtfarm's own. OpenMPI is built without frame
 # pointers, so the fast unwinder stops inside it and the stack never reaches the library names the
-# suppressions match: fast_unwind_on_malloc=0 records whole allocation stacks.
-export ASAN_OPTIONS="detect_leaks=1:fast_unwind_on_malloc=0"
+# suppressions match: fast_unwind_on_malloc=0 records whole allocation stacks. Per program,
+# scripts/asan/<name>.options overrides that (read last, %b = the program's name): prt-view keeps
+# the fast unwinder, since under Xvfb Mesa's software renderer registers code with the unwinder
+# and the slow unwinder called from inside it deadlocks (prt-view uses no MPI).
+export ASAN_OPTIONS="detect_leaks=1:fast_unwind_on_malloc=0:include_if_exists=$ROOT/scripts/asan/%b.options"
 export LSAN_OPTIONS="suppressions=$ROOT/scripts/lsan.supp:print_suppressions=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 # Wall-clock bounds of the few tests that have one grow by this factor (docs/testing.md).
