@@ -62,7 +62,9 @@ class ByteReader {
     const uint64_t n = Get<uint64_t>();
     if (n > (bytes_.size() - at_) / sizeof(T)) throw std::runtime_error("truncated sparse job");
     std::vector<T> v(static_cast<std::size_t>(n));
-    std::memcpy(v.data(), bytes_.data() + at_, v.size() * sizeof(T));
+    // An empty vector's data() may be null, and memcpy's source and destination must not be
+    // (UBSan: nonnull-attribute), even for zero bytes.
+    if (!v.empty()) std::memcpy(v.data(), bytes_.data() + at_, v.size() * sizeof(T));
     at_ += v.size() * sizeof(T);
     return v;
   }
