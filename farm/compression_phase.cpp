@@ -389,29 +389,6 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
 }
 
-bool CompressedRunIsComplete(const FarmOptions& options) {
-  int rank = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  int done = 0;
-  if (rank == 0) {
-    const RunFolder f(options.out_dir);
-    const std::string prtc = (fs::path(f.dir) / kCompressedTransportFile).string();
-    std::error_code ec;
-    // With --force, the setup phase removes transport.prtc once the new scene proved valid.
-    if (!options.force && options.resume && !options.no_compress && fs::exists(prtc, ec) &&
-        fs::exists(f.journal, ec) && !fs::exists(f.transport, ec) && !fs::exists(f.partial, ec)) {
-      done = 1;
-      if (!options.quiet)
-        std::fprintf(stderr,
-                     "prt-farm: --resume: %s is complete (%s written, raw matrix removed); "
-                     "nothing to do (use --force to start over)\n",
-                     f.dir.c_str(), kCompressedTransportFile);
-    }
-  }
-  MPI_Bcast(&done, 1, MPI_INT, 0, MPI_COMM_WORLD);
-  return done != 0;
-}
-
 int RunCompressionPhase(const FarmOptions& options) {
   if (options.no_compress) return kExitOk;
   MPI_Comm comm = MPI_COMM_WORLD;

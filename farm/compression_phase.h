@@ -114,12 +114,6 @@ double MeasureMemoryBandwidth(std::size_t bytes);
 // Writes `bytes` into a temporary file in `dir`, fsyncs it, removes it: MB/s.
 double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes);
 
-// Collective, before RunFarm: with --resume on a run folder whose compression finished and whose
-// raw matrix was removed (transport.prtc present, transport.prtt and .partial absent, journal
-// present) returns true: the run is complete and nothing needs to run. With --force removes a
-// stale transport.prtc. Only rank 0 looks at the folder; the answer is broadcast.
-bool CompressedRunIsComplete(const FarmOptions& options);
-
 // Collective, after RunFarm returned kExitOk on every rank: the compression phase. Returns the
 // exit code (the same on every rank; a failure in the middle aborts the job with MPI_Abort).
 // Does nothing with --no-compress.

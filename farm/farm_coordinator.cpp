@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "farm/checkpoint_journal.h"
+#include "farm/compression_phase.h"
 #include "farm/farm_report.h"
 #include "farm/job_planner.h"
 #include "farm/mpi_support.h"
@@ -105,6 +106,9 @@ struct SetupParams {
   int32_t visibility = 0;  // 1: the visibility job (cubemap_n is then the maps' n)
   int32_t visibility_supersample = 1;
   int32_t visibility_bits = 1;
+  // 1: --resume of a transport run that already finished (transport.prtc written, the raw
+  // matrix removed) whose inputs still match its manifest: nothing is left to do.
+  int32_t complete = 0;
 };
 static_assert(std::is_trivially_copyable_v<SparsePlan>, "SparsePlan is broadcast as bytes");
 
@@ -260,6 +264,7 @@ class SetupPhase : public FarmPhase {
     CheckMpi(MPI_Bcast(&status, 1, MPI_INT, 0, ctx.comm), "MPI_Bcast status");
     if (status != kExitOk) throw CollectiveStop{status};
     CheckMpi(MPI_Bcast(&ctx.params, sizeof(SetupParams), MPI_BYTE, 0, ctx.comm), "MPI_Bcast");
+    if (ctx.params.complete) return;  // a finished run: RunFarm stops after this phase
     if (ctx.params.sparse) {
       CheckMpi(MPI_Bcast(&ctx.plan, sizeof(SparsePlan), MPI_BYTE, 0, ctx.comm), "MPI_Bcast plan");
       ctx.method = "sparse";
@@ -426,6 +431,20 @@ class SetupPhase : public FarmPhase {
                                          "); use --force to start over, or another --out");
       }
       fresh = false;
+      // A finished transport run (the compression phase wrote transport.prtc and removed the raw
+      // matrix): its inputs were checked just above, so the finished asset stays untouched.
+      if (!ctx.params.visibility && !o.no_compress && !fs::exists(f.partial, ec) &&
+          !fs::exists(f.transport, ec) && fs::exists(f.journal, ec) &&
+          fs::exists(fs::path(f.dir) / kCompressedTransportFile, ec)) {
+        ctx.params.complete = 1;
+        if (!o.quiet) {
+          std::fprintf(stderr,
+                       "prt-farm: --resume: %s is complete (%s written, raw matrix removed) and "
+                       "its inputs are unchanged; nothing to do (use --force to start over)\n",
+                       f.dir.c_str(), kCompressedTransportFile);
+        }
+        return;
+      }
     } else if (o.resume) {
       spdlog::info("--resume: {} holds no checkpoints yet; starting a fresh run", f.dir);
     } else if (has_run && !o.force) {
@@ -2082,6 +2101,11 @@ int RunFarm(const FarmOptions& options, bool* transport_job) {
     rep.phases.push_back({phase->name(), Now() - t0});
     if (std::string(phase->name()) == ctx.method) rep.sampling_seconds = Now() - t0;
     if (exit_code != kExitOk) break;
+    if (i == 0 && ctx.params.complete) {
+      // Nothing to do: the finished run's report and files stay as they are.
+      if (transport_job != nullptr) *transport_job = false;
+      return kExitOk;
+    }
     if (i == 0) {
       // Setup told every rank the method: its sampling phase, then finalize.
       if (ctx.params.visibility) {

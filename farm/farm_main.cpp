@@ -31,13 +31,10 @@ int main(int argc, char** argv) {
       code = prt::kExitRankFailed;
     } else {
       // The compression phase (farm/compression_phase.h) runs once the transport is complete.
-      if (prt::CompressedRunIsComplete(options)) {
-        code = prt::kExitOk;
-      } else {
-        bool transport = true;
-        code = prt::RunFarm(options, &transport);
-        if (code == prt::kExitOk && transport) code = prt::RunCompressionPhase(options);
-      }
+      // RunFarm reports transport = false for a visibility run and for a finished run.
+      bool transport = true;
+      code = prt::RunFarm(options, &transport);
+      if (code == prt::kExitOk && transport) code = prt::RunCompressionPhase(options);
     }
   }
   MPI_Finalize();

@@ -79,6 +79,13 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
                  "Row data each rank buffers in the blocked transpose before spilling to disk "
                  "(bytes; suffixes k, M, G = 2^10, 2^20, 2^30)")
       ->transform(CLI::AsSizeValue(false))
+      ->check(CLI::Validator(
+          [](const std::string& value) -> std::string {
+            // After the size transform: plain bytes. A tiny budget spills every block (the
+            // tests force spilling with 2k); zero leaves nothing for the transpose at all.
+            return std::stoull(value) == 0 ? "must be at least 1 byte, got 0" : std::string();
+          },
+          "BYTES>0"))
       ->capture_default_str();
   app.add_option("--compression-scheme", o.compression_scheme,
                  "Override the scene's [compression] scheme")

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tests/run_prt_farm.h"
@@ -167,10 +168,35 @@ TEST(CompressionPhase, ResumeRedoesOnlyTheCompression) {
   EXPECT_GT(rep["jobs"]["reused_from_checkpoints"].get<int>(), 0);
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
   EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
-  const RunResult again = Farm(1, kScene + " --out " + run + " --resume");
+  const std::string report = ReadWholeFile(run + "/report.json");
+  const RunResult again = Farm(1, kScene + " --out " + run + " --rows-per-block 16 --resume");
   EXPECT_EQ(again.exit_code, 0) << again.output;
   EXPECT_NE(again.output.find("nothing to do"), std::string::npos) << again.output;
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
+  EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
+
+  // The finished run's inputs are checked before "nothing to do": another scene (here another
+  // seed) or other settings are refused, naming the manifest, and the finished asset stays.
+  const std::string changed = WorkDir("resume-changed") + "/changed.toml";
+  std::string text = ReadWholeFile(kScene);
+  std::string box_path = PRT_TESTS_DATA_DIR;
+  box_path.append("/box.off").insert(0, 1, '"').push_back('"');
+  for (const auto& [from, to] :
+       {std::pair<std::string, std::string>{"seed = 3", "seed = 4"}, {"\"box.off\"", box_path}}) {
+    const std::size_t at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << text;
+    text.replace(at, from.size(), to);
+  }
+  WriteFileDurably(changed, text);
+  const RunResult other = Farm(1, changed + " --out " + run + " --rows-per-block 16 --resume");
+  EXPECT_EQ(other.exit_code, 2) << other.output;
+  EXPECT_NE(other.output.find("manifest.json"), std::string::npos) << other.output;
+  EXPECT_NE(other.output.find("different run"), std::string::npos) << other.output;
+  const RunResult rpb = Farm(1, kScene + " --out " + run + " --resume");
+  EXPECT_EQ(rpb.exit_code, 2) << rpb.output;
+  EXPECT_NE(rpb.output.find("rows_per_block"), std::string::npos) << rpb.output;
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
+  EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
 }
 
 }  // namespace
