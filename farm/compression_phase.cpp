@@ -10,8 +10,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -389,6 +391,15 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
 }
 
+namespace {
+// --fail-in (tests of killed runs): this rank dies now, without cleaning up.
+[[noreturn]] void ExitAbruptly(int rank, const std::string& where) {
+  spdlog::warn("debug: rank {} exits abruptly {} (--fail-in)", rank, where);
+  spdlog::default_logger()->flush();
+  std::_Exit(kExitRankFailed);
+}
+}  // namespace
+
 int RunCompressionPhase(const FarmOptions& options) {
   if (options.no_compress) return kExitOk;
   MPI_Comm comm = MPI_COMM_WORLD;
@@ -478,6 +489,7 @@ int RunCompressionPhase(const FarmOptions& options) {
     spill.memory_budget_bytes = std::max<uint64_t>(1, options.memory_budget_bytes / 2);
     fs::path spill_dir = fs::path(folder.dir) / ("compress-spill-rank" + std::to_string(rank));
     std::error_code ec;
+    fs::remove_all(spill_dir, ec);  // what a killed run left there
     fs::create_directories(spill_dir, ec);
     if (ec) {
       spill_dir = fs::temp_directory_path() /
@@ -513,7 +525,12 @@ int RunCompressionPhase(const FarmOptions& options) {
     st = DistributedTranspose(
         comm, rows, cols, chunk,
         [&](uint64_t first, uint64_t count, float* out) { reader->ReadRows(first, count, out); },
-        [&](uint64_t, uint64_t count, float* r) { PrepareRows(header, copt, r, count); }, spill,
+        [&](uint64_t first, uint64_t count, float* r) {
+          if (options.fail_in == "transpose" && rank == options.fail_rank && first > 0)
+            ExitAbruptly(rank, "in the transpose's second chunk of rows");
+          PrepareRows(header, copt, r, count);
+        },
+        spill,
         [&](uint32_t first, uint32_t count, std::vector<float>& columns) {
           if (!col_progress) {
             progress.Finish();
@@ -610,6 +627,13 @@ int RunCompressionPhase(const FarmOptions& options) {
       }
       const std::vector<uint8_t> file = EncodeCompressedTransport(t);
       const std::string prtc = (fs::path(folder.dir) / kCompressedTransportFile).string();
+      if (options.fail_in == "write" && options.fail_rank == 0) {
+        // As if killed inside WriteFileDurably: half of its temporary file is on disk.
+        std::ofstream(prtc + ".tmp", std::ios::binary)
+            .write(reinterpret_cast<const char*>(file.data()),
+                   static_cast<std::streamsize>(file.size() / 2));
+        ExitAbruptly(rank, "halfway through writing " + prtc);
+      }
       WriteFileDurably(prtc,
                        std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
       rep.write_seconds = Now() - tw;

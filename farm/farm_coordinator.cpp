@@ -2000,6 +2000,12 @@ class FinalizePhase : public FarmPhase {
     if (ctx.rank != 0) return;
     ctx.writer->Finalize();
     ctx.writer.reset();
+    if (ctx.options.fail_in == "finalize" && ctx.options.fail_rank == 0) {
+      spdlog::warn("debug: rank 0 exits abruptly before renaming {} (--fail-in finalize)",
+                   ctx.folder.partial);
+      spdlog::default_logger()->flush();
+      std::_Exit(kExitRankFailed);
+    }
     fs::rename(ctx.folder.partial, ctx.folder.transport);
     SyncDirectory(ctx.folder.dir);
     spdlog::info("wrote {} ({} rows x {} texels, {} blocks of {} rows)", ctx.folder.transport,

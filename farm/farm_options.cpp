@@ -69,6 +69,9 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_option("--fail-after-jobs", o.fail_after_jobs)->group("");
   app.add_option("--fail-rank", o.fail_rank)->group("");
   app.add_option("--fail-mode", o.fail_mode)->check(CLI::IsMember({"exit", "hang"}))->group("");
+  app.add_option("--fail-in", o.fail_in)
+      ->check(CLI::IsMember({"finalize", "transpose", "write"}))
+      ->group("");
   app.add_option("--initial-job-rows", o.initial_job_rows)->group("");
   app.add_option("--max-job-rows", o.max_job_rows)->group("");
   app.add_flag("--no-compress", o.no_compress,

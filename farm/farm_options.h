@@ -51,8 +51,13 @@ struct FarmOptions {
   int fail_after_jobs = -1;  // the rank fail_rank dies after this many jobs
   int fail_rank = 0;
   std::string fail_mode = "exit";  // exit: _Exit(4) abruptly; hang: sleep forever
-  uint64_t initial_job_rows = 0;   // 0: auto
-  uint64_t max_job_rows = 0;       // 0: auto (a job's rows fit in 256 MiB)
+  // The rank fail_rank exits abruptly (_Exit(4)) at a point after sampling: "finalize" (rank 0,
+  // transport.prtt complete but not yet renamed), "transpose" (when its second chunk of rows
+  // arrives in the compression's transpose), "write" (rank 0, halfway through writing
+  // transport.prtc's temporary file). Empty: never.
+  std::string fail_in;
+  uint64_t initial_job_rows = 0;  // 0: auto
+  uint64_t max_job_rows = 0;      // 0: auto (a job's rows fit in 256 MiB)
 
   // Compression phase (farm/compression_phase.h, docs/farm-compression.md).
   bool no_compress = false;                   // stop after transport.prtt

@@ -152,6 +152,45 @@ TEST(CompressionPhase, SchemeOverrideAndNoCompress) {
   EXPECT_EQ(Farm(1, kScene + " --out " + none + " --compression-scheme 3d").exit_code, 1);
 }
 
+// A rank killed after sampling, at each point where finished work could be lost: rank 0 before
+// renaming the finalized transport.prtt, either rank inside the transpose (4 KiB budget: spill
+// files on disk), rank 0 halfway through writing transport.prtc. --resume re-uses every journaled
+// job (none redone) and writes the bytes of an uninterrupted run; nothing temporary is left.
+TEST(CompressionPhase, KilledAfterSamplingThenResumeGivesTheUninterruptedBytes) {
+  const std::string reference = WorkDir("kill_reference");
+  ASSERT_EQ(Farm(2, kScene + " --out " + reference + kArgs + " --memory-budget 4k").exit_code, 0);
+  const std::string expected = ReadWholeFile(reference + "/transport.prtc");
+  const std::vector<std::pair<std::string, int>> points = {
+      {"finalize", 0}, {"transpose", 0}, {"transpose", 1}, {"write", 0}};
+  for (const auto& [point, rank] : points) {
+    SCOPED_TRACE(point + " on rank " + std::to_string(rank));
+    const std::string run = WorkDir("kill_" + point + std::to_string(rank));
+    const RunResult killed =
+        Farm(2, kScene + " --out " + run + kArgs + " --memory-budget 4k --fail-in " + point +
+                    " --fail-rank " + std::to_string(rank));
+    EXPECT_EQ(killed.exit_code, 4) << killed.output;
+    EXPECT_NE(killed.output.find("exits abruptly"), std::string::npos) << killed.output;
+    EXPECT_FALSE(fs::exists(run + "/transport.prtc"));
+    const int journaled = static_cast<int>(Report(reference)["jobs"]["total"].get<int>());
+    const RunResult resumed = Farm(2, kScene + " --out " + run +
+                                          " --rows-per-block 16 --max-job-rows 9 --quiet "
+                                          "--memory-budget 4k --resume");
+    ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+    EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
+    const nlohmann::json rep = Report(run);
+    EXPECT_EQ(rep["jobs"]["done"], 0) << rep.dump();
+    EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], journaled) << rep.dump();
+    EXPECT_EQ(rep["rays_traced"], 0) << rep.dump();
+    for (const fs::directory_entry& e : fs::directory_iterator(run)) {
+      const std::string name = e.path().filename().string();
+      EXPECT_TRUE(name != "transport.prtt" && name.find(".tmp") == std::string::npos &&
+                  name.find("spill") == std::string::npos &&
+                  name.find(".partial") == std::string::npos)
+          << "left behind: " << name;
+    }
+  }
+}
+
 // The compression was interrupted (no transport.prtc, raw still there): --resume re-uses every
 // journaled job and redoes only the compression. On a compressed run without the raw matrix,
 // --resume has nothing to do.
