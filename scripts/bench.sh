@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep|stress] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|relight|glossy|sweep|stress] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -45,6 +45,14 @@ PY
 
 run_sparse() { "$BUILD_DIR/bench/prt-sparse-bench" --out "$OUT/sparse" $QUICK; }
 run_compression() { "$BUILD_DIR/bench/compression_bench"; }
+# Google Benchmark of the viewer's B = T·L and its fixed per-frame parts on the demo's pack
+# (PRT_RELIGHT_PACK names another).
+run_relight() {
+  local pack="${PRT_RELIGHT_PACK:-$ROOT/demo-out/default.prtpack}"
+  [ -f "$pack" ] || "$ROOT/scripts/demo.sh"
+  "$BUILD_DIR/bench/relight_microbench" --benchmark_repetitions=5 \
+    --benchmark_report_aggregates_only=true "$pack"
+}
 run_viewer() { [ -x "$BUILD_DIR/bench/viewer_bench" ] && "$BUILD_DIR/bench/viewer_bench" || echo "viewer_bench not built"; }
 run_sweep() {
   local np="${PRT_BENCH_NP:-1}" launch=()
@@ -61,7 +69,7 @@ run_stress() {
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
-  all) run_transport; run_scaling; run_sparse; run_compression; run_viewer; run_glossy ;;
-  transport|scaling|sparse|compression|viewer|glossy|sweep|stress) "run_$WHAT" ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
+  all) run_transport; run_scaling; run_sparse; run_compression; run_viewer; run_relight; run_glossy ;;
+  transport|scaling|sparse|compression|viewer|relight|glossy|sweep|stress) "run_$WHAT" ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|relight|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
 esac

@@ -2,11 +2,14 @@
 // columns (Cheslack-Postava et al. 2008 §4.2, §4.3, §4.5 Eq. 5–8). docs/compression.md.
 #include "vocabulary/compressed_relight.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -25,6 +28,9 @@ void SegmentShape(const SpatialSegment& s, int& w, int& h) {
     h = 1;
   }
 }
+
+// Four floats in one SSE register (GCC/Clang vector extension): one sample's channels in X.
+using Float4 = float __attribute__((vector_size(16)));
 
 uint64_t SplitMix64(uint64_t x) {
   x += 0x9e3779b97f4a7c15ull;
@@ -208,6 +214,17 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
   ValidateHeader(header_, "CompressedRelighter");
   const std::size_t S = header_.sample_count;
   slot_.assign(header_.column_count(), -1);
+  coefficient_of_sample_.resize(S);
+  {
+    std::size_t off = 0;
+    for (const auto& seg : header_.domain.segments) {
+      const bool permuted = seg.kind == SpatialSegment::Kind::kMesh1D && !seg.order.empty();
+      for (uint32_t k = 0; k < seg.count; ++k)
+        coefficient_of_sample_[off + (permuted ? seg.order[k] : k)] =
+            static_cast<uint32_t>(off + k);
+      off += seg.count;
+    }
+  }
   terms_.reserve(t.term_count());
   std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
   for (const auto& c : t.columns) {
@@ -236,6 +253,12 @@ int CompressedRelighter::ColumnDepth(uint32_t column) const {
   return columns_[slot_[column]].depth;
 }
 
+std::size_t CompressedRelighter::ColumnTermCount(uint32_t column) const {
+  if (column >= slot_.size() || slot_[column] < 0) return 0;
+  const Column& c = columns_[slot_[column]];
+  return c.end - c.begin;
+}
+
 // One light of Eq. 8: a stored column and its weight per channel.
 struct CompressedRelighter::Light {
   int32_t slot;
@@ -243,20 +266,22 @@ struct CompressedRelighter::Light {
 };
 
 // Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
-// deepest level to depth 0, then undo the Hilbert permutation. One coefficient-domain buffer X per
-// channel (float) receives every light of a depth directly, so the frame pays one full inverse
-// transform whatever the number of lights, and nothing of size S is allocated per depth.
+// deepest level to depth 0, then undo the Hilbert permutation. One coefficient-domain buffer X
+// receives every light of a depth directly, so the frame pays one full inverse transform whatever
+// the number of lights, and nothing of size S is allocated per depth.
+// X holds the channels of a sample side by side (3 channels padded to 4 floats): a term then
+// updates one 16-byte element, a single cache line, with one SIMD multiply-add, and one float
+// inverse step per level (InverseWavelet2DStepInterleaved) transforms every channel at once.
 // The scatter of a depth's lights runs in parallel over disjoint ranges of coefficient indices
-// (each column's indices are sorted, so a binary search finds its part of a range) and updates
-// every channel in one pass over the column; the inverse steps and the final permutation run in
-// parallel over channels.
+// (each column's indices are sorted, so a binary search finds its part of a range).
 void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels,
                                         std::span<float> radiance) const {
   const std::size_t S = header_.sample_count;
   const auto C = static_cast<std::size_t>(channels);
-  // Not thread_local: a thread waiting in the parallel loops below may run another relight.
-  std::vector<float> scratch(S * C, 0.0f);
-  float* x = scratch.data();
+  const std::size_t K = C == 3 ? 4 : C;  // floats per sample in X
+  std::unique_ptr<FrameBuffers> buffers = TakeBuffers();
+  buffers->x.assign(S * K, 0.0f);
+  float* x = buffers->x.data();
   // Deepest lights first (stable: lights of one depth keep their order, so sums are
   // reproducible).
   std::stable_sort(lights.begin(), lights.end(), [&](const Light& a, const Light& b) {
@@ -268,13 +293,23 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   const std::size_t ranges =
       std::clamp<std::size_t>(static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1,
                               std::max<std::size_t>(1, S / 1024));
+  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
   bool any = false;
   std::size_t next = 0;
   for (int d = max_depth_; d >= 0; --d) {
     if (any && d < max_depth_) {
-      // x is at depth d + 1: one single inverse step brings it to depth d.
-      tbb::parallel_for(std::size_t{0}, C, [&](std::size_t c) {
-        InverseColumnTransformStep(header_.domain, header_.column_wavelet, d + 1, x + c * S);
+      // X is at depth d + 1: one single inverse step per segment brings it to depth d.
+      if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
+      float* scratch = buffers->scratch.data();
+      const auto& segments = header_.domain.segments;
+      tbb::parallel_for(std::size_t{0}, segments.size(), [&](std::size_t k) {
+        std::size_t off = 0;
+        for (std::size_t j = 0; j < k; ++j) off += segments[j].count;
+        int w, h;
+        SegmentShape(segments[k], w, h);
+        if (d + 1 <= MaxSegmentDepth(segments[k]))
+          InverseWavelet2DStepInterleaved(filter, x + off * K, w, h, static_cast<int>(K), d + 1,
+                                          scratch + off * K);
       });
     }
     const std::size_t first = next;
@@ -299,32 +334,52 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
           __builtin_prefetch(n + 8);
         }
         const float* w = lights[k].weight;
-        if (C == 3) {
-          const float w0 = w[0], w1 = w[1], w2 = w[2];
-          float* __restrict x0 = x;
-          float* __restrict x1 = x + S;
-          float* __restrict x2 = x + 2 * S;
+        if (K == 4) {
+          const Float4 w4 = {w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
           for (const Term* t = b; t != e; ++t) {
-            const uint32_t i = t->index;
-            const float v = t->value;
-            x0[i] += w0 * v;
-            x1[i] += w1 * v;
-            x2[i] += w2 * v;
+            float* xi = x + 4 * static_cast<std::size_t>(t->index);
+            Float4 xv;
+            std::memcpy(&xv, xi, sizeof xv);
+            xv += w4 * t->value;
+            std::memcpy(xi, &xv, sizeof xv);
           }
+        } else if (K == 1) {
+          const float w0 = w[0];
+          for (const Term* t = b; t != e; ++t) x[t->index] += w0 * t->value;
         } else {
-          for (std::size_t c = 0; c < C; ++c) {
-            const float wc = w[c];
-            if (wc == 0.0f) continue;
-            float* __restrict xc = x + c * S;
-            for (const Term* t = b; t != e; ++t) xc[t->index] += wc * t->value;
+          for (const Term* t = b; t != e; ++t) {
+            float* __restrict xi = x + K * static_cast<std::size_t>(t->index);
+            const float v = t->value;
+            for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * v;
           }
         }
       }
     });
   }
-  tbb::parallel_for(std::size_t{0}, C, [&](std::size_t c) {
-    CoefficientOrderToSamples(header_.domain, x + c * S, radiance.data() + c * S);
-  });
+  // Back to sample order and to channel-major radiance: sequential writes, each sample's
+  // channels gathered from one element of X.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, S, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      const uint32_t* src = coefficient_of_sample_.data();
+                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        const float* from = x + K * src[i];
+                        for (std::size_t c = 0; c < C; ++c) radiance[c * S + i] = from[c];
+                      }
+                    });
+  ReturnBuffers(std::move(buffers));
+}
+
+std::unique_ptr<CompressedRelighter::FrameBuffers> CompressedRelighter::TakeBuffers() const {
+  const std::lock_guard<std::mutex> lock(pool_mutex_);
+  if (pool_.empty()) return std::make_unique<FrameBuffers>();
+  std::unique_ptr<FrameBuffers> b = std::move(pool_.back());
+  pool_.pop_back();
+  return b;
+}
+
+void CompressedRelighter::ReturnBuffers(std::unique_ptr<FrameBuffers> b) const {
+  const std::lock_guard<std::mutex> lock(pool_mutex_);
+  pool_.push_back(std::move(b));
 }
 
 void CompressedRelighter::Relight(std::span<const float> lighting_hat, int channels,

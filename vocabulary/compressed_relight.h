@@ -14,6 +14,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <mutex>
 #include <span>
 #include <vector>
 
@@ -102,6 +104,8 @@ class CompressedRelighter {
   std::size_t column_count() const { return header_.column_count(); }
   // Depth chosen for a column (0 for absent/all-zero columns); -1 when absent.
   int ColumnDepth(uint32_t column) const;
+  // Stored terms of a column (0 for absent columns).
+  std::size_t ColumnTermCount(uint32_t column) const;
 
   // Dense lighting in the row-wavelet basis: lighting_hat = channels × column_count floats,
   // radiance = channels × sample_count floats (channel-major), B = T̂·L̂ per channel.
@@ -122,6 +126,8 @@ class CompressedRelighter {
   CompressedTransportHeader header_;
   int max_depth_ = 0;
   std::vector<int32_t> slot_;  // column → index into columns_, or −1
+  // Sample (global order) → its coefficient in the depth-0 layout (the Hilbert order's inverse).
+  std::vector<uint32_t> coefficient_of_sample_;
   std::vector<Column> columns_;
   // A stored term: coefficient index and dequantised value side by side, so that a column is
   // one sequential stream of 8-byte terms.
@@ -130,6 +136,17 @@ class CompressedRelighter {
     float value;
   };
   std::vector<Term> terms_;
+  // Per-frame buffers (X and the inverse steps' scratch), kept between frames: a fresh
+  // allocation of this size is mmap'ed and page-faulted in every frame. A pool, not one pair,
+  // since concurrent Relight calls (and a thread that runs another relight while it waits in a
+  // parallel loop) each need their own.
+  struct FrameBuffers {
+    std::vector<float> x, scratch;
+  };
+  std::unique_ptr<FrameBuffers> TakeBuffers() const;
+  void ReturnBuffers(std::unique_ptr<FrameBuffers> b) const;
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<std::unique_ptr<FrameBuffers>> pool_;
 };
 
 }  // namespace prt

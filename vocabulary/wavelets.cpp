@@ -10,6 +10,7 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "vocabulary/cubemap.h"
 
@@ -72,84 +73,87 @@ int Log2(int n) {
 // horizontal pass; otherwise elements are rows of a region, which makes the vertical pass a
 // sequence of contiguous row operations.
 
-template <bool kScalar>
+template <bool kScalar, typename T = double>
 struct Line {
-  double* p;
+  T* p;
   std::ptrdiff_t stride;
   int width;
-  double* operator[](int i) const { return p + static_cast<std::ptrdiff_t>(i) * Stride(); }
+  T* operator[](int i) const { return p + static_cast<std::ptrdiff_t>(i) * Stride(); }
   std::ptrdiff_t Stride() const { return kScalar ? 1 : stride; }
   int Width() const { return kScalar ? 1 : width; }
 };
 
-template <bool kScalar>
-inline void CopyElem(const Line<kScalar>& from, int i, const Line<kScalar>& to, int j) {
-  const double* a = from[i];
-  double* b = to[j];
+template <bool kScalar, typename T = double>
+inline void CopyElem(const Line<kScalar, T>& from, int i, const Line<kScalar, T>& to, int j) {
+  const T* a = from[i];
+  T* b = to[j];
   for (int x = 0; x < from.Width(); ++x) b[x] = a[x];
 }
 
-template <bool kScalar>
-inline void ScaleElems(const Line<kScalar>& l, int begin, int end, double c) {
+template <bool kScalar, typename T = double>
+inline void ScaleElems(const Line<kScalar, T>& l, int begin, int end, double scale) {
+  const T c = static_cast<T>(scale);
   for (int i = begin; i < end; ++i) {
-    double* a = l[i];
+    T* a = l[i];
     for (int x = 0; x < l.Width(); ++x) a[x] *= c;
   }
 }
 
 // d[n] += c·(s[n] + s[n+1]) with s[ns] ≡ s[ns−1] (symmetric extension at an even length's end).
-template <bool kScalar>
-void LiftOdd(const Line<kScalar>& s, const Line<kScalar>& d, int ns, int nd, double c) {
+template <bool kScalar, typename T = double>
+void LiftOdd(const Line<kScalar, T>& s, const Line<kScalar, T>& d, int ns, int nd, double coef) {
+  const T c = static_cast<T>(coef);
   const int full = ns > nd ? nd : nd - 1;
   const int w = s.Width();
   for (int n = 0; n < full; ++n) {
-    double* dn = d[n];
-    const double* s0 = s[n];
-    const double* s1 = s[n + 1];
+    T* dn = d[n];
+    const T* s0 = s[n];
+    const T* s1 = s[n + 1];
     for (int x = 0; x < w; ++x) dn[x] += c * (s0[x] + s1[x]);
   }
   if (full < nd) {
-    double* dn = d[nd - 1];
-    const double* s0 = s[nd - 1];
+    T* dn = d[nd - 1];
+    const T* s0 = s[nd - 1];
     for (int x = 0; x < w; ++x) dn[x] += 2 * c * s0[x];
   }
 }
 
 // s[n] += c·(d[n−1] + d[n]) with d[−1] ≡ d[0] and d[nd] ≡ d[nd−1] (symmetric extension).
-template <bool kScalar>
-void LiftEven(const Line<kScalar>& s, const Line<kScalar>& d, int ns, int nd, double c) {
+template <bool kScalar, typename T = double>
+void LiftEven(const Line<kScalar, T>& s, const Line<kScalar, T>& d, int ns, int nd, double coef) {
+  const T c = static_cast<T>(coef);
   if (nd == 0) return;
   const int w = s.Width();
   {
-    double* s0 = s[0];
-    const double* d0 = d[0];
+    T* s0 = s[0];
+    const T* d0 = d[0];
     for (int x = 0; x < w; ++x) s0[x] += 2 * c * d0[x];
   }
   for (int n = 1; n < nd; ++n) {
-    double* sn = s[n];
-    const double* d0 = d[n - 1];
-    const double* d1 = d[n];
+    T* sn = s[n];
+    const T* d0 = d[n - 1];
+    const T* d1 = d[n];
     for (int x = 0; x < w; ++x) sn[x] += c * (d0[x] + d1[x]);
   }
   if (ns > nd) {
-    double* sn = s[nd];
-    const double* d0 = d[nd - 1];
+    T* sn = s[nd];
+    const T* d0 = d[nd - 1];
     for (int x = 0; x < w; ++x) sn[x] += 2 * c * d0[x];
   }
 }
 
 // One analysis step of the lifting filters (Cheslack-Postava et al. §4.1: JPEG 2000's 5/3 and
 // 9/7). `in` (len elements, read only) → `out`: low at [0, ⌈len/2⌉), high after it.
-template <bool kScalar>
-void AnalyzeLifting(const LiftingScheme& ls, const Line<kScalar>& in, const Line<kScalar>& out,
-                    int len) {
+template <bool kScalar, typename T = double>
+void AnalyzeLifting(const LiftingScheme& ls, const Line<kScalar, T>& in,
+                    const Line<kScalar, T>& out, int len) {
   const int ns = (len + 1) / 2;
   const int nd = len / 2;
   for (int j = 0; j < ns; ++j) CopyElem(in, 2 * j, out, j);
   for (int j = 0; j < nd; ++j) CopyElem(in, 2 * j + 1, out, ns + j);
   if (nd == 0) return;  // length 1: identity
-  const Line<kScalar> s = out;
-  const Line<kScalar> d{out[ns], out.stride, out.width};
+  const Line<kScalar, T> s = out;
+  const Line<kScalar, T> d{out[ns], out.stride, out.width};
   for (int k = 0; k < ls.steps; ++k) {
     if (k % 2 == 0) {
       LiftOdd(s, d, ns, nd, ls.coef[k]);
@@ -162,16 +166,16 @@ void AnalyzeLifting(const LiftingScheme& ls, const Line<kScalar>& in, const Line
 }
 
 // Inverse of AnalyzeLifting: `in` (overwritten) → interleaved samples in `out`.
-template <bool kScalar>
-void SynthesizeLifting(const LiftingScheme& ls, const Line<kScalar>& in, const Line<kScalar>& out,
-                       int len) {
+template <bool kScalar, typename T = double>
+void SynthesizeLifting(const LiftingScheme& ls, const Line<kScalar, T>& in,
+                       const Line<kScalar, T>& out, int len) {
   const int ns = (len + 1) / 2;
   const int nd = len / 2;
   if (nd > 0) {
     ScaleElems(in, 0, ns, 1.0 / ls.low_scale);
     ScaleElems(in, ns, len, 1.0 / ls.high_scale);
-    const Line<kScalar> s = in;
-    const Line<kScalar> d{in[ns], in.stride, in.width};
+    const Line<kScalar, T> s = in;
+    const Line<kScalar, T> d{in[ns], in.stride, in.width};
     for (int k = ls.steps - 1; k >= 0; --k) {
       if (k % 2 == 0) {
         LiftOdd(s, d, ns, nd, -ls.coef[k]);
@@ -185,82 +189,82 @@ void SynthesizeLifting(const LiftingScheme& ls, const Line<kScalar>& in, const L
 }
 
 // Orthonormal Haar step (Ng et al. 2003): a = (x0 + x1)/√2, d = (x0 − x1)/√2. len even.
-template <bool kScalar>
-void AnalyzeHaar(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+template <bool kScalar, typename T = double>
+void AnalyzeHaar(const Line<kScalar, T>& in, const Line<kScalar, T>& out, int len) {
   const int half = len / 2;
   const int w = in.Width();
   for (int j = 0; j < half; ++j) {
-    const double* x0 = in[2 * j];
-    const double* x1 = in[2 * j + 1];
-    double* a = out[j];
-    double* d = out[half + j];
+    const T* x0 = in[2 * j];
+    const T* x1 = in[2 * j + 1];
+    T* a = out[j];
+    T* d = out[half + j];
     for (int x = 0; x < w; ++x) {
-      a[x] = kInvSqrt2 * (x0[x] + x1[x]);
-      d[x] = kInvSqrt2 * (x0[x] - x1[x]);
+      a[x] = static_cast<T>(kInvSqrt2 * (x0[x] + x1[x]));
+      d[x] = static_cast<T>(kInvSqrt2 * (x0[x] - x1[x]));
     }
   }
 }
 
-template <bool kScalar>
-void SynthesizeHaar(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+template <bool kScalar, typename T = double>
+void SynthesizeHaar(const Line<kScalar, T>& in, const Line<kScalar, T>& out, int len) {
   const int half = len / 2;
   const int w = in.Width();
   for (int j = 0; j < half; ++j) {
-    const double* a = in[j];
-    const double* d = in[half + j];
-    double* x0 = out[2 * j];
-    double* x1 = out[2 * j + 1];
+    const T* a = in[j];
+    const T* d = in[half + j];
+    T* x0 = out[2 * j];
+    T* x1 = out[2 * j + 1];
     for (int x = 0; x < w; ++x) {
-      x0[x] = kInvSqrt2 * (a[x] + d[x]);
-      x1[x] = kInvSqrt2 * (a[x] - d[x]);
+      x0[x] = static_cast<T>(kInvSqrt2 * (a[x] + d[x]));
+      x1[x] = static_cast<T>(kInvSqrt2 * (a[x] - d[x]));
     }
   }
 }
 
 // Orthonormal Daubechies-4 step with periodic extension (Daubechies 1988):
 // a[j] = Σ_k h_k x[(2j+k) mod len], d[j] = Σ_k g_k x[(2j+k) mod len]. len even.
-template <bool kScalar>
-void AnalyzeD4(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+template <bool kScalar, typename T = double>
+void AnalyzeD4(const Line<kScalar, T>& in, const Line<kScalar, T>& out, int len) {
   const int half = len / 2;
   const int w = in.Width();
   for (int j = 0; j < half; ++j) {
-    const double* x0 = in[2 * j];
-    const double* x1 = in[2 * j + 1];
+    const T* x0 = in[2 * j];
+    const T* x1 = in[2 * j + 1];
     const int wrap = 2 * j + 2 < len ? 0 : len;  // periodic extension, only at the last j
-    const double* x2 = in[2 * j + 2 - wrap];
-    const double* x3 = in[2 * j + 3 - wrap];
-    double* a = out[j];
-    double* d = out[half + j];
+    const T* x2 = in[2 * j + 2 - wrap];
+    const T* x3 = in[2 * j + 3 - wrap];
+    T* a = out[j];
+    T* d = out[half + j];
     for (int x = 0; x < w; ++x) {
-      a[x] = kD4H0 * x0[x] + kD4H1 * x1[x] + kD4H2 * x2[x] + kD4H3 * x3[x];
-      d[x] = kD4G0 * x0[x] + kD4G1 * x1[x] + kD4G2 * x2[x] + kD4G3 * x3[x];
+      a[x] = static_cast<T>(kD4H0 * x0[x] + kD4H1 * x1[x] + kD4H2 * x2[x] + kD4H3 * x3[x]);
+      d[x] = static_cast<T>(kD4G0 * x0[x] + kD4G1 * x1[x] + kD4G2 * x2[x] + kD4G3 * x3[x]);
     }
   }
 }
 
 // x[2i] = h0 a[i] + g0 d[i] + h2 a[i−1] + g2 d[i−1],
 // x[2i+1] = h1 a[i] + g1 d[i] + h3 a[i−1] + g3 d[i−1]   (indices of a, d mod len/2).
-template <bool kScalar>
-void SynthesizeD4(const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+template <bool kScalar, typename T = double>
+void SynthesizeD4(const Line<kScalar, T>& in, const Line<kScalar, T>& out, int len) {
   const int half = len / 2;
   const int w = in.Width();
   for (int i = 0; i < half; ++i) {
     const int p = i == 0 ? half - 1 : i - 1;  // periodic extension
-    const double* a = in[i];
-    const double* d = in[half + i];
-    const double* ap = in[p];
-    const double* dp = in[half + p];
-    double* x0 = out[2 * i];
-    double* x1 = out[2 * i + 1];
+    const T* a = in[i];
+    const T* d = in[half + i];
+    const T* ap = in[p];
+    const T* dp = in[half + p];
+    T* x0 = out[2 * i];
+    T* x1 = out[2 * i + 1];
     for (int x = 0; x < w; ++x) {
-      x0[x] = kD4H0 * a[x] + kD4G0 * d[x] + kD4H2 * ap[x] + kD4G2 * dp[x];
-      x1[x] = kD4H1 * a[x] + kD4G1 * d[x] + kD4H3 * ap[x] + kD4G3 * dp[x];
+      x0[x] = static_cast<T>(kD4H0 * a[x] + kD4G0 * d[x] + kD4H2 * ap[x] + kD4G2 * dp[x]);
+      x1[x] = static_cast<T>(kD4H1 * a[x] + kD4G1 * d[x] + kD4H3 * ap[x] + kD4G3 * dp[x]);
     }
   }
 }
 
-template <bool kScalar>
-void Analyze(WaveletFilter f, const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+template <bool kScalar, typename T = double>
+void Analyze(WaveletFilter f, const Line<kScalar, T>& in, const Line<kScalar, T>& out, int len) {
   switch (f) {
     case WaveletFilter::kHaar:
       AnalyzeHaar(in, out, len);
@@ -274,8 +278,8 @@ void Analyze(WaveletFilter f, const Line<kScalar>& in, const Line<kScalar>& out,
   }
 }
 
-template <bool kScalar>
-void Synthesize(WaveletFilter f, const Line<kScalar>& in, const Line<kScalar>& out, int len) {
+template <bool kScalar, typename T = double>
+void Synthesize(WaveletFilter f, const Line<kScalar, T>& in, const Line<kScalar, T>& out, int len) {
   switch (f) {
     case WaveletFilter::kHaar:
       SynthesizeHaar(in, out, len);
@@ -674,6 +678,109 @@ void InverseWavelet2D(WaveletFilter filter, float* data, int width, int height, 
     InverseStep2D(filter, a, b, width, SizeAtDepth(width, t - 1), SizeAtDepth(height, t - 1));
   }
   StoreBlock(a, width, data, width, width, height);
+}
+
+namespace {
+
+// Elements of the fused kernel: one float, or four (GCC/Clang vector extension: one SSE register).
+using Float4 = float __attribute__((vector_size(16)));
+template <typename V>
+inline V LoadElem(const float* p) {
+  V v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+template <typename V>
+inline void StoreElem(float* p, V v) {
+  std::memcpy(p, &v, sizeof v);
+}
+
+// LeGall 5/3 synthesis (SynthesizeLifting with kLeGall53Scheme) fused into one pass: `in` holds
+// len elements V (low band at [0, ns), high band after it), `out` receives them interleaved.
+// Unscaled s' = s/√2, d' = √2·d; even update S[n] = s'[n] − ¼(d'[n−1] + d'[n]); odd predict
+// out[2n+1] = d'[n] + ½(S[n] + S[n+1]); the symmetric extensions of LiftEven and LiftOdd are
+// d'[−1] ≡ d'[0], d'[nd] ≡ d'[nd−1] and S[ns] ≡ S[ns−1].
+template <typename V>
+void SynthesizeLeGall53Fused(const float* in, float* out, int len) {
+  constexpr std::ptrdiff_t kW = sizeof(V) / sizeof(float);
+  const int ns = (len + 1) / 2, nd = len / 2;
+  if (nd == 0) {  // length 1: identity, as SynthesizeLifting
+    StoreElem(out, LoadElem<V>(in));
+    return;
+  }
+  const float a = static_cast<float>(1.0 / kLeGall53Scheme.low_scale);
+  const float c = static_cast<float>(1.0 / kLeGall53Scheme.high_scale);
+  const float b = static_cast<float>(-kLeGall53Scheme.coef[1] / kLeGall53Scheme.high_scale);
+  const float p = static_cast<float>(-kLeGall53Scheme.coef[0]);
+  const float* s = in;
+  const float* d = in + ns * kW;
+  const auto S = [&](int n, int left, int right) {
+    return a * LoadElem<V>(s + n * kW) +
+           b * (LoadElem<V>(d + left * kW) + LoadElem<V>(d + right * kW));
+  };
+  V cur = S(0, 0, 0);
+  // Interior: S[n + 1] needs d[n] and d[n + 1], both inside the high band.
+  for (int n = 0; n + 1 < nd; ++n) {
+    const V dn = LoadElem<V>(d + n * kW);
+    const V next = a * LoadElem<V>(s + (n + 1) * kW) + b * (dn + LoadElem<V>(d + (n + 1) * kW));
+    StoreElem(out + 2 * n * kW, cur);
+    StoreElem(out + (2 * n + 1) * kW, c * dn + p * (cur + next));
+    cur = next;
+  }
+  // The last odd sample: S[nd] exists only for odd lengths (d[nd] ≡ d[nd − 1]).
+  const int n = nd - 1;
+  const V next = nd < ns ? S(nd, nd - 1, nd - 1) : cur;
+  StoreElem(out + 2 * n * kW, cur);
+  StoreElem(out + (2 * n + 1) * kW, c * LoadElem<V>(d + n * kW) + p * (cur + next));
+  if (nd < ns) StoreElem(out + 2 * nd * kW, next);
+}
+
+// One horizontal synthesis of `len` elements of `channels` floats, fused where it can be.
+void SynthesizeInterleavedRow(WaveletFilter filter, float* in, float* out, int len, int channels) {
+  if (filter == WaveletFilter::kLeGall53) {
+    switch (channels) {
+      case 1:
+        SynthesizeLeGall53Fused<float>(in, out, len);
+        return;
+      case 4:
+        SynthesizeLeGall53Fused<Float4>(in, out, len);
+        return;
+      default:
+        break;
+    }
+  }
+  Synthesize<false, float>(filter, {in, channels, channels}, {out, channels, channels}, len);
+}
+
+}  // namespace
+
+// The vertical pass first, then the horizontal one (as InverseStep2D); each reads one buffer and
+// writes the other, so the result ends in `data` or is copied back once.
+void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int width, int height,
+                                     int channels, int step, float* scratch) {
+  CheckStep("InverseWavelet2DStepInterleaved", step,
+            CheckedMaxDepth2D("InverseWavelet2DStepInterleaved", filter, width, height));
+  if (channels < 1) Fail("InverseWavelet2DStepInterleaved", "channels must be at least 1");
+  const int wc = SizeAtDepth(width, step - 1), hc = SizeAtDepth(height, step - 1);
+  const std::ptrdiff_t row = static_cast<std::ptrdiff_t>(width) * channels;
+  const int row_floats = wc * channels;
+  float* src = data;
+  float* dst = scratch;
+  if (hc >= 2) {  // elements: the region's rows, wc·channels floats each
+    Synthesize<false, float>(filter, {src, row, row_floats}, {dst, row, row_floats}, hc);
+    std::swap(src, dst);
+  }
+  if (wc >= 2) {  // elements: one sample's channels
+    for (int y = 0; y < hc; ++y) {
+      SynthesizeInterleavedRow(filter, src + y * row, dst + y * row, wc, channels);
+    }
+    std::swap(src, dst);
+  }
+  if (src != data) {
+    for (int y = 0; y < hc; ++y)
+      std::memcpy(data + y * row, src + y * row,
+                  sizeof(float) * static_cast<std::size_t>(row_floats));
+  }
 }
 
 void ForwardWavelet2DStep(WaveletFilter filter, float* data, int width, int height, int step,

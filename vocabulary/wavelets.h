@@ -159,6 +159,14 @@ void ForwardWavelet2DStep(WaveletFilter filter, float* data, int width, int heig
 void InverseWavelet2DStep(WaveletFilter filter, float* data, int width, int height, int step,
                           WaveletWorkspace& ws = ThreadWaveletWorkspace());
 
+// The same inverse step t on a width×height region whose elements are `channels` interleaved
+// floats (data[(y·width + x)·channels + c]), computed in float for all channels at once: the
+// runtime's Eq. 8 (vocabulary/compressed_relight.h), where a step runs once per level per frame
+// and float keeps well inside the 9-bit quantisation of the terms it sums. The double transforms
+// above stay the reference. `scratch` holds at least width·height·channels floats.
+void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int width, int height,
+                                     int channels, int step, float* scratch);
+
 // A whole cubemap vector, 6·n² floats in the layout face·n² + y·n + x (vocabulary/cubemap.h),
 // each face transformed independently by the 2D transform above.
 void ForwardWaveletCubemap(WaveletFilter filter, float* data, int n, int depth,
