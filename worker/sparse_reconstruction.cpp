@@ -42,22 +42,51 @@ Runs RunsOf(const uint8_t* above, std::size_t total) {
 
 // Per-texel statistics over the neighbours on the given runs (entries outside them are left
 // 0), neighbour-outer so that the inner loops run contiguously over texels.
+// Per-thread buffers of the functions below, reused from row to row: a sparse row used to
+// allocate and zero ten full-sphere arrays, which showed as memset and page faults in the profile.
+// Only the texels on the runs are ever read, so only those are cleared. Thread-local is safe:
+// nothing a row calls (the sampler's texel tracing, the L1 solver) runs parallel loops, so a
+// thread never starts another row while it is inside one.
+struct RowScratch {
+  std::vector<float> s, s2, var, unocc, acc;
+  std::vector<uint16_t> feat;
+  std::vector<uint8_t> above, fully;
+};
+RowScratch& ThreadScratch() {
+  thread_local RowScratch scratch;
+  return scratch;
+}
+
+void ClearOnRuns(std::vector<float>& v, std::size_t total, const Runs& runs) {
+  if (v.size() < total) v.resize(total);
+  for (const auto& [first, last] : runs) std::fill(v.begin() + first, v.begin() + last, 0.0f);
+}
+
 void NeighbourStatistics(std::span<const DenseNeighbor> neighbors, std::size_t total,
                          const Runs& runs, std::vector<float>& var, std::vector<uint16_t>& feat) {
-  std::vector<float> s(total, 0.0f), s2(total, 0.0f);
-  feat.assign(total, 0);
+  RowScratch& scratch = ThreadScratch();
+  std::vector<float>& s = scratch.s;
+  std::vector<float>& s2 = scratch.s2;
+  ClearOnRuns(s, total, runs);
+  ClearOnRuns(s2, total, runs);
+  if (feat.size() < total) feat.resize(total);
+  for (const auto& [first, last] : runs)
+    std::fill(feat.begin() + first, feat.begin() + last, uint16_t{0});
+  float* __restrict sp = s.data();
+  float* __restrict s2p = s2.data();
+  uint16_t* __restrict fp = feat.data();
   for (const DenseNeighbor& nb : neighbors) {
-    const float* t = nb.transport;
-    const uint8_t* f = nb.feature;
+    const float* __restrict t = nb.transport;
+    const uint8_t* __restrict f = nb.feature;
     for (const auto& [first, last] : runs) {
       for (std::size_t j = first; j < last; ++j) {
-        s[j] += t[j];
-        s2[j] += t[j] * t[j];
-        feat[j] = static_cast<uint16_t>(feat[j] + f[j]);
+        sp[j] += t[j];
+        s2p[j] += t[j] * t[j];
+        fp[j] = static_cast<uint16_t>(fp[j] + f[j]);
       }
     }
   }
-  var.assign(total, 0.0f);
+  if (var.size() < total) var.resize(total);  // written on the runs below, read only there
   const float inv = neighbors.empty() ? 0.0f : 1.0f / static_cast<float>(neighbors.size());
   for (const auto& [first, last] : runs) {
     for (std::size_t j = first; j < last; ++j) {
@@ -136,12 +165,16 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   }
   const CubemapLayout& layout = sampler.layout();
   const std::size_t total = layout.texel_count();
-  std::vector<uint8_t> above(total), fully(total);
+  RowScratch& scratch = ThreadScratch();
+  std::vector<uint8_t>& above = scratch.above;
+  std::vector<uint8_t>& fully = scratch.fully;
+  above.resize(total);
+  fully.resize(total);
   const std::size_t above_count =
       layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
   const Runs runs = RunsOf(above.data(), total);
-  std::vector<float> var;
-  std::vector<uint16_t> featcount;
+  std::vector<float>& var = scratch.var;
+  std::vector<uint16_t>& featcount = scratch.feat;
   NeighbourStatistics(neighbors, total, runs, var, featcount);
   const std::vector<uint32_t> feats = ChooseFromStatistics(
       above.data(), total, var, featcount, options.features, options.min_features, sample_index);
@@ -160,7 +193,8 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
     if (above[j]) above_list.push_back(static_cast<uint32_t>(j));
   std::vector<float> unocc_list(above_list.size());
   UnoccludedValues(sampler, sample, sample_index, above_list, fully.data(), unocc_list.data());
-  std::vector<float> unocc(total, 0.0f);
+  std::vector<float>& unocc = scratch.unocc;  // read only above the horizon, all written here
+  if (unocc.size() < total) unocc.resize(total);
   for (std::size_t i = 0; i < above_list.size(); ++i) unocc[above_list[i]] = unocc_list[i];
   for (std::size_t i = 0; i < feats.size(); ++i) unocc[feats[i]] = traced_unocc[i];
 
@@ -196,7 +230,8 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
 
   // Eq. 4 on this vertex's own hemisphere (neighbour-outer, contiguous over texels), then the
   // traced values exactly.
-  std::vector<float> acc(total, 0.0f);
+  std::vector<float>& acc = scratch.acc;
+  ClearOnRuns(acc, total, runs);
   for (int c = 0; c < k; ++c) {
     const float a = static_cast<float>(alpha[static_cast<std::size_t>(c)]);
     if (a == 0.0f) continue;
