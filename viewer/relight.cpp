@@ -225,13 +225,8 @@ void CompressedTransportOperator::Accumulate(std::span<const LightingTerm> terms
     columns[k] = terms[k].index;
     for (int c = 0; c < 3; ++c) weights[3 * k + c] = static_cast<float>(terms[k].value[c]);
   }
-  std::vector<float> radiance(3 * samples);  // channel-major
-  relighter_.RelightSparse(columns, weights, 3, radiance);
-  for (int c = 0; c < 3; ++c) {
-    double* __restrict o = out.channel[c].data();
-    const float* __restrict r = radiance.data() + c * samples;
-    for (std::size_t s = 0; s < samples; ++s) o[s] += static_cast<double>(r[s]);
-  }
+  double* const channels[3] = {out.channel[0].data(), out.channel[1].data(), out.channel[2].data()};
+  relighter_.RelightSparseAdd(columns, weights, 3, channels);
 }
 
 std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo) {

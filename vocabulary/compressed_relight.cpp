@@ -275,7 +275,7 @@ struct CompressedRelighter::Light {
 // The scatter of a depth's lights runs in parallel over disjoint ranges of coefficient indices
 // (each column's indices are sorted, so a binary search finds its part of a range).
 void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels,
-                                        std::span<float> radiance) const {
+                                        Output out) const {
   const std::size_t S = header_.sample_count;
   const auto C = static_cast<std::size_t>(channels);
   const std::size_t K = C == 3 ? 4 : C;  // floats per sample in X
@@ -356,14 +356,21 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       }
     });
   }
-  // Back to sample order and to channel-major radiance: sequential writes, each sample's
-  // channels gathered from one element of X.
+  // Back to sample order: sequential writes, each sample's channels gathered from one element
+  // of X.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, S, 4096),
                     [&](const tbb::blocked_range<std::size_t>& range) {
                       const uint32_t* src = coefficient_of_sample_.data();
-                      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        const float* from = x + K * src[i];
-                        for (std::size_t c = 0; c < C; ++c) radiance[c * S + i] = from[c];
+                      for (std::size_t c = 0; c < C; ++c) {
+                        if (out.add != nullptr) {
+                          double* __restrict o = out.add[c];
+                          for (std::size_t i = range.begin(); i != range.end(); ++i)
+                            o[i] += static_cast<double>(x[K * src[i] + c]);
+                        } else {
+                          float* __restrict o = out.radiance + c * S;
+                          for (std::size_t i = range.begin(); i != range.end(); ++i)
+                            o[i] = x[K * src[i] + c];
+                        }
                       }
                     });
   ReturnBuffers(std::move(buffers));
@@ -400,15 +407,12 @@ void CompressedRelighter::Relight(std::span<const float> lighting_hat, int chann
     for (int c = 0; c < channels; ++c) w.push_back(lighting_hat[c * M + j]);
   }
   for (std::size_t k = 0; k < lights.size(); ++k) lights[k].weight = w.data() + k * channels;
-  RelightLights(lights, channels, radiance);
+  RelightLights(lights, channels, {radiance.data(), nullptr});
 }
 
-void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
-                                        std::span<const float> weights, int channels,
-                                        std::span<float> radiance) const {
-  const std::size_t S = header_.sample_count;
-  if (channels < 1 || weights.size() != columns.size() * channels ||
-      radiance.size() != S * channels)
+std::vector<CompressedRelighter::Light> CompressedRelighter::LightsOf(
+    std::span<const uint32_t> columns, std::span<const float> weights, int channels) const {
+  if (channels < 1 || weights.size() != columns.size() * channels)
     throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
   std::vector<Light> lights;
   lights.reserve(columns.size());
@@ -417,7 +421,25 @@ void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
     if (slot_[columns[k]] >= 0)
       lights.push_back({slot_[columns[k]], weights.data() + k * channels});
   }
-  RelightLights(lights, channels, radiance);
+  return lights;
+}
+
+void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
+                                        std::span<const float> weights, int channels,
+                                        std::span<float> radiance) const {
+  if (radiance.size() != header_.sample_count * channels)
+    throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
+  std::vector<Light> lights = LightsOf(columns, weights, channels);
+  RelightLights(lights, channels, {radiance.data(), nullptr});
+}
+
+void CompressedRelighter::RelightSparseAdd(std::span<const uint32_t> columns,
+                                           std::span<const float> weights, int channels,
+                                           std::span<double* const> out) const {
+  if (out.size() != static_cast<std::size_t>(channels))
+    throw std::invalid_argument("CompressedRelighter::RelightSparseAdd: one array per channel");
+  std::vector<Light> lights = LightsOf(columns, weights, channels);
+  RelightLights(lights, channels, {nullptr, out.data()});
 }
 
 }  // namespace prt

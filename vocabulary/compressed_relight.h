@@ -114,6 +114,10 @@ class CompressedRelighter {
   // + c]); columns need not be sorted; duplicates add.
   void RelightSparse(std::span<const uint32_t> columns, std::span<const float> weights,
                      int channels, std::span<float> radiance) const;
+  // The same, added into one double array of sample_count() values per channel (out[c]), with
+  // no intermediate float image: what the viewer's TransportOperator accumulates into.
+  void RelightSparseAdd(std::span<const uint32_t> columns, std::span<const float> weights,
+                        int channels, std::span<double* const> out) const;
 
  private:
   struct Column {
@@ -121,7 +125,14 @@ class CompressedRelighter {
     uint32_t begin, end;  // range in terms_
   };
   struct Light;
-  void RelightLights(std::vector<Light>& lights, int channels, std::span<float> radiance) const;
+  // Where a frame's radiance goes: channel-major floats, or added into per-channel doubles.
+  struct Output {
+    float* radiance = nullptr;
+    double* const* add = nullptr;
+  };
+  void RelightLights(std::vector<Light>& lights, int channels, Output out) const;
+  std::vector<Light> LightsOf(std::span<const uint32_t> columns, std::span<const float> weights,
+                              int channels) const;
 
   CompressedTransportHeader header_;
   int max_depth_ = 0;
