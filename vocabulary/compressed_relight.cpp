@@ -302,15 +302,15 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
       float* scratch = buffers->scratch.data();
       const auto& segments = header_.domain.segments;
-      tbb::parallel_for(std::size_t{0}, segments.size(), [&](std::size_t k) {
-        std::size_t off = 0;
-        for (std::size_t j = 0; j < k; ++j) off += segments[j].count;
+      std::size_t off = 0;
+      for (const SpatialSegment& seg : segments) {
         int w, h;
-        SegmentShape(segments[k], w, h);
-        if (d + 1 <= MaxSegmentDepth(segments[k]))
+        SegmentShape(seg, w, h);
+        if (d + 1 <= MaxSegmentDepth(seg))
           InverseWavelet2DStepInterleaved(filter, x + off * K, w, h, static_cast<int>(K), d + 1,
                                           scratch + off * K);
-      });
+        off += seg.count;
+      }
     }
     const std::size_t first = next;
     while (next < lights.size() && columns_[lights[next].slot].depth == d) ++next;
