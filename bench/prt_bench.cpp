@@ -799,24 +799,26 @@ bool Plot(const std::vector<Record>& all, const std::string& scene, const std::s
   std::ostringstream gp;
   gp << "set terminal pngcairo size 900,700 noenhanced\nset logscale xy\nset grid\nset key below "
         "maxrows 4 font ',10'\nset ylabel 'relit relative RMS error (mean over environments)'\n";
-  // 1. Precomputation time.
+  // 1. Precomputation time (only with sparse points: gnuplot stops the whole script at a plot
+  // of an empty file, which lost the size and relighting plots of a compression-only sweep).
   WriteDat(base + "_sparse_time.dat", of("sparse"), CpuOf);
   double max_cpu = brute->cpu_s;
   for (const Record* r : of("sparse")) max_cpu = std::max(max_cpu, r->cpu_s);
-  gp << "set output '" << base << "_time_error.png'\nset title '" << scene
-     << ": precomputation time vs error (n = " << brute->n << ")'\n"
-     << "set xrange [" << Fmt(brute->cpu_s / 6) << ":" << Fmt(max_cpu * 1.5) << "]\n"
-     << "set xlabel 'CPU seconds, all threads (brute force " << Fmt3(brute->cpu_s) << " s)'\n"
-     << "set arrow 1 from " << Fmt(brute->cpu_s) << ", graph 0 to " << Fmt(brute->cpu_s)
-     << ", graph 1 nohead lw 2 lc rgb 'black'\n"
-     << "set label 1 'brute force (exact)' at " << Fmt(brute->cpu_s) << ", graph 0.95 right "
-     << "offset -0.5,0\n"
-     << "set arrow 2 from " << Fmt(brute->cpu_s / 5) << ", graph 0 to " << Fmt(brute->cpu_s / 4)
-     << ", graph 0 nohead lw 8 lc rgb '#cc0000'\n"
-     << "set label 2 'Huang 2010: 4-5x faster at ~11% sampled' at " << Fmt(brute->cpu_s / 5)
-     << ", graph 0.06 tc rgb '#cc0000'\n"
-     << "plot '" << base << "_sparse_time.dat' u 1:2 w p pt 7 ps 1.3 t 'sparse (budget, "
-     << "features, radius sweep)'\nunset arrow\nunset label\nset autoscale x\n";
+  if (!of("sparse").empty())
+    gp << "set output '" << base << "_time_error.png'\nset title '" << scene
+       << ": precomputation time vs error (n = " << brute->n << ")'\n"
+       << "set xrange [" << Fmt(brute->cpu_s / 6) << ":" << Fmt(max_cpu * 1.5) << "]\n"
+       << "set xlabel 'CPU seconds, all threads (brute force " << Fmt3(brute->cpu_s) << " s)'\n"
+       << "set arrow 1 from " << Fmt(brute->cpu_s) << ", graph 0 to " << Fmt(brute->cpu_s)
+       << ", graph 1 nohead lw 2 lc rgb 'black'\n"
+       << "set label 1 'brute force (exact)' at " << Fmt(brute->cpu_s) << ", graph 0.95 right "
+       << "offset -0.5,0\n"
+       << "set arrow 2 from " << Fmt(brute->cpu_s / 5) << ", graph 0 to " << Fmt(brute->cpu_s / 4)
+       << ", graph 0 nohead lw 8 lc rgb '#cc0000'\n"
+       << "set label 2 'Huang 2010: 4-5x faster at ~11% sampled' at " << Fmt(brute->cpu_s / 5)
+       << ", graph 0.06 tc rgb '#cc0000'\n"
+       << "plot '" << base << "_sparse_time.dat' u 1:2 w p pt 7 ps 1.3 t 'sparse (budget, "
+       << "features, radius sweep)'\nunset arrow\nunset label\nset autoscale x\n";
   // 2. Size.
   gp << "set output '" << base << "_size_error.png'\nset title '" << scene
      << ": bytes stored vs error'\nset format x '%.0s%c'\nset xlabel 'bytes (raw float T = "

@@ -112,7 +112,7 @@ struct CompressionSettings {
   std::string scheme = "adaptive4d";        // 2d | 4d | adaptive4d
   int bits = 9;
   double keep_fraction = 0.05;    // non-linear approximation budget (fraction of T)
-  std::string budget = "column";  // column (N terms per column) | global (one threshold)
+  std::string budget = "global";  // global (one threshold, the default) | column (paper: N per column)
   int light_weight = 0;           // global budget: row level l weighted by 2^(−light_weight·l/2)
 };
 

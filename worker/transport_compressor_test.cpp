@@ -308,9 +308,9 @@ TEST(TransportCompressor, OptionsFromSceneSettingsAreValidated) {
   s.column_wavelet = "haar";
   EXPECT_THROW(CompressionOptionsFrom(s, "scene.toml"), InputError);
   s.column_wavelet = "legall53";
-  EXPECT_EQ(o.budget, CompressionBudget::kColumn);
-  s.budget = "global";
-  EXPECT_EQ(CompressionOptionsFrom(s, "scene.toml").budget, CompressionBudget::kGlobal);
+  EXPECT_EQ(o.budget, CompressionBudget::kGlobal);  // the scene files' default
+  s.budget = "column";
+  EXPECT_EQ(CompressionOptionsFrom(s, "scene.toml").budget, CompressionBudget::kColumn);
   s.budget = "row";
   EXPECT_THROW(CompressionOptionsFrom(s, "scene.toml"), InputError);
   CompressionOptions b;
