@@ -20,6 +20,7 @@
 
 #include "packager/prtpack_writer.h"
 #include "viewer/rasterizer.h"
+#include "viewer/window_test_support.h"
 #include "vocabulary/errors.h"
 #include "worker/embree_scene.h"
 #include "worker/visibility_sampler.h"
@@ -293,12 +294,9 @@ TEST(GlossySession, WindowScreenshotMatchesHeadlessRender) {
   const GlossyPack& t = TinyGlossyPack();
   const fs::path dir = WorkDir() / "window";
   fs::create_directories(dir);
-  const std::string shot = (dir / "shot.npy").string();
-  const std::string cmd = "xvfb-run -a -s '-screen 0 320x240x24' '" + std::string(PRT_VIEW_EXE) +
-                          "' '" + t.pack + "' --env '" + t.env +
-                          "' --window --window-frames 3 --screenshot '" + shot + "' > '" +
-                          (dir / "log.txt").string() + "' 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::string shot =
+      testing::RunWindowScreenshot(PRT_VIEW_EXE, t.pack, t.env, dir, "--window-frames 3");
+  ASSERT_FALSE(shot.empty()) << "prt-view --window failed, see " << (dir / "log.txt");
   const std::vector<float> codes = ReadNpy(shot);
   const auto s = GlossySession::Open(t.pack);
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(t.env), s->cubemap_n());
@@ -306,10 +304,7 @@ TEST(GlossySession, WindowScreenshotMatchesHeadlessRender) {
   s->Relight(s->Lighting(cube), s->camera().eye, rgb, {.exact_cosine = true});
   const ImageRgb image = s->Render(s->camera(), rgb, &cube);
   ASSERT_EQ(codes.size(), image.pixels.size());
-  double worst = 0;
-  for (std::size_t i = 0; i < codes.size(); ++i)
-    worst = std::max(worst, std::abs(codes[i] - double(ToSrgb8(image.pixels[i]))));
-  EXPECT_LE(worst, 1.0);
+  EXPECT_LE(testing::LargestCodeDifference(codes, image), 1.0);
 #endif
 }
 

@@ -24,6 +24,7 @@
 #include "packager/prtpack_writer.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
+#include "viewer/window_test_support.h"
 #include "vocabulary/compressed_relight.h"
 #include "vocabulary/errors.h"
 #include "worker/column_order.h"
@@ -387,22 +388,16 @@ TEST(PrtViewCliTest, WindowScreenshotMatchesHeadlessRender) {
   fs::create_directories(dir);
   const std::string env = (dir / "sky.exr").string();
   WriteEnvironmentExr(SunSky(0.3f, 40.f), env);
-  const std::string shot = (dir / "shot.npy").string();
-  const std::string cmd = "xvfb-run -a -s '-screen 0 320x240x24' '" + std::string(PRT_VIEW_EXE) +
-                          "' '" + tiny.pack + "' --env '" + env +
-                          "' --window --window-frames 5 --lighting pbi --terms 50 --screenshot '" +
-                          shot + "' > '" + (dir / "log.txt").string() + "' 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::string shot = testing::RunWindowScreenshot(
+      PRT_VIEW_EXE, tiny.pack, env, dir, "--window-frames 5 --lighting pbi --terms 50");
+  ASSERT_FALSE(shot.empty()) << "prt-view --window failed, see " << (dir / "log.txt");
   const std::vector<float> codes = ReadFile(shot);
   const auto s = ViewerSession::Open(tiny.pack);
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(env), tiny.n);
   const ImageRgb image =
       s->Render(s->camera(), s->Shade(s->RelightExact(ProjectLighting(cube))), &cube);
   ASSERT_EQ(codes.size(), image.pixels.size());
-  double worst = 0;
-  for (std::size_t i = 0; i < codes.size(); ++i)
-    worst = std::max(worst, std::abs(codes[i] - double(ToSrgb8(image.pixels[i]))));
-  EXPECT_LE(worst, 1.0);
+  EXPECT_LE(testing::LargestCodeDifference(codes, image), 1.0);
 #endif
 }
 
