@@ -246,6 +246,19 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
     col.end = static_cast<uint32_t>(terms_.size());
     columns_.push_back(col);
   }
+  // At most 64 tiles per column (the offsets cost 4·65 bytes per column); past 64 Ki samples a
+  // tile outgrows L1 but stays within L2.
+  tile_ = std::max<std::size_t>(4096, (S + 63) / 64);
+  tiles_ = std::max<std::size_t>(1, (S + tile_ - 1) / tile_);
+  tile_offsets_.resize(columns_.size() * (tiles_ + 1));
+  for (std::size_t c = 0; c < columns_.size(); ++c) {
+    uint32_t k = columns_[c].begin;
+    for (std::size_t tile = 0; tile <= tiles_; ++tile) {
+      const std::size_t bound = tile * tile_;
+      while (k < columns_[c].end && terms_[k].index < bound) ++k;
+      tile_offsets_[c * (tiles_ + 1) + tile] = tile == tiles_ ? columns_[c].end : k;
+    }
+  }
 }
 
 int CompressedRelighter::ColumnDepth(uint32_t column) const {
@@ -272,27 +285,29 @@ struct CompressedRelighter::Light {
 // X holds the channels of a sample side by side (3 channels padded to 4 floats): a term then
 // updates one 16-byte element, a single cache line, with one SIMD multiply-add, and one float
 // inverse step per level (InverseWavelet2DStepInterleaved) transforms every channel at once.
-// The scatter of a depth's lights runs in parallel over disjoint ranges of coefficient indices
-// (each column's indices are sorted, so a binary search finds its part of a range).
+// The scatter of a depth's lights runs tile by tile (each column's indices are sorted, so a
+// column's terms in a tile are one contiguous piece, found once at construction), the tiles in
+// parallel.
 void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels,
                                         Output out) const {
   const std::size_t S = header_.sample_count;
   const auto C = static_cast<std::size_t>(channels);
   const std::size_t K = C == 3 ? 4 : C;  // floats per sample in X
   std::unique_ptr<FrameBuffers> buffers = TakeBuffers();
-  buffers->x.assign(S * K, 0.0f);
+  buffers->x.resize(S * K);
   float* x = buffers->x.data();
   // Deepest lights first (stable: lights of one depth keep their order, so sums are
   // reproducible).
   std::stable_sort(lights.begin(), lights.end(), [&](const Light& a, const Light& b) {
     return columns_[a.slot].depth > columns_[b.slot].depth;
   });
-  // Ranges of coefficient indices, one per thread: each column is then read in as few
-  // sequential pieces as there are threads (short pieces defeat the hardware prefetcher), and a
-  // thread's part of X stays in its own cache.
-  const std::size_t ranges =
-      std::clamp<std::size_t>(static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1,
-                              std::max<std::size_t>(1, S / 1024));
+  // Tiles of coefficients, split into one contiguous run per thread: a thread's part of X stays
+  // in its own cache, and within a tile every term's read-modify-write of X stays in that core's
+  // L1/L2 while the columns stream in from memory (each column read in pieces of a tile's
+  // length, prefetched ahead).
+  const std::size_t ranges = std::clamp<std::size_t>(
+      static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1, tiles_);
+  const std::size_t stride = tiles_ + 1;
   const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
   bool any = false;
   std::size_t next = 0;
@@ -315,64 +330,106 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
     const std::size_t first = next;
     while (next < lights.size() && columns_[lights[next].slot].depth == d) ++next;
     if (next == first) continue;
+    const bool zero = !any;  // the first lights of the frame: X is zeroed tile by tile
     any = true;
     tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
-      const auto lo = static_cast<uint32_t>(S * r / ranges);
-      const auto hi = static_cast<uint32_t>(S * (r + 1) / ranges);
-      const auto below = [](const Term& t, uint32_t i) { return t.index < i; };
-      for (std::size_t k = first; k < next; ++k) {
-        const Column& col = columns_[lights[k].slot];
-        const Term* b = terms_.data() + col.begin;
-        const Term* e = terms_.data() + col.end;
-        if (ranges > 1) {
-          b = std::lower_bound(b, e, lo, below);
-          e = std::lower_bound(b, e, hi, below);
+      // Locals, not the lambda's references: the stores into X (memcpy, which may alias
+      // anything) would otherwise make the compiler reload these through the closure per term.
+      float* const xl = x;
+      const Term* const terms = terms_.data();
+      const std::size_t t0 = tiles_ * r / ranges, t1 = tiles_ * (r + 1) / ranges;
+      for (std::size_t t = t0; t < t1; ++t) {
+        if (zero) {
+          const std::size_t lo = t * tile_, hi = std::min(S, lo + tile_);
+          std::memset(xl + K * lo, 0, sizeof(float) * K * (hi - lo));
         }
-        if (k + 1 < next) {  // the next column's first lines, while this one is added
-          const Term* n = terms_.data() + columns_[lights[k + 1].slot].begin;
-          __builtin_prefetch(n);
-          __builtin_prefetch(n + 8);
-        }
-        const float* w = lights[k].weight;
-        if (K == 4) {
-          const Float4 w4 = {w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
-          for (const Term* t = b; t != e; ++t) {
-            float* xi = x + 4 * static_cast<std::size_t>(t->index);
-            Float4 xv;
-            std::memcpy(&xv, xi, sizeof xv);
-            xv += w4 * t->value;
-            std::memcpy(xi, &xv, sizeof xv);
+        for (std::size_t k = first; k < next; ++k) {
+          const uint32_t* off = tile_offsets_.data() + lights[k].slot * stride + t;
+          const Term* b = terms + off[0];
+          const Term* e = terms + off[1];
+          if (k + 1 < next) {  // the next column's piece, while this one is added
+            const Term* n = terms + tile_offsets_[lights[k + 1].slot * stride + t];
+            __builtin_prefetch(n);
+            __builtin_prefetch(n + 8);
           }
-        } else if (K == 1) {
-          const float w0 = w[0];
-          for (const Term* t = b; t != e; ++t) x[t->index] += w0 * t->value;
-        } else {
-          for (const Term* t = b; t != e; ++t) {
-            float* __restrict xi = x + K * static_cast<std::size_t>(t->index);
-            const float v = t->value;
-            for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * v;
+          const float* w = lights[k].weight;
+          if (K == 4) {
+            const Float4 w4 = {w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
+            const auto add = [xl, w4](const Term& term) {
+              float* xi = xl + 4 * static_cast<std::size_t>(term.index);
+              Float4 xv;
+              std::memcpy(&xv, xi, sizeof xv);
+              xv += w4 * term.value;
+              std::memcpy(xi, &xv, sizeof xv);
+            };
+            const Term* p = b;
+            for (; e - p >= 8; p += 8) {  // a cache line of terms; prefetch 4 lines ahead
+              __builtin_prefetch(p + 32);
+              for (int u = 0; u < 8; ++u) add(p[u]);
+            }
+            for (; p != e; ++p) add(*p);
+          } else if (K == 1) {
+            const float w0 = w[0];
+            for (const Term* p = b; p != e; ++p) xl[p->index] += w0 * p->value;
+          } else {
+            for (const Term* p = b; p != e; ++p) {
+              float* __restrict xi = xl + K * static_cast<std::size_t>(p->index);
+              const float v = p->value;
+              for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * v;
+            }
           }
         }
       }
     });
   }
-  // Back to sample order: sequential writes, each sample's channels gathered from one element
-  // of X.
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, S, 4096),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      const uint32_t* src = coefficient_of_sample_.data();
-                      for (std::size_t c = 0; c < C; ++c) {
-                        if (out.add != nullptr) {
-                          double* __restrict o = out.add[c];
-                          for (std::size_t i = range.begin(); i != range.end(); ++i)
-                            o[i] += static_cast<double>(x[K * src[i] + c]);
-                        } else {
-                          float* __restrict o = out.radiance + c * S;
-                          for (std::size_t i = range.begin(); i != range.end(); ++i)
-                            o[i] = x[K * src[i] + c];
-                        }
-                      }
-                    });
+  if (!any) std::fill(x, x + S * K, 0.0f);
+  // Back to sample order: sequential writes, each sample's channels gathered from its one
+  // element of X in one read.
+  const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi) {
+    const uint32_t* __restrict src = coefficient_of_sample_.data();
+    const float* __restrict xs = x;
+    if (out.add != nullptr && C == 3 && K == 4) {
+      double* __restrict o0 = out.add[0];
+      double* __restrict o1 = out.add[1];
+      double* __restrict o2 = out.add[2];
+      for (std::size_t i = lo; i != hi; ++i) {
+        const float* xi = xs + 4 * static_cast<std::size_t>(src[i]);
+        o0[i] += static_cast<double>(xi[0]);
+        o1[i] += static_cast<double>(xi[1]);
+        o2[i] += static_cast<double>(xi[2]);
+      }
+    } else if (out.add == nullptr && C == 3 && K == 4) {
+      float* __restrict o0 = out.radiance;
+      float* __restrict o1 = o0 + S;
+      float* __restrict o2 = o1 + S;
+      for (std::size_t i = lo; i != hi; ++i) {
+        const float* xi = xs + 4 * static_cast<std::size_t>(src[i]);
+        o0[i] = xi[0];
+        o1[i] = xi[1];
+        o2[i] = xi[2];
+      }
+    } else {
+      for (std::size_t i = lo; i != hi; ++i) {
+        const float* xi = xs + K * src[i];
+        for (std::size_t c = 0; c < C; ++c) {
+          if (out.add != nullptr) {
+            out.add[c][i] += static_cast<double>(xi[c]);
+          } else {
+            out.radiance[c * S + i] = xi[c];
+          }
+        }
+      }
+    }
+  };
+  // On the calling thread while X fits in its caches (the inverse steps just left it there; a
+  // second thread would fetch its half from the other core), in parallel beyond.
+  if (S * K * sizeof(float) <= (std::size_t{4} << 20)) {
+    gather(0, S);
+  } else {
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, S, 4096),
+        [&](const tbb::blocked_range<std::size_t>& r) { gather(r.begin(), r.end()); });
+  }
   ReturnBuffers(std::move(buffers));
 }
 

@@ -93,7 +93,8 @@ std::vector<float> LightingToRowWaveletBasis(RowWavelet wavelet, int cubemap_n,
 // by adding the lights of depth-l columns into one column-wavelet-domain buffer per channel
 // (float) and running one single-step inverse per level from the deepest level down (one full
 // inverse transform in all, whatever the number of lights). Parallel inside (TBB: the scatter over
-// ranges of coefficients, the inverse steps over channels). Thread-compatible (const methods are
+// tiles of coefficients; the inverse steps and, below 4 MB of X, the gather back to sample order
+// run on the calling thread, where X is cached). Thread-compatible (const methods are
 // safe to call from several threads with separate outputs).
 class CompressedRelighter {
  public:
@@ -147,6 +148,13 @@ class CompressedRelighter {
     float value;
   };
   std::vector<Term> terms_;
+  // X is scattered tile by tile: tile_ consecutive coefficients (4096, 64 KB of X with three
+  // channels, so that every term's read-modify-write stays within L1/L2 of the core that owns
+  // the tile), all of a depth's lights per tile.
+  // tile_offsets_[slot·(tiles_ + 1) + t] is the first term of column `slot` whose index is at
+  // least t·tile_ (its last entry is the column's end).
+  std::size_t tile_ = 0, tiles_ = 0;
+  std::vector<uint32_t> tile_offsets_;
   // Per-frame buffers (X and the inverse steps' scratch), kept between frames: a fresh
   // allocation of this size is mmap'ed and page-faulted in every frame. A pool, not one pair,
   // since concurrent Relight calls (and a thread that runs another relight while it waits in a

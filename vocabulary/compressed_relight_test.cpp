@@ -169,5 +169,80 @@ TEST(CompressedRelighter, Equation8MatchesDenseProductForEveryWaveletPair) {
   }
 }
 
+// A domain of several scatter tiles (4096 coefficients each) with columns of every depth, dense
+// and sparse: every channel count (4 is X's padded width, 1 and 2 use the scalar paths), the
+// sparse entry points, RelightSparseAdd and a frame with no lights against the dense product.
+TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
+  CompressedTransport t;
+  t.header.cubemap_n = 2;
+  t.header.bits = 11;
+  SpatialSegment mesh;
+  mesh.kind = SpatialSegment::Kind::kMesh1D;
+  mesh.count = 9001;
+  mesh.order.resize(mesh.count);
+  std::iota(mesh.order.begin(), mesh.order.end(), 0u);
+  std::shuffle(mesh.order.begin(), mesh.order.end(), std::mt19937(5));
+  SpatialSegment grid;
+  grid.kind = SpatialSegment::Kind::kGrid2D;
+  grid.width = 67;
+  grid.height = 61;
+  grid.count = 67 * 61;
+  t.header.domain.segments = {mesh, grid};
+  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+  const std::size_t S = t.header.sample_count, M = t.header.column_count();
+  ASSERT_GT(S, 3u * 4096u);
+  std::mt19937 rng(17);
+  const int maxd = MaxColumnDepth(t.header.domain);
+  for (uint32_t j = 0; j < M; ++j) {
+    if (j % 7 == 3) continue;  // absent columns
+    CompressedColumn c;
+    c.column = j;
+    c.depth = static_cast<uint8_t>(j % (maxd + 1));
+    c.scale = 1.0f;
+    const uint32_t keep = j % 3 == 0 ? 1 : (j % 3 == 1 ? 5 : 50);  // 100 %, 20 %, 2 % dense
+    for (uint32_t i = 0; i < S; ++i) {
+      if (rng() % keep) continue;
+      c.index.push_back(i);
+      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
+      c.q.push_back(q == 0 ? 1 : q);
+    }
+    t.columns.push_back(c);
+  }
+  const std::vector<float> That = DecompressToRowWaveletBasis(t);
+  const CompressedRelighter relighter(t);
+  for (int channels = 1; channels <= 4; ++channels) {
+    std::vector<float> Lhat(M * channels);
+    for (float& v : Lhat) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+    std::vector<double> ref(S * channels);
+    for (int ch = 0; ch < channels; ++ch)
+      for (std::size_t s = 0; s < S; ++s) {
+        double a = 0;
+        for (std::size_t j = 0; j < M; ++j)
+          a += static_cast<double>(That[s * M + j]) * Lhat[ch * M + j];
+        ref[ch * S + s] = a;
+      }
+    std::vector<float> B(S * channels, -7.0f);
+    relighter.Relight(Lhat, channels, B);
+    EXPECT_LT(RelErr(std::vector<double>(B.begin(), B.end()), ref), 1e-5) << channels;
+    // The same lights as a sparse list (every column, in reverse order) added into doubles.
+    std::vector<uint32_t> cols(M);
+    std::vector<float> w(M * channels);
+    for (uint32_t k = 0; k < M; ++k) {
+      cols[k] = static_cast<uint32_t>(M - 1 - k);
+      for (int ch = 0; ch < channels; ++ch) w[k * channels + ch] = Lhat[ch * M + cols[k]];
+    }
+    std::vector<double> acc(S * channels, 1.0);
+    std::vector<double*> out(channels);
+    for (int ch = 0; ch < channels; ++ch) out[ch] = acc.data() + ch * S;
+    relighter.RelightSparseAdd(cols, w, channels, out);
+    for (double& v : acc) v -= 1.0;
+    EXPECT_LT(RelErr(acc, ref), 1e-5) << channels;
+    // No lights at all: zero radiance, whatever the buffers held before.
+    std::vector<float> zero(S * channels, -7.0f);
+    relighter.RelightSparse({}, {}, channels, zero);
+    EXPECT_TRUE(std::all_of(zero.begin(), zero.end(), [](float v) { return v == 0.0f; }));
+  }
+}
+
 }  // namespace
 }  // namespace prt
