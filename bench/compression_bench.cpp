@@ -20,7 +20,7 @@
 // Usage: compression_bench [--scenes default,dragon,armadillo] [--n 32,64] [--rays K]
 //          [--cache DIR] [--run DIR] [--bits B] [--keep f1,f2,...] [--budget column|global|both]
 //          [--column-keep f1,...] [--schemes 2d,4d,adaptive4d] [--light-weight W] [--t-error]
-//          [--out DIR]
+//          [--order-normal-weight W] [--out DIR]
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -96,6 +96,7 @@ struct Transport {
   prt::SpatialDomain domain;
   std::vector<float> albedo;  // 3 per sample
   std::string source;
+  double order_normal_weight = 0;  // of the mesh column order
 };
 
 std::vector<float> AlbedoPerSample(const prt::SceneGeometry& g) {
@@ -108,13 +109,15 @@ std::vector<float> AlbedoPerSample(const prt::SceneGeometry& g) {
 
 // T of a benchmark scene at n: from `cache` (<scene>_n<n>_r<rays>.f32) when present, else
 // traced (and written there).
-Transport SceneTransport(const std::string& name, int n, int rays, const std::string& cache) {
+Transport SceneTransport(const std::string& name, int n, int rays, const std::string& cache,
+                         double order_normal_weight) {
   Transport t;
   t.name = name;
   t.n = n;
   const prt::SceneDescription scene = BenchScene(name, n);
   const prt::SceneGeometry geometry = prt::BuildSceneGeometry(scene);
-  t.domain = prt::SpatialDomainOf(geometry);
+  t.domain = prt::SpatialDomainOf(geometry, order_normal_weight);
+  t.order_normal_weight = order_normal_weight;
   t.albedo = AlbedoPerSample(geometry);
   t.S = t.domain.sample_count();
   const std::size_t M = static_cast<std::size_t>(6) * n * n;
@@ -149,7 +152,7 @@ Transport SceneTransport(const std::string& name, int n, int rays, const std::st
   return t;
 }
 
-Transport ReadRun(const std::string& dir) {
+Transport ReadRun(const std::string& dir, double order_normal_weight) {
   Transport t;
   const prt::TransportFileReader reader(dir + "/" + prt::kTransportFileName);
   t.n = static_cast<int>(reader.info().cubemap_n);
@@ -157,7 +160,8 @@ Transport ReadRun(const std::string& dir) {
   t.T.resize(t.S * reader.info().cols());
   reader.ReadRows(0, t.S, t.T.data());
   const prt::SceneGeometry g = prt::ReadSceneGeometryFile(dir + "/" + prt::kGeometryFileName);
-  t.domain = prt::SpatialDomainOf(g);
+  t.domain = prt::SpatialDomainOf(g, order_normal_weight);
+  t.order_normal_weight = order_normal_weight;
   t.albedo = AlbedoPerSample(g);
   t.name = "run";
   t.source = dir;
@@ -219,8 +223,11 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
   const int n = tr.n;
   const std::size_t S = tr.S, M = static_cast<std::size_t>(6) * n * n;
   const double raw_bytes = static_cast<double>(S * M) * 4.0;
-  std::printf("\n=== %s, n = %d: %zu samples x %zu texels, %zu segments, raw %.1f MB\n",
-              tr.source.c_str(), n, S, M, tr.domain.segments.size(), raw_bytes / 1e6);
+  std::printf(
+      "\n=== %s, n = %d: %zu samples x %zu texels, %zu segments (mesh order normal weight %g), "
+      "raw %.1f MB\n",
+      tr.source.c_str(), n, S, M, tr.domain.segments.size(), tr.order_normal_weight,
+      raw_bytes / 1e6);
   // The real environment maps (Blender's), resampled to the cubemap.
   std::vector<std::vector<float>> lights;
   std::printf("environments:");
@@ -509,6 +516,7 @@ int main(int argc, char** argv) {
   std::string keep_arg = "0.0025,0.005,0.01,0.02,0.04,0.08", budget = "both";
   std::string schemes_arg = "2d,4d,adaptive4d", column_keep_arg;
   int rays = 1, bits = 9, light_weight = 0;
+  double order_normal_weight = prt::CompressionSettings{}.order_normal_weight;
   bool t_error = false;
   CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
   app.add_option("--run", run, "farm run folder to read T from (instead of the scenes)");
@@ -525,6 +533,9 @@ int main(int argc, char** argv) {
   app.add_option(
       "--light-weight", light_weight,
       "global budget: row level l weighted by 2^(-w*l/2) (scene compression.light_weight)");
+  app.add_option("--order-normal-weight", order_normal_weight,
+                 "mesh column order: weight of the normal in the 6D Hilbert curve, 0 = position "
+                 "only (scene compression.order_normal_weight)");
   app.add_flag("--t-error", t_error, "also measure the relative Frobenius error of T (slower)");
   app.add_option("--out", out_dir, "folder for CSV, gnuplot scripts and PNG curves");
   CLI11_PARSE(app, argc, argv);
@@ -540,13 +551,13 @@ int main(int argc, char** argv) {
     for (const std::string& s : SplitList<std::string>(schemes_arg))
       schemes.push_back(prt::ParseCompressionScheme(s, "--schemes"));
     if (!run.empty()) {
-      const Transport tr = ReadRun(run);
+      const Transport tr = ReadRun(run, order_normal_weight);
       RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error, out_dir);
       return 0;
     }
     for (const std::string& scene : SplitList<std::string>(scenes_arg))
       for (int n : SplitList<int>(n_arg)) {
-        const Transport tr = SceneTransport(scene, n, rays, cache);
+        const Transport tr = SceneTransport(scene, n, rays, cache, order_normal_weight);
         RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error, out_dir);
       }
   } catch (const std::exception& e) {

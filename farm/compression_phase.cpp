@@ -428,7 +428,8 @@ int RunCompressionPhase(const FarmOptions& options) {
       copt = CompressionOptionsFrom(scene.compression, folder.scene_copy);
       if (!options.compression_scheme.empty())
         copt.scheme = ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
-      const SpatialDomain domain = SpatialDomainOf(ReadSceneGeometryFile(folder.geometry));
+      const SpatialDomain domain = SpatialDomainOf(ReadSceneGeometryFile(folder.geometry),
+                                                   scene.compression.order_normal_weight);
       if (domain.sample_count() != reader->info().rows)
         throw InputError(folder.transport,
                          std::to_string(reader->info().rows) + " rows, but " + folder.geometry +

@@ -423,6 +423,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.keep_fraction = s.Number("keep_fraction", p.keep_fraction, 0, 1, true);
     p.budget = s.Choice("budget", p.budget, {"column", "global"});
     p.light_weight = static_cast<int>(s.Integer("light_weight", p.light_weight, 0, 16));
+    p.order_normal_weight = s.Number("order_normal_weight", p.order_normal_weight, 0, 100);
     s.RejectUnknown();
   }
   {

@@ -111,9 +111,13 @@ struct CompressionSettings {
   std::string column_wavelet = "legall53";  // legall53 | cdf97
   std::string scheme = "adaptive4d";        // 2d | 4d | adaptive4d
   int bits = 9;
-  double keep_fraction = 0.05;    // non-linear approximation budget (fraction of T)
-  std::string budget = "global";  // global (one threshold, the default) | column (paper: N per column)
-  int light_weight = 0;           // global budget: row level l weighted by 2^(−light_weight·l/2)
+  double keep_fraction = 0.05;  // non-linear approximation budget (fraction of T)
+  std::string budget =
+      "global";          // global (one threshold, the default) | column (paper: N per column)
+  int light_weight = 0;  // global budget: row level l weighted by 2^(−light_weight·l/2)
+  // A mesh's column order: a 6D Hilbert curve through (position, normal), the normal's axes
+  // spanning this times the mesh's largest extent; 0 = position only (worker/column_order.h).
+  double order_normal_weight = 2.0;
 };
 
 struct SceneDescription {

@@ -48,6 +48,56 @@ TEST(HilbertOrder, VisitsAShuffledLatticeOneStepAtATime) {
     EXPECT_NEAR(Length(p[order[k]] - p[order[k - 1]]), 0.5, 1e-12);
 }
 
+TEST(HilbertIndex, EveryDimensionIsABijectionWhoseConsecutiveCellsAreFaceNeighbours) {
+  for (int dims = 1; dims <= 6; ++dims) {
+    for (int bits = 1; bits <= (dims <= 3 ? 4 : 2); ++bits) {
+      const uint32_t side = 1u << bits;
+      std::size_t cells = 1;
+      for (int i = 0; i < dims; ++i) cells *= side;
+      std::vector<std::vector<uint32_t>> at(cells);
+      std::vector<uint32_t> axes(dims, 0);
+      for (std::size_t c = 0; c < cells; ++c) {
+        std::size_t r = c;
+        for (int i = 0; i < dims; ++i, r /= side) axes[i] = static_cast<uint32_t>(r % side);
+        const uint64_t h = HilbertIndex(axes, bits);
+        ASSERT_LT(h, cells);
+        ASSERT_TRUE(at[h].empty()) << "index used twice";
+        at[h] = axes;
+      }
+      for (std::size_t h = 1; h < cells; ++h) {
+        int d = 0;
+        for (int i = 0; i < dims; ++i)
+          d += std::abs(static_cast<int>(at[h][i]) - static_cast<int>(at[h - 1][i]));
+        EXPECT_EQ(d, 1) << dims << "D, bits " << bits << ", index " << h;
+      }
+    }
+  }
+  const uint32_t a[3] = {5, 9, 2};
+  EXPECT_EQ(HilbertIndex(a, 4), HilbertIndex3D(5, 9, 2, 4));
+  EXPECT_THROW(HilbertIndex(std::vector<uint32_t>(6, 0), 11), std::invalid_argument);
+}
+
+TEST(HilbertOrder, NormalWeightSeparatesTheTwoSidesOfAThinSheet) {
+  // Two sides of a sheet 1e-3 thick, points interleaved in space, normals opposite: by position
+  // alone the order alternates sides; with the normal axes each side is a few long runs (the
+  // curve crosses the normal's half-spaces a few times, as the Gray code of the top bits does).
+  std::vector<Vec3> p, nrm;
+  for (int i = 0; i < 32; ++i)
+    for (int j = 0; j < 32; ++j)
+      for (int side = 0; side < 2; ++side) {
+        p.push_back({i / 31.0, j / 31.0, side * 1e-3});
+        nrm.push_back({0, 0, side ? 1.0 : -1.0});
+      }
+  const auto switches = [&](const std::vector<uint32_t>& order) {
+    int n = 0;
+    for (std::size_t k = 1; k < order.size(); ++k) n += nrm[order[k]].z != nrm[order[k - 1]].z;
+    return n;
+  };
+  EXPECT_GT(switches(HilbertOrder(p)), 500);
+  EXPECT_LE(switches(HilbertOrder(p, nrm, 1.0)), 8);
+  EXPECT_THROW(HilbertOrder(p, std::vector<Vec3>(3), 1.0), std::invalid_argument);
+}
+
 TEST(SpatialDomainOf, MeshesAreHilbertSegmentsAndTheGroundIsAGrid) {
   SceneGeometry g;
   SceneMesh m;
@@ -68,6 +118,25 @@ TEST(SpatialDomainOf, MeshesAreHilbertSegmentsAndTheGroundIsAGrid) {
   EXPECT_EQ(d.segments[1].width, 4u);
   EXPECT_EQ(d.sample_count(), 26u);
   EXPECT_EQ(ImageDomain(7, 3).segments[0].count, 21u);
+}
+
+TEST(SpatialDomainOf, MeshOrderUsesTheNormalsWithTheGivenWeight) {
+  SceneGeometry g;
+  SceneMesh m;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int i = 0; i < 200; ++i) {
+    m.mesh.positions.push_back({u(rng), u(rng), 0.01 * u(rng)});
+    m.mesh.normals.push_back({0, 0, i % 2 ? 1.0 : -1.0});
+  }
+  g.meshes.push_back(m);
+  EXPECT_EQ(SpatialDomainOf(g, 0.0).segments[0].order, HilbertOrder(m.mesh.positions));
+  EXPECT_EQ(SpatialDomainOf(g, 2.0).segments[0].order,
+            HilbertOrder(m.mesh.positions, m.mesh.normals, 2.0));
+  EXPECT_NE(SpatialDomainOf(g, 2.0).segments[0].order, HilbertOrder(m.mesh.positions));
+  EXPECT_EQ(
+      SpatialDomainOf(g).segments[0].order,
+      HilbertOrder(m.mesh.positions, m.mesh.normals, CompressionSettings{}.order_normal_weight));
 }
 
 }  // namespace
