@@ -313,27 +313,56 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   // and held N = 300 on the demo's pack at ~2/3 of this speed (docs/viewer.md).
   constexpr std::ptrdiff_t kPrefetchTerms = 256;
   const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
+  const auto& segments = header_.domain.segments;
+  const bool split = InverseWavelet1DStepSplitSupported(filter, static_cast<int>(K));
+  if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
+  float* scratch = buffers->scratch.data();
+  std::vector<bool>& in_scratch = buffers->low_in_scratch;  // per segment
+  in_scratch.assign(segments.size(), false);
   bool any = false;
   std::size_t next = 0;
   for (int d = max_depth_; d >= 0; --d) {
     if (any && d < max_depth_) {
-      // X is at depth d + 1: one single inverse step per segment brings it to depth d.
-      if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
-      float* scratch = buffers->scratch.data();
-      const auto& segments = header_.domain.segments;
+      // X is at depth d + 1: one single inverse step per segment brings it to depth d. A mesh
+      // segment (1D) alternates its low band between X and the scratch buffer, its high bands
+      // staying in X (InverseWavelet1DStepSplit): no copy back per step.
       std::size_t off = 0;
-      for (const SpatialSegment& seg : segments) {
+      for (std::size_t si = 0; si < segments.size(); ++si) {
+        const SpatialSegment& seg = segments[si];
         int w, h;
         SegmentShape(seg, w, h);
-        if (d + 1 <= MaxSegmentDepth(seg))
-          InverseWavelet2DStepInterleaved(filter, x + off * K, w, h, static_cast<int>(K), d + 1,
-                                          scratch + off * K);
+        if (d + 1 <= MaxSegmentDepth(seg)) {
+          if (split && h == 1) {
+            const std::size_t ns = (static_cast<std::size_t>(SizeAtDepth(w, d)) + 1) / 2;
+            float* low = in_scratch[si] ? scratch : x;
+            float* dst = in_scratch[si] ? x : scratch;
+            InverseWavelet1DStepSplit(filter, low + off * K, x + (off + ns) * K, dst + off * K, w,
+                                      static_cast<int>(K), d + 1);
+            in_scratch[si] = !in_scratch[si];
+          } else {
+            InverseWavelet2DStepInterleaved(filter, x + off * K, w, h, static_cast<int>(K), d + 1,
+                                            scratch + off * K);
+          }
+        }
         off += seg.count;
       }
     }
     const std::size_t first = next;
     while (next < lights.size() && columns_[lights[next].slot].depth == d) ++next;
     if (next == first) continue;
+    {  // this depth's lights add into X: low bands left in the scratch buffer come back
+      std::size_t off = 0;
+      for (std::size_t si = 0; si < segments.size(); ++si) {
+        if (in_scratch[si]) {
+          int w, h;
+          SegmentShape(segments[si], w, h);
+          const std::size_t len = static_cast<std::size_t>(SizeAtDepth(w, d)) * K;
+          std::memcpy(x + off * K, scratch + off * K, sizeof(float) * len);
+          in_scratch[si] = false;
+        }
+        off += segments[si].count;
+      }
+    }
     const bool zero = !any;  // the first lights of the frame: X is zeroed tile by tile
     any = true;
     tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
@@ -389,9 +418,9 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   if (!any) std::fill(x, x + S * K, 0.0f);
   // Back to sample order: sequential writes, each sample's channels gathered from its one
   // element of X in one read.
-  const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi) {
+  const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi, const float* base) {
     const uint32_t* __restrict src = coefficient_of_sample_.data();
-    const float* __restrict xs = x;
+    const float* __restrict xs = base;
     if (out.add != nullptr && C == 3 && K == 4) {
       double* __restrict o0 = out.add[0];
       double* __restrict o1 = out.add[1];
@@ -427,12 +456,21 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   };
   // On the calling thread while X fits in its caches (the inverse steps just left it there; a
   // second thread would fetch its half from the other core), in parallel beyond.
-  if (S * K * sizeof(float) <= (std::size_t{4} << 20)) {
-    gather(0, S);
-  } else {
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, S, 4096),
-        [&](const tbb::blocked_range<std::size_t>& r) { gather(r.begin(), r.end()); });
+  // A segment's samples are its coefficients' range; its depth-0 coefficients are in X or, for
+  // a mesh whose last step wrote there, in the scratch buffer.
+  const bool serial = S * K * sizeof(float) <= (std::size_t{4} << 20);
+  std::size_t off = 0;
+  for (std::size_t si = 0; si < segments.size(); ++si) {
+    const float* base = in_scratch[si] ? scratch : x;
+    const std::size_t lo = off, hi = off + segments[si].count;
+    if (serial) {
+      gather(lo, hi, base);
+    } else {
+      tbb::parallel_for(
+          tbb::blocked_range<std::size_t>(lo, hi, 4096),
+          [&](const tbb::blocked_range<std::size_t>& r) { gather(r.begin(), r.end(), base); });
+    }
+    off = hi;
   }
   ReturnBuffers(std::move(buffers));
 }

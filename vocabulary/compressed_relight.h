@@ -161,6 +161,7 @@ class CompressedRelighter {
   // parallel loop) each need their own.
   struct FrameBuffers {
     std::vector<float> x, scratch;
+    std::vector<bool> low_in_scratch;  // per segment: its low band lives in `scratch`
   };
   std::unique_ptr<FrameBuffers> TakeBuffers() const;
   void ReturnBuffers(std::unique_ptr<FrameBuffers> b) const;

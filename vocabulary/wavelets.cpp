@@ -700,20 +700,22 @@ inline void StoreElem(float* p, V v) {
 // Unscaled s' = s/√2, d' = √2·d; even update S[n] = s'[n] − ¼(d'[n−1] + d'[n]); odd predict
 // out[2n+1] = d'[n] + ½(S[n] + S[n+1]); the symmetric extensions of LiftEven and LiftOdd are
 // d'[−1] ≡ d'[0], d'[nd] ≡ d'[nd−1] and S[ns] ≡ S[ns−1].
+// The low band s and the high band d may lie apart (InverseWavelet1DStepSplit); `out` may be
+// the buffer that holds d, starting ns elements before it: every element is read before the
+// stores that could reach it (at iteration n the stores go to 2n, 2n + 1 <= ns + n, the loads
+// to ns + n + 1 and beyond are still to come).
 template <typename V>
-void SynthesizeLeGall53Fused(const float* in, float* out, int len) {
+void SynthesizeLeGall53Fused(const float* s, const float* d, float* out, int len) {
   constexpr std::ptrdiff_t kW = sizeof(V) / sizeof(float);
   const int ns = (len + 1) / 2, nd = len / 2;
   if (nd == 0) {  // length 1: identity, as SynthesizeLifting
-    StoreElem(out, LoadElem<V>(in));
+    StoreElem(out, LoadElem<V>(s));
     return;
   }
   const float a = static_cast<float>(1.0 / kLeGall53Scheme.low_scale);
   const float c = static_cast<float>(1.0 / kLeGall53Scheme.high_scale);
   const float b = static_cast<float>(-kLeGall53Scheme.coef[1] / kLeGall53Scheme.high_scale);
   const float p = static_cast<float>(-kLeGall53Scheme.coef[0]);
-  const float* s = in;
-  const float* d = in + ns * kW;
   const auto S = [&](int n, int left, int right) {
     return a * LoadElem<V>(s + n * kW) +
            b * (LoadElem<V>(d + left * kW) + LoadElem<V>(d + right * kW));
@@ -740,10 +742,10 @@ void SynthesizeInterleavedRow(WaveletFilter filter, float* in, float* out, int l
   if (filter == WaveletFilter::kLeGall53) {
     switch (channels) {
       case 1:
-        SynthesizeLeGall53Fused<float>(in, out, len);
+        SynthesizeLeGall53Fused<float>(in, in + (len + 1) / 2, out, len);
         return;
       case 4:
-        SynthesizeLeGall53Fused<Float4>(in, out, len);
+        SynthesizeLeGall53Fused<Float4>(in, in + 4 * ((len + 1) / 2), out, len);
         return;
       default:
         break;
@@ -780,6 +782,28 @@ void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int widt
     for (int y = 0; y < hc; ++y)
       std::memcpy(data + y * row, src + y * row,
                   sizeof(float) * static_cast<std::size_t>(row_floats));
+  }
+}
+
+bool InverseWavelet1DStepSplitSupported(WaveletFilter filter, int channels) {
+  return filter == WaveletFilter::kLeGall53 && (channels == 1 || channels == 4);
+}
+
+void InverseWavelet1DStepSplit(WaveletFilter filter, const float* low, const float* high,
+                               float* out, int length, int channels, int step) {
+  if (!InverseWavelet1DStepSplitSupported(filter, channels))
+    Fail("InverseWavelet1DStepSplit", "only LeGall 5/3 on 1 or 4 interleaved channels");
+  CheckStep("InverseWavelet1DStepSplit", step,
+            CheckedMaxDepth2D("InverseWavelet1DStepSplit", filter, length, 1));
+  const int len = SizeAtDepth(length, step - 1);
+  if (len < 2) {
+    std::memcpy(out, low, sizeof(float) * static_cast<std::size_t>(channels));
+    return;
+  }
+  if (channels == 1) {
+    SynthesizeLeGall53Fused<float>(low, high, out, len);
+  } else {
+    SynthesizeLeGall53Fused<Float4>(low, high, out, len);
   }
 }
 

@@ -167,6 +167,18 @@ void InverseWavelet2DStep(WaveletFilter filter, float* data, int width, int heig
 void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int width, int height,
                                      int channels, int step, float* scratch);
 
+// Inverse step t of a 1D signal of `length` elements (`channels` interleaved floats each) whose
+// low band (the first ⌈len/2⌉ elements of the len = SizeAtDepth(length, t − 1) being
+// synthesised) is at `low` and whose high band (the next ⌊len/2⌋) is at `high`, written to
+// out[0, len): the same numbers as InverseWavelet2DStepInterleaved on a length×1 region, without
+// its copy back. `out` may be `high − ⌈len/2⌉·channels` (the high band's own buffer, whose low
+// band then lives elsewhere), so a caller can alternate two buffers from step to step
+// (vocabulary/compressed_relight.cpp). LeGall 5/3 with 1 or 4 channels only
+// (InverseWavelet1DStepSplitSupported).
+bool InverseWavelet1DStepSplitSupported(WaveletFilter filter, int channels);
+void InverseWavelet1DStepSplit(WaveletFilter filter, const float* low, const float* high,
+                               float* out, int length, int channels, int step);
+
 // A whole cubemap vector, 6·n² floats in the layout face·n² + y·n + x (vocabulary/cubemap.h),
 // each face transformed independently by the 2D transform above.
 void ForwardWaveletCubemap(WaveletFilter filter, float* data, int n, int depth,

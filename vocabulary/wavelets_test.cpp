@@ -166,6 +166,45 @@ TEST(Wavelets, InterleavedFloatStepMatchesThePerChannelStep) {
   }
 }
 
+// The split 1D step gives InverseWavelet2DStepInterleaved's numbers on a length×1 region, with
+// its bands in two buffers, both when it writes to a third buffer and when it writes over the
+// high band's own buffer (the relighter's alternation of X and its scratch).
+TEST(Wavelets, SplitOneDimensionalStepMatchesTheInterleavedStep) {
+  const WaveletFilter f = WaveletFilter::kLeGall53;
+  EXPECT_TRUE(InverseWavelet1DStepSplitSupported(f, 4));
+  EXPECT_FALSE(InverseWavelet1DStepSplitSupported(WaveletFilter::kCdf97, 4));
+  EXPECT_FALSE(InverseWavelet1DStepSplitSupported(f, 3));
+  for (int length = 1; length <= 70; ++length) {
+    for (int channels : {1, 4}) {
+      const std::size_t n = static_cast<std::size_t>(length) * channels;
+      const std::vector<float> x = RandomSignal(n, 3u + length * channels);
+      for (int t = 1; t <= WaveletMaxDepth2D(f, length, 1); ++t) {
+        std::vector<float> want = x, scratch(n);
+        InverseWavelet2DStepInterleaved(f, want.data(), length, 1, channels, t, scratch.data());
+        const int len = SizeAtDepth(length, t - 1), ns = (len + 1) / 2;
+        const std::size_t region = static_cast<std::size_t>(len) * channels;
+        // Low band elsewhere, output to a third buffer.
+        std::vector<float> low(x.begin(), x.begin() + static_cast<std::ptrdiff_t>(ns * channels));
+        std::vector<float> out(n, -9.0f);
+        InverseWavelet1DStepSplit(f, low.data(), x.data() + ns * channels, out.data(), length,
+                                  channels, t);
+        for (std::size_t i = 0; i < region; ++i)
+          ASSERT_EQ(out[i], want[i]) << length << " " << channels << " step " << t;
+        // Output over the buffer that holds the high band (its low band poisoned).
+        std::vector<float> same = x;
+        for (std::size_t i = 0; i < static_cast<std::size_t>(ns) * channels; ++i) same[i] = NAN;
+        InverseWavelet1DStepSplit(f, low.data(), same.data() + ns * channels, same.data(), length,
+                                  channels, t);
+        for (std::size_t i = 0; i < n; ++i)
+          ASSERT_EQ(same[i], i < region ? want[i] : x[i]) << length << " " << channels << " " << t;
+      }
+    }
+  }
+  float v = 0;
+  EXPECT_THROW(InverseWavelet1DStepSplit(WaveletFilter::kCdf97, &v, &v, &v, 1, 4, 1),
+               std::invalid_argument);
+}
+
 // A single step touches only the region SizeAtDepth(·, t−1) of its step.
 TEST(Wavelets, SingleStepLeavesOuterCoefficientsAlone) {
   const int w = 13, h = 9;
