@@ -246,8 +246,9 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
     col.end = static_cast<uint32_t>(terms_.size());
     columns_.push_back(col);
   }
-  // At most 64 tiles per column (the offsets cost 4·65 bytes per column); past 64 Ki samples a
-  // tile outgrows L1 but stays within L2.
+  // Tiles of at least 4096 coefficients (64 KB of X with three channels: the core's L2) and at
+  // most 64 per column (the offsets cost 4·65 bytes per column); past 256 Ki samples a tile is
+  // S/64 coefficients.
   tile_ = std::max<std::size_t>(4096, (S + 63) / 64);
   tiles_ = std::max<std::size_t>(1, (S + tile_ - 1) / tile_);
   tile_offsets_.resize(columns_.size() * (tiles_ + 1));
