@@ -10,19 +10,21 @@
 namespace prt {
 namespace {
 
-SpatialDomain TwoSegmentDomain() {
+// A shuffled mesh segment of `mesh_count` samples followed by a width×height grid.
+SpatialDomain TwoSegmentDomain(uint32_t mesh_count = 45, uint32_t width = 9, uint32_t height = 6,
+                               unsigned shuffle_seed = 11) {
   SpatialDomain d;
   SpatialSegment mesh;
   mesh.kind = SpatialSegment::Kind::kMesh1D;
-  mesh.count = 45;
-  mesh.order.resize(45);
+  mesh.count = mesh_count;
+  mesh.order.resize(mesh_count);
   std::iota(mesh.order.begin(), mesh.order.end(), 0u);
-  std::shuffle(mesh.order.begin(), mesh.order.end(), std::mt19937(11));
+  std::shuffle(mesh.order.begin(), mesh.order.end(), std::mt19937(shuffle_seed));
   SpatialSegment grid;
   grid.kind = SpatialSegment::Kind::kGrid2D;
-  grid.width = 9;
-  grid.height = 6;
-  grid.count = 54;
+  grid.width = width;
+  grid.height = height;
+  grid.count = width * height;
   d.segments = {mesh, grid};
   return d;
 }
@@ -176,18 +178,7 @@ TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
   CompressedTransport t;
   t.header.cubemap_n = 2;
   t.header.bits = 11;
-  SpatialSegment mesh;
-  mesh.kind = SpatialSegment::Kind::kMesh1D;
-  mesh.count = 9001;
-  mesh.order.resize(mesh.count);
-  std::iota(mesh.order.begin(), mesh.order.end(), 0u);
-  std::shuffle(mesh.order.begin(), mesh.order.end(), std::mt19937(5));
-  SpatialSegment grid;
-  grid.kind = SpatialSegment::Kind::kGrid2D;
-  grid.width = 67;
-  grid.height = 61;
-  grid.count = 67 * 61;
-  t.header.domain.segments = {mesh, grid};
+  t.header.domain = TwoSegmentDomain(9001, 67, 61, 5);
   t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
   const std::size_t S = t.header.sample_count, M = t.header.column_count();
   ASSERT_GT(S, 3u * 4096u);

@@ -173,8 +173,8 @@ void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int widt
 // out[0, len): the same numbers as InverseWavelet2DStepInterleaved on a length×1 region, without
 // its copy back. `out` may be `high − ⌈len/2⌉·channels` (the high band's own buffer, whose low
 // band then lives elsewhere), so a caller can alternate two buffers from step to step
-// (vocabulary/compressed_relight.cpp). LeGall 5/3 with 1 or 4 channels only
-// (InverseWavelet1DStepSplitSupported).
+// (Cheslack-Postava et al. 2008 §4.5 Eq. 8 in vocabulary/compressed_relight.cpp). LeGall 5/3
+// with 1 or 4 channels only (InverseWavelet1DStepSplitSupported).
 bool InverseWavelet1DStepSplitSupported(WaveletFilter filter, int channels);
 void InverseWavelet1DStepSplit(WaveletFilter filter, const float* low, const float* high,
                                float* out, int length, int channels, int step);
