@@ -409,6 +409,11 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     const int64_t default_features = (350 * n * n + 512) / 1024;
     p.features = static_cast<int>(s.Integer("features", default_features, 1, 6 * n * n));
     p.lambda = s.Number("lambda", p.lambda, 0, 1e30, true);
+    p.window = static_cast<int>(s.Integer("window", p.window, 3, 15));
+    if (p.window % 2 == 0) {
+      s.Fail(t ? t->get("window") : nullptr, "window",
+             "must be odd (a window centred on the texel), got " + std::to_string(p.window));
+    }
     p.seed = static_cast<uint64_t>(s.Integer("seed", 1, 0, INT64_MAX));
     s.RejectUnknown();
   }
@@ -506,6 +511,7 @@ radius = 0.035
 max_neighbors = 40
 features = 350
 lambda = 0.001
+window = 7
 seed = 1
 
 [compression]

@@ -103,6 +103,7 @@ struct SparseSettings {
   int max_neighbors = 40;          // §5.1: "usually 10–40" dense neighbours
   int features = 350;              // §7: 350 directions at n = 32; default scales with n²
   double lambda = 1e-3;  // L1 weight relative to λ_max = ‖2Aᵀb‖∞ (not in the paper)
+  int window = 7;        // §4.2: a dense row's feature test looks at the grid in a 7×7 window
   uint64_t seed = 1;
 };
 

@@ -62,9 +62,72 @@ bool PolishOnSupport(const Mat& G, const Vec& c, double lambda, const std::vecto
 }
 }  // namespace
 
+// Cholesky factor L (G_AA = L Lᵀ) of the Gram block of LARS's active set, in the order the
+// variables entered.
+class ActiveCholesky {
+ public:
+  void Reset(int k) {
+    k_ = k;
+    s_ = 0;
+    max_pivot_ = 0;
+    L_.assign(static_cast<std::size_t>(k) * static_cast<std::size_t>(k), 0.0);
+  }
+  // Appends variable j to the factor of `active` (the variables of its rows, in order). Returns
+  // false and changes nothing when j's column is numerically dependent on them: its pivot (the
+  // squared new diagonal, what an LDLᵀ factorisation would give) ≤ 1e-12 × the largest pivot.
+  bool Append(const Mat& G, const std::vector<int>& active, int j) {
+    double* row = &L_[static_cast<std::size_t>(s_) * k_];
+    double pivot = G(j, j);
+    for (int i = 0; i < s_; ++i) {
+      const double* li = &L_[static_cast<std::size_t>(i) * k_];
+      double v = G(active[static_cast<std::size_t>(i)], j);
+      for (int q = 0; q < i; ++q) v -= li[q] * row[q];
+      row[i] = v / li[i];
+      pivot -= row[i] * row[i];
+    }
+    if (!(pivot > 1e-12 * std::max(max_pivot_, G(j, j))) || !std::isfinite(pivot)) return false;
+    row[s_] = std::sqrt(pivot);
+    max_pivot_ = std::max(max_pivot_, pivot);
+    ++s_;
+    return true;
+  }
+  // Factors `active` afresh (after a variable left).
+  bool Refactor(const Mat& G, const std::vector<int>& active) {
+    s_ = 0;
+    max_pivot_ = 0;
+    std::vector<int> prefix;
+    prefix.reserve(active.size());
+    for (int j : active) {
+      if (!Append(G, prefix, j)) return false;
+      prefix.push_back(j);
+    }
+    return true;
+  }
+  // x = (L Lᵀ)⁻¹ b over the factor's s entries.
+  void Solve(const double* b, double* x) const {
+    for (int i = 0; i < s_; ++i) {
+      const double* li = &L_[static_cast<std::size_t>(i) * k_];
+      double v = b[i];
+      for (int q = 0; q < i; ++q) v -= li[q] * x[q];
+      x[i] = v / li[i];
+    }
+    for (int i = s_ - 1; i >= 0; --i) {
+      double v = x[i];
+      for (int r = i + 1; r < s_; ++r) v -= L_[static_cast<std::size_t>(r) * k_ + i] * x[r];
+      x[i] = v / L_[static_cast<std::size_t>(i) * k_ + i];
+    }
+  }
+
+ private:
+  int k_ = 0, s_ = 0;
+  double max_pivot_ = 0;
+  std::vector<double> L_;  // row-major k×k; row i holds L's row i in columns 0..i
+};
+
 struct L1Solver::Impl {
   Mat G;
   Vec c;
+  ActiveCholesky chol;
 };
 
 L1Solver::L1Solver(L1Options options) : impl_(new Impl), options_(options) {}
@@ -95,7 +158,10 @@ std::vector<double> L1Solver::LeastSquares(std::span<const double> A, std::span<
 L1Result L1Solver::Solve(std::span<const double> A, std::span<const double> b, int m, int k) {
   const Mat Am = CMap(A.data(), m, k);
   const Vec bv = CVecMap(b.data(), m);
-  impl_->G.noalias() = Am.transpose() * Am;
+  // AᵀA through its lower triangle (half the work of the full product), mirrored.
+  impl_->G.setZero(k, k);
+  impl_->G.selfadjointView<Eigen::Lower>().rankUpdate(Am.transpose());
+  impl_->G.triangularView<Eigen::StrictlyUpper>() = impl_->G.transpose();
   impl_->c.noalias() = Am.transpose() * bv;
   return SolveGram({impl_->G.data(), static_cast<std::size_t>(k) * k},
                    {impl_->c.data(), static_cast<std::size_t>(k)}, bv.squaredNorm(), k);
@@ -119,19 +185,26 @@ L1Result L1Solver::SolveGram(std::span<const double> Gs, std::span<const double>
   Vec alpha = Vec::Zero(k);
 
   // ---- LARS / homotopy ----
+  // The active set's Gram block is held as its Cholesky factor, extended by one row when a
+  // variable enters (O(s²)) and refactored when one leaves (rare), instead of a fresh
+  // factorisation of G_AA at every step (O(s³) per step, ~40 steps).
   std::vector<int> active;
   std::vector<double> sign;
   std::vector<char> in_active(static_cast<std::size_t>(k), 0),
       dependent(static_cast<std::size_t>(k), 0);
+  ActiveCholesky& chol = impl_->chol;
+  chol.Reset(k);
   int last_dropped = -1;
   bool lars_ok = false;
   {
     Vec g = c;
+    Vec a(k);
+    std::vector<double> d(static_cast<std::size_t>(k));
     Eigen::Index first;
     double lam = g.cwiseAbs().maxCoeff(&first);
     if (lam <= lambda) {
       lars_ok = true;  // α = 0 is optimal
-    } else {
+    } else if (chol.Append(G, active, static_cast<int>(first))) {
       active.push_back(static_cast<int>(first));
       sign.push_back(g[first] > 0 ? 1.0 : -1.0);
       in_active[static_cast<std::size_t>(first)] = 1;
@@ -139,30 +212,11 @@ L1Result L1Solver::SolveGram(std::span<const double> Gs, std::span<const double>
       int step = 0;
       for (; step < max_steps; ++step) {
         const int s = static_cast<int>(active.size());
-        Mat Gaa(s, s);
-        Vec sa(s);
-        for (int i = 0; i < s; ++i) {
-          sa[i] = sign[static_cast<std::size_t>(i)];
-          for (int j = 0; j < s; ++j)
-            Gaa(i, j) = G(active[static_cast<std::size_t>(i)], active[static_cast<std::size_t>(j)]);
-        }
-        Eigen::LDLT<Mat> ldlt(Gaa);
-        const Vec piv = ldlt.vectorD().cwiseAbs();
-        if (ldlt.info() != Eigen::Success || piv.minCoeff() <= 1e-12 * piv.maxCoeff()) {
-          // The variable just added is (numerically) dependent on the active set: drop it for
-          // good and continue from the same point of the path.
-          const int j = active.back();
-          active.pop_back();
-          sign.pop_back();
-          in_active[static_cast<std::size_t>(j)] = 0;
-          dependent[static_cast<std::size_t>(j)] = 1;
-          if (active.empty()) break;
-          continue;
-        }
-        const Vec d = ldlt.solve(sa);
-        Vec a = Vec::Zero(k);
-        for (int i = 0; i < s; ++i) a += G.col(active[static_cast<std::size_t>(i)]) * d[i];
-        g = c - G * alpha;
+        chol.Solve(sign.data(), d.data());  // d = G_AA⁻¹ s_A
+        a.setZero();
+        for (int i = 0; i < s; ++i)
+          a += G.col(active[static_cast<std::size_t>(i)]) * d[static_cast<std::size_t>(i)];
+        g.noalias() = c - G * alpha;
         double gamma = lam - lambda;  // default: reach the target λ
         int event = -1;
         bool drop = false;
@@ -190,15 +244,17 @@ L1Result L1Solver::SolveGram(std::span<const double> Gs, std::span<const double>
         }
         for (int i = 0; i < s; ++i) {
           const int j = active[static_cast<std::size_t>(i)];
-          if (d[i] == 0) continue;
-          const double t = -alpha[j] / d[i];
+          const double di = d[static_cast<std::size_t>(i)];
+          if (di == 0) continue;
+          const double t = -alpha[j] / di;
           if (t > tiny && t < gamma) {
             gamma = t;
             event = i;
             drop = true;
           }
         }
-        for (int i = 0; i < s; ++i) alpha[active[static_cast<std::size_t>(i)]] += gamma * d[i];
+        for (int i = 0; i < s; ++i)
+          alpha[active[static_cast<std::size_t>(i)]] += gamma * d[static_cast<std::size_t>(i)];
         lam -= gamma;
         if (event < 0) {
           lars_ok = true;
@@ -211,22 +267,29 @@ L1Result L1Solver::SolveGram(std::span<const double> Gs, std::span<const double>
           active.erase(active.begin() + event);
           sign.erase(sign.begin() + event);
           last_dropped = j;
+          // A principal block of a positive definite block: refactoring cannot fail but for
+          // rounding; if it does, the homotopy gives up and ADMM takes over.
+          if (!chol.Refactor(G, active)) break;
           if (active.empty()) {
             // Path restarts from α = 0 at the current λ.
-            const Vec g2 = c - G * alpha;
+            g.noalias() = c - G * alpha;
             Eigen::Index nxt;
-            g2.cwiseAbs().maxCoeff(&nxt);
-            if (std::abs(g2[nxt]) <= lambda) {
+            g.cwiseAbs().maxCoeff(&nxt);
+            if (std::abs(g[nxt]) <= lambda) {
               lars_ok = true;
               break;
             }
           }
-        } else {
-          const Vec g2 = c - G * alpha;
+        } else if (chol.Append(G, active, event)) {
+          g.noalias() = c - G * alpha;
           active.push_back(event);
-          sign.push_back(g2[event] > 0 ? 1.0 : -1.0);
+          sign.push_back(g[event] > 0 ? 1.0 : -1.0);
           in_active[static_cast<std::size_t>(event)] = 1;
           last_dropped = -1;
+        } else {
+          // The variable is (numerically) dependent on the active set: never add it, and go on
+          // from the same point of the path.
+          dependent[static_cast<std::size_t>(event)] = 1;
         }
       }
       result.iterations = step + 1;

@@ -96,5 +96,12 @@ std::vector<float> RunSparsePrecomputation(
     const TransportSampler& sampler, std::span<const SpatialSample> samples, const SparsePlan& plan,
     SparseReport& report,
     const std::function<void(const char*, std::size_t, std::size_t)>& progress = {});
+// The same into caller-owned storage of sample_count · texel_count floats (every entry is
+// written), as TransportSampler::ComputeRows does: a benchmark allocates both outputs before
+// timing either (first-touching 350 MB of fresh pages costs ~0.5 s on a VM).
+void RunSparsePrecomputation(
+    const TransportSampler& sampler, std::span<const SpatialSample> samples, const SparsePlan& plan,
+    SparseReport& report, float* out,
+    const std::function<void(const char*, std::size_t, std::size_t)>& progress = {});
 
 }  // namespace prt

@@ -142,6 +142,21 @@ TEST(LocalRank, UnknownCandidatesWeighAsTheLargestRankOfTheRound) {
                                              plan.seed + 7919 * 3));
 }
 
+// The scene's [sparse] settings reach the plan: radius relative to the diagonal, features ∝ n²,
+// the dense rows' window.
+TEST(SparsePlan, FromSceneSettings) {
+  SparseSettings s;
+  s.radius = 0.05;
+  s.window = 5;
+  s.lambda = 0.01;
+  const SparsePlan p = PlanFromSettings(s, 4.0, 64);
+  EXPECT_DOUBLE_EQ(p.radius, 0.2);
+  EXPECT_EQ(p.sparse.features, 1400);
+  EXPECT_EQ(p.angular.window, 5);
+  EXPECT_EQ(p.sparse.lambda, 0.01);
+  EXPECT_EQ(PlanFromSettings(SparseSettings{}, 1.0, 32).angular.window, 7);
+}
+
 TEST(NeighborIndex, RadiusSearchMatchesBruteForce) {
   std::vector<Vec3> pts;
   std::vector<uint32_t> ids;
