@@ -61,7 +61,28 @@ namespace fs = std::filesystem;
 constexpr const char* kDefaultSceneName = "<default scene>";
 constexpr uint64_t kMaxMessageBytes = uint64_t{64} << 20;  // rows travel in ≤ 64 MiB messages
 constexpr uint64_t kMaxJobBytes = uint64_t{256} << 20;     // a job's rows fit in 256 MiB
+// A sparse-method job's rows (the dense neighbours it is sent, or the rows it returns) fit in
+// 24 MiB: glibc serves blocks above its mmap threshold (at most 32 MiB) with fresh pages on
+// every allocation, so jobs of ~100 MiB paid a page fault per 4 KiB of every copy of every job
+// (encode, MPI, decode, result) — 14 % of a 2-rank run's samples (docs/farm.md). Below it the
+// buffers are reused from the heap.
+constexpr uint64_t kMaxSparseJobBytes = uint64_t{24} << 20;
 constexpr uint64_t kMaxBroadcastBytes = uint64_t{1} << 30;
+
+// A worker waits for rank 0's next message without spinning: MPI_Probe busy-polls, and where
+// ranks share cores (2 ranks on a laptop or in CI, oversubscribed nodes) a waiting worker took a
+// core from rank 0's coordinator and its worker thread. Polls with MPI_Iprobe, sleeping 20 µs
+// doubling to 1 ms in between (a job takes tens of milliseconds at least).
+int ProbeFromRankZero(MPI_Comm comm, MPI_Status* st) {
+  auto pause = std::chrono::microseconds(20);
+  for (;;) {
+    int flag = 0;
+    const int rc = MPI_Iprobe(0, MPI_ANY_TAG, comm, &flag, st);
+    if (rc != MPI_SUCCESS || flag) return rc;
+    std::this_thread::sleep_for(pause);
+    pause = std::min(pause * 2, std::chrono::microseconds(1000));
+  }
+}
 
 enum Tag : int {
   kTagReady = 1,
@@ -572,10 +593,11 @@ class LocalWorker {
     thread_.join();
   }
 
+  // Queues a job (the worker takes them in order).
   void Give(Job job) {
     {
       std::lock_guard lock(mutex_);
-      job_ = std::move(job);
+      jobs_.push_back(std::move(job));
     }
     cv_.notify_all();
   }
@@ -599,10 +621,10 @@ class LocalWorker {
       Job job;
       {
         std::unique_lock lock(mutex_);
-        cv_.wait(lock, [&] { return stop_ || job_.has_value(); });
+        cv_.wait(lock, [&] { return stop_ || !jobs_.empty(); });
         if (stop_) return;
-        job = std::move(*job_);
-        job_.reset();
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
       }
       Result r;
       try {
@@ -621,7 +643,7 @@ class LocalWorker {
   Compute compute_;
   std::mutex mutex_;
   std::condition_variable cv_, cv_done_;
-  std::optional<Job> job_;
+  std::deque<Job> jobs_;
   std::deque<Result> results_;
   bool stop_ = false;
   std::thread thread_;  // last: starts after every other member exists
@@ -664,7 +686,7 @@ class BruteSamplingPhase : public FarmPhase {
     int jobs = 0;
     for (;;) {
       MPI_Status st;
-      CheckMpi(MPI_Probe(0, MPI_ANY_TAG, ctx.comm, &st), "MPI_Probe from rank 0");
+      CheckMpi(ProbeFromRankZero(ctx.comm, &st), "MPI_Iprobe from rank 0");
       if (st.MPI_TAG == kTagStop) {
         CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
                  "MPI_Recv stop");
@@ -1027,10 +1049,20 @@ class SparseSamplingPhase : public FarmPhase {
     CheckMpi(MPI_Send(&ready, sizeof ready, MPI_BYTE, 0, kTagReady, ctx.comm), "MPI_Send ready");
     int jobs = 0;
     std::string job;
+    std::deque<std::pair<MPI_Request, std::string>> sending;  // results on their way, oldest first
     for (;;) {
+      while (!sending.empty()) {
+        int sent = 0;
+        CheckMpi(MPI_Test(&sending.front().first, &sent, MPI_STATUS_IGNORE), "MPI_Test");
+        if (!sent) break;
+        sending.pop_front();
+      }
       MPI_Status st;
-      CheckMpi(MPI_Probe(0, MPI_ANY_TAG, ctx.comm, &st), "MPI_Probe from rank 0");
+      CheckMpi(ProbeFromRankZero(ctx.comm, &st), "MPI_Iprobe from rank 0");
       if (st.MPI_TAG == kTagStop) {
+        // Rank 0 stops a worker only once it has every result, so these have left.
+        for (auto& [request, buffer] : sending)
+          CheckMpi(MPI_Wait(&request, MPI_STATUS_IGNORE), "MPI_Wait");
         CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
                  "MPI_Recv stop");
         return;
@@ -1052,9 +1084,13 @@ class SparseSamplingPhase : public FarmPhase {
         MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE);
         throw CollectiveStop{kExitRankFailed};
       }
-      CheckMpi(MPI_Send(result.data(), static_cast<int>(result.size()), MPI_BYTE, 0,
-                        kTagSparseResult, ctx.comm),
-               "MPI_Send sparse result");
+      // Sent in the background while the next job is received and computed: a blocking send
+      // of a large result spins until rank 0 gets round to receiving it, on a core rank 0's
+      // threads may need.
+      auto& [request, buffer] = sending.emplace_back(MPI_REQUEST_NULL, std::move(result));
+      CheckMpi(MPI_Isend(buffer.data(), static_cast<int>(buffer.size()), MPI_BYTE, 0,
+                         kTagSparseResult, ctx.comm, &request),
+               "MPI_Isend sparse result");
       ++jobs;
     }
   }
@@ -1063,9 +1099,15 @@ class SparseSamplingPhase : public FarmPhase {
     int rank = 0;
     bool local = false;
     bool ready = false;
-    std::optional<SparseJobHeader> job;
-    double since = 0;
+    std::deque<SparseJobHeader> jobs;  // given to the rank and not returned, oldest first
+    double since = 0;                  // when the oldest began (or the slot opened)
+    // Remote ranks: the encoded jobs whose MPI_Isend is in flight, oldest first.
+    std::deque<std::pair<MPI_Request, std::string>> sends;
   };
+  // Jobs a rank holds at once: the one it computes and the next, encoded and sent while it
+  // computes, so that it never waits for rank 0 to read its neighbours' rows (a 2-rank run's
+  // sparse-reconstruct workers were idle 45 % of the time; docs/farm.md).
+  static constexpr std::size_t kJobsAhead = 2;
 
   // One sub-phase's jobs: items [0, items) of a deterministic list, cut by a JobPlanner.
   struct PhaseJobs {
@@ -1103,9 +1145,9 @@ class SparseSamplingPhase : public FarmPhase {
       timeout_ = ctx_.options.rank_timeout_s > 0 ? ctx_.options.rank_timeout_s
                                                  : std::max(300.0, 50.0 * ctx_.options.job_seconds);
       const double start = Now();
-      for (int r = 1; r < ctx_.size; ++r) slots_.push_back({r, false, false, {}, start});
+      for (int r = 1; r < ctx_.size; ++r) slots_.push_back({r, false, false, {}, start, {}});
       if (ctx_.computes_here()) {
-        slots_.push_back({0, true, true, {}, start});
+        slots_.push_back({0, true, true, {}, start, {}});
         local_ =
             std::make_unique<SparseLocalWorker>([this](std::string& job, SparseLocalResult& r) {
               r.bytes = ComputeSparseJob(*ctx_.sampler, ctx_.samples, ctx_.plan, job);
@@ -1333,7 +1375,7 @@ class SparseSamplingPhase : public FarmPhase {
           std::size_t added = 0;
           for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
           // A job's rows stay within the job byte limit (at least one vertex per job).
-          if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxJobBytes) {
+          if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxSparseJobBytes) {
             h.count = i - h.first;
             break;
           }
@@ -1447,7 +1489,7 @@ class SparseSamplingPhase : public FarmPhase {
       const uint64_t per_item_bytes = p.kind == SparseJobKind::kRank ? 64 : 9 * T_;
       sizing.max_rows = ctx_.options.max_job_rows > 0
                             ? ctx_.options.max_job_rows
-                            : std::max<uint64_t>(1, kMaxJobBytes / per_item_bytes);
+                            : std::max<uint64_t>(1, kMaxSparseJobBytes / per_item_bytes);
       sizing.initial_rows = ctx_.options.initial_job_rows > 0
                                 ? ctx_.options.initial_job_rows
                                 : 4 * static_cast<uint64_t>(ctx_.threads);
@@ -1461,6 +1503,7 @@ class SparseSamplingPhase : public FarmPhase {
       po.already_done = planner.done_before_rows();
       Progress progress(p.name, p.items, po);
 
+      double last_commit = Now();
       std::vector<JournalEntry> pending;
       std::string bytes;
       auto slot_of = [&](int rank) -> Slot& {
@@ -1476,8 +1519,8 @@ class SparseSamplingPhase : public FarmPhase {
         } catch (const std::exception& e) {
           throw RankFailure("rank " + std::to_string(rank) + ": " + e.what());
         }
-        if (!s.job || s.job->first != r.header.first || s.job->count != r.header.count ||
-            r.header.phase != phase_number_) {
+        if (s.jobs.empty() || s.jobs.front().first != r.header.first ||
+            s.jobs.front().count != r.header.count || r.header.phase != phase_number_) {
           throw RankFailure("rank " + std::to_string(rank) + " returned a job it was not given");
         }
         uint64_t rows_written = 0;
@@ -1493,7 +1536,8 @@ class SparseSamplingPhase : public FarmPhase {
         e.texels_below_horizon = rows_written;  // (rows written; not journaled for sjob lines)
         pending.push_back(e);
         planner.Measured(rank, r.header.count, r.busy_seconds);
-        s.job.reset();
+        s.jobs.pop_front();
+        s.since = Now();
       };
       auto commit = [&] {
         if (pending.empty()) return;
@@ -1518,29 +1562,48 @@ class SparseSamplingPhase : public FarmPhase {
 
       for (;;) {
         for (Slot& s : slots_) {
-          if (s.job || !s.ready) continue;
-          std::optional<RowRange> next = planner.Next(s.rank);
-          if (!next) continue;
-          SparseJobHeader h;
-          h.kind = static_cast<uint32_t>(p.kind);
-          h.phase = phase_number_;
-          h.first = next->first;
-          h.count = next->count;
-          std::string job = p.make_job(h);
-          if (h.count < next->count) planner.Return({h.first + h.count, next->count - h.count});
-          s.job = h;
-          s.since = Now();
-          if (s.local) {
-            local_->Give(std::move(job));
-          } else {
-            CheckMpi(MPI_Send(job.data(), static_cast<int>(job.size()), MPI_BYTE, s.rank,
-                              kTagSparseJob, ctx_.comm),
-                     "MPI_Send job to rank " + std::to_string(s.rank));
+          // Sends that have left free their buffers (rank 0 keeps MPI progressing here).
+          while (!s.sends.empty()) {
+            int sent = 0;
+            CheckMpi(MPI_Test(&s.sends.front().first, &sent, MPI_STATUS_IGNORE), "MPI_Test");
+            if (!sent) break;
+            s.sends.pop_front();
+          }
+          while (s.ready && s.jobs.size() < kJobsAhead) {
+            std::optional<RowRange> next = planner.Next(s.rank);
+            if (!next) break;
+            SparseJobHeader h;
+            h.kind = static_cast<uint32_t>(p.kind);
+            h.phase = phase_number_;
+            h.first = next->first;
+            h.count = next->count;
+            std::string job = p.make_job(h);
+            if (h.count < next->count) planner.Return({h.first + h.count, next->count - h.count});
+            if (s.jobs.empty()) s.since = Now();
+            s.jobs.push_back(h);
+            if (s.local) {
+              local_->Give(std::move(job));
+            } else {
+              // A deque keeps its elements in place: the buffer stays put until MPI_Test says
+              // the send has left.
+              auto& [request, buffer] = s.sends.emplace_back(MPI_REQUEST_NULL, std::move(job));
+              CheckMpi(MPI_Isend(buffer.data(), static_cast<int>(buffer.size()), MPI_BYTE, s.rank,
+                                 kTagSparseJob, ctx_.comm, &request),
+                       "MPI_Isend job to rank " + std::to_string(s.rank));
+            }
           }
         }
         const bool idle = std::none_of(slots_.begin(), slots_.end(),
-                                       [](const Slot& s) { return s.job.has_value(); });
-        if (idle && pending.empty() && planner.unassigned_rows() == 0) break;
+                                       [](const Slot& s) { return !s.jobs.empty(); });
+        if (idle && pending.empty() && planner.unassigned_rows() == 0) {
+          // Every job came back, so every send has left; complete the requests.
+          for (Slot& s : slots_) {
+            for (auto& [request, buffer] : s.sends)
+              CheckMpi(MPI_Wait(&request, MPI_STATUS_IGNORE), "MPI_Wait");
+            s.sends.clear();
+          }
+          break;
+        }
 
         bool busy = false;
         if (local_) {
@@ -1585,14 +1648,23 @@ class SparseSamplingPhase : public FarmPhase {
                               " from rank " + std::to_string(src));
           }
         }
-        commit();
+        // Results become durable (rows fdatasync'ed, then their journal lines) every 0.5 s and
+        // when no job is out: an fdatasync per result cost 2 s of a 27 s 2-rank run. A
+        // failure-injection run commits every result, as its resume tests count on.
+        const bool outstanding = std::any_of(slots_.begin(), slots_.end(),
+                                             [](const Slot& s) { return !s.jobs.empty(); });
+        if (!outstanding || ctx_.options.fail_after_jobs >= 0 || Now() - last_commit >= 0.5) {
+          commit();
+          last_commit = Now();
+        }
 
         const double now = Now();
         for (const Slot& s : slots_) {
-          if (!s.job || now - s.since <= timeout_) continue;
+          if (s.jobs.empty() || now - s.since <= timeout_) continue;
+          const SparseJobHeader& oldest = s.jobs.front();
           throw RankFailure("rank " + std::to_string(s.rank) + " has not returned its job (" +
-                            p.name + " items " + std::to_string(s.job->first) + ".." +
-                            std::to_string(s.job->first + s.job->count - 1) + ") for " +
+                            p.name + " items " + std::to_string(oldest.first) + ".." +
+                            std::to_string(oldest.first + oldest.count - 1) + ") for " +
                             std::to_string(static_cast<int>(now - s.since)) +
                             " s (--rank-timeout); giving up");
         }
@@ -1672,7 +1744,7 @@ class VisibilityPhase : public FarmPhase {
     int jobs = 0;
     for (;;) {
       MPI_Status st;
-      CheckMpi(MPI_Probe(0, MPI_ANY_TAG, ctx.comm, &st), "MPI_Probe from rank 0");
+      CheckMpi(ProbeFromRankZero(ctx.comm, &st), "MPI_Iprobe from rank 0");
       if (st.MPI_TAG == kTagStop) {
         CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
                  "MPI_Recv stop");
