@@ -87,6 +87,10 @@ Variant ParseVariant(const std::string& spec, const SparsePlan& base) {
       v.plan.sparse.lambda = x;
     } else if (key == "normal_cos") {
       v.plan.sparse.min_normal_cos = x;
+    } else if (key == "unity") {
+      v.plan.sparse.unity_weight = x;
+    } else if (key == "max_residual") {
+      v.plan.sparse.max_residual = x;
     } else if (key == "empty_weight") {
       v.plan.empty_weight = static_cast<int>(x);
     } else if (key == "mode") {

@@ -125,7 +125,7 @@ std::vector<uint64_t> SparseJobCounters::ToVector() const {
           reconstructed,         fallback_too_few_neighbors,
           fallback_solve_failed, solved_lars,
           solved_admm,           zero_systems,
-          features_traced};
+          features_traced,       fallback_poor_fit};
 }
 
 SparseJobCounters SparseJobCounters::FromVector(std::span<const uint64_t> v) {
@@ -147,6 +147,7 @@ SparseJobCounters SparseJobCounters::FromVector(std::span<const uint64_t> v) {
   c.solved_admm = a[12];
   c.zero_systems = a[13];
   c.features_traced = a[14];
+  c.fallback_poor_fit = a[15];
   return c;
 }
 
@@ -357,6 +358,7 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       c.reconstructed = total.reconstructed;
       c.fallback_too_few_neighbors = total.fallback_too_few_neighbors;
       c.fallback_solve_failed = total.fallback_solve_failed;
+      c.fallback_poor_fit = total.fallback_poor_fit;
       c.solved_lars = total.solved_lars;
       c.solved_admm = total.solved_admm;
       c.zero_systems = total.zero_systems;

@@ -40,8 +40,9 @@ struct SparseJobCounters {
   uint64_t solved_admm = 0;
   uint64_t zero_systems = 0;
   uint64_t features_traced = 0;
+  uint64_t fallback_poor_fit = 0;  // appended: older journal lines read it as 0
 
-  static constexpr std::size_t kCount = 15;
+  static constexpr std::size_t kCount = 16;
   std::vector<uint64_t> ToVector() const;
   // Missing trailing values read as 0.
   static SparseJobCounters FromVector(std::span<const uint64_t> v);

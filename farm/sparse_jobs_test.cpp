@@ -81,6 +81,10 @@ TEST_F(SparseJobsTest, DenseJobEqualsTheAdaptiveSamplerAndSurvivesEncoding) {
 }
 
 TEST_F(SparseJobsTest, RankAndSparseJobsEqualTheKernelsCalledDirectly) {
+  // The job mechanics with the paper's fallbacks only (the poor-fit fallback, which turns one
+  // of this tiny grid's vertices dense, is tested in worker/sparse_precomputation_test.cpp;
+  // its counter is checked against the kernel below).
+  plan_.sparse.max_residual = 0;
   // Dense rows of every other ground vertex, computed directly.
   const std::vector<uint32_t> dense = {4, 6, 8, 16, 18, 20, 28, 30, 32};
   std::vector<DenseRow> rows(dense.size());
@@ -158,6 +162,7 @@ TEST_F(SparseJobsTest, RankAndSparseJobsEqualTheKernelsCalledDirectly) {
   EXPECT_EQ(at * T(), sr.transport.size());
   EXPECT_EQ(sr.outcomes[2], static_cast<uint8_t>(SparseOutcome::kTooFewNeighbors));
   EXPECT_EQ(sr.counters.fallback_too_few_neighbors, 1u);
+  EXPECT_EQ(sr.counters.fallback_poor_fit, 0u);
   EXPECT_EQ(sr.counters.reconstructed, at);
   EXPECT_EQ(sr.counters.solved_lars + sr.counters.solved_admm + sr.counters.zero_systems, at);
 

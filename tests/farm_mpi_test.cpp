@@ -353,6 +353,7 @@ TEST(FarmMpiSparseTest, OneTwoAndThreeRanksGiveTheInProcessDriversBytes) {
     EXPECT_EQ(sp["fallbacks"]["too_few_neighbors"],
               ref.report.sparse_stats.fallback_too_few_neighbors);
     EXPECT_EQ(sp["fallbacks"]["solve_failed"], ref.report.sparse_stats.fallback_solve_failed);
+    EXPECT_EQ(sp["fallbacks"]["poor_fit"], ref.report.sparse_stats.fallback_poor_fit);
     EXPECT_EQ(sp["l1_solver"]["lars"], ref.report.sparse_stats.solved_lars);
     EXPECT_EQ(sp["l1_solver"]["admm"], ref.report.sparse_stats.solved_admm);
     EXPECT_EQ(sp["l1_solver"]["zero"], ref.report.sparse_stats.zero_systems);

@@ -410,6 +410,8 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.features = static_cast<int>(s.Integer("features", default_features, 1, 6 * n * n));
     p.lambda = s.Number("lambda", p.lambda, 0, 1e30, true);
     p.window = static_cast<int>(s.Integer("window", p.window, 3, 15));
+    p.unity_weight = s.Number("unity_weight", p.unity_weight, 0, 100, false);
+    p.max_residual = s.Number("max_residual", p.max_residual, 0, 10, false);
     if (p.window % 2 == 0) {
       s.Fail(t ? t->get("window") : nullptr, "window",
              "must be odd (a window centred on the texel), got " + std::to_string(p.window));
@@ -512,6 +514,8 @@ max_neighbors = 40
 features = 350
 lambda = 0.001
 window = 7
+unity_weight = 1
+max_residual = 0.3
 seed = 1
 
 [compression]

@@ -104,6 +104,10 @@ struct SparseSettings {
   int features = 350;              // §7: 350 directions at n = 32; default scales with n²
   double lambda = 1e-3;  // L1 weight relative to λ_max = ‖2Aᵀb‖∞ (not in the paper)
   int window = 7;        // §4.2: a dense row's feature test looks at the grid in a 7×7 window
+  // Not in the paper (docs/sparse-precomputation.md, measured): the partition-of-unity equation's
+  // weight, and the relative residual on the traced features above which a vertex is made dense.
+  double unity_weight = 1.0;
+  double max_residual = 0.3;
   uint64_t seed = 1;
 };
 

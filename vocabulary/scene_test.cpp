@@ -91,6 +91,8 @@ TEST(SceneTest, DefaultSceneParsesWithDocumentedValues) {
   EXPECT_EQ(s.sparse.features, 350);
   EXPECT_EQ(s.sparse.max_neighbors, 40);
   EXPECT_EQ(s.sparse.window, 7);
+  EXPECT_EQ(s.sparse.unity_weight, 1.0);
+  EXPECT_EQ(s.sparse.max_residual, 0.3);
   EXPECT_EQ(s.compression.bits, 9);
   ASSERT_EQ(s.environments.size(), 2u);
   if (fs::exists(std::string(PRT_DATA_DIR) + "/meshes/bunny00.off")) {
@@ -202,6 +204,7 @@ TEST(SceneTest, EveryErrorNamesTheFileAndTheLine) {
       {mesh + "[sparse]\ndense_budget = 0.01\n", 4, "initial_fraction"},
       {mesh + "[sparse]\nwindow = 6\n", 4, "must be odd"},
       {mesh + "[sparse]\nwindow = 1\n", 4, "out of range"},
+      {mesh + "[sparse]\nmax_residual = -0.1\n", 4, "out of range"},
       {mesh + "[compression]\nbits = 0\n", 4, "out of range"},
       {mesh + "[compression]\nscheme = \"3d\"\n", 4, "not one of"},
       {mesh + "[compression]\nkeep = 0.1\n", 4, "unknown key 'keep'"},

@@ -32,6 +32,8 @@ SparsePlan PlanFromSettings(const SparseSettings& s, double scene_diagonal, int 
   p.sparse.features = std::max(8, static_cast<int>(std::lround(s.features * scale)));
   p.sparse.lambda = s.lambda;
   p.angular.window = s.window;
+  p.sparse.unity_weight = s.unity_weight;
+  p.sparse.max_residual = s.max_residual;
   p.rank_resolution = std::min(8, cubemap_n);
   return p;
 }

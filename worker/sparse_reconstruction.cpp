@@ -12,6 +12,7 @@ SparseStats& SparseStats::operator+=(const SparseStats& o) {
   reconstructed += o.reconstructed;
   fallback_too_few_neighbors += o.fallback_too_few_neighbors;
   fallback_solve_failed += o.fallback_solve_failed;
+  fallback_poor_fit += o.fallback_poor_fit;
   neighbors_dropped_by_normal += o.neighbors_dropped_by_normal;
   solved_lars += o.solved_lars;
   solved_admm += o.solved_admm;
@@ -48,7 +49,7 @@ Runs RunsOf(const uint8_t* above, std::size_t total) {
 // nothing a row calls (the sampler's texel tracing, the L1 solver) runs parallel loops, so a
 // thread never starts another row while it is inside one.
 struct RowScratch {
-  std::vector<float> s, s2, var, unocc, acc;
+  std::vector<float> s, s2, var, unocc, acc, vmin;
   std::vector<uint16_t> feat;
   std::vector<uint8_t> above, fully;
 };
@@ -202,22 +203,49 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   // the relit radiance: visibility mode fits Σ α_k v_k(j) · U_x(j) to T_x(j) (the neighbours'
   // visibility under this vertex's own cosine); transport mode fits Σ α_k T_k(j) to T_x(j).
   const bool vis = options.mode == InterpolationMode::kVisibility;
-  std::vector<double> A(static_cast<std::size_t>(m) * k), b(static_cast<std::size_t>(m));
+  // The partition-of-unity row (SparseOptions::unity_weight): the untraced texels where every
+  // neighbour is unoccluded.
+  double unity_w = 0;
+  if (vis && options.unity_weight > 0) {
+    std::vector<float>& vmin = scratch.vmin;
+    if (vmin.size() < total) vmin.resize(total);
+    for (const auto& [first, last] : runs)
+      std::fill(vmin.begin() + first, vmin.begin() + last, 1.0f);
+    float* __restrict vm = vmin.data();
+    for (const DenseNeighbor& nb : neighbors) {
+      const float* __restrict v = nb.visibility;
+      for (const auto& [first, last] : runs)
+        for (std::size_t j = first; j < last; ++j) vm[j] = std::min(vm[j], v[j]);
+    }
+    for (uint32_t j : feats) vm[j] = 0.0f;  // traced: already an equation
+    double w2 = 0;
+    for (const auto& [first, last] : runs)
+      for (std::size_t j = first; j < last; ++j)
+        if (vm[j] >= 1.0f) w2 += static_cast<double>(unocc[j]) * unocc[j];
+    unity_w = options.unity_weight * std::sqrt(w2);
+  }
+  const int rows = m + (unity_w > 0 ? 1 : 0);
+  std::vector<double> A(static_cast<std::size_t>(rows) * k), b(static_cast<std::size_t>(rows));
+  if (rows > m) {
+    b[static_cast<std::size_t>(m)] = unity_w;
+    for (int c = 0; c < k; ++c)
+      A[static_cast<std::size_t>(m) + static_cast<std::size_t>(rows) * c] = unity_w;
+  }
   for (int i = 0; i < m; ++i) {
     const uint32_t j = feats[static_cast<std::size_t>(i)];
     const double u = unocc[j];
     b[static_cast<std::size_t>(i)] = traced[static_cast<std::size_t>(i)];
     for (int c = 0; c < k; ++c) {
       const DenseNeighbor& nb = neighbors[static_cast<std::size_t>(c)];
-      A[static_cast<std::size_t>(i) + static_cast<std::size_t>(m) * c] =
+      A[static_cast<std::size_t>(i) + static_cast<std::size_t>(rows) * c] =
           vis ? nb.visibility[j] * u : nb.transport[j];
     }
   }
   std::vector<double> alpha;
   if (options.solver == SolverKind::kLeastSquares) {
-    alpha = L1Solver::LeastSquares(A, b, m, k);
+    alpha = L1Solver::LeastSquares(A, b, rows, k);
   } else {
-    const L1Result r = solver.Solve(A, b, m, k);
+    const L1Result r = solver.Solve(A, b, rows, k);
     if (r.status == L1Status::kFailed) {
       ++stats.fallback_solve_failed;
       return SparseOutcome::kSolveFailed;
@@ -226,6 +254,21 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
     stats.solved_admm += r.status == L1Status::kAdmm;
     stats.zero_systems += r.status == L1Status::kZeroSystem;
     alpha = r.alpha;
+  }
+  if (options.max_residual > 0) {  // over the traced features only
+    double rr = 0, bb = 0;
+    for (int i = 0; i < m; ++i) {
+      double f = -b[static_cast<std::size_t>(i)];
+      for (int c = 0; c < k; ++c)
+        f += A[static_cast<std::size_t>(i) + static_cast<std::size_t>(rows) * c] *
+             alpha[static_cast<std::size_t>(c)];
+      rr += f * f;
+      bb += b[static_cast<std::size_t>(i)] * b[static_cast<std::size_t>(i)];
+    }
+    if (bb > 0 && rr > options.max_residual * options.max_residual * bb) {
+      ++stats.fallback_poor_fit;
+      return SparseOutcome::kPoorFit;
+    }
   }
 
   // Eq. 4 on this vertex's own hemisphere (neighbour-outer, contiguous over texels), then the

@@ -43,6 +43,16 @@ struct SparseOptions {
   double min_normal_cos = -2;
   InterpolationMode mode = InterpolationMode::kVisibility;
   SolverKind solver = SolverKind::kL1;
+  // A vertex whose fit leaves more than this relative residual ‖Aα − b‖ / ‖b‖ on its own traced
+  // features is sampled densely instead (a combination of its neighbours does not explain it);
+  // ≤ 0: off. The scene's [sparse] max_residual (default 0.3).
+  double max_residual = 0.3;
+  // Visibility mode: weight of the partition-of-unity equation (Σ α_k − 1)·w = 0, where w² is
+  // the sum of U_x(j)² over the untraced texels every neighbour sees unoccluded (v_k(j) = 1):
+  // the equations those texels would add if the vertex saw them unoccluded too, collapsed into
+  // one (their rows are all U_x(j)·[1 … 1]). 0: off (the paper's system, features only). The
+  // scene's [sparse] unity_weight (default 1).
+  double unity_weight = 1.0;
 };
 
 // A dense neighbour as a sparse job receives it.
@@ -57,6 +67,7 @@ enum class SparseOutcome : uint8_t {
   kReconstructed = 0,
   kTooFewNeighbors = 1,  // fallback: make it dense
   kSolveFailed = 2,      // fallback: make it dense
+  kPoorFit = 3,          // fallback (SparseOptions::max_residual): make it dense
 };
 
 struct SparseStats {
@@ -64,6 +75,7 @@ struct SparseStats {
   uint64_t reconstructed = 0;
   uint64_t fallback_too_few_neighbors = 0;
   uint64_t fallback_solve_failed = 0;
+  uint64_t fallback_poor_fit = 0;
   uint64_t neighbors_dropped_by_normal = 0;
   uint64_t solved_lars = 0;
   uint64_t solved_admm = 0;
