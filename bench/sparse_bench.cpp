@@ -55,7 +55,8 @@ struct Variant {
 
 // A variant from "key=value;key=value" (keys: budget, initial, iterations, radius (× the scene's),
 // features, min_features (× features when < 1), window, lambda, normal_cos, empty_weight, mode
-// (visibility| transport), solver (l1|ls)) applied to the scene's plan. Throws on an unknown key.
+// (visibility| transport), solver (l1|ls), unity (unity_weight), max_residual) applied to the
+// scene's plan. Throws on an unknown key.
 Variant ParseVariant(const std::string& spec, const SparsePlan& base) {
   Variant v{spec, base};
   std::stringstream ss(spec);
@@ -124,11 +125,12 @@ int main(int argc, char** argv) {
                  "folder to keep brute-force rows in between runs (exploration only: the timings "
                  "of a cached brute force are those of the run that computed it)");
   std::vector<std::string> variant_specs;
-  app.add_option(
-      "--variant", variant_specs,
-      "extra variant after the default, \"key=value;...\" (budget, initial, "
-      "iterations, radius (x scene), features, min_features, window, lambda, "
-      "normal_cos, empty_weight, mode, solver); repeatable; replaces the built-in sweep");
+  app.add_option("--variant", variant_specs,
+                 "extra variant after the default, \"key=value;...\" (budget, initial, "
+                 "iterations, radius (x scene), features, min_features, window, lambda, "
+                 "normal_cos, empty_weight, mode, solver, unity, max_residual); repeatable; "
+                 "replaces the built-in "
+                 "sweep");
   CLI11_PARSE(app, argc, argv);
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // progress lines while redirected to a file
   std::unique_ptr<tbb::global_control> gc;
