@@ -6,7 +6,8 @@
 // BM_Relight/N: CompressedRelighter::RelightSparse with the N largest area-weighted sunrise
 // terms (NWA), 3 channels, into float radiance; BM_Apply/N: the viewer's TransportOperator::Apply
 // of the same terms (double SampleRadiance, as prt-view uses it); BM_InverseSteps: the Eq. 8
-// inverse column steps of every level over 3 interleaved channels, alone. The counter
+// inverse column steps of every level over 3 interleaved channels, alone; *_128bit: the same
+// with the wavelet synthesis on 128-bit vectors (no AVX kernel). The counter
 // "T_bytes/s" is the stored bytes of the N columns (8 per term) divided by the time: compare it
 // with the copy bandwidth printed by viewer_bench.
 #include <benchmark/benchmark.h>
@@ -120,11 +121,26 @@ void BM_InverseSteps(benchmark::State& state) {
   state.counters["samples"] = static_cast<double>(S);
 }
 
+// The same with the wavelet synthesis on 128-bit vectors only (prt::SetWaveletAvx(false)): the
+// AVX kernel's gain, measured in the same run.
+void BM_Relight_128bit(benchmark::State& state) {
+  const bool had = prt::SetWaveletAvx(false);
+  BM_Relight(state);
+  prt::SetWaveletAvx(had);
+}
+void BM_InverseSteps_128bit(benchmark::State& state) {
+  const bool had = prt::SetWaveletAvx(false);
+  BM_InverseSteps(state);
+  prt::SetWaveletAvx(had);
+}
+
 }  // namespace
 
 BENCHMARK(BM_Relight)->Arg(1)->Arg(30)->Arg(100)->Arg(300)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Apply)->Arg(1)->Arg(30)->Arg(100)->Arg(300)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_InverseSteps)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_Relight_128bit)->Arg(1)->Arg(30)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_InverseSteps_128bit)->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);

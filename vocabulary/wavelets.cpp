@@ -737,6 +737,112 @@ void SynthesizeLeGall53Fused(const float* s, const float* d, float* out, int len
   if (nd < ns) StoreElem(out + 2 * nd * kW, next);
 }
 
+#if defined(__x86_64__)
+// SynthesizeLeGall53Fused<Float4> with two elements per 256-bit vector (AVX; chosen at run time,
+// the build targets baseline x86-64): the same operations on every element in the same order,
+// so the same bits. Only the interior runs two at a time; the ends are the generic code's.
+// Aliasing as SynthesizeLeGall53Fused's: the pair at n stores out[2n, 2n + 4) after it has
+// loaded d up to n + 3, and later pairs load d from n + 3 on, which sits at out[ns + n + 3] >
+// 2n + 3 while n < ns.
+using Float8 = float __attribute__((vector_size(32)));
+using Int8 = int __attribute__((vector_size(32)));
+
+__attribute__((target("avx"))) void SynthesizeLeGall53Float4Avx(const float* s, const float* d,
+                                                                float* out, int len) {
+  const int ns = (len + 1) / 2, nd = len / 2;
+  if (nd < 5) {
+    SynthesizeLeGall53Fused<Float4>(s, d, out, len);
+    return;
+  }
+  const float a = static_cast<float>(1.0 / kLeGall53Scheme.low_scale);
+  const float c = static_cast<float>(1.0 / kLeGall53Scheme.high_scale);
+  const float b = static_cast<float>(-kLeGall53Scheme.coef[1] / kLeGall53Scheme.high_scale);
+  const float p = static_cast<float>(-kLeGall53Scheme.coef[0]);
+  Float4 s0, s1, d0, d1;
+  std::memcpy(&s0, s, sizeof s0);
+  std::memcpy(&s1, s + 4, sizeof s1);
+  std::memcpy(&d0, d, sizeof d0);
+  std::memcpy(&d1, d + 4, sizeof d1);
+  // Element 0 as the generic code computes it: S[0] (d[−1] ≡ d[0]), S[1], out[0], out[1].
+  const Float4 S0 = a * s0 + b * (d0 + d0);
+  const Float4 S1 = a * s1 + b * (d0 + d1);
+  const Float4 O0 = c * d0 + p * (S0 + S1);
+  std::memcpy(out, &S0, sizeof S0);
+  std::memcpy(out + 4, &O0, sizeof O0);
+  const Float8 a8 = {a, a, a, a, a, a, a, a}, b8 = {b, b, b, b, b, b, b, b};
+  const Float8 c8 = {c, c, c, c, c, c, c, c}, p8 = {p, p, p, p, p, p, p, p};
+  // Unaligned 256-bit loads (a lambda returning the vector would not be compiled for AVX).
+  Float8 l0, l1, l2;
+#define PRT_LOAD8(v, q) std::memcpy(&(v), (q), sizeof(Float8))
+  // Sv = (S[n], S[n + 1]), S[m] = a·s[m] + b·(d[m − 1] + d[m]) for m ≥ 1.
+  int n = 1;
+  PRT_LOAD8(l0, s + 4 * n);
+  PRT_LOAD8(l1, d + 4 * (n - 1));
+  PRT_LOAD8(l2, d + 4 * n);
+  Float8 Sv = a8 * l0 + b8 * (l1 + l2);
+  for (; n + 3 <= nd - 1; n += 2) {
+    PRT_LOAD8(l0, s + 4 * (n + 2));
+    PRT_LOAD8(l1, d + 4 * (n + 1));
+    PRT_LOAD8(l2, d + 4 * (n + 2));
+    const Float8 S2 = a8 * l0 + b8 * (l1 + l2);
+    Float8 dv;
+    PRT_LOAD8(dv, d + 4 * n);
+    const Float8 Snext = __builtin_shuffle(Sv, S2, Int8{4, 5, 6, 7, 8, 9, 10, 11});
+    const Float8 O = c8 * dv + p8 * (Sv + Snext);
+    const Float8 lo = __builtin_shuffle(Sv, O, Int8{0, 1, 2, 3, 8, 9, 10, 11});
+    const Float8 hi = __builtin_shuffle(Sv, O, Int8{4, 5, 6, 7, 12, 13, 14, 15});
+    std::memcpy(out + 8 * n, &lo, sizeof lo);
+    std::memcpy(out + 8 * n + 8, &hi, sizeof hi);
+    Sv = S2;
+  }
+#undef PRT_LOAD8
+  // The rest as the generic loop, from S[n] (Sv's first element).
+  Float4 cur = {Sv[0], Sv[1], Sv[2], Sv[3]};
+  for (; n + 1 < nd; ++n) {
+    Float4 dn, sn1, dn1;
+    std::memcpy(&dn, d + 4 * n, sizeof dn);
+    std::memcpy(&sn1, s + 4 * (n + 1), sizeof sn1);
+    std::memcpy(&dn1, d + 4 * (n + 1), sizeof dn1);
+    const Float4 next = a * sn1 + b * (dn + dn1);
+    const Float4 odd = c * dn + p * (cur + next);
+    std::memcpy(out + 8 * n, &cur, sizeof cur);
+    std::memcpy(out + 8 * n + 4, &odd, sizeof odd);
+    cur = next;
+  }
+  Float4 dl;
+  std::memcpy(&dl, d + 4 * n, sizeof dl);
+  Float4 next = cur;
+  if (nd < ns) {
+    Float4 sl;
+    std::memcpy(&sl, s + 4 * nd, sizeof sl);
+    next = a * sl + b * (dl + dl);
+  }
+  const Float4 odd = c * dl + p * (cur + next);
+  std::memcpy(out + 8 * n, &cur, sizeof cur);
+  std::memcpy(out + 8 * n + 4, &odd, sizeof odd);
+  if (nd < ns) std::memcpy(out + 8 * nd, &next, sizeof next);
+}
+#endif
+
+bool g_wavelet_avx = [] {
+#if defined(__x86_64__)
+  return __builtin_cpu_supports("avx") != 0;
+#else
+  return false;
+#endif
+}();
+
+// SynthesizeLeGall53Fused<Float4>, two elements at a time where the CPU has AVX.
+void SynthesizeLeGall53Float4(const float* s, const float* d, float* out, int len) {
+#if defined(__x86_64__)
+  if (g_wavelet_avx) {
+    SynthesizeLeGall53Float4Avx(s, d, out, len);
+    return;
+  }
+#endif
+  SynthesizeLeGall53Fused<Float4>(s, d, out, len);
+}
+
 // One horizontal synthesis of `len` elements of `channels` floats, fused where it can be.
 void SynthesizeInterleavedRow(WaveletFilter filter, float* in, float* out, int len, int channels) {
   if (filter == WaveletFilter::kLeGall53) {
@@ -745,7 +851,7 @@ void SynthesizeInterleavedRow(WaveletFilter filter, float* in, float* out, int l
         SynthesizeLeGall53Fused<float>(in, in + (len + 1) / 2, out, len);
         return;
       case 4:
-        SynthesizeLeGall53Fused<Float4>(in, in + 4 * ((len + 1) / 2), out, len);
+        SynthesizeLeGall53Float4(in, in + 4 * ((len + 1) / 2), out, len);
         return;
       default:
         break;
@@ -803,8 +909,18 @@ void InverseWavelet1DStepSplit(WaveletFilter filter, const float* low, const flo
   if (channels == 1) {
     SynthesizeLeGall53Fused<float>(low, high, out, len);
   } else {
-    SynthesizeLeGall53Fused<Float4>(low, high, out, len);
+    SynthesizeLeGall53Float4(low, high, out, len);
   }
+}
+
+bool SetWaveletAvx(bool enable) {
+  const bool before = g_wavelet_avx;
+#if defined(__x86_64__)
+  g_wavelet_avx = enable && __builtin_cpu_supports("avx") != 0;
+#else
+  (void)enable;
+#endif
+  return before;
 }
 
 void ForwardWavelet2DStep(WaveletFilter filter, float* data, int width, int height, int step,

@@ -178,6 +178,10 @@ void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int widt
 bool InverseWavelet1DStepSplitSupported(WaveletFilter filter, int channels);
 void InverseWavelet1DStepSplit(WaveletFilter filter, const float* low, const float* high,
                                float* out, int length, int channels, int step);
+// The 4-channel LeGall 5/3 synthesis above and in InverseWavelet2DStepInterleaved runs two
+// elements per 256-bit vector where the CPU has AVX (the same bits as the 128-bit code). For
+// tests and benchmarks: turns that off (or back on where available); returns the old setting.
+bool SetWaveletAvx(bool enable);
 
 // A whole cubemap vector, 6·n² floats in the layout face·n² + y·n + x (vocabulary/cubemap.h),
 // each face transformed independently by the 2D transform above.
