@@ -745,7 +745,6 @@ void SynthesizeLeGall53Fused(const float* s, const float* d, float* out, int len
 // loaded d up to n + 3, and later pairs load d from n + 3 on, which sits at out[ns + n + 3] >
 // 2n + 3 while n < ns.
 using Float8 = float __attribute__((vector_size(32)));
-using Int8 = int __attribute__((vector_size(32)));
 
 __attribute__((target("avx"))) void SynthesizeLeGall53Float4Avx(const float* s, const float* d,
                                                                 float* out, int len) {
@@ -787,10 +786,10 @@ __attribute__((target("avx"))) void SynthesizeLeGall53Float4Avx(const float* s, 
     const Float8 S2 = a8 * l0 + b8 * (l1 + l2);
     Float8 dv;
     PRT_LOAD8(dv, d + 4 * n);
-    const Float8 Snext = __builtin_shuffle(Sv, S2, Int8{4, 5, 6, 7, 8, 9, 10, 11});
+    const Float8 Snext = __builtin_shufflevector(Sv, S2, 4, 5, 6, 7, 8, 9, 10, 11);
     const Float8 O = c8 * dv + p8 * (Sv + Snext);
-    const Float8 lo = __builtin_shuffle(Sv, O, Int8{0, 1, 2, 3, 8, 9, 10, 11});
-    const Float8 hi = __builtin_shuffle(Sv, O, Int8{4, 5, 6, 7, 12, 13, 14, 15});
+    const Float8 lo = __builtin_shufflevector(Sv, O, 0, 1, 2, 3, 8, 9, 10, 11);
+    const Float8 hi = __builtin_shufflevector(Sv, O, 4, 5, 6, 7, 12, 13, 14, 15);
     std::memcpy(out + 8 * n, &lo, sizeof lo);
     std::memcpy(out + 8 * n + 8, &hi, sizeof hi);
     Sv = S2;
