@@ -825,6 +825,7 @@ __attribute__((target("avx"))) void SynthesizeLeGall53Float4Avx(const float* s, 
 
 bool g_wavelet_avx = [] {
 #if defined(__x86_64__)
+  __builtin_cpu_init();  // a static initializer may run before the one that fills the CPU model
   return __builtin_cpu_supports("avx") != 0;
 #else
   return false;
