@@ -412,6 +412,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.window = static_cast<int>(s.Integer("window", p.window, 3, 15));
     p.unity_weight = s.Number("unity_weight", p.unity_weight, 0, 100, false);
     p.max_residual = s.Number("max_residual", p.max_residual, 0, 10, false);
+    p.min_normal_cos = s.Number("min_normal_cos", p.min_normal_cos, -2, 1, false);
     if (p.window % 2 == 0) {
       s.Fail(t ? t->get("window") : nullptr, "window",
              "must be odd (a window centred on the texel), got " + std::to_string(p.window));
@@ -516,6 +517,7 @@ lambda = 0.001
 window = 7
 unity_weight = 1
 max_residual = 0.3
+min_normal_cos = 0.5
 seed = 1
 
 [compression]

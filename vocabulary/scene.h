@@ -108,6 +108,7 @@ struct SparseSettings {
   // weight, and the relative residual on the traced features above which a vertex is made dense.
   double unity_weight = 1.0;
   double max_residual = 0.3;
+  double min_normal_cos = 0.5;  // neighbours whose normal is farther than 60° are not used
   uint64_t seed = 1;
 };
 

@@ -93,6 +93,7 @@ TEST(SceneTest, DefaultSceneParsesWithDocumentedValues) {
   EXPECT_EQ(s.sparse.window, 7);
   EXPECT_EQ(s.sparse.unity_weight, 1.0);
   EXPECT_EQ(s.sparse.max_residual, 0.3);
+  EXPECT_EQ(s.sparse.min_normal_cos, 0.5);
   EXPECT_EQ(s.compression.bits, 9);
   ASSERT_EQ(s.environments.size(), 2u);
   if (fs::exists(std::string(PRT_DATA_DIR) + "/meshes/bunny00.off")) {

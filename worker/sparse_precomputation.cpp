@@ -34,6 +34,7 @@ SparsePlan PlanFromSettings(const SparseSettings& s, double scene_diagonal, int 
   p.angular.window = s.window;
   p.sparse.unity_weight = s.unity_weight;
   p.sparse.max_residual = s.max_residual;
+  p.sparse.min_normal_cos = s.min_normal_cos;
   p.rank_resolution = std::min(8, cubemap_n);
   return p;
 }

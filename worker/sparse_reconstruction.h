@@ -39,8 +39,10 @@ struct SparseOptions {
   int min_neighbors = 3;  // fewer dense neighbours: the vertex becomes dense
   // Neighbours whose normal makes a larger angle with the vertex's own (cosine below this) are
   // not used: across a thin part (a claw, a wing, an ear) the radius reaches the other side,
-  // whose visibility has nothing in common with this side's. ≤ −1: every neighbour is used.
-  double min_normal_cos = -2;
+  // and from the ground it reaches the model's underside, whose visibility has nothing in common
+  // with this vertex's. ≤ −1: every neighbour is used. The scene's [sparse] min_normal_cos
+  // (default 0.5, 60°).
+  double min_normal_cos = 0.5;
   InterpolationMode mode = InterpolationMode::kVisibility;
   SolverKind solver = SolverKind::kL1;
   // A vertex whose fit leaves more than this relative residual ‖Aα − b‖ / ‖b‖ on its own traced
