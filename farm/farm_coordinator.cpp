@@ -84,6 +84,35 @@ int ProbeFromRankZero(MPI_Comm comm, MPI_Status* st) {
   }
 }
 
+// Messages sent with MPI_Isend whose buffers must live until the send completes, oldest first
+// (a deque keeps its elements in place, so a buffer never moves while MPI holds it).
+class BackgroundSends {
+ public:
+  void Send(std::string bytes, int dest, int tag, MPI_Comm comm, const std::string& what) {
+    auto& [request, buffer] = sends_.emplace_back(MPI_REQUEST_NULL, std::move(bytes));
+    CheckMpi(MPI_Isend(buffer.data(), static_cast<int>(buffer.size()), MPI_BYTE, dest, tag, comm,
+                       &request),
+             what);
+  }
+  // Frees the buffers of the sends that have left (and keeps MPI progressing).
+  void Retire() {
+    while (!sends_.empty()) {
+      int sent = 0;
+      CheckMpi(MPI_Test(&sends_.front().first, &sent, MPI_STATUS_IGNORE), "MPI_Test");
+      if (!sent) return;
+      sends_.pop_front();
+    }
+  }
+  void WaitAll() {
+    for (auto& [request, buffer] : sends_)
+      CheckMpi(MPI_Wait(&request, MPI_STATUS_IGNORE), "MPI_Wait");
+    sends_.clear();
+  }
+
+ private:
+  std::deque<std::pair<MPI_Request, std::string>> sends_;
+};
+
 enum Tag : int {
   kTagReady = 1,
   kTagJob,
@@ -1049,20 +1078,14 @@ class SparseSamplingPhase : public FarmPhase {
     CheckMpi(MPI_Send(&ready, sizeof ready, MPI_BYTE, 0, kTagReady, ctx.comm), "MPI_Send ready");
     int jobs = 0;
     std::string job;
-    std::deque<std::pair<MPI_Request, std::string>> sending;  // results on their way, oldest first
+    BackgroundSends sending;  // results on their way
     for (;;) {
-      while (!sending.empty()) {
-        int sent = 0;
-        CheckMpi(MPI_Test(&sending.front().first, &sent, MPI_STATUS_IGNORE), "MPI_Test");
-        if (!sent) break;
-        sending.pop_front();
-      }
+      sending.Retire();
       MPI_Status st;
       CheckMpi(ProbeFromRankZero(ctx.comm, &st), "MPI_Iprobe from rank 0");
       if (st.MPI_TAG == kTagStop) {
         // Rank 0 stops a worker only once it has every result, so these have left.
-        for (auto& [request, buffer] : sending)
-          CheckMpi(MPI_Wait(&request, MPI_STATUS_IGNORE), "MPI_Wait");
+        sending.WaitAll();
         CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
                  "MPI_Recv stop");
         return;
@@ -1087,10 +1110,7 @@ class SparseSamplingPhase : public FarmPhase {
       // Sent in the background while the next job is received and computed: a blocking send
       // of a large result spins until rank 0 gets round to receiving it, on a core rank 0's
       // threads may need.
-      auto& [request, buffer] = sending.emplace_back(MPI_REQUEST_NULL, std::move(result));
-      CheckMpi(MPI_Isend(buffer.data(), static_cast<int>(buffer.size()), MPI_BYTE, 0,
-                         kTagSparseResult, ctx.comm, &request),
-               "MPI_Isend sparse result");
+      sending.Send(std::move(result), 0, kTagSparseResult, ctx.comm, "MPI_Isend sparse result");
       ++jobs;
     }
   }
@@ -1101,8 +1121,7 @@ class SparseSamplingPhase : public FarmPhase {
     bool ready = false;
     std::deque<SparseJobHeader> jobs;  // given to the rank and not returned, oldest first
     double since = 0;                  // when the oldest began (or the slot opened)
-    // Remote ranks: the encoded jobs whose MPI_Isend is in flight, oldest first.
-    std::deque<std::pair<MPI_Request, std::string>> sends;
+    BackgroundSends sends;             // remote ranks: the encoded jobs on their way
   };
   // Jobs a rank holds at once: the one it computes and the next, encoded and sent while it
   // computes, so that it never waits for rank 0 to read its neighbours' rows (a 2-rank run's
@@ -1562,13 +1581,7 @@ class SparseSamplingPhase : public FarmPhase {
 
       for (;;) {
         for (Slot& s : slots_) {
-          // Sends that have left free their buffers (rank 0 keeps MPI progressing here).
-          while (!s.sends.empty()) {
-            int sent = 0;
-            CheckMpi(MPI_Test(&s.sends.front().first, &sent, MPI_STATUS_IGNORE), "MPI_Test");
-            if (!sent) break;
-            s.sends.pop_front();
-          }
+          s.sends.Retire();
           while (s.ready && s.jobs.size() < kJobsAhead) {
             std::optional<RowRange> next = planner.Next(s.rank);
             if (!next) break;
@@ -1584,12 +1597,8 @@ class SparseSamplingPhase : public FarmPhase {
             if (s.local) {
               local_->Give(std::move(job));
             } else {
-              // A deque keeps its elements in place: the buffer stays put until MPI_Test says
-              // the send has left.
-              auto& [request, buffer] = s.sends.emplace_back(MPI_REQUEST_NULL, std::move(job));
-              CheckMpi(MPI_Isend(buffer.data(), static_cast<int>(buffer.size()), MPI_BYTE, s.rank,
-                                 kTagSparseJob, ctx_.comm, &request),
-                       "MPI_Isend job to rank " + std::to_string(s.rank));
+              s.sends.Send(std::move(job), s.rank, kTagSparseJob, ctx_.comm,
+                           "MPI_Isend job to rank " + std::to_string(s.rank));
             }
           }
         }
@@ -1597,11 +1606,7 @@ class SparseSamplingPhase : public FarmPhase {
                                        [](const Slot& s) { return !s.jobs.empty(); });
         if (idle && pending.empty() && planner.unassigned_rows() == 0) {
           // Every job came back, so every send has left; complete the requests.
-          for (Slot& s : slots_) {
-            for (auto& [request, buffer] : s.sends)
-              CheckMpi(MPI_Wait(&request, MPI_STATUS_IGNORE), "MPI_Wait");
-            s.sends.clear();
-          }
+          for (Slot& s : slots_) s.sends.WaitAll();
           break;
         }
 

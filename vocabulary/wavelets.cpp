@@ -705,36 +705,42 @@ inline void StoreElem(float* p, V v) {
 // stores that could reach it (at iteration n the stores go to 2n, 2n + 1 <= ns + n, the loads
 // to ns + n + 1 and beyond are still to come).
 template <typename V>
-void SynthesizeLeGall53Fused(const float* s, const float* d, float* out, int len) {
-  constexpr std::ptrdiff_t kW = sizeof(V) / sizeof(float);
-  const int ns = (len + 1) / 2, nd = len / 2;
-  if (nd == 0) {  // length 1: identity, as SynthesizeLifting
-    StoreElem(out, LoadElem<V>(s));
-    return;
-  }
+struct LeGall53Synthesis {
   const float a = static_cast<float>(1.0 / kLeGall53Scheme.low_scale);
   const float c = static_cast<float>(1.0 / kLeGall53Scheme.high_scale);
   const float b = static_cast<float>(-kLeGall53Scheme.coef[1] / kLeGall53Scheme.high_scale);
   const float p = static_cast<float>(-kLeGall53Scheme.coef[0]);
-  const auto S = [&](int n, int left, int right) {
-    return a * LoadElem<V>(s + n * kW) +
-           b * (LoadElem<V>(d + left * kW) + LoadElem<V>(d + right * kW));
-  };
-  V cur = S(0, 0, 0);
-  // Interior: S[n + 1] needs d[n] and d[n + 1], both inside the high band.
-  for (int n = 0; n + 1 < nd; ++n) {
-    const V dn = LoadElem<V>(d + n * kW);
-    const V next = a * LoadElem<V>(s + (n + 1) * kW) + b * (dn + LoadElem<V>(d + (n + 1) * kW));
+
+  // Elements 2n, 2n + 1, … of the output from element n on, given cur = S[n] (nd ≥ 1).
+  void From(const float* s, const float* d, float* out, int len, int n, V cur) const {
+    constexpr std::ptrdiff_t kW = sizeof(V) / sizeof(float);
+    const int ns = (len + 1) / 2, nd = len / 2;
+    // Interior: S[n + 1] needs d[n] and d[n + 1], both inside the high band.
+    for (; n + 1 < nd; ++n) {
+      const V dn = LoadElem<V>(d + n * kW);
+      const V next = a * LoadElem<V>(s + (n + 1) * kW) + b * (dn + LoadElem<V>(d + (n + 1) * kW));
+      StoreElem(out + 2 * n * kW, cur);
+      StoreElem(out + (2 * n + 1) * kW, c * dn + p * (cur + next));
+      cur = next;
+    }
+    // The last odd sample: S[nd] exists only for odd lengths (d[nd] ≡ d[nd − 1]).
+    const V dl = LoadElem<V>(d + n * kW);
+    const V next = nd < ns ? a * LoadElem<V>(s + nd * kW) + b * (dl + dl) : cur;
     StoreElem(out + 2 * n * kW, cur);
-    StoreElem(out + (2 * n + 1) * kW, c * dn + p * (cur + next));
-    cur = next;
+    StoreElem(out + (2 * n + 1) * kW, c * dl + p * (cur + next));
+    if (nd < ns) StoreElem(out + 2 * nd * kW, next);
   }
-  // The last odd sample: S[nd] exists only for odd lengths (d[nd] ≡ d[nd − 1]).
-  const int n = nd - 1;
-  const V next = nd < ns ? S(nd, nd - 1, nd - 1) : cur;
-  StoreElem(out + 2 * n * kW, cur);
-  StoreElem(out + (2 * n + 1) * kW, c * LoadElem<V>(d + n * kW) + p * (cur + next));
-  if (nd < ns) StoreElem(out + 2 * nd * kW, next);
+};
+
+template <typename V>
+void SynthesizeLeGall53Fused(const float* s, const float* d, float* out, int len) {
+  if (len / 2 == 0) {  // length 1: identity, as SynthesizeLifting
+    StoreElem(out, LoadElem<V>(s));
+    return;
+  }
+  const LeGall53Synthesis<V> k;
+  const V d0 = LoadElem<V>(d);
+  k.From(s, d, out, len, 0, k.a * LoadElem<V>(s) + k.b * (d0 + d0));  // S[0], d[−1] ≡ d[0]
 }
 
 #if defined(__x86_64__)
@@ -748,15 +754,13 @@ using Float8 = float __attribute__((vector_size(32)));
 
 __attribute__((target("avx"))) void SynthesizeLeGall53Float4Avx(const float* s, const float* d,
                                                                 float* out, int len) {
-  const int ns = (len + 1) / 2, nd = len / 2;
+  const int nd = len / 2;
   if (nd < 5) {
     SynthesizeLeGall53Fused<Float4>(s, d, out, len);
     return;
   }
-  const float a = static_cast<float>(1.0 / kLeGall53Scheme.low_scale);
-  const float c = static_cast<float>(1.0 / kLeGall53Scheme.high_scale);
-  const float b = static_cast<float>(-kLeGall53Scheme.coef[1] / kLeGall53Scheme.high_scale);
-  const float p = static_cast<float>(-kLeGall53Scheme.coef[0]);
+  const LeGall53Synthesis<Float4> k;
+  const float a = k.a, b = k.b, c = k.c, p = k.p;
   Float4 s0, s1, d0, d1;
   std::memcpy(&s0, s, sizeof s0);
   std::memcpy(&s1, s + 4, sizeof s1);
@@ -795,31 +799,8 @@ __attribute__((target("avx"))) void SynthesizeLeGall53Float4Avx(const float* s, 
     Sv = S2;
   }
 #undef PRT_LOAD8
-  // The rest as the generic loop, from S[n] (Sv's first element).
-  Float4 cur = {Sv[0], Sv[1], Sv[2], Sv[3]};
-  for (; n + 1 < nd; ++n) {
-    Float4 dn, sn1, dn1;
-    std::memcpy(&dn, d + 4 * n, sizeof dn);
-    std::memcpy(&sn1, s + 4 * (n + 1), sizeof sn1);
-    std::memcpy(&dn1, d + 4 * (n + 1), sizeof dn1);
-    const Float4 next = a * sn1 + b * (dn + dn1);
-    const Float4 odd = c * dn + p * (cur + next);
-    std::memcpy(out + 8 * n, &cur, sizeof cur);
-    std::memcpy(out + 8 * n + 4, &odd, sizeof odd);
-    cur = next;
-  }
-  Float4 dl;
-  std::memcpy(&dl, d + 4 * n, sizeof dl);
-  Float4 next = cur;
-  if (nd < ns) {
-    Float4 sl;
-    std::memcpy(&sl, s + 4 * nd, sizeof sl);
-    next = a * sl + b * (dl + dl);
-  }
-  const Float4 odd = c * dl + p * (cur + next);
-  std::memcpy(out + 8 * n, &cur, sizeof cur);
-  std::memcpy(out + 8 * n + 4, &odd, sizeof odd);
-  if (nd < ns) std::memcpy(out + 8 * nd, &next, sizeof next);
+  // The rest as the generic code, from S[n] (Sv's first element).
+  k.From(s, d, out, len, n, Float4{Sv[0], Sv[1], Sv[2], Sv[3]});
 }
 #endif
 

@@ -91,16 +91,13 @@ class ActiveCholesky {
     ++s_;
     return true;
   }
-  // Factors `active` afresh (after a variable left).
+  // Factors `active` afresh (after a variable left): Append reads only the first s_ entries,
+  // the prefix already factored.
   bool Refactor(const Mat& G, const std::vector<int>& active) {
     s_ = 0;
     max_pivot_ = 0;
-    std::vector<int> prefix;
-    prefix.reserve(active.size());
-    for (int j : active) {
-      if (!Append(G, prefix, j)) return false;
-      prefix.push_back(j);
-    }
+    for (int j : active)
+      if (!Append(G, active, j)) return false;
     return true;
   }
   // x = (L Lᵀ)⁻¹ b over the factor's s entries.
