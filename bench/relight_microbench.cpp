@@ -5,7 +5,9 @@
 //
 // BM_Relight/N: CompressedRelighter::RelightSparse with the N largest area-weighted sunrise
 // terms (NWA), 3 channels, into float radiance; BM_Apply/N: the viewer's TransportOperator::Apply
-// of the same terms (double SampleRadiance, as prt-view uses it); BM_InverseSteps: the Eq. 8
+// of the same terms (double SampleRadiance in the session's coefficient order); BM_Assign/N: the
+// same into a buffer kept between frames; BM_Apply_PackOrder/N: Apply in the pack's sample order
+// (the gather through the Hilbert permutation); BM_InverseSteps: the Eq. 8
 // inverse column steps of every level over 3 interleaved channels, alone; *_128bit: the same
 // with the wavelet synthesis on 128-bit vectors (no AVX kernel). The counter
 // "T_bytes/s" is the stored bytes of the N columns (8 per term) divided by the time: compare it
@@ -96,6 +98,32 @@ void BM_Apply(benchmark::State& state) {
       benchmark::Counter(StoredBytes(t), benchmark::Counter::kIsIterationInvariantRate);
 }
 
+// The viewer's frame loop: Assign into a radiance buffer kept between frames (no clearing).
+void BM_Assign(benchmark::State& state) {
+  const Terms t = TermsOf(static_cast<std::size_t>(state.range(0)));
+  const prt::TransportOperator& op = Get().session->transport();
+  prt::SampleRadiance b;
+  for (auto _ : state) {
+    op.Assign(t.terms, b);
+    benchmark::DoNotOptimize(b.channel[0].data());
+  }
+  state.counters["T_bytes/s"] =
+      benchmark::Counter(StoredBytes(t), benchmark::Counter::kIsIterationInvariantRate);
+}
+
+// Apply in the pack's sample order: the gather through the Hilbert permutation that the
+// session's coefficient order avoids (the session's operator is SampleOrder::kCoefficients).
+void BM_Apply_PackOrder(benchmark::State& state) {
+  const Terms t = TermsOf(static_cast<std::size_t>(state.range(0)));
+  const prt::CompressedTransportOperator op(Get().session->relighter(), prt::SampleOrder::kSamples);
+  for (auto _ : state) {
+    prt::SampleRadiance b = op.Apply(t.terms);
+    benchmark::DoNotOptimize(b.channel[0].data());
+  }
+  state.counters["T_bytes/s"] =
+      benchmark::Counter(StoredBytes(t), benchmark::Counter::kIsIterationInvariantRate);
+}
+
 void BM_InverseSteps(benchmark::State& state) {
   const prt::CompressedRelighter& r = Get().session->relighter();
   const prt::CompressedTransportHeader& h = r.header();
@@ -138,6 +166,8 @@ void BM_InverseSteps_128bit(benchmark::State& state) {
 
 BENCHMARK(BM_Relight)->Arg(1)->Arg(30)->Arg(100)->Arg(300)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Apply)->Arg(1)->Arg(30)->Arg(100)->Arg(300)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_Assign)->Arg(1)->Arg(30)->Arg(100)->Arg(300)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_Apply_PackOrder)->Arg(1)->Arg(30)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_InverseSteps)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Relight_128bit)->Arg(1)->Arg(30)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_InverseSteps_128bit)->Unit(benchmark::kMicrosecond);

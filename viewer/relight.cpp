@@ -33,9 +33,18 @@ SampleRadiance& SampleRadiance::operator+=(const SampleRadiance& other) {
   return *this;
 }
 
-SampleRadiance TransportOperator::Apply(std::span<const LightingTerm> terms) const {
-  SampleRadiance out(sample_count());
+void TransportOperator::Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const {
+  if (out.size() != sample_count()) {
+    out = SampleRadiance(sample_count());
+  } else {
+    out.SetZero();
+  }
   Accumulate(terms, out);
+}
+
+SampleRadiance TransportOperator::Apply(std::span<const LightingTerm> terms) const {
+  SampleRadiance out;
+  Assign(terms, out);
   return out;
 }
 
@@ -197,8 +206,9 @@ void SparseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadi
   });
 }
 
-CompressedTransportOperator::CompressedTransportOperator(const CompressedRelighter& relighter)
-    : relighter_(relighter) {
+CompressedTransportOperator::CompressedTransportOperator(const CompressedRelighter& relighter,
+                                                         SampleOrder order)
+    : relighter_(relighter), order_(order) {
   if (relighter.header().row_wavelet != RowWavelet::kHaar) {
     throw std::invalid_argument(
         "CompressedTransportOperator: the transport rows use the D4 row wavelet; the viewer's "
@@ -216,9 +226,21 @@ std::size_t CompressedTransportOperator::coefficient_count() const {
 
 void CompressedTransportOperator::Accumulate(std::span<const LightingTerm> terms,
                                              SampleRadiance& out) const {
+  Relight(terms, out, false);
+}
+
+void CompressedTransportOperator::Assign(std::span<const LightingTerm> terms,
+                                         SampleRadiance& out) const {
+  // Resized without clearing: RelightSparseAdd with `assign` writes every value.
+  for (auto& c : out.channel) c.resize(sample_count());
+  Relight(terms, out, true);
+}
+
+void CompressedTransportOperator::Relight(std::span<const LightingTerm> terms, SampleRadiance& out,
+                                          bool assign) const {
   const std::size_t samples = sample_count();
   CheckTerms(terms, coefficient_count(), out, samples);
-  if (terms.empty() || samples == 0) return;
+  if (samples == 0 || (terms.empty() && !assign)) return;
   std::vector<uint32_t> columns(terms.size());
   std::vector<float> weights(3 * terms.size());
   for (std::size_t k = 0; k < terms.size(); ++k) {
@@ -226,7 +248,7 @@ void CompressedTransportOperator::Accumulate(std::span<const LightingTerm> terms
     for (int c = 0; c < 3; ++c) weights[3 * k + c] = static_cast<float>(terms[k].value[c]);
   }
   double* const channels[3] = {out.channel[0].data(), out.channel[1].data(), out.channel[2].data()};
-  relighter_.RelightSparseAdd(columns, weights, 3, channels);
+  relighter_.RelightSparseAdd(columns, weights, 3, channels, order_, assign);
 }
 
 std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo) {

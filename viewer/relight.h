@@ -19,11 +19,10 @@
 #include <span>
 #include <vector>
 
+#include "vocabulary/compressed_relight.h"
 #include "vocabulary/scene.h"
 
 namespace prt {
-
-class CompressedRelighter;  // vocabulary/compressed_relight.h
 
 // One term of a lighting approximation: a Haar coefficient index and its value per channel.
 struct LightingTerm {
@@ -54,6 +53,10 @@ class TransportOperator {
   // out must have sample_count() samples; every index must be < coefficient_count() (throws
   // std::out_of_range otherwise). Repeated indices are allowed (their values add).
   virtual void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const = 0;
+
+  // out = T·L̂: out is resized to sample_count() and its previous values are overwritten, not
+  // read (a frame loop that keeps `out` pays no clearing pass). Same checks as Accumulate.
+  virtual void Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const;
 
   // T·L̂ for a lighting approximation, from zero.
   SampleRadiance Apply(std::span<const LightingTerm> terms) const;
@@ -109,16 +112,24 @@ class SparseTransport final : public TransportOperator {
 // its row wavelet must be Haar (the lighting basis here; std::invalid_argument otherwise).
 // Lighting values pass to the compressed path in float, and its radiance comes back in float:
 // expect ~1e-7 relative rounding per Accumulate (the incremental state stays in double).
+// Its outputs are in the relighter's sample order `order` (vocabulary/compressed_relight.h):
+// kSamples, the pack's order, or kCoefficients, the depth-0 coefficient layout, which spares the
+// frame the gather through the Hilbert permutation (ViewerSession renders in that order).
 class CompressedTransportOperator final : public TransportOperator {
  public:
-  explicit CompressedTransportOperator(const CompressedRelighter& relighter);
+  explicit CompressedTransportOperator(const CompressedRelighter& relighter,
+                                       SampleOrder order = SampleOrder::kSamples);
 
   std::size_t sample_count() const override;
   std::size_t coefficient_count() const override;
+  SampleOrder order() const { return order_; }
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+  void Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
 
  private:
+  void Relight(std::span<const LightingTerm> terms, SampleRadiance& out, bool assign) const;
   const CompressedRelighter& relighter_;
+  SampleOrder order_;
 };
 
 // Final colours: albedo ⊙ radiance, interleaved RGB float per sample. albedo may be empty (white),

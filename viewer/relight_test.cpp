@@ -232,6 +232,24 @@ TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
   }
   ASSERT_GT(scale, 0.0);
   ExpectNear(a, b, 1e-5 * scale);
+  // Assign overwrites whatever the buffer held (and sizes it); the dense operator's default
+  // Assign does the same.
+  SampleRadiance assigned(19);
+  for (auto& ch : assigned.channel) std::fill(ch.begin(), ch.end(), 1e30);
+  op.Assign(terms, assigned);
+  ExpectNear(assigned, b, 1e-5 * scale);
+  SampleRadiance sized;
+  dense.Assign(terms, sized);
+  ExpectNear(sized, b, 1e-5 * scale);
+  op.Assign({}, assigned);
+  for (const auto& ch : assigned.channel)
+    for (double v : ch) EXPECT_EQ(v, 0.0);
+  // In the coefficient order, sample s sits at coefficient_of_sample()[s].
+  const CompressedTransportOperator lay(relighter, SampleOrder::kCoefficients);
+  const SampleRadiance l = lay.Apply(terms);
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t v = 0; v < 19; ++v)
+      EXPECT_EQ(l.channel[c][relighter.coefficient_of_sample()[v]], a.channel[c][v]);
 }
 
 // Measurement, not an assertion on time: throughput of the dense and sparse operators on 4096

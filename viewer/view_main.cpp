@@ -199,8 +199,8 @@ int Run(const Options& o) {
               : prt::RelightApproximate(session->transport(), lighting, mode, o.terms);
   const double relight_s = Seconds(t_relight);
   const std::vector<float> rgb = session->Shade(radiance);
-  if (!o.radiance_out.empty())
-    prt::WriteNpyFloat32(o.radiance_out, rgb, session->sample_count(), 3);
+  if (!o.radiance_out.empty())  // the session's order → the pack's (viewer_session.h)
+    prt::WriteNpyFloat32(o.radiance_out, session->ToPackOrder(rgb), session->sample_count(), 3);
   const auto t_raster = std::chrono::steady_clock::now();
   const prt::ImageRgb image = session->Render(camera, rgb, &cube);
   const double raster_s = Seconds(t_raster);

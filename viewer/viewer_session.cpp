@@ -158,8 +158,35 @@ std::unique_ptr<ViewerSession> ViewerSession::Open(const std::string& pack_path)
                                     "; the viewer's lighting basis is Haar");
   s->transport_terms_ = s->compressed_->term_count();
   s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_);
-  s->operator_ = std::make_unique<CompressedTransportOperator>(*s->relighter_);
+  s->operator_ =
+      std::make_unique<CompressedTransportOperator>(*s->relighter_, SampleOrder::kCoefficients);
+  // The session's order: position p holds the sample whose coefficient is p.
+  const std::span<const uint32_t> coefficient = s->relighter_->coefficient_of_sample();
+  const std::size_t ns = s->albedo_.size();
+  s->pack_sample_.resize(ns);
+  for (std::size_t v = 0; v < ns; ++v) s->pack_sample_[coefficient[v]] = static_cast<uint32_t>(v);
+  s->session_albedo_.resize(ns);
+  s->session_positions_.resize(ns);
+  for (std::size_t p = 0; p < ns; ++p) {
+    s->session_albedo_[p] = s->albedo_[s->pack_sample_[p]];
+    s->session_positions_[p] = s->positions_[s->pack_sample_[p]];
+  }
+  s->session_triangles_.resize(s->triangles_.size());
+  for (std::size_t t = 0; t < s->triangles_.size(); ++t)
+    for (int k = 0; k < 3; ++k) s->session_triangles_[t][k] = coefficient[s->triangles_[t][k]];
   return s;
+}
+
+std::vector<float> ViewerSession::ToPackOrder(std::span<const float> values, std::size_t k) const {
+  const std::size_t ns = pack_sample_.size();
+  if (k == 0 || values.size() != k * ns)
+    throw std::invalid_argument("ViewerSession::ToPackOrder: " + std::to_string(values.size()) +
+                                " values for " + std::to_string(ns) + " samples × " +
+                                std::to_string(k));
+  std::vector<float> out(values.size());
+  for (std::size_t p = 0; p < ns; ++p)
+    std::copy_n(values.data() + k * p, k, out.data() + k * pack_sample_[p]);
+  return out;
 }
 
 ViewerSession::~ViewerSession() = default;
@@ -179,7 +206,7 @@ SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) cons
       l[c * cols + j] = static_cast<float>(lighting.coefficient[c][j]);
   const std::size_t ns = sample_count();
   std::vector<float> b(3 * ns);
-  relighter_->Relight(l, 3, b);
+  relighter_->Relight(l, 3, b, SampleOrder::kCoefficients);
   SampleRadiance out(ns);
   for (int c = 0; c < 3; ++c)
     for (std::size_t s = 0; s < ns; ++s) {
@@ -190,14 +217,15 @@ SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) cons
 }
 
 std::vector<float> ViewerSession::Shade(const SampleRadiance& radiance) const {
-  return ShadeSamples(radiance, albedo_);
+  return ShadeSamples(radiance, session_albedo_);
 }
 
 ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
                                const CubemapRgb* background) const {
   RasterOptions options;
   if (background != nullptr) options.background = CubemapBackground(*background);
-  RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
+  RasterImage r =
+      RasterizeTriangles(camera, session_positions_, session_triangles_, sample_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = std::move(r.rgb);
   return image;

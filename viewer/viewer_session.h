@@ -36,6 +36,16 @@ LightingMode ParseLightingMode(const std::string& s);
 const char* ToString(LightingMode mode);
 
 // A pack opened for relighting. Not copyable or movable (the operator refers to the relighter).
+//
+// Sample order. Everything the session computes per spatial sample — the SampleRadiance of
+// transport(), RelightExact and the incremental relighters built on transport(), Shade's
+// colours, Render's input — is in the session's order: the compressed transport's depth-0
+// coefficient layout (SampleOrder::kCoefficients of vocabulary/compressed_relight.h; each mesh
+// along its Hilbert order), the order the Eq. 8 inverse steps leave the frame in, so a frame
+// needs no gather through the permutation. The renderer's vertex buffers are remapped once at
+// Open. pack_sample(p) names the pack sample at position p; ToPackOrder turns per-sample colours
+// back into the pack's order (meshes in pack order, each mesh's vertices in order), as
+// --radiance-out writes them. albedo(), positions() and triangles() are in the pack's order.
 class ViewerSession {
  public:
   // Reads meshes, materials, metadata and the whole compressed transport. Throws
@@ -62,13 +72,18 @@ class ViewerSession {
   const std::vector<Rgb>& albedo() const { return albedo_; }
   std::span<const Vec3> positions() const { return positions_; }
   std::span<const std::array<uint32_t, 3>> triangles() const { return triangles_; }
+  // The pack sample at position p of the session's order (a permutation of 0..samples−1).
+  std::span<const uint32_t> pack_sample() const { return pack_sample_; }
+  // Per-sample values in the session's order (k values per sample, interleaved) → pack order.
+  std::vector<float> ToPackOrder(std::span<const float> values, std::size_t k = 3) const;
 
-  // T·L with every coefficient of L (Eq. 8 with dense lighting: one inverse column transform).
+  // T·L with every coefficient of L (Eq. 8 with dense lighting: one inverse column transform),
+  // in the session's order.
   SampleRadiance RelightExact(const WaveletLighting& lighting) const;
-  // albedo ⊙ radiance, interleaved RGB per sample (ShadeSamples).
+  // albedo ⊙ radiance, interleaved RGB per sample (ShadeSamples), in the session's order.
   std::vector<float> Shade(const SampleRadiance& radiance) const;
-  // Rasterises the meshes with per-sample colours (3 floats per sample) from `camera`, over the
-  // lighting cubemap as background when `background` is non-null.
+  // Rasterises the meshes with per-sample colours (3 floats per sample, the session's order)
+  // from `camera`, over the lighting cubemap as background when `background` is non-null.
   ImageRgb Render(const Camera& camera, std::span<const float> sample_rgb,
                   const CubemapRgb* background) const;
 
@@ -84,6 +99,11 @@ class ViewerSession {
   std::vector<Rgb> albedo_;
   std::vector<Vec3> positions_;
   std::vector<std::array<uint32_t, 3>> triangles_;
+  // The same in the session's order (what Shade and Render use).
+  std::vector<uint32_t> pack_sample_;
+  std::vector<Rgb> session_albedo_;
+  std::vector<Vec3> session_positions_;
+  std::vector<std::array<uint32_t, 3>> session_triangles_;
 };
 
 // The scene's camera from a pack's metadata JSON: "scene" → "camera" (eye, target, up, fov,

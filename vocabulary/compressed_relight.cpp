@@ -279,6 +279,67 @@ struct CompressedRelighter::Light {
   const float* weight;
 };
 
+namespace {
+
+// The identity as an index array (coefficient order: sample i is element i of X).
+struct IdentityIndex {
+  std::size_t operator[](std::size_t i) const { return i; }
+};
+
+}  // namespace
+
+// X's elements [lo, hi) of a segment to the frame's output: sample i reads element index[i]
+// (its coefficient; the identity in coefficient order) and writes, or adds, its C channels.
+template <class Index>
+void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base,
+                               const Index& index, std::size_t C, std::size_t K, std::size_t S,
+                               const Output& out) {
+  const float* __restrict xs = base;
+  if (out.add != nullptr && C == 3 && K == 4) {
+    double* __restrict o0 = out.add[0];
+    double* __restrict o1 = out.add[1];
+    double* __restrict o2 = out.add[2];
+    if (out.assign) {
+      for (std::size_t i = lo; i != hi; ++i) {
+        const float* xi = xs + 4 * static_cast<std::size_t>(index[i]);
+        o0[i] = static_cast<double>(xi[0]);
+        o1[i] = static_cast<double>(xi[1]);
+        o2[i] = static_cast<double>(xi[2]);
+      }
+    } else {
+      for (std::size_t i = lo; i != hi; ++i) {
+        const float* xi = xs + 4 * static_cast<std::size_t>(index[i]);
+        o0[i] += static_cast<double>(xi[0]);
+        o1[i] += static_cast<double>(xi[1]);
+        o2[i] += static_cast<double>(xi[2]);
+      }
+    }
+  } else if (out.add == nullptr && C == 3 && K == 4) {
+    float* __restrict o0 = out.radiance;
+    float* __restrict o1 = o0 + S;
+    float* __restrict o2 = o1 + S;
+    for (std::size_t i = lo; i != hi; ++i) {
+      const float* xi = xs + 4 * static_cast<std::size_t>(index[i]);
+      o0[i] = xi[0];
+      o1[i] = xi[1];
+      o2[i] = xi[2];
+    }
+  } else {
+    for (std::size_t i = lo; i != hi; ++i) {
+      const float* xi = xs + K * static_cast<std::size_t>(index[i]);
+      for (std::size_t c = 0; c < C; ++c) {
+        if (out.add == nullptr) {
+          out.radiance[c * S + i] = xi[c];
+        } else if (out.assign) {
+          out.add[c][i] = static_cast<double>(xi[c]);
+        } else {
+          out.add[c][i] += static_cast<double>(xi[c]);
+        }
+      }
+    }
+  }
+}
+
 // Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
 // deepest level to depth 0, then undo the Hilbert permutation. One coefficient-domain buffer X
 // receives every light of a depth directly, so the frame pays one full inverse transform whatever
@@ -418,41 +479,12 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   }
   if (!any) std::fill(x, x + S * K, 0.0f);
   // Back to sample order: sequential writes, each sample's channels gathered from its one
-  // element of X in one read.
+  // element of X in one read; in coefficient order a sequential copy (no permutation).
   const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi, const float* base) {
-    const uint32_t* __restrict src = coefficient_of_sample_.data();
-    const float* __restrict xs = base;
-    if (out.add != nullptr && C == 3 && K == 4) {
-      double* __restrict o0 = out.add[0];
-      double* __restrict o1 = out.add[1];
-      double* __restrict o2 = out.add[2];
-      for (std::size_t i = lo; i != hi; ++i) {
-        const float* xi = xs + 4 * static_cast<std::size_t>(src[i]);
-        o0[i] += static_cast<double>(xi[0]);
-        o1[i] += static_cast<double>(xi[1]);
-        o2[i] += static_cast<double>(xi[2]);
-      }
-    } else if (out.add == nullptr && C == 3 && K == 4) {
-      float* __restrict o0 = out.radiance;
-      float* __restrict o1 = o0 + S;
-      float* __restrict o2 = o1 + S;
-      for (std::size_t i = lo; i != hi; ++i) {
-        const float* xi = xs + 4 * static_cast<std::size_t>(src[i]);
-        o0[i] = xi[0];
-        o1[i] = xi[1];
-        o2[i] = xi[2];
-      }
+    if (out.order == SampleOrder::kCoefficients) {
+      Copy(lo, hi, base, IdentityIndex{}, C, K, S, out);
     } else {
-      for (std::size_t i = lo; i != hi; ++i) {
-        const float* xi = xs + K * src[i];
-        for (std::size_t c = 0; c < C; ++c) {
-          if (out.add != nullptr) {
-            out.add[c][i] += static_cast<double>(xi[c]);
-          } else {
-            out.radiance[c * S + i] = xi[c];
-          }
-        }
-      }
+      Copy(lo, hi, base, coefficient_of_sample_.data(), C, K, S, out);
     }
   };
   // On the calling thread while X fits in its caches (the inverse steps just left it there; a
@@ -490,7 +522,7 @@ void CompressedRelighter::ReturnBuffers(std::unique_ptr<FrameBuffers> b) const {
 }
 
 void CompressedRelighter::Relight(std::span<const float> lighting_hat, int channels,
-                                  std::span<float> radiance) const {
+                                  std::span<float> radiance, SampleOrder order) const {
   const std::size_t S = header_.sample_count, M = header_.column_count();
   if (channels < 1 || lighting_hat.size() != M * channels || radiance.size() != S * channels)
     throw std::invalid_argument("CompressedRelighter::Relight: buffer sizes");
@@ -507,7 +539,7 @@ void CompressedRelighter::Relight(std::span<const float> lighting_hat, int chann
     for (int c = 0; c < channels; ++c) w.push_back(lighting_hat[c * M + j]);
   }
   for (std::size_t k = 0; k < lights.size(); ++k) lights[k].weight = w.data() + k * channels;
-  RelightLights(lights, channels, {radiance.data(), nullptr});
+  RelightLights(lights, channels, {radiance.data(), nullptr, order});
 }
 
 std::vector<CompressedRelighter::Light> CompressedRelighter::LightsOf(
@@ -526,20 +558,21 @@ std::vector<CompressedRelighter::Light> CompressedRelighter::LightsOf(
 
 void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
                                         std::span<const float> weights, int channels,
-                                        std::span<float> radiance) const {
+                                        std::span<float> radiance, SampleOrder order) const {
   if (radiance.size() != header_.sample_count * channels)
     throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
   std::vector<Light> lights = LightsOf(columns, weights, channels);
-  RelightLights(lights, channels, {radiance.data(), nullptr});
+  RelightLights(lights, channels, {radiance.data(), nullptr, order});
 }
 
 void CompressedRelighter::RelightSparseAdd(std::span<const uint32_t> columns,
                                            std::span<const float> weights, int channels,
-                                           std::span<double* const> out) const {
+                                           std::span<double* const> out, SampleOrder order,
+                                           bool assign) const {
   if (out.size() != static_cast<std::size_t>(channels))
     throw std::invalid_argument("CompressedRelighter::RelightSparseAdd: one array per channel");
   std::vector<Light> lights = LightsOf(columns, weights, channels);
-  RelightLights(lights, channels, {nullptr, out.data()});
+  RelightLights(lights, channels, {nullptr, out.data(), order, assign});
 }
 
 }  // namespace prt

@@ -87,6 +87,15 @@ std::vector<float> DecompressTransport(const CompressedTransport& t);
 std::vector<float> LightingToRowWaveletBasis(RowWavelet wavelet, int cubemap_n,
                                              std::span<const float> lighting, int channels);
 
+// Where a relight's per-sample outputs go. kSamples: global sample order (meshes in order, each
+// mesh's vertices in its file's order). kCoefficients: the depth-0 coefficient layout, i.e. each
+// mesh segment's vertices along its Hilbert order (position k of a segment holds its vertex
+// order[k]) and each grid in row-major order: the order the inverse steps leave X in, so that the
+// way back is a sequential copy instead of a gather through the permutation. A renderer that
+// remaps its vertex buffers once at load (CompressedRelighter::coefficient_of_sample()) then
+// takes the relit radiance as it comes (docs/viewer.md, "Relighting speed").
+enum class SampleOrder : uint8_t { kSamples, kCoefficients };
+
 // Relighting from adaptively compressed columns (§4.5, Eq. 8). Construction dequantises every
 // term once and groups columns by depth; Relight then computes, per channel,
 //   B = Σ_l S'_{l→l−1}( Σ_{j∈N(l)} L̂_j · C_j )
@@ -108,17 +117,26 @@ class CompressedRelighter {
   // Stored terms of a column (0 for absent columns).
   std::size_t ColumnTermCount(uint32_t column) const;
 
+  // Sample (global order) → its position in the depth-0 coefficient layout, the position its
+  // radiance takes in SampleOrder::kCoefficients outputs.
+  std::span<const uint32_t> coefficient_of_sample() const { return coefficient_of_sample_; }
+
   // Dense lighting in the row-wavelet basis: lighting_hat = channels × column_count floats,
-  // radiance = channels × sample_count floats (channel-major), B = T̂·L̂ per channel.
-  void Relight(std::span<const float> lighting_hat, int channels, std::span<float> radiance) const;
+  // radiance = channels × sample_count floats (channel-major, samples in `order`), B = T̂·L̂ per
+  // channel.
+  void Relight(std::span<const float> lighting_hat, int channels, std::span<float> radiance,
+               SampleOrder order = SampleOrder::kSamples) const;
   // Sparse lighting (a non-linear lighting approximation): terms (columns[k], weights[k·channels
   // + c]); columns need not be sorted; duplicates add.
   void RelightSparse(std::span<const uint32_t> columns, std::span<const float> weights,
-                     int channels, std::span<float> radiance) const;
-  // The same, added into one double array of sample_count() values per channel (out[c]), with
-  // no intermediate float image: what the viewer's TransportOperator accumulates into.
+                     int channels, std::span<float> radiance,
+                     SampleOrder order = SampleOrder::kSamples) const;
+  // The same, into one double array of sample_count() values per channel (out[c]), with no
+  // intermediate float image: what the viewer's TransportOperator accumulates into. Added to
+  // out[c]'s values, or with `assign` written over them (out[c] need not be initialised).
   void RelightSparseAdd(std::span<const uint32_t> columns, std::span<const float> weights,
-                        int channels, std::span<double* const> out) const;
+                        int channels, std::span<double* const> out,
+                        SampleOrder order = SampleOrder::kSamples, bool assign = false) const;
 
  private:
   struct Column {
@@ -130,8 +148,13 @@ class CompressedRelighter {
   struct Output {
     float* radiance = nullptr;
     double* const* add = nullptr;
+    SampleOrder order = SampleOrder::kSamples;
+    bool assign = false;  // with `add`: write instead of adding
   };
   void RelightLights(std::vector<Light>& lights, int channels, Output out) const;
+  template <class Index>
+  static void Copy(std::size_t lo, std::size_t hi, const float* base, const Index& index,
+                   std::size_t C, std::size_t K, std::size_t S, const Output& out);
   std::vector<Light> LightsOf(std::span<const uint32_t> columns, std::span<const float> weights,
                               int channels) const;
 

@@ -228,10 +228,39 @@ TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
     relighter.RelightSparseAdd(cols, w, channels, out);
     for (double& v : acc) v -= 1.0;
     EXPECT_LT(RelErr(acc, ref), 1e-5) << channels;
+    // Written over (assign) instead of added, in the coefficient order: position
+    // coefficient_of_sample()[s] holds sample s, bit for bit the same values.
+    std::vector<double> lay(S * channels, std::nan(""));
+    for (int ch = 0; ch < channels; ++ch) out[ch] = lay.data() + ch * S;
+    relighter.RelightSparseAdd(cols, w, channels, out, SampleOrder::kCoefficients, true);
+    std::vector<double> once(S * channels, std::nan(""));
+    for (int ch = 0; ch < channels; ++ch) out[ch] = once.data() + ch * S;
+    relighter.RelightSparseAdd(cols, w, channels, out, SampleOrder::kSamples, true);
+    EXPECT_LT(RelErr(once, ref), 1e-5) << channels;
+    const std::span<const uint32_t> coef = relighter.coefficient_of_sample();
+    ASSERT_EQ(coef.size(), S);
+    std::size_t moved = 0, mismatched = 0;
+    for (int ch = 0; ch < channels; ++ch)
+      for (std::size_t s = 0; s < S; ++s) {
+        moved += coef[s] != s;
+        mismatched += lay[ch * S + coef[s]] != once[ch * S + s];
+      }
+    EXPECT_EQ(mismatched, 0u) << channels;
+    EXPECT_GT(moved, S / 2);  // the mesh segment really is permuted
+    std::vector<float> Blay(S * channels, -7.0f);
+    relighter.Relight(Lhat, channels, Blay, SampleOrder::kCoefficients);
+    mismatched = 0;
+    for (int ch = 0; ch < channels; ++ch)
+      for (std::size_t s = 0; s < S; ++s) mismatched += Blay[ch * S + coef[s]] != B[ch * S + s];
+    EXPECT_EQ(mismatched, 0u) << channels;
     // No lights at all: zero radiance, whatever the buffers held before.
     std::vector<float> zero(S * channels, -7.0f);
     relighter.RelightSparse({}, {}, channels, zero);
     EXPECT_TRUE(std::all_of(zero.begin(), zero.end(), [](float v) { return v == 0.0f; }));
+    std::fill(lay.begin(), lay.end(), std::nan(""));
+    for (int ch = 0; ch < channels; ++ch) out[ch] = lay.data() + ch * S;
+    relighter.RelightSparseAdd({}, {}, channels, out, SampleOrder::kCoefficients, true);
+    EXPECT_TRUE(std::all_of(lay.begin(), lay.end(), [](double v) { return v == 0.0; }));
   }
 }
 
