@@ -841,6 +841,53 @@ void SynthesizeInterleavedRow(WaveletFilter filter, float* in, float* out, int l
   Synthesize<false, float>(filter, {in, channels, channels}, {out, channels, channels}, len);
 }
 
+// The LeGall 5/3 synthesis of SynthesizeLeGall53Fused with elements that are whole rows: `len`
+// rows of `width` floats, `stride` floats apart, low band rows first (the vertical pass of a
+// grid's inverse step). Column blocks of kBlock floats keep S[n] in a local row; each float
+// goes through the same operations as the per-element kernel.
+void SynthesizeLeGall53Rows(const float* in, float* out, std::ptrdiff_t stride, int len,
+                            int width) {
+  const int ns = (len + 1) / 2, nd = len / 2;
+  if (nd == 0) {
+    std::memcpy(out, in, sizeof(float) * static_cast<std::size_t>(width));
+    return;
+  }
+  const LeGall53Synthesis<float> k;
+  const float a = k.a, b = k.b, c = k.c, p = k.p;
+  const float* s = in;
+  const float* d = in + ns * stride;
+  constexpr int kBlock = 64;
+  float cur[kBlock], next[kBlock];
+  for (int j0 = 0; j0 < width; j0 += kBlock) {
+    const int bw = std::min(kBlock, width - j0);
+    for (int j = 0; j < bw; ++j) {  // S[0], d[−1] ≡ d[0]
+      const float d0 = d[j0 + j];
+      cur[j] = a * s[j0 + j] + b * (d0 + d0);
+    }
+    for (int n = 0; n < nd; ++n) {
+      const float* dn = d + n * stride + j0;
+      float* even = out + 2 * n * stride + j0;
+      float* odd = even + stride;
+      if (n + 1 < nd) {
+        const float* sn1 = s + (n + 1) * stride + j0;
+        const float* dn1 = dn + stride;
+        for (int j = 0; j < bw; ++j) next[j] = a * sn1[j] + b * (dn[j] + dn1[j]);
+      } else if (nd < ns) {  // S[nd] of an odd length, d[nd] ≡ d[nd − 1]
+        const float* snd = s + nd * stride + j0;
+        for (int j = 0; j < bw; ++j) next[j] = a * snd[j] + b * (dn[j] + dn[j]);
+      } else {  // S[ns] ≡ S[ns − 1]
+        for (int j = 0; j < bw; ++j) next[j] = cur[j];
+      }
+      for (int j = 0; j < bw; ++j) {
+        even[j] = cur[j];
+        odd[j] = c * dn[j] + p * (cur[j] + next[j]);
+        cur[j] = next[j];
+      }
+    }
+    if (nd < ns) std::memcpy(out + 2 * nd * stride + j0, cur, sizeof(float) * bw);
+  }
+}
+
 }  // namespace
 
 // The vertical pass first, then the horizontal one (as InverseStep2D); each reads one buffer and
@@ -856,7 +903,11 @@ void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int widt
   float* src = data;
   float* dst = scratch;
   if (hc >= 2) {  // elements: the region's rows, wc·channels floats each
-    Synthesize<false, float>(filter, {src, row, row_floats}, {dst, row, row_floats}, hc);
+    if (filter == WaveletFilter::kLeGall53) {
+      SynthesizeLeGall53Rows(src, dst, row, hc, row_floats);
+    } else {
+      Synthesize<false, float>(filter, {src, row, row_floats}, {dst, row, row_floats}, hc);
+    }
     std::swap(src, dst);
   }
   if (wc >= 2) {  // elements: one sample's channels
