@@ -341,9 +341,10 @@ void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
 }
 
 // Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
-// deepest level to depth 0, then undo the Hilbert permutation. One coefficient-domain buffer X
-// receives every light of a depth directly, so the frame pays one full inverse transform whatever
-// the number of lights, and nothing of size S is allocated per depth.
+// deepest level to depth 0, then (for SampleOrder::kSamples) undo the Hilbert permutation. One
+// coefficient-domain buffer X receives every light of a depth directly, so the frame pays one
+// full inverse transform whatever the number of lights, and nothing of size S is allocated per
+// depth.
 // X holds the channels of a sample side by side (3 channels padded to 4 floats): a term then
 // updates one 16-byte element, a single cache line, with one SIMD multiply-add, and one float
 // inverse step per level (InverseWavelet2DStepInterleaved) transforms every channel at once.
