@@ -285,6 +285,9 @@ int main(int argc, char** argv) {
     const std::vector<std::size_t> term_counts = {30, 100, 300};
     std::vector<std::vector<prt::LightingTerm>> lights;
     std::vector<std::vector<float>> refs;  // uncompressed T (texel basis) under each lighting
+    // The errors are computed in the pack's order (the traced rows'), with its albedo.
+    std::vector<prt::Rgb> albedo(ns);
+    for (std::size_t p = 0; p < ns; ++p) albedo[session->pack_sample()[p]] = session->albedo()[p];
     for (std::size_t terms : term_counts) {
       lights.push_back(prt::NonlinearLightingApproximation(sunrise, basis, terms));
       const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, lights.back());
@@ -296,8 +299,7 @@ int main(int argc, char** argv) {
           const float* row = traced.rows.data() + s * texels;
           for (std::size_t j = 0; j < texels; ++j)
             acc += double(row[j]) * approx_cube.Channel(c)[j];
-          ref[3 * s + c] =
-              static_cast<float>(acc * session->albedo()[s][static_cast<std::size_t>(c)]);
+          ref[3 * s + c] = static_cast<float>(acc * albedo[s][static_cast<std::size_t>(c)]);
         }
       refs.push_back(std::move(ref));
     }
@@ -338,7 +340,7 @@ int main(int argc, char** argv) {
             *c.relighter, prt::SampleOrder::kCoefficients);
         const prt::CompressedTransportOperator op(*c.relighter);
         for (std::size_t q = 0; q < term_counts.size(); ++q) {
-          const std::vector<float> rgb = prt::ShadeSamples(op.Apply(lights[q]), session->albedo());
+          const std::vector<float> rgb = prt::ShadeSamples(op.Apply(lights[q]), albedo);
           c.error.push_back(prt::RelativeRmsError(rgb, refs[q]));
         }
         c.best.assign(term_counts.size(), Timing{1e300, 1e300});

@@ -122,7 +122,6 @@ class CompressedTransportOperator final : public TransportOperator {
 
   std::size_t sample_count() const override;
   std::size_t coefficient_count() const override;
-  SampleOrder order() const { return order_; }
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
   void Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
 

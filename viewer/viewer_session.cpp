@@ -160,20 +160,21 @@ std::unique_ptr<ViewerSession> ViewerSession::Open(const std::string& pack_path)
   s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_);
   s->operator_ =
       std::make_unique<CompressedTransportOperator>(*s->relighter_, SampleOrder::kCoefficients);
-  // The session's order: position p holds the sample whose coefficient is p.
+  // The session's order (viewer_session.h): position p holds the pack sample whose coefficient
+  // is p. The per-sample arrays move to it once, and the triangles follow their vertices.
   const std::span<const uint32_t> coefficient = s->relighter_->coefficient_of_sample();
   const std::size_t ns = s->albedo_.size();
   s->pack_sample_.resize(ns);
   for (std::size_t v = 0; v < ns; ++v) s->pack_sample_[coefficient[v]] = static_cast<uint32_t>(v);
-  s->session_albedo_.resize(ns);
-  s->session_positions_.resize(ns);
-  for (std::size_t p = 0; p < ns; ++p) {
-    s->session_albedo_[p] = s->albedo_[s->pack_sample_[p]];
-    s->session_positions_[p] = s->positions_[s->pack_sample_[p]];
-  }
-  s->session_triangles_.resize(s->triangles_.size());
-  for (std::size_t t = 0; t < s->triangles_.size(); ++t)
-    for (int k = 0; k < 3; ++k) s->session_triangles_[t][k] = coefficient[s->triangles_[t][k]];
+  const auto to_session = [&](auto& values) {
+    const auto pack_order = std::move(values);
+    values.resize(ns);
+    for (std::size_t p = 0; p < ns; ++p) values[p] = pack_order[s->pack_sample_[p]];
+  };
+  to_session(s->albedo_);
+  to_session(s->positions_);
+  for (auto& t : s->triangles_)
+    for (uint32_t& v : t) v = coefficient[v];
   return s;
 }
 
@@ -217,15 +218,14 @@ SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) cons
 }
 
 std::vector<float> ViewerSession::Shade(const SampleRadiance& radiance) const {
-  return ShadeSamples(radiance, session_albedo_);
+  return ShadeSamples(radiance, albedo_);
 }
 
 ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
                                const CubemapRgb* background) const {
   RasterOptions options;
   if (background != nullptr) options.background = CubemapBackground(*background);
-  RasterImage r =
-      RasterizeTriangles(camera, session_positions_, session_triangles_, sample_rgb, options);
+  RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = std::move(r.rgb);
   return image;

@@ -42,10 +42,10 @@ const char* ToString(LightingMode mode);
 // colours, Render's input — is in the session's order: the compressed transport's depth-0
 // coefficient layout (SampleOrder::kCoefficients of vocabulary/compressed_relight.h; each mesh
 // along its Hilbert order), the order the Eq. 8 inverse steps leave the frame in, so a frame
-// needs no gather through the permutation. The renderer's vertex buffers are remapped once at
-// Open. pack_sample(p) names the pack sample at position p; ToPackOrder turns per-sample colours
-// back into the pack's order (meshes in pack order, each mesh's vertices in order), as
-// --radiance-out writes them. albedo(), positions() and triangles() are in the pack's order.
+// needs no gather through the permutation. The per-sample arrays albedo() and positions() are
+// moved to that order once at Open, and triangles() index them there. pack_sample(p) names the
+// pack sample at position p; ToPackOrder turns per-sample values back into the pack's order
+// (meshes in pack order, each mesh's vertices in order), as --radiance-out writes them.
 class ViewerSession {
  public:
   // Reads meshes, materials, metadata and the whole compressed transport. Throws
@@ -68,7 +68,7 @@ class ViewerSession {
   std::size_t transport_terms() const { return transport_terms_; }
   const CompressedRelighter& relighter() const { return *relighter_; }
   const TransportOperator& transport() const { return *operator_; }
-  // Albedo per spatial sample (meshes in pack order, each mesh's vertices in order).
+  // Albedo and position per spatial sample, and the triangles over them, in the session's order.
   const std::vector<Rgb>& albedo() const { return albedo_; }
   std::span<const Vec3> positions() const { return positions_; }
   std::span<const std::array<uint32_t, 3>> triangles() const { return triangles_; }
@@ -99,11 +99,7 @@ class ViewerSession {
   std::vector<Rgb> albedo_;
   std::vector<Vec3> positions_;
   std::vector<std::array<uint32_t, 3>> triangles_;
-  // The same in the session's order (what Shade and Render use).
-  std::vector<uint32_t> pack_sample_;
-  std::vector<Rgb> session_albedo_;
-  std::vector<Vec3> session_positions_;
-  std::vector<std::array<uint32_t, 3>> session_triangles_;
+  std::vector<uint32_t> pack_sample_;  // session position → pack sample
 };
 
 // The scene's camera from a pack's metadata JSON: "scene" → "camera" (eye, target, up, fov,

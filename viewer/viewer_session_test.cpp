@@ -237,6 +237,33 @@ TEST(ViewerSessionTest, ExactRelightMatchesTracedTransport) {
   std::sort(sorted.begin(), sorted.end());
   for (std::size_t v = 0; v < ns; ++v) ASSERT_EQ(sorted[v], v);
   for (std::size_t p = 0; p < ns; ++p) EXPECT_EQ(a_pack[3 * s->pack_sample()[p] + 1], a[3 * p + 1]);
+  // The render buffers moved with the samples: positions()[p] is pack sample pack_sample()[p]'s,
+  // and triangles() mapped back through pack_sample() are the scene's triangles.
+  std::vector<Vec3> pack_positions;
+  std::vector<std::array<uint32_t, 3>> pack_triangles;
+  for (const SceneMesh& m : tiny.geometry.meshes) {
+    const auto offset = static_cast<uint32_t>(pack_positions.size());
+    for (auto t : m.mesh.triangles) {
+      for (uint32_t& v : t) v += offset;
+      std::sort(t.begin(), t.end());
+      pack_triangles.push_back(t);
+    }
+    pack_positions.insert(pack_positions.end(), m.mesh.positions.begin(), m.mesh.positions.end());
+  }
+  ASSERT_EQ(s->positions().size(), ns);
+  for (std::size_t p = 0; p < ns; ++p) {
+    const Vec3 d = s->positions()[p] - pack_positions[s->pack_sample()[p]];
+    EXPECT_LT(std::abs(d.x) + std::abs(d.y) + std::abs(d.z), 1e-3) << p;  // Draco quantisation
+  }
+  std::vector<std::array<uint32_t, 3>> back;
+  for (auto t : s->triangles()) {
+    for (uint32_t& v : t) v = s->pack_sample()[v];
+    std::sort(t.begin(), t.end());
+    back.push_back(t);
+  }
+  std::sort(back.begin(), back.end());
+  std::sort(pack_triangles.begin(), pack_triangles.end());
+  EXPECT_EQ(back, pack_triangles);
 }
 
 // NWA with every non-zero coefficient is exact; fewer terms are not. BI/PBI from zero with N
