@@ -227,6 +227,21 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
   }
   terms_.reserve(t.term_count());
   std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
+  // Segment bounds in the global coefficient order, for the early/late split below.
+  struct Bounds {
+    std::size_t lo, hi;
+    int w, h, max_depth;
+  };
+  std::vector<Bounds> bounds;
+  {
+    std::size_t off = 0;
+    for (const auto& seg : header_.domain.segments) {
+      Bounds b{off, off + seg.count, 0, 0, MaxSegmentDepth(seg)};
+      SegmentShape(seg, b.w, b.h);
+      bounds.push_back(b);
+      off += seg.count;
+    }
+  }
   for (const auto& c : t.columns) {
     ValidateColumn(header_, c, "CompressedRelighter");
     if (slot_[c.column] >= 0) throw InputError("CompressedRelighter", "duplicate column");
@@ -236,14 +251,31 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
       ColumnScaleMap(header_.domain, c.depth, lv.data());
     }
     slot_[c.column] = static_cast<int32_t>(columns_.size());
-    Column col{c.depth, static_cast<uint32_t>(terms_.size()), 0};
+    Column col{c.depth, static_cast<uint32_t>(terms_.size()), 0,
+               static_cast<uint32_t>(late_terms_.size()), 0};
+    std::size_t si = 0;  // segment of index i (indices increase)
     for (std::size_t k = 0; k < c.index.size(); ++k) {
       const uint32_t i = c.index[k];
-      terms_.push_back({i, static_cast<float>(DequantiseTerm(
-                               c.q[k], DitherOffset(header_.dither_seed, c.column, i), c.scale,
-                               header_.bits, lv[i]))});
+      const Term term{i, static_cast<float>(
+                             DequantiseTerm(c.q[k], DitherOffset(header_.dither_seed, c.column, i),
+                                            c.scale, header_.bits, lv[i]))};
+      while (i >= bounds[si].hi) ++si;
+      // Late: in the low band that the segment's inverse step c.depth + 1 writes. A segment
+      // whose maximum depth is at most c.depth is not touched by any step before the column's
+      // lights are due, so all of its terms are early; depth-0 columns are scattered after
+      // every step, all their terms in terms_.
+      const Bounds& b = bounds[si];
+      bool late = false;
+      if (c.depth > 0 && c.depth < b.max_depth) {
+        const std::size_t p = i - b.lo;
+        const auto pw = static_cast<std::size_t>(b.w);
+        late = p % pw < static_cast<std::size_t>(SizeAtDepth(b.w, c.depth)) &&
+               p / pw < static_cast<std::size_t>(SizeAtDepth(b.h, c.depth));
+      }
+      (late ? late_terms_ : terms_).push_back(term);
     }
     col.end = static_cast<uint32_t>(terms_.size());
+    col.late_end = static_cast<uint32_t>(late_terms_.size());
     columns_.push_back(col);
   }
   // Tiles of at least 4096 coefficients (64 KB of X with three channels: the core's L2) and at
@@ -270,7 +302,7 @@ int CompressedRelighter::ColumnDepth(uint32_t column) const {
 std::size_t CompressedRelighter::ColumnTermCount(uint32_t column) const {
   if (column >= slot_.size() || slot_[column] < 0) return 0;
   const Column& c = columns_[slot_[column]];
-  return c.end - c.begin;
+  return (c.end - c.begin) + (c.late_end - c.late_begin);
 }
 
 // One light of Eq. 8: a stored column and its weight per channel.
@@ -342,15 +374,25 @@ void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
 
 // Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
 // deepest level to depth 0, then (for SampleOrder::kSamples) undo the Hilbert permutation. One
-// coefficient-domain buffer X receives every light of a depth directly, so the frame pays one
-// full inverse transform whatever the number of lights, and nothing of size S is allocated per
-// depth.
+// coefficient-domain buffer X receives every light, so the frame pays one full inverse
+// transform whatever the number of lights, and nothing of size S is allocated per depth.
+// The recursion adds a depth-t column after inverse step t + 1, but inverse step t' reads and
+// writes only the low band at depth t' − 1 of each segment it transforms. A column's term
+// outside the low band at depth t of its segment (a detail coefficient, or any coefficient of a
+// segment whose maximum depth is ≤ t) is thus untouched by every step that precedes the column,
+// and adding it before the first step leaves X the same. So a frame has three phases:
+//   1. X is zeroed and receives the early terms (terms_) of every column of depth ≥ 1, all
+//      depths in one pass over X;
+//   2. from the deepest light's depth up: a depth's late terms (late_terms_: its low band, a
+//      prefix of S/2^t coefficients per segment), then one inverse step per segment;
+//   3. the depth-0 columns, all of whose terms come after the last step.
+// Phases 1 and 3 run tile by tile (each column's indices are sorted, so a column's terms in a
+// tile are one contiguous piece, found once at construction), the tiles split into one
+// contiguous run per thread when they have many terms, else on the calling thread, where the
+// inverse steps then find X in cache. Phase 2 and the way back run on the calling thread.
 // X holds the channels of a sample side by side (3 channels padded to 4 floats): a term then
 // updates one 16-byte element, a single cache line, with one SIMD multiply-add, and one float
 // inverse step per level (InverseWavelet2DStepInterleaved) transforms every channel at once.
-// The scatter of a depth's lights runs tile by tile (each column's indices are sorted, so a
-// column's terms in a tile are one contiguous piece, found once at construction), the tiles in
-// parallel.
 void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels,
                                         Output out) const {
   const std::size_t S = header_.sample_count;
@@ -360,75 +402,33 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   buffers->x.resize(S * K);
   float* x = buffers->x.data();
   // Deepest lights first (stable: lights of one depth keep their order, so sums are
-  // reproducible).
+  // reproducible); lights [0, deep_end) have depth ≥ 1.
   std::stable_sort(lights.begin(), lights.end(), [&](const Light& a, const Light& b) {
     return columns_[a.slot].depth > columns_[b.slot].depth;
   });
-  // Tiles of coefficients, split into one contiguous run per thread: a thread's part of X stays
-  // in its own cache, and within a tile every term's read-modify-write of X stays in that core's
-  // L1/L2 while the columns stream in from memory (each column read in pieces of a tile's
-  // length, prefetched ahead).
-  const std::size_t ranges = std::clamp<std::size_t>(
+  const auto deep_end = static_cast<std::size_t>(
+      std::partition_point(lights.begin(), lights.end(),
+                           [&](const Light& l) { return columns_[l.slot].depth > 0; }) -
+      lights.begin());
+  const std::size_t threads = std::clamp<std::size_t>(
       static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1, tiles_);
   const std::size_t stride = tiles_ + 1;
   // Software prefetch 2 KB ahead in the column being added, and the first 2 KB of the next
   // light's piece before it starts: the hardware prefetcher, left alone, restarts on every piece
   // and held N = 300 on the demo's pack at ~2/3 of this speed (docs/viewer.md).
   constexpr std::ptrdiff_t kPrefetchTerms = 256;
-  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
-  const auto& segments = header_.domain.segments;
-  const bool split = InverseWavelet1DStepSplitSupported(filter, static_cast<int>(K));
-  if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
-  float* scratch = buffers->scratch.data();
-  std::vector<bool>& in_scratch = buffers->low_in_scratch;  // per segment
-  in_scratch.assign(segments.size(), false);
-  bool any = false;
-  std::size_t next = 0;
-  for (int d = max_depth_; d >= 0; --d) {
-    if (any && d < max_depth_) {
-      // X is at depth d + 1: one single inverse step per segment brings it to depth d. A mesh
-      // segment (1D) alternates its low band between X and the scratch buffer, its high bands
-      // staying in X (InverseWavelet1DStepSplit): no copy back per step.
-      std::size_t off = 0;
-      for (std::size_t si = 0; si < segments.size(); ++si) {
-        const SpatialSegment& seg = segments[si];
-        int w, h;
-        SegmentShape(seg, w, h);
-        if (d + 1 <= MaxSegmentDepth(seg)) {
-          if (split && h == 1) {
-            const std::size_t ns = (static_cast<std::size_t>(SizeAtDepth(w, d)) + 1) / 2;
-            float* low = in_scratch[si] ? scratch : x;
-            float* dst = in_scratch[si] ? x : scratch;
-            InverseWavelet1DStepSplit(filter, low + off * K, x + (off + ns) * K, dst + off * K, w,
-                                      static_cast<int>(K), d + 1);
-            in_scratch[si] = !in_scratch[si];
-          } else {
-            InverseWavelet2DStepInterleaved(filter, x + off * K, w, h, static_cast<int>(K), d + 1,
-                                            scratch + off * K);
-          }
-        }
-        off += seg.count;
-      }
-    }
-    const std::size_t first = next;
-    while (next < lights.size() && columns_[lights[next].slot].depth == d) ++next;
-    if (next == first) continue;
-    {  // this depth's lights add into X: low bands left in the scratch buffer come back
-      std::size_t off = 0;
-      for (std::size_t si = 0; si < segments.size(); ++si) {
-        if (in_scratch[si]) {
-          int w, h;
-          SegmentShape(segments[si], w, h);
-          const std::size_t len = static_cast<std::size_t>(SizeAtDepth(w, d)) * K;
-          std::memcpy(x + off * K, scratch + off * K, sizeof(float) * len);
-          in_scratch[si] = false;
-        }
-        off += segments[si].count;
-      }
-    }
-    const bool zero = !any;  // the first lights of the frame: X is zeroed tile by tile
-    any = true;
-    tbb::parallel_for(std::size_t{0}, ranges, [&](std::size_t r) {
+  // Fewer terms than this (256 KB of them) are scattered on the calling thread: a second thread
+  // would cost more in waking it and in fetching its half of X back across the cores for the
+  // inverse steps than it saves (docs/viewer.md).
+  constexpr std::size_t kParallelTerms = std::size_t{1} << 15;
+  // Lights [l0, l1)'s terms_ into X, tile by tile; with `zero`, each tile is zeroed first.
+  const auto scatter = [&](std::size_t l0, std::size_t l1, bool zero) {
+    std::size_t count = 0;
+    for (std::size_t k = l0; k < l1; ++k)
+      count += columns_[lights[k].slot].end - columns_[lights[k].slot].begin;
+    if (count == 0 && !zero) return;
+    const std::size_t ranges = count >= kParallelTerms ? threads : 1;
+    const auto body = [&, l0, l1, zero, ranges](std::size_t r) {
       // Locals, not the lambda's references: the stores into X (memcpy, which may alias
       // anything) would otherwise make the compiler reload these through the closure per term.
       float* const xl = x;
@@ -439,11 +439,11 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
           const std::size_t lo = t * tile_, hi = std::min(S, lo + tile_);
           std::memset(xl + K * lo, 0, sizeof(float) * K * (hi - lo));
         }
-        for (std::size_t k = first; k < next; ++k) {
+        for (std::size_t k = l0; k < l1; ++k) {
           const uint32_t* off = tile_offsets_.data() + lights[k].slot * stride + t;
           const Term* b = terms + off[0];
           const Term* e = terms + off[1];
-          if (k + 1 < next) {  // the next column's piece, while this one is added
+          if (k + 1 < l1) {  // the next column's piece, while this one is added
             const uint32_t* n = tile_offsets_.data() + lights[k + 1].slot * stride + t;
             const std::ptrdiff_t len = std::min<std::ptrdiff_t>(kPrefetchTerms, n[1] - n[0]);
             for (std::ptrdiff_t q = 0; q < len; q += 8) __builtin_prefetch(terms + n[0] + q);
@@ -476,9 +476,78 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
           }
         }
       }
-    });
+    };
+    if (ranges == 1) {
+      body(0);
+    } else {
+      tbb::parallel_for(std::size_t{0}, ranges, body);
+    }
+  };
+  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
+  const auto& segments = header_.domain.segments;
+  const bool split = InverseWavelet1DStepSplitSupported(filter, static_cast<int>(K));
+  if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
+  float* scratch = buffers->scratch.data();
+  std::vector<bool>& in_scratch = buffers->low_in_scratch;  // per segment
+  in_scratch.assign(segments.size(), false);
+
+  // Phase 1 (with no column of depth ≥ 1, the depth-0 columns: no step follows).
+  scatter(0, deep_end > 0 ? deep_end : lights.size(), true);
+  if (deep_end > 0) {
+    // Phase 2. X is at depth d at the top of each iteration: its low bands receive the late
+    // terms of the depth-d lights (a mesh segment's low band may be in the scratch buffer),
+    // then inverse step d takes every segment that has it to depth d − 1. A mesh segment (1D)
+    // alternates its low band between X and the scratch buffer, its high bands staying in X
+    // (InverseWavelet1DStepSplit): no copy back per step. Steps deeper than the deepest light
+    // would transform zeros (no early term lies in their low bands) and are skipped.
+    std::size_t next = 0;
+    for (int d = columns_[lights[0].slot].depth; d >= 1; --d) {
+      for (; next < deep_end && columns_[lights[next].slot].depth == d; ++next) {
+        const Column& col = columns_[lights[next].slot];
+        const float* w = lights[next].weight;
+        std::size_t si = 0, end = segments[0].count;  // the segment of the term (sorted)
+        for (uint32_t q = col.late_begin; q < col.late_end; ++q) {
+          const Term& term = late_terms_[q];
+          while (term.index >= end) end += segments[++si].count;
+          float* xi = (in_scratch[si] ? scratch : x) + K * static_cast<std::size_t>(term.index);
+          for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * term.value;
+        }
+      }
+      std::size_t off = 0;
+      for (std::size_t si = 0; si < segments.size(); ++si) {
+        const SpatialSegment& seg = segments[si];
+        int w, h;
+        SegmentShape(seg, w, h);
+        if (d <= MaxSegmentDepth(seg)) {
+          if (split && h == 1) {
+            const std::size_t ns = (static_cast<std::size_t>(SizeAtDepth(w, d - 1)) + 1) / 2;
+            float* low = in_scratch[si] ? scratch : x;
+            float* dst = in_scratch[si] ? x : scratch;
+            InverseWavelet1DStepSplit(filter, low + off * K, x + (off + ns) * K, dst + off * K, w,
+                                      static_cast<int>(K), d);
+            in_scratch[si] = !in_scratch[si];
+          } else {
+            InverseWavelet2DStepInterleaved(filter, x + off * K, w, h, static_cast<int>(K), d,
+                                            scratch + off * K);
+          }
+        }
+        off += seg.count;
+      }
+    }
+    // Phase 3: the depth-0 lights add into X; mesh segments left in the scratch buffer by the
+    // last step come back first.
+    if (deep_end < lights.size()) {
+      std::size_t off = 0;
+      for (std::size_t si = 0; si < segments.size(); ++si) {
+        if (in_scratch[si]) {
+          std::memcpy(x + off * K, scratch + off * K, sizeof(float) * segments[si].count * K);
+          in_scratch[si] = false;
+        }
+        off += segments[si].count;
+      }
+      scatter(deep_end, lights.size(), false);
+    }
   }
-  if (!any) std::fill(x, x + S * K, 0.0f);
   // Back to sample order: sequential writes, each sample's channels gathered from its one
   // element of X in one read; in coefficient order a sequential copy (no permutation).
   const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi, const float* base) {

@@ -139,9 +139,13 @@ class CompressedRelighter {
                         SampleOrder order = SampleOrder::kSamples, bool assign = false) const;
 
  private:
+  // A column's terms in two parts (see RelightLights): those no inverse step deeper than the
+  // column's depth touches, in terms_ (every term of a depth-0 column), and the rest, the
+  // low-band coefficients of segments transformed below their maximum depth, in late_terms_.
   struct Column {
     uint8_t depth;
-    uint32_t begin, end;  // range in terms_
+    uint32_t begin, end;            // range in terms_
+    uint32_t late_begin, late_end;  // range in late_terms_
   };
   struct Light;
   // Where a frame's radiance goes: channel-major floats, or added into per-channel doubles.
@@ -171,6 +175,7 @@ class CompressedRelighter {
     float value;
   };
   std::vector<Term> terms_;
+  std::vector<Term> late_terms_;
   // X is scattered tile by tile: tile_ consecutive coefficients (4096, 64 KB of X with three
   // channels, so that every term's read-modify-write stays within L1/L2 of the core that owns
   // the tile), all of a depth's lights per tile.

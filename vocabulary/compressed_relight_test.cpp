@@ -261,6 +261,28 @@ TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
     for (int ch = 0; ch < channels; ++ch) out[ch] = lay.data() + ch * S;
     relighter.RelightSparseAdd({}, {}, channels, out, SampleOrder::kCoefficients, true);
     EXPECT_TRUE(std::all_of(lay.begin(), lay.end(), [](double v) { return v == 0.0; }));
+    // A few lights: of every depth the column with the fewest terms, so that the frame runs on
+    // the calling thread and the low-band ("late") terms join between the inverse steps.
+    std::vector<uint32_t> few;
+    for (int d = 0; d <= maxd; ++d) {
+      uint32_t best = UINT32_MAX;
+      for (uint32_t j = 0; j < M; ++j)
+        if (relighter.ColumnDepth(j) == d &&
+            (best == UINT32_MAX || relighter.ColumnTermCount(j) < relighter.ColumnTermCount(best)))
+          best = j;
+      if (best != UINT32_MAX) few.push_back(best);
+    }
+    ASSERT_GE(few.size(), 10u);
+    std::vector<float> wf(few.size() * channels);
+    for (float& v : wf) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+    std::vector<double> ref_few(S * channels, 0.0);
+    for (int ch = 0; ch < channels; ++ch)
+      for (std::size_t s = 0; s < S; ++s)
+        for (std::size_t k = 0; k < few.size(); ++k)
+          ref_few[ch * S + s] += static_cast<double>(That[s * M + few[k]]) * wf[k * channels + ch];
+    std::vector<float> Bf(S * channels, -7.0f);
+    relighter.RelightSparse(few, wf, channels, Bf);
+    EXPECT_LT(RelErr(std::vector<double>(Bf.begin(), Bf.end()), ref_few), 1e-5) << channels;
   }
 }
 
