@@ -20,7 +20,8 @@
 // Usage: compression_bench [--scenes default,dragon,armadillo] [--n 32,64] [--rays K]
 //          [--cache DIR] [--run DIR] [--bits B] [--keep f1,f2,...] [--budget column|global|both]
 //          [--column-keep f1,...] [--schemes 2d,4d,adaptive4d] [--light-weight W] [--t-error]
-//          [--order-normal-weight W] [--column-wavelet legall53|cdf97] [--out DIR]
+//          [--order-normal-weight W] [--column-wavelet legall53|cdf97] [--row-wavelet haar|d4]
+//          [--out DIR]
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -219,15 +220,16 @@ double BytesAtError(std::vector<Point> pts, double e) {
 void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& schemes,
             const std::vector<prt::CompressionBudget>& budgets, const std::vector<double>& keeps,
             const std::vector<double>& column_keeps, int bits, int light_weight, bool t_error,
-            prt::ColumnWavelet column_wavelet, const std::string& out_dir) {
+            prt::ColumnWavelet column_wavelet, prt::RowWavelet row_wavelet,
+            const std::string& out_dir) {
   const int n = tr.n;
   const std::size_t S = tr.S, M = static_cast<std::size_t>(6) * n * n;
   const double raw_bytes = static_cast<double>(S * M) * 4.0;
   std::printf(
       "\n=== %s, n = %d: %zu samples x %zu texels, %zu segments (mesh order normal weight %g), "
-      "column wavelet %s, raw %.1f MB\n",
+      "row wavelet %s, column wavelet %s, raw %.1f MB\n",
       tr.source.c_str(), n, S, M, tr.domain.segments.size(), tr.order_normal_weight,
-      prt::ToString(column_wavelet), raw_bytes / 1e6);
+      prt::ToString(row_wavelet), prt::ToString(column_wavelet), raw_bytes / 1e6);
   // The real environment maps (Blender's), resampled to the cubemap.
   std::vector<std::vector<float>> lights;
   std::printf("environments:");
@@ -271,6 +273,7 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
   {
     prt::CompressionOptions o;
     o.budget = prt::CompressionBudget::kGlobal;  // no per-row truncation here
+    o.row_wavelet = row_wavelet;
     prt::PrepareRows(prt::MakeCompressedHeader(o, n, tr.domain), o, rows_hat.data(), S);
   }
   auto transpose = [&](const std::vector<float>& rows) {
@@ -296,6 +299,7 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
         o.budget = budget;
         o.light_weight = light_weight;
         o.column_wavelet = column_wavelet;
+        o.row_wavelet = row_wavelet;
         const prt::CompressedTransportHeader h = prt::MakeCompressedHeader(o, n, tr.domain);
         std::vector<prt::ColumnStats> stats;
         const auto t0 = Clock::now();
@@ -519,6 +523,7 @@ int main(int argc, char** argv) {
   int rays = 1, bits = 9, light_weight = 0;
   double order_normal_weight = prt::CompressionSettings{}.order_normal_weight;
   std::string column_wavelet_arg = prt::CompressionSettings{}.column_wavelet;
+  std::string row_wavelet_arg = prt::CompressionSettings{}.row_wavelet;
   bool t_error = false;
   CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
   app.add_option("--run", run, "farm run folder to read T from (instead of the scenes)");
@@ -540,6 +545,8 @@ int main(int argc, char** argv) {
                  "only (scene compression.order_normal_weight)");
   app.add_option("--column-wavelet", column_wavelet_arg,
                  "column (spatial) wavelet: legall53 | cdf97 (scene compression.column_wavelet)");
+  app.add_option("--row-wavelet", row_wavelet_arg,
+                 "row (cubemap) wavelet: haar | d4 (scene compression.row_wavelet)");
   app.add_flag("--t-error", t_error, "also measure the relative Frobenius error of T (slower)");
   app.add_option("--out", out_dir, "folder for CSV, gnuplot scripts and PNG curves");
   CLI11_PARSE(app, argc, argv);
@@ -547,6 +554,7 @@ int main(int argc, char** argv) {
   try {
     const prt::ColumnWavelet column_wavelet =
         prt::ParseColumnWavelet(column_wavelet_arg, "--column-wavelet");
+    const prt::RowWavelet row_wavelet = prt::ParseRowWavelet(row_wavelet_arg, "--row-wavelet");
     const std::vector<double> keeps = SplitList<double>(keep_arg);
     const std::vector<double> column_keeps =
         column_keep_arg.empty() ? keeps : SplitList<double>(column_keep_arg);
@@ -559,14 +567,14 @@ int main(int argc, char** argv) {
     if (!run.empty()) {
       const Transport tr = ReadRun(run, order_normal_weight);
       RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error, column_wavelet,
-             out_dir);
+             row_wavelet, out_dir);
       return 0;
     }
     for (const std::string& scene : SplitList<std::string>(scenes_arg))
       for (int n : SplitList<int>(n_arg)) {
         const Transport tr = SceneTransport(scene, n, rays, cache, order_normal_weight);
         RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error,
-               column_wavelet, out_dir);
+               column_wavelet, row_wavelet, out_dir);
       }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "compression_bench: %s\n", e.what());
