@@ -291,16 +291,16 @@ std::vector<RotationFrame> RunRotation(
     const std::vector<LightingTerm> nwa_terms =
         NonlinearLightingApproximation(lighting, basis, options.terms);
     const std::vector<float> nwa = session.Shade(t.Apply(nwa_terms));
+    RotationFrame r;
     if (f == 0) {
       bi.Initialize(lighting);
       pbi.Initialize(lighting);
     } else {
       bi.Update(lighting);
-      pbi.Update(lighting);
+      for (uint8_t reset : pbi.Update(lighting).band_reset) r.pbi_reset_bands += reset ? '1' : '0';
     }
     const std::vector<float> bi_rgb = session.Shade(bi.Radiance());
     const std::vector<float> pbi_rgb = session.Shade(pbi.Radiance());
-    RotationFrame r;
     r.frame = f;
     r.angle_deg = angle_deg;
     r.lighting_error = {RelativeLightingError(lighting, nwa_terms),
@@ -320,13 +320,13 @@ void WriteRotationCsv(const std::vector<RotationFrame>& frames, std::size_t term
   if (!out) throw InputError(path, "cannot be written");
   out << "# terms per frame: " << terms << "; errors relative to exact lighting\n";
   out << "frame,angle_deg,lighting_error_nwa,lighting_error_bi,lighting_error_pbi,"
-         "image_error_nwa,image_error_bi,image_error_pbi\n";
+         "image_error_nwa,image_error_bi,image_error_pbi,pbi_reset_bands\n";
   char line[512];
   for (const RotationFrame& f : frames) {
-    std::snprintf(line, sizeof line, "%d,%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", f.frame,
-                  f.angle_deg, f.lighting_error[0], f.lighting_error[1], f.lighting_error[2],
-                  f.image_error[0], f.image_error[1], f.image_error[2]);
-    out << line;
+    std::snprintf(line, sizeof line, "%d,%.6f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,", f.frame, f.angle_deg,
+                  f.lighting_error[0], f.lighting_error[1], f.lighting_error[2], f.image_error[0],
+                  f.image_error[1], f.image_error[2]);
+    out << line << f.pbi_reset_bands << '\n';
   }
   if (!out) throw InputError(path, "write failed");
 }

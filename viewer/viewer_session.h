@@ -136,6 +136,10 @@ struct RotationFrame {
   double angle_deg = 0;
   std::array<double, 3> lighting_error{};
   std::array<double, 3> image_error{};
+  // PBI's band decisions this frame (Overbeck et al. 2006 Fig. 9): character b is '1' when band
+  // b (0 = scaling and coarsest wavelets … finest) was reset, updated non-incrementally; empty
+  // on frame 0 (Initialize).
+  std::string pbi_reset_bands;
 };
 
 // What the callback may look at for each frame (valid during the call only).

@@ -405,7 +405,21 @@ TEST(PrtViewCliTest, EndToEnd) {
   std::ifstream csv(frames / "rotation_errors.csv");
   std::string line;
   int lines = 0;
-  while (std::getline(csv, line)) ++lines;
+  while (std::getline(csv, line)) {
+    ++lines;
+    // The last field: PBI's reset decision per band, one '0'/'1' per band after frame 0.
+    const std::string last = line.substr(line.rfind(',') + 1);
+    if (lines == 2) {
+      EXPECT_EQ(last, "pbi_reset_bands");
+    } else if (lines == 3) {
+      EXPECT_EQ(last, "") << line;  // frame 0: Initialize, no decision
+    }
+    if (lines >= 4) {
+      EXPECT_EQ(last.size(), static_cast<std::size_t>(HaarLightingBasis(tiny.n).band_count()))
+          << line;
+      EXPECT_EQ(last.find_first_not_of("01"), std::string::npos) << line;
+    }
+  }
   EXPECT_EQ(lines, 2 + 6);
   if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
     EXPECT_TRUE(fs::exists(frames / "rotation_errors.png"));
