@@ -101,10 +101,11 @@ enum class SampleOrder : uint8_t { kSamples, kCoefficients };
 //   B = Σ_l S'_{l→l−1}( Σ_{j∈N(l)} L̂_j · C_j )
 // by adding the lights of depth-l columns into one column-wavelet-domain buffer per channel
 // (float) and running one single-step inverse per level from the deepest level down (one full
-// inverse transform in all, whatever the number of lights). Parallel inside (TBB: the scatter over
-// tiles of coefficients; the inverse steps and, below 4 MB of X, the gather back to sample order
-// run on the calling thread, where X is cached). Thread-compatible (const methods are
-// safe to call from several threads with separate outputs).
+// inverse transform in all, whatever the number of lights); the terms no earlier inverse step
+// touches are added in one pass before the first step (RelightLights). Parallel inside (TBB: the
+// scatter over tiles of coefficients, from 2^15 terms; the inverse steps and, below 4 MB of X,
+// the gather back to sample order run on the calling thread, where X is cached). Thread-compatible
+// (const methods are safe to call from several threads with separate outputs).
 class CompressedRelighter {
  public:
   explicit CompressedRelighter(const CompressedTransport& t);
