@@ -38,7 +38,8 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
                "Continue the run in --out: re-run only unfinished jobs (starts fresh if the "
                "folder holds no run)");
   app.add_flag("--force", o.force, "Discard a run already in --out and start over");
-  app.add_option("--method", o.method, "Sampling method (default: the scene's; brute)")
+  app.add_option("--method", o.method,
+                 "Sampling method: sparse | brute (default: the scene's; sparse)")
       ->check(CLI::IsMember({"brute", "sparse"}));
   app.add_option("--job", o.job,
                  "What to compute: transport (the matrix T) or visibility (per-vertex visibility "

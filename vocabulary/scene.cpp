@@ -504,7 +504,7 @@ height = 480
 [sampling]
 rays_per_texel = 4
 seed = 1
-method = "brute"
+method = "sparse"
 
 [sparse]
 initial_fraction = 0.05

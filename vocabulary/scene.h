@@ -78,7 +78,7 @@ enum class SpatialSamples { kVertices, kCameraPixels };
 struct SamplingSettings {
   int rays_per_texel = 4;  // stratified jittered occlusion rays per cubemap texel
   uint64_t seed = 1;
-  std::string method = "brute";  // brute | sparse
+  std::string method = "sparse";  // sparse | brute (the reference)
   // What prt-farm computes: the transport matrix, or per-vertex visibility cubemaps for glossy
   // triple-product relighting ([visibility] settings, docs/farm.md "Visibility job").
   std::string job = "transport";  // transport | visibility

@@ -85,7 +85,7 @@ TEST(SceneTest, DefaultSceneParsesWithDocumentedValues) {
   EXPECT_EQ(s.ground.resolution, 64);
   EXPECT_EQ(s.ground.size, 4.0);
   EXPECT_EQ(s.sampling.rays_per_texel, 4);
-  EXPECT_EQ(s.sampling.method, "brute");
+  EXPECT_EQ(s.sampling.method, "sparse");
   EXPECT_EQ(s.sparse.initial_fraction, 0.05);
   EXPECT_EQ(s.sparse.dense_budget, 0.25);
   EXPECT_EQ(s.sparse.features, 350);
