@@ -42,6 +42,60 @@ TEST(NonLinearApproximation, KeptEnergyIsTheSumOfTheLargestSquares) {
   EXPECT_EQ(LargestTerms(c.data(), c.size(), 10), (std::vector<uint32_t>{0, 2, 3, 5}));
 }
 
+// The histogram selection against a full sort, on columns that stress it: wide and narrow
+// ranges (many values in the threshold bin), ties, denormals, signed zeros, budgets 0 … n.
+TEST(NonLinearApproximation, HistogramSelectionEqualsAFullSort) {
+  std::mt19937 rng(5);
+  const auto check = [](const std::vector<float>& c, std::size_t budget) {
+    std::vector<double> sq;
+    double total = 0;
+    for (float v : c)
+      if (v != 0.0f) {
+        sq.push_back(static_cast<double>(v) * v);
+        total += static_cast<double>(v) * v;
+      }
+    std::sort(sq.begin(), sq.end(), std::greater<double>());
+    const std::size_t take = std::min(budget, sq.size());
+    double kept = 0;
+    for (std::size_t k = 0; k < take; ++k) kept += sq[k];
+    const ApproximationEnergy e = MeasureApproximation(c.data(), c.size(), budget);
+    EXPECT_EQ(e.total, total);  // summed in the same order: bit for bit
+    EXPECT_NEAR(e.kept, kept, 1e-12 * total) << budget;
+    EXPECT_EQ(e.terms, take);
+    EXPECT_EQ(e.keeps_all, sq.size() <= budget);
+  };
+  for (int trial = 0; trial < 300; ++trial) {
+    const std::size_t n = 1 + rng() % 3000;
+    std::vector<float> c(n);
+    const int kind = trial % 6;
+    for (std::size_t i = 0; i < n; ++i) {
+      const float u = std::uniform_real_distribution<float>(-1, 1)(rng);
+      switch (kind) {
+        case 0:
+          c[i] = u;
+          break;  // one decade
+        case 1:
+          c[i] = u * std::pow(10.0f, static_cast<float>(rng() % 60) - 30);
+          break;  // 60
+        case 2:
+          c[i] = rng() % 3 == 0 ? 0.0f : (rng() % 2 ? 0.5f : -0.5f);
+          break;  // ties
+        case 3:
+          c[i] = u * 1e-41f;
+          break;  // denormals
+        case 4:
+          c[i] = rng() % 2 ? -0.0f : 1.0f + 1e-7f * static_cast<float>(rng() % 8);
+          break;
+        default:
+          c[i] = 1.0f + 0.01f * u;
+          break;  // everything in one or two bins
+      }
+    }
+    for (std::size_t budget : {std::size_t{0}, std::size_t{1}, n / 3, n / 2, n - 1, n, n + 5})
+      check(c, budget);
+  }
+}
+
 TEST(PickDepth, FewestTermsAmongFullKeepersElseMostEnergy) {
   std::vector<ApproximationEnergy> m(4);
   m[0] = {8, 10, 5, false};
