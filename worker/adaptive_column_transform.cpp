@@ -18,20 +18,33 @@ namespace prt {
 // the count from the top reaches `budget` is found; a second pass sums the squares of the bins
 // above it and gathers that bin's squares, of which only the largest remaining ones are selected.
 // Two linear passes and a selection among one bin's values, where std::nth_element over every
-// non-zero was 40 % of the farm's compress phase (docs/compression.md).
+// non-zero was 40 % of the farm's compress phase (docs/farm-compression.md).
 ApproximationEnergy MeasureApproximation(const float* c, std::size_t n, std::size_t budget) {
   constexpr int kShift = 20;  // 31-bit key → 2^11 bins
   constexpr std::size_t kBins = std::size_t{1} << (31 - kShift);
   std::array<uint32_t, kBins> count{};
   ApproximationEnergy e;
-  std::size_t nonzero = 0;
-  for (std::size_t i = 0; i < n; ++i) {
+  // Branch-free (zeros land in bin 0 and are taken out after; their squares add nothing), the
+  // total in four partial sums so that the additions do not wait on each other.
+  std::size_t zeros = 0;
+  double sum[4] = {0, 0, 0, 0};
+  const auto add = [&](std::size_t i, int lane) {
     const uint32_t key = std::bit_cast<uint32_t>(c[i]) & 0x7FFFFFFFu;
-    if (key == 0) continue;
     ++count[key >> kShift];
-    ++nonzero;
-    e.total += static_cast<double>(c[i]) * c[i];
+    zeros += key == 0;
+    sum[lane] += static_cast<double>(c[i]) * c[i];
+  };
+  std::size_t q = 0;
+  for (; q + 4 <= n; q += 4) {
+    add(q, 0);
+    add(q + 1, 1);
+    add(q + 2, 2);
+    add(q + 3, 3);
   }
+  for (; q < n; ++q) add(q, 0);
+  count[0] -= static_cast<uint32_t>(zeros);
+  const std::size_t nonzero = n - zeros;
+  e.total = (sum[0] + sum[1]) + (sum[2] + sum[3]);
   if (nonzero <= budget) {
     e.kept = e.total;
     e.terms = static_cast<uint32_t>(nonzero);

@@ -59,7 +59,7 @@ TEST(NonLinearApproximation, HistogramSelectionEqualsAFullSort) {
     double kept = 0;
     for (std::size_t k = 0; k < take; ++k) kept += sq[k];
     const ApproximationEnergy e = MeasureApproximation(c.data(), c.size(), budget);
-    EXPECT_EQ(e.total, total);  // summed in the same order: bit for bit
+    EXPECT_NEAR(e.total, total, 1e-14 * total);  // summed in four lanes
     EXPECT_NEAR(e.kept, kept, 1e-12 * total) << budget;
     EXPECT_EQ(e.terms, take);
     EXPECT_EQ(e.keeps_all, sq.size() <= budget);
