@@ -227,18 +227,12 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
   }
   terms_.reserve(t.term_count());
   std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
-  // Segment bounds in the global coefficient order, for the early/late split below.
-  struct Bounds {
-    std::size_t lo, hi;
-    int w, h, max_depth;
-  };
-  std::vector<Bounds> bounds;
   {
     std::size_t off = 0;
     for (const auto& seg : header_.domain.segments) {
-      Bounds b{off, off + seg.count, 0, 0, MaxSegmentDepth(seg)};
+      Segment b{off, off + seg.count, 0, 0, MaxSegmentDepth(seg)};
       SegmentShape(seg, b.w, b.h);
-      bounds.push_back(b);
+      segments_.push_back(b);
       off += seg.count;
     }
   }
@@ -259,12 +253,12 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
       const Term term{i, static_cast<float>(
                              DequantiseTerm(c.q[k], DitherOffset(header_.dither_seed, c.column, i),
                                             c.scale, header_.bits, lv[i]))};
-      while (i >= bounds[si].hi) ++si;
+      while (i >= segments_[si].hi) ++si;
       // Late: in the low band that the segment's inverse step c.depth + 1 writes. A segment
       // whose maximum depth is at most c.depth is not touched by any step before the column's
       // lights are due, so all of its terms are early; depth-0 columns are scattered after
       // every step, all their terms in terms_.
-      const Bounds& b = bounds[si];
+      const Segment& b = segments_[si];
       bool late = false;
       if (c.depth > 0 && c.depth < b.max_depth) {
         const std::size_t p = i - b.lo;
@@ -484,12 +478,12 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
     }
   };
   const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
-  const auto& segments = header_.domain.segments;
+  const std::size_t segments = segments_.size();
   const bool split = InverseWavelet1DStepSplitSupported(filter, static_cast<int>(K));
   if (buffers->scratch.size() < S * K) buffers->scratch.resize(S * K);
   float* scratch = buffers->scratch.data();
   std::vector<bool>& in_scratch = buffers->low_in_scratch;  // per segment
-  in_scratch.assign(segments.size(), false);
+  in_scratch.assign(segments, false);
 
   // Phase 1 (with no column of depth ≥ 1, the depth-0 columns: no step follows).
   scatter(0, deep_end > 0 ? deep_end : lights.size(), true);
@@ -505,20 +499,17 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       for (; next < deep_end && columns_[lights[next].slot].depth == d; ++next) {
         const Column& col = columns_[lights[next].slot];
         const float* w = lights[next].weight;
-        std::size_t si = 0, end = segments[0].count;  // the segment of the term (sorted)
+        std::size_t si = 0;  // the segment of the term (sorted)
         for (uint32_t q = col.late_begin; q < col.late_end; ++q) {
           const Term& term = late_terms_[q];
-          while (term.index >= end) end += segments[++si].count;
+          while (term.index >= segments_[si].hi) ++si;
           float* xi = (in_scratch[si] ? scratch : x) + K * static_cast<std::size_t>(term.index);
           for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * term.value;
         }
       }
-      std::size_t off = 0;
-      for (std::size_t si = 0; si < segments.size(); ++si) {
-        const SpatialSegment& seg = segments[si];
-        int w, h;
-        SegmentShape(seg, w, h);
-        if (d <= MaxSegmentDepth(seg)) {
+      for (std::size_t si = 0; si < segments; ++si) {
+        const auto [off, hi, w, h, max_depth] = segments_[si];
+        if (d <= max_depth) {
           if (split && h == 1) {
             const std::size_t ns = (static_cast<std::size_t>(SizeAtDepth(w, d - 1)) + 1) / 2;
             float* low = in_scratch[si] ? scratch : x;
@@ -531,19 +522,17 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
                                             scratch + off * K);
           }
         }
-        off += seg.count;
       }
     }
     // Phase 3: the depth-0 lights add into X; mesh segments left in the scratch buffer by the
     // last step come back first.
     if (deep_end < lights.size()) {
-      std::size_t off = 0;
-      for (std::size_t si = 0; si < segments.size(); ++si) {
+      for (std::size_t si = 0; si < segments; ++si) {
         if (in_scratch[si]) {
-          std::memcpy(x + off * K, scratch + off * K, sizeof(float) * segments[si].count * K);
+          const std::size_t lo = segments_[si].lo, hi = segments_[si].hi;
+          std::memcpy(x + lo * K, scratch + lo * K, sizeof(float) * (hi - lo) * K);
           in_scratch[si] = false;
         }
-        off += segments[si].count;
       }
       scatter(deep_end, lights.size(), false);
     }
@@ -562,10 +551,9 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   // A segment's samples are its coefficients' range; its depth-0 coefficients are in X or, for
   // a mesh whose last step wrote there, in the scratch buffer.
   const bool serial = S * K * sizeof(float) <= (std::size_t{4} << 20);
-  std::size_t off = 0;
-  for (std::size_t si = 0; si < segments.size(); ++si) {
+  for (std::size_t si = 0; si < segments; ++si) {
     const float* base = in_scratch[si] ? scratch : x;
-    const std::size_t lo = off, hi = off + segments[si].count;
+    const std::size_t lo = segments_[si].lo, hi = segments_[si].hi;
     if (serial) {
       gather(lo, hi, base);
     } else {
@@ -573,7 +561,6 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
           tbb::blocked_range<std::size_t>(lo, hi, 4096),
           [&](const tbb::blocked_range<std::size_t>& r) { gather(r.begin(), r.end(), base); });
     }
-    off = hi;
   }
   ReturnBuffers(std::move(buffers));
 }

@@ -169,6 +169,14 @@ class CompressedRelighter {
   // Sample (global order) → its coefficient in the depth-0 layout (the Hilbert order's inverse).
   std::vector<uint32_t> coefficient_of_sample_;
   std::vector<Column> columns_;
+  // Each segment of the domain as the relighter uses it, derived once from the header: its
+  // coefficient range [lo, hi) in the global order, its w×h shape (a mesh is count×1) and its
+  // maximum depth.
+  struct Segment {
+    std::size_t lo, hi;
+    int w, h, max_depth;
+  };
+  std::vector<Segment> segments_;
   // A stored term: coefficient index and dequantised value side by side, so that a column is
   // one sequential stream of 8-byte terms.
   struct Term {
