@@ -59,6 +59,9 @@ double Seconds(Clock::time_point t0) {
 #ifndef PRT_DATA_DIR
 #define PRT_DATA_DIR "data"
 #endif
+#ifndef PRT_SHARED_DATA_DIR
+#define PRT_SHARED_DATA_DIR "../shared/data"
+#endif
 
 std::string DataDir() {
   if (const char* d = std::getenv("PRT_DATA_DIR"); d != nullptr && *d != '\0') return d;
@@ -73,18 +76,26 @@ prt::SceneDescription BenchScene(const std::string& name, int n) {
                                                      {"dragon", "ChineseDragon-10kv.off"},
                                                      {"armadillo", "armadillo.off"},
                                                      {"camel", "camel.off"},
-                                                     {"lion", "lion-head.off"}};
+                                                     {"lion", "lion-head.off"},
+                                                     {"horse", "horse_cyberware.ply"},
+                                                     {"teapot", "utah_teapot_24x24.obj"}};
   const auto it = meshes.find(name);
   if (it == meshes.end())
-    throw prt::InputError("--scenes",
-                          "unknown scene '" + name + "' (default, dragon, armadillo, camel, lion)");
-  const std::string from = "meshes/bunny00.off";
-  const auto pos = text.find(from);
-  if (pos == std::string::npos)
-    throw prt::InputError("<bench scene>", "default scene lacks " + from);
-  text.replace(pos, from.size(), "meshes/" + it->second);
-  prt::SceneDescription scene =
-      prt::ParseScene(text, "<bench scene " + name + ">", "", {DataDir()});
+    throw prt::InputError(
+        "--scenes", "unknown scene '" + name + "' (default, dragon, armadillo, camel, lion, horse, teapot)");
+  const auto replace = [&](const std::string& from, const std::string& to) {
+    const auto pos = text.find(from);
+    if (pos == std::string::npos)
+      throw prt::InputError("<bench scene>", "default scene lacks " + from);
+    text.replace(pos, from.size(), to);
+  };
+  replace("meshes/bunny00.off\"", "meshes/" + it->second + "\"");
+  // The horse and the teapot (in ../shared/data only: not in a Debian package) are Z up; the
+  // horse is wound inward (docs/mesh-import.md).
+  if (name == "horse") replace("up = \"+y\" }", "up = \"+z\" }\nflip_winding = true");
+  if (name == "teapot") replace("up = \"+y\" }", "up = \"+z\" }");
+  prt::SceneDescription scene = prt::ParseScene(text, "<bench scene " + name + ">", "",
+                                                {DataDir(), PRT_SHARED_DATA_DIR});
   scene.cubemap_n = n;
   return scene;
 }
@@ -527,7 +538,7 @@ int main(int argc, char** argv) {
   bool t_error = false;
   CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
   app.add_option("--run", run, "farm run folder to read T from (instead of the scenes)");
-  app.add_option("--scenes", scenes_arg, "benchmark scenes (default, dragon, armadillo, camel)");
+  app.add_option("--scenes", scenes_arg, "benchmark scenes (default, dragon, armadillo, camel, lion, horse, teapot)");
   app.add_option("--n", n_arg, "cubemap resolutions, comma-separated");
   app.add_option("--rays", rays, "rays per texel when tracing");
   app.add_option("--cache", cache, "folder for traced transport matrices (reused when present)");
