@@ -27,6 +27,7 @@
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
 #include "worker/column_order.h"
+#include "worker/huge_pages.h"
 #include "worker/transport_compressor.h"
 
 namespace prt {
@@ -180,7 +181,13 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
   const auto [cb, ce] = OwnedColumns(cols, rank, size);
   const uint32_t width = ce - cb;
   std::optional<BlockTransposer> tr;
-  if (width > 0) tr.emplace(rows, cb, ce, spill);
+  if (width > 0) {
+    // Counted as buffering: with the owned data inside the budget, the transposer allocates and
+    // first-touches all its column blocks here.
+    const double t = Now();
+    tr.emplace(rows, cb, ce, spill);
+    st.buffer_seconds += Now() - t;
+  }
   std::vector<uint32_t> col_first(static_cast<std::size_t>(size)),
       col_width(static_cast<std::size_t>(size));
   for (int r = 0; r < size; ++r) {
@@ -199,6 +206,7 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
     if (rank == 0) {
       const double t = Now();
       try {
+        ReserveFreshHuge(chunk, count * cols);
         chunk.resize(count * cols);
         read(first, count, chunk.data());
       } catch (...) {
@@ -221,6 +229,7 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
       if (rank == 0 && static_cast<int>(r) != 0) st.bytes_sent += c * cols * sizeof(float);
     }
     const auto [my_first, my_count] = ChunkShare(first, count, rank, size);
+    ReserveFreshHuge(mine, my_count * cols);
     mine.resize(my_count * cols);
     if (size == 1) {
       mine.swap(chunk);
@@ -251,6 +260,8 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
         rdispls[j] = ro;
         ro += rcounts[j];
       }
+      ReserveFreshHuge(sendbuf, static_cast<std::size_t>(so));
+      ReserveFreshHuge(recvbuf, static_cast<std::size_t>(ro));
       sendbuf.resize(static_cast<std::size_t>(so));
       recvbuf.resize(static_cast<std::size_t>(ro));
       for (std::size_t j = 0; j < P; ++j) {

@@ -51,9 +51,11 @@ struct TransposeStats {
   double read_seconds = 0;           // rank 0: reading and verifying transport.prtt
   double row_transform_seconds = 0;  // PrepareRows (§4.1)
   double exchange_seconds = 0;       // MPI scatter + all-to-all
-  double buffer_seconds = 0;         // BlockTransposer::AddRows (buffering, spilling)
-  double merge_seconds = 0;          // BlockTransposer::NextColumnBlock (merging runs)
-  double sink_seconds = 0;           // the column-block consumer (compression)
+  // BlockTransposer: its construction (allocation; with the owned data inside the budget, the
+  // first touch of all of it) and AddRows (buffering, spilling).
+  double buffer_seconds = 0;
+  double merge_seconds = 0;  // BlockTransposer::NextColumnBlock (merging runs)
+  double sink_seconds = 0;   // the column-block consumer (compression)
 };
 
 // Reads rows [first, first + count) of T into out (count × cols floats); called on rank 0 only.

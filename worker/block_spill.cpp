@@ -11,6 +11,8 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "worker/huge_pages.h"
+
 namespace prt {
 namespace {
 std::atomic<uint64_t> g_transposer_id{0};
@@ -41,6 +43,12 @@ struct BlockTransposer::Impl {
   BlockSpillOptions opt;
   uint32_t nblocks;
   std::vector<float> pool;
+  // Direct mode, when every owned row fits the budget at once: the rows are written straight
+  // into their column blocks (blocks[b], column-major: [k·rows + r]) as they arrive, and
+  // NextColumnBlock hands each block out without a copy. The same values as the buffered path
+  // (pool, entries, merge), minus one copy and one first touch of the owned data.
+  bool direct = false;
+  std::vector<std::vector<float>> blocks;
   std::vector<Entry> entries;
   std::vector<uint8_t> seen;
   std::vector<std::unique_ptr<Run>> runs;
@@ -97,10 +105,20 @@ BlockTransposer::BlockTransposer(uint64_t rows, uint32_t column_begin, uint32_t 
   m.opt = std::move(options);
   m.nblocks = (column_end - column_begin + m.opt.columns_per_block - 1) / m.opt.columns_per_block;
   m.seen.assign(rows, 0);
-  // Reserve the row buffer once (growing a budget-sized vector by doubling dominated the
-  // in-memory transpose: reallocation copies and repeated page faults).
-  m.pool.reserve(static_cast<std::size_t>(
-      std::min<uint64_t>(m.opt.memory_budget_bytes, rows * (column_end - column_begin) * 4) / 4));
+  const uint64_t owned_bytes = rows * (column_end - column_begin) * sizeof(float);
+  m.direct = owned_bytes <= m.opt.memory_budget_bytes;
+  if (m.direct) {
+    m.blocks.resize(m.nblocks);
+    for (uint32_t b = 0; b < m.nblocks; ++b) {
+      ReserveFreshHuge(m.blocks[b], static_cast<std::size_t>(m.Width(b)) * rows);
+      m.blocks[b].resize(static_cast<std::size_t>(m.Width(b)) * rows);
+    }
+  } else {
+    // Reserve the row buffer once (growing a budget-sized vector by doubling dominated the
+    // in-memory transpose: reallocation copies and repeated page faults), in huge pages: its
+    // first touch was most of AddRows' time (docs/farm-compression.md).
+    ReserveFreshHuge(m.pool, static_cast<std::size_t>(m.opt.memory_budget_bytes / 4));
+  }
   m.id = g_transposer_id++;
 }
 
@@ -123,6 +141,18 @@ void BlockTransposer::AddRows(uint64_t first_row, uint64_t count, const float* d
   for (uint64_t r = first_row; r < first_row + count; ++r)
     if (m.seen[r]) throw std::invalid_argument("BlockTransposer: row added twice");
   for (uint64_t r = first_row; r < first_row + count; ++r) m.seen[r] = 1;
+  if (m.direct) {
+    for (uint32_t b = 0; b < m.nblocks; ++b) {
+      const uint32_t w = m.Width(b);
+      float* const dst = m.blocks[b].data() + first_row;
+      const float* const src = data + static_cast<std::size_t>(b) * m.opt.columns_per_block;
+      for (uint64_t r = 0; r < count; ++r) {
+        const float* row = src + r * stride;
+        for (uint32_t k = 0; k < w; ++k) dst[k * m.rows + r] = row[k];
+      }
+    }
+    return;
+  }
   for (uint64_t r = 0; r < count; ++r) {
     const float* row = data + r * stride;
     for (uint32_t b = 0; b < m.nblocks; ++b) {
@@ -155,6 +185,14 @@ bool BlockTransposer::NextColumnBlock(uint32_t& first_column, uint32_t& count,
   const uint32_t w = m.Width(b);
   first_column = m.begin + b * m.opt.columns_per_block;
   count = w;
+  if (m.direct) {
+    columns.swap(m.blocks[b]);
+    std::vector<float>().swap(m.blocks[b]);
+    return true;
+  }
+  // A consumer that keeps the blocks (the global budget's stash) hands back an empty vector:
+  // each block is then fresh memory, advised for huge pages before its first touch.
+  ReserveFreshHuge(columns, static_cast<std::size_t>(w) * m.rows);
   columns.assign(static_cast<std::size_t>(w) * m.rows, 0.0f);
   std::vector<float> rec(w);
   auto scatter = [&](uint64_t row, const float* v) {

@@ -5,7 +5,9 @@
 // block at a time. No MPI here: the farm's all-to-all (farm/) delivers each rank the slabs of
 // rows for the column range it owns and feeds them to AddRows.
 //
-// Memory: the row buffer never exceeds max(budget, one row slab's size), plus one output column
+// When all the owned columns of all rows fit the budget, rows are written straight into their
+// column blocks as they arrive (no buffer, no merge; the blocks are handed out as they are).
+// Otherwise the row buffer never exceeds max(budget, one row slab's size), plus one output column
 // block (columns_per_block × rows floats) and one read buffer per run while merging.
 // The output is bit-for-bit the same whatever the budget.
 #pragma once

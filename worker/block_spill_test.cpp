@@ -52,11 +52,20 @@ TEST(BlockTransposer, TinyBudgetSpillsAndGivesTheInMemoryResultBitForBit) {
   std::vector<float> rows(nrows * stride);
   std::mt19937 rng(1);
   for (float& v : rows) v = std::uniform_real_distribution<float>(-1, 1)(rng);
-  uint64_t runs_small = 0, runs_big = 0;
+  uint64_t runs_small = 0, runs_big = 0, runs_below = 0, runs_exact = 0;
   const Output small = Transpose(rows, nrows, stride, begin, end, 600, &runs_small);
   const Output big = Transpose(rows, nrows, stride, begin, end, 1ull << 30, &runs_big);
+  // The owned data is 203 × 77 floats: one byte less takes the buffered path (and spills at
+  // least once), exactly that much the direct one (rows written into their column blocks).
+  const uint64_t owned = nrows * (end - begin) * sizeof(float);
+  const Output below = Transpose(rows, nrows, stride, begin, end, owned - 1, &runs_below);
+  const Output exact = Transpose(rows, nrows, stride, begin, end, owned, &runs_exact);
   EXPECT_GT(runs_small, 20u);
   EXPECT_EQ(runs_big, 0u);
+  EXPECT_GE(runs_below, 1u);
+  EXPECT_EQ(runs_exact, 0u);
+  EXPECT_EQ(below.blocks, big.blocks);
+  EXPECT_EQ(exact.blocks, big.blocks);
   ASSERT_EQ(small.blocks.size(), 8u);  // ⌈77 / 10⌉
   ASSERT_EQ(big.blocks.size(), 8u);
   for (std::size_t b = 0; b < 8; ++b) {
@@ -70,6 +79,32 @@ TEST(BlockTransposer, TinyBudgetSpillsAndGivesTheInMemoryResultBitForBit) {
       for (uint64_t r = 0; r < nrows; ++r)
         ASSERT_EQ(small.blocks[b][k * nrows + r], rows[r * stride + small.first[b] + k]);
   }
+}
+
+TEST(BlockTransposer, DirectModeRejectsMissingAndDuplicateRows) {
+  BlockSpillOptions o;
+  o.memory_budget_bytes = 1ull << 20;  // all 4 × 7 floats fit: direct mode
+  o.columns_per_block = 3;
+  BlockTransposer t(4, 0, 7, o);
+  std::vector<float> rows(4 * 7);
+  std::iota(rows.begin(), rows.end(), 0.0f);
+  t.AddRows(0, 2, rows.data(), 7);
+  EXPECT_THROW(t.AddRows(1, 1, rows.data(), 7), std::invalid_argument);
+  EXPECT_THROW(t.AddRows(3, 2, rows.data(), 7), std::invalid_argument);  // past the last row
+  uint32_t f, n;
+  std::vector<float> c;
+  EXPECT_THROW(t.NextColumnBlock(f, n, c), std::invalid_argument);  // rows 2 and 3 missing
+  t.AddRows(2, 2, rows.data() + 2 * 7, 7);
+  ASSERT_TRUE(t.NextColumnBlock(f, n, c));
+  EXPECT_EQ(f, 0u);
+  EXPECT_EQ(n, 3u);
+  EXPECT_EQ(c, (std::vector<float>{0, 7, 14, 21, 1, 8, 15, 22, 2, 9, 16, 23}));
+  ASSERT_TRUE(t.NextColumnBlock(f, n, c));
+  ASSERT_TRUE(t.NextColumnBlock(f, n, c));
+  EXPECT_EQ(f, 6u);
+  EXPECT_EQ(n, 1u);
+  EXPECT_EQ(c, (std::vector<float>{6, 13, 20, 27}));
+  EXPECT_FALSE(t.NextColumnBlock(f, n, c));
 }
 
 TEST(BlockTransposer, RejectsMissingAndDuplicateRowsAndCleansUp) {
