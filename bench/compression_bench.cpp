@@ -2,9 +2,10 @@
 // adaptive 4D compression of real transport matrices (Cheslack-Postava et al. 2008 §5.2, Fig. 7
 // and Fig. 8), all through the same code (worker/transport_compressor.h).
 //
-// For each benchmark scene (bench_scenes.h: the default scene, i.e. the bunny on a 64×64 ground
-// grid, and real meshes on the same ground) and cubemap size n, T is traced here with
-// TransportSampler (or read from a cache file written by an earlier run, or from a farm run
+// For each benchmark scene (the default scene, i.e. the bunny on a 64×64 ground grid, and real
+// meshes in its place on the same ground: dragon, armadillo, camel, lion from the data folder;
+// horse and teapot from ../shared/data, PRT_SHARED_DATA_DIR) and cubemap size n, T is traced here
+// with TransportSampler (or read from a cache file written by an earlier run, or from a farm run
 // folder). For each scheme, budget (column: the paper's N terms per column, 2D per row; global:
 // one magnitude threshold over the matrix) and keep fraction it prints the stored terms, the
 // encoded bytes of transport.prtc (and % of raw float32 T), the relative Frobenius error of T, and
@@ -17,7 +18,7 @@
 //   * the average chosen column depth per row-transform level (Fig. 8);
 //   * with --out DIR: DIR/<scene>_n<n>.csv, a gnuplot script and its PNG (Fig. 7-like curves).
 //
-// Usage: compression_bench [--scenes default,dragon,armadillo] [--n 32,64] [--rays K]
+// Usage: compression_bench [--scenes default,dragon,armadillo,horse,teapot] [--n 32,64] [--rays K]
 //          [--cache DIR] [--run DIR] [--bits B] [--keep f1,f2,...] [--budget column|global|both]
 //          [--column-keep f1,...] [--schemes 2d,4d,adaptive4d] [--light-weight W] [--t-error]
 //          [--order-normal-weight W] [--column-wavelet legall53|cdf97] [--row-wavelet haar|d4]
@@ -72,17 +73,16 @@ std::string DataDir() {
 // does not link the viewer): the default scene, or another mesh in its place.
 prt::SceneDescription BenchScene(const std::string& name, int n) {
   std::string text = prt::DefaultSceneText();
-  const std::map<std::string, std::string> meshes = {{"default", "bunny00.off"},
-                                                     {"dragon", "ChineseDragon-10kv.off"},
-                                                     {"armadillo", "armadillo.off"},
-                                                     {"camel", "camel.off"},
-                                                     {"lion", "lion-head.off"},
-                                                     {"horse", "horse_cyberware.ply"},
-                                                     {"teapot", "utah_teapot_24x24.obj"}};
+  const std::map<std::string, std::string> meshes = {
+      {"default", "bunny00.off"},         {"dragon", "ChineseDragon-10kv.off"},
+      {"armadillo", "armadillo.off"},     {"camel", "camel.off"},
+      {"lion", "lion-head.off"},          {"horse", "horse_cyberware.ply"},
+      {"teapot", "utah_teapot_24x24.obj"}};
   const auto it = meshes.find(name);
   if (it == meshes.end())
     throw prt::InputError(
-        "--scenes", "unknown scene '" + name + "' (default, dragon, armadillo, camel, lion, horse, teapot)");
+        "--scenes",
+        "unknown scene '" + name + "' (default, dragon, armadillo, camel, lion, horse, teapot)");
   const auto replace = [&](const std::string& from, const std::string& to) {
     const auto pos = text.find(from);
     if (pos == std::string::npos)
@@ -94,8 +94,8 @@ prt::SceneDescription BenchScene(const std::string& name, int n) {
   // horse is wound inward (docs/mesh-import.md).
   if (name == "horse") replace("up = \"+y\" }", "up = \"+z\" }\nflip_winding = true");
   if (name == "teapot") replace("up = \"+y\" }", "up = \"+z\" }");
-  prt::SceneDescription scene = prt::ParseScene(text, "<bench scene " + name + ">", "",
-                                                {DataDir(), PRT_SHARED_DATA_DIR});
+  prt::SceneDescription scene =
+      prt::ParseScene(text, "<bench scene " + name + ">", "", {DataDir(), PRT_SHARED_DATA_DIR});
   scene.cubemap_n = n;
   return scene;
 }
@@ -538,7 +538,8 @@ int main(int argc, char** argv) {
   bool t_error = false;
   CLI::App app{"compression_bench: storage against relit error for 2D, 4D and adaptive 4D"};
   app.add_option("--run", run, "farm run folder to read T from (instead of the scenes)");
-  app.add_option("--scenes", scenes_arg, "benchmark scenes (default, dragon, armadillo, camel, lion, horse, teapot)");
+  app.add_option("--scenes", scenes_arg,
+                 "benchmark scenes (default, dragon, armadillo, camel, lion, horse, teapot)");
   app.add_option("--n", n_arg, "cubemap resolutions, comma-separated");
   app.add_option("--rays", rays, "rays per texel when tracing");
   app.add_option("--cache", cache, "folder for traced transport matrices (reused when present)");
