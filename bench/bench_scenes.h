@@ -16,7 +16,8 @@ namespace prt::bench {
 std::string DataDir();
 
 // A benchmark scene by name: "default" (the bunny), "armadillo", "dragon" (the CGAL 10k-vertex
-// Chinese dragon), "camel", each fitted on the default scene's ground plane; `n` overrides the
+// Chinese dragon), "camel", and from ../shared/data "horse" (Cyberware, 48k vertices) and
+// "teapot" (Utah, 18.5k), each fitted on the default scene's ground plane; `n` overrides the
 // cubemap resolution (0 keeps the scene's). Throws InputError for an unknown name.
 SceneDescription BenchScene(const std::string& name, int n = 0);
 
