@@ -6,20 +6,12 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_scene.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene.h"
 
 namespace prt::bench {
-
-// Data folder: $PRT_DATA_DIR if set, else the build tree's data/ (compiled in).
-std::string DataDir();
-
-// A benchmark scene by name: "default" (the bunny), "armadillo", "dragon" (the CGAL 10k-vertex
-// Chinese dragon), "camel", and from ../shared/data "horse" (Cyberware, 48k vertices) and
-// "teapot" (Utah, 18.5k), each fitted on the default scene's ground plane; `n` overrides the
-// cubemap resolution (0 keeps the scene's). Throws InputError for an unknown name.
-SceneDescription BenchScene(const std::string& name, int n = 0);
 
 // The real environment maps used for accuracy figures, resampled to n: sunrise, city, studio,
 // interior (Blender's, from the data folder).

@@ -38,6 +38,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_scene.h"
 #include "vocabulary/compressed_relight.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/envmap.h"
@@ -57,48 +58,8 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-#ifndef PRT_DATA_DIR
-#define PRT_DATA_DIR "data"
-#endif
-#ifndef PRT_SHARED_DATA_DIR
-#define PRT_SHARED_DATA_DIR "../shared/data"
-#endif
-
-std::string DataDir() {
-  if (const char* d = std::getenv("PRT_DATA_DIR"); d != nullptr && *d != '\0') return d;
-  return PRT_DATA_DIR;
-}
-
-// The benchmark scenes of bench/bench_scenes.h (BenchScene; repeated here so that this benchmark
-// does not link the viewer): the default scene, or another mesh in its place.
-prt::SceneDescription BenchScene(const std::string& name, int n) {
-  std::string text = prt::DefaultSceneText();
-  const std::map<std::string, std::string> meshes = {
-      {"default", "bunny00.off"},         {"dragon", "ChineseDragon-10kv.off"},
-      {"armadillo", "armadillo.off"},     {"camel", "camel.off"},
-      {"lion", "lion-head.off"},          {"horse", "horse_cyberware.ply"},
-      {"teapot", "utah_teapot_24x24.obj"}};
-  const auto it = meshes.find(name);
-  if (it == meshes.end())
-    throw prt::InputError(
-        "--scenes",
-        "unknown scene '" + name + "' (default, dragon, armadillo, camel, lion, horse, teapot)");
-  const auto replace = [&](const std::string& from, const std::string& to) {
-    const auto pos = text.find(from);
-    if (pos == std::string::npos)
-      throw prt::InputError("<bench scene>", "default scene lacks " + from);
-    text.replace(pos, from.size(), to);
-  };
-  replace("meshes/bunny00.off\"", "meshes/" + it->second + "\"");
-  // The horse and the teapot (in ../shared/data only: not in a Debian package) are Z up; the
-  // horse is wound inward (docs/mesh-import.md).
-  if (name == "horse") replace("up = \"+y\" }", "up = \"+z\" }\nflip_winding = true");
-  if (name == "teapot") replace("up = \"+y\" }", "up = \"+z\" }");
-  prt::SceneDescription scene =
-      prt::ParseScene(text, "<bench scene " + name + ">", "", {DataDir(), PRT_SHARED_DATA_DIR});
-  scene.cubemap_n = n;
-  return scene;
-}
+using prt::bench::BenchScene;
+using prt::bench::DataDir;
 
 struct Transport {
   std::string name;

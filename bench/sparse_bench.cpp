@@ -116,7 +116,7 @@ int main(int argc, char** argv) {
   bool quick = false;
   int threads = 0;
   app.add_option("--scenes", scenes_arg,
-                 "comma-separated: default, armadillo, dragon, camel, horse, teapot");
+                 "comma-separated: default, armadillo, dragon, camel, lion, horse, teapot");
   app.add_option("--n", n, "cubemap resolution");
   app.add_option("--out", out_dir, "folder for the CSV, summary and images");
   app.add_option("--threads", threads, "TBB threads (0: all cores)");
