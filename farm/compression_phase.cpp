@@ -23,11 +23,11 @@
 #include "farm/run_folder.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/huge_pages.h"
 #include "vocabulary/progress.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"
 #include "worker/column_order.h"
-#include "worker/huge_pages.h"
 #include "worker/transport_compressor.h"
 
 namespace prt {

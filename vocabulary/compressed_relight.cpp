@@ -14,6 +14,7 @@
 #include <string>
 
 #include "vocabulary/errors.h"
+#include "vocabulary/huge_pages.h"
 
 namespace prt {
 namespace {
@@ -225,7 +226,9 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
       off += seg.count;
     }
   }
-  terms_.reserve(t.term_count());
+  // 8 bytes per stored term (100 MB for the demo's pack), fresh: huge pages halve its first
+  // touch, most of the load's page faults (docs/viewer.md).
+  ReserveFreshHuge(terms_, t.term_count());
   std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
   {
     std::size_t off = 0;

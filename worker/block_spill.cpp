@@ -11,7 +11,7 @@
 #include <fstream>
 #include <stdexcept>
 
-#include "worker/huge_pages.h"
+#include "vocabulary/huge_pages.h"
 
 namespace prt {
 namespace {

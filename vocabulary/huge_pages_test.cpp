@@ -1,4 +1,4 @@
-#include "worker/huge_pages.h"
+#include "vocabulary/huge_pages.h"
 
 #include <gtest/gtest.h>
 

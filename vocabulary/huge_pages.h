@@ -1,5 +1,5 @@
-// Transparent huge pages for the farm's large, freshly allocated buffers (the transposer's row
-// buffer and column blocks, the exchange buffers). On the development VM a first touch of fresh
+// Transparent huge pages for large, freshly allocated buffers: the farm's transposer blocks and
+// exchange buffers, the viewer's dequantised terms. On the development VM a first touch of fresh
 // memory costs far more than the copy into it (page faults through the hypervisor and the
 // kernel's page clearing: 1 GiB copied into fresh 4 KiB pages 6.7 s, into 2 MiB pages 1.8 s;
 // docs/farm-compression.md), and the compression phase touches the raw matrix's size of fresh
