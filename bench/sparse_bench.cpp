@@ -152,7 +152,7 @@ int main(int argc, char** argv) {
     TransportSamplerOptions so;
     so.rays_per_texel = scene.sampling.rays_per_texel;
     so.seed = scene.sampling.seed;
-    const TransportSampler sampler(embree, n, so);
+    TransportSampler sampler(embree, n, so);
     const std::vector<SpatialSample> samples = SpatialSamplesOf(geometry);
     const std::size_t T = sampler.layout().texel_count();
     const bench::SampleRanges ranges = bench::RangesOf(geometry);
@@ -257,11 +257,14 @@ int main(int argc, char** argv) {
       SparseReport rep;
       // Allocated and touched before the clock starts, as brute force's output is.
       std::vector<float> rows(brute.size(), 0.0f);
+      sampler.MeasureTraceCpu(true);
       const auto t0 = Clock::now();
       const double c0 = CpuSeconds();
       RunSparsePrecomputation(sampler, samples, v.plan, rep, rows.data());
       const double sec = Seconds(t0);
       const double cpu = CpuSeconds() - c0;
+      const double trace_cpu = sampler.trace_cpu_seconds();
+      sampler.MeasureTraceCpu(false);
       const double dense_n =
           static_cast<double>(rep.dense_initial + rep.dense_by_rank + rep.dense_fallback);
       const double dense_spatial = dense_n / static_cast<double>(samples.size());
@@ -289,6 +292,18 @@ int main(int argc, char** argv) {
           static_cast<unsigned long long>(rep.dense_fallback),
           dense_in(ranges.model_first, ranges.model_last),
           dense_in(ranges.ground_first, ranges.ground_last));
+      // The floor any implementation of this sampling pays: the CPU time inside the sampler
+      // (rays and the estimator around them) against brute force's whole CPU time, and what a
+      // traced texel cost against brute force's average texel.
+      const uint64_t traced =
+          rep.dense_angular.trace.texels_traced + rep.sparse_stats.trace.texels_traced;
+      std::printf(
+          "    tracing CPU %.2f s = %.3f× brute (a traced texel %.2f× brute force's average), "
+          "the rest %.3f×\n",
+          trace_cpu, trace_cpu / brute_cpu,
+          (trace_cpu / static_cast<double>(std::max<uint64_t>(1, traced))) /
+              (brute_cpu / static_cast<double>(std::max<uint64_t>(1, bst.texels_traced))),
+          (cpu - trace_cpu) / brute_cpu);
       md << "| " << v.name << " | " << v.plan.radius << " | " << sec << " | " << cpu / brute_cpu
          << " | " << 100 * dense_spatial << "% | " << 100 * dense_ang << "% | " << 100 * sparse_ang
          << "% | " << 100 * rep.SampledFraction() << "% | " << rep.dense_fallback << " |";

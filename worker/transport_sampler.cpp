@@ -2,8 +2,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
+#include <time.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -77,6 +79,9 @@ struct TransportSampler::Impl {
   // Ω_s for every stratum of every texel of one face (all faces share it): index
   // (y·n + x)·k + s.
   std::vector<double> stratum_omega;
+  // Thread CPU nanoseconds spent in ComputeRow / ComputeTexels while measure_trace_cpu is set.
+  std::atomic<bool> measure_trace_cpu{false};
+  mutable std::atomic<uint64_t> trace_cpu_ns{0};
 
   Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o)
       : scene(s), layout(n), options(o) {
@@ -292,16 +297,55 @@ double TransportSampler::StratumSolidAngle(std::size_t texel, int stratum) const
   return impl_->stratum_omega[(texel % fs) * k + stratum];
 }
 
+namespace {
+
+uint64_t ThreadCpuNanoseconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<uint64_t>(ts.tv_sec) * 1000000000u + static_cast<uint64_t>(ts.tv_nsec);
+}
+
+// Adds the calling thread's CPU time over its lifetime to `total` when `on`.
+class ScopedThreadCpu {
+ public:
+  ScopedThreadCpu(bool on, std::atomic<uint64_t>& total)
+      : total_(on ? &total : nullptr), start_(on ? ThreadCpuNanoseconds() : 0) {}
+  ~ScopedThreadCpu() {
+    if (total_ != nullptr) total_->fetch_add(ThreadCpuNanoseconds() - start_);
+  }
+  ScopedThreadCpu(const ScopedThreadCpu&) = delete;
+  ScopedThreadCpu& operator=(const ScopedThreadCpu&) = delete;
+
+ private:
+  std::atomic<uint64_t>* total_;
+  uint64_t start_;
+};
+
+}  // namespace
+
 SampleStats TransportSampler::ComputeRow(const SpatialSample& sample, uint64_t sample_index,
                                          float* row) const {
+  const ScopedThreadCpu cpu(impl_->measure_trace_cpu.load(std::memory_order_relaxed),
+                            impl_->trace_cpu_ns);
   return impl_->Row(sample, sample_index, row, Tracer{Tracer::kEmbree, &impl_->scene, nullptr});
 }
 
 SampleStats TransportSampler::ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
                                             std::span<const uint32_t> texels, float* values,
                                             float* unoccluded) const {
+  const ScopedThreadCpu cpu(impl_->measure_trace_cpu.load(std::memory_order_relaxed),
+                            impl_->trace_cpu_ns);
   return impl_->Texels(sample, sample_index, texels, values,
                        Tracer{Tracer::kEmbree, &impl_->scene, nullptr}, unoccluded);
+}
+
+void TransportSampler::MeasureTraceCpu(bool on) {
+  impl_->trace_cpu_ns = 0;
+  impl_->measure_trace_cpu = on;
+}
+
+double TransportSampler::trace_cpu_seconds() const {
+  return static_cast<double>(impl_->trace_cpu_ns.load()) * 1e-9;
 }
 
 void TransportSampler::ComputeUnoccludedTexels(const SpatialSample& sample, uint64_t sample_index,

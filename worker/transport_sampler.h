@@ -115,6 +115,13 @@ class TransportSampler {
   void AppendRowRays(const SpatialSample& sample, uint64_t sample_index,
                      std::vector<OcclusionRay>& rays) const;
 
+  // For benchmarks: with `on`, the thread CPU time spent inside ComputeRow and ComputeTexels
+  // (the tracing and the estimator around it; clock_gettime per call) is summed over all
+  // threads; resets the sum either way. Not thread-safe against concurrent Compute* calls.
+  void MeasureTraceCpu(bool on);
+  // The sum since the last MeasureTraceCpu call, in seconds.
+  double trace_cpu_seconds() const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
