@@ -13,7 +13,8 @@
 //      rotation stops to reach the exact-lighting image (relative RMS < 1e-3).
 //   4. One frame side by side: exact | NWA | PBI (PNG in --out-dir).
 //
-// Usage: viewer_bench [scene.prtpack] [--n 16] [--rays 1] [--keep F] [--deg 0.5] [--frames 120]
+// Usage: viewer_bench [scene.prtpack] [--n 16] [--rays 1] [--keep F] [--scheme S] [--deg 0.5]
+// [--frames 120]
 //                     [--hold 60] [--out-dir viewer_bench_out] [--quick]
 // Without a pack, the default scene (bunny on a 64×64 ground, 41,802 samples) is traced here at
 // reduced cost (cubemap n = 16, 1 ray per texel), compressed like scenes/default.toml
@@ -184,6 +185,7 @@ int main(int argc, char** argv) {
   std::string pack_path, out_dir = "viewer_bench_out";
   int n = 16, rays = 1, frames = 120, hold = 60;
   double deg = 0.5, pack_keep = 0.0;
+  std::string pack_scheme;
   bool quick = false;
   CLI::App app{"viewer_bench: relighting speed, 2D against 4D, PBI against NWA"};
   app.add_option("pack", pack_path, "a .prtpack (default: trace the default scene in-process)");
@@ -191,6 +193,9 @@ int main(int argc, char** argv) {
   app.add_option("--rays", rays, "rays per texel of the in-process pack");
   app.add_option("--keep", pack_keep,
                  "kept fraction of the in-process pack's terms (default: the scene's)");
+  app.add_option("--scheme", pack_scheme,
+                 "compression scheme of the in-process pack, 2d | 4d | adaptive4d (default: the "
+                 "scene's)");
   app.add_option("--deg", deg, "rotation per frame, degrees");
   app.add_option("--frames", frames, "rotating frames");
   app.add_option("--hold", hold, "still frames");
@@ -210,6 +215,7 @@ int main(int argc, char** argv) {
                 traced.geometry.vertex_count(), n, rays, traced.trace_s);
     prt::CompressionOptions o = prt::CompressionOptionsFrom(traced.scene.compression, "default");
     if (pack_keep > 0) o.keep_fraction = pack_keep;
+    if (!pack_scheme.empty()) o.scheme = prt::ParseCompressionScheme(pack_scheme, "--scheme");
     const auto t0 = Clock::now();
     const prt::CompressedTransport ct =
         prt::CompressTransport(traced.rows.data(), n, prt::SpatialDomainOf(traced.geometry), o);
