@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
+#include <time.h>
 
 #include <algorithm>
 #include <array>
@@ -437,6 +438,43 @@ TEST(TransportSampler, UnoccludedTexelsBoundTheRowAndMatchItWhenFree) {
 
 // AppendRowRays reproduces the traced rays: as many as ComputeRow traces, from the robust
 // origin, and re-tracing them reproduces the row's visibility.
+// The benchmark's tracing clock: off by default, summing the threads' CPU time inside
+// ComputeRow / ComputeTexels when on (here all on this thread: at most the thread's CPU time
+// over the same calls, and most of it, since the loop does nothing else), reset by every
+// MeasureTraceCpu call.
+TEST(TransportSampler, MeasureTraceCpuSumsTheSamplersCpuTimeOnlyWhenOn) {
+  const PartlyOccluded scene_data;
+  const EmbreeScene scene(scene_data.geometry);
+  TransportSampler sampler(scene, 32, {4, 1});
+  const auto thread_cpu = [] {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+  };
+  std::vector<float> row(sampler.layout().texel_count());
+  sampler.ComputeRow(scene_data.samples[0], 0, row.data());
+  EXPECT_EQ(sampler.trace_cpu_seconds(), 0.0);  // off by default
+
+  sampler.MeasureTraceCpu(true);
+  const std::vector<uint32_t> texels{0, 5, 77, 1000};
+  std::vector<float> values(texels.size());
+  const double c0 = thread_cpu();
+  for (std::size_t i = 0; i < scene_data.samples.size(); ++i) {
+    sampler.ComputeRow(scene_data.samples[i], i, row.data());
+    sampler.ComputeTexels(scene_data.samples[i], i, texels, values.data());
+  }
+  const double thread = thread_cpu() - c0;
+  const double traced = sampler.trace_cpu_seconds();
+  EXPECT_GT(traced, 0.0);
+  EXPECT_LE(traced, thread + 1e-6);
+  EXPECT_GE(traced, 0.5 * thread);
+
+  sampler.MeasureTraceCpu(false);
+  EXPECT_EQ(sampler.trace_cpu_seconds(), 0.0);
+  sampler.ComputeRow(scene_data.samples[0], 0, row.data());
+  EXPECT_EQ(sampler.trace_cpu_seconds(), 0.0);
+}
+
 TEST(TransportSampler, AppendRowRaysReproducesTheTracedRays) {
   const PartlyOccluded scene_data;
   const EmbreeScene scene(scene_data.geometry);
