@@ -7,6 +7,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -32,6 +33,9 @@ void SegmentShape(const SpatialSegment& s, int& w, int& h) {
 
 // Four floats in one SSE register (GCC/Clang vector extension): one sample's channels in X.
 using Float4 = float __attribute__((vector_size(16)));
+
+// The most tiles X is scattered in (see the constructor).
+constexpr std::size_t kMaxTiles = 64;
 
 uint64_t SplitMix64(uint64_t x) {
   x += 0x9e3779b97f4a7c15ull;
@@ -278,7 +282,7 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
   // Tiles of at least 4096 coefficients (64 KB of X with three channels: the core's L2) and at
   // most 64 per column (the offsets cost 4·65 bytes per column); past 256 Ki samples a tile is
   // S/64 coefficients.
-  tile_ = std::max<std::size_t>(4096, (S + 63) / 64);
+  tile_ = std::max<std::size_t>(4096, (S + kMaxTiles - 1) / kMaxTiles);
   tiles_ = std::max<std::size_t>(1, (S + tile_ - 1) / tile_);
   tile_offsets_.resize(columns_.size() * (tiles_ + 1));
   for (std::size_t c = 0; c < columns_.size(); ++c) {
@@ -410,6 +414,7 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   const std::size_t threads = std::clamp<std::size_t>(
       static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1, tiles_);
   const std::size_t stride = tiles_ + 1;
+  std::array<std::size_t, kMaxTiles + 1> tile_work{};
   // Software prefetch 2 KB ahead in the column being added, and the first 2 KB of the next
   // light's piece before it starts: the hardware prefetcher, left alone, restarts on every piece
   // and held N = 300 on the demo's pack at ~2/3 of this speed (docs/viewer.md).
@@ -425,12 +430,40 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       count += columns_[lights[k].slot].end - columns_[lights[k].slot].begin;
     if (count == 0 && !zero) return;
     const std::size_t ranges = count >= kParallelTerms ? threads : 1;
-    const auto body = [&, l0, l1, zero, ranges](std::size_t r) {
+    // Each thread's run of tiles carries an equal share of the work: the terms of these lights
+    // in its tiles, plus, when zeroing, a tile's coefficients (a 64 KB memset costs about what
+    // 4096 terms do). Equal tile counts would not do: the Mallat layout puts the coarse
+    // coefficients, which nearly every column stores, in the first tiles (at N = 100 on a keep
+    // 0.01 pack the first half of the tiles held 78 % of the terms, and the second thread idled).
+    std::array<std::size_t, kMaxTiles + 2> first_tile{};
+    first_tile[ranges] = tiles_;
+    if (ranges > 1) {
+      std::size_t total = 0;
+      for (std::size_t t = 0; t < tiles_; ++t) {
+        std::size_t w = zero ? std::min(S, (t + 1) * tile_) - t * tile_ : 0;
+        for (std::size_t k = l0; k < l1; ++k) {
+          const uint32_t* off = tile_offsets_.data() + lights[k].slot * stride + t;
+          w += off[1] - off[0];
+        }
+        total += w;
+        tile_work[t] = total;  // cumulative: the work of tiles [0, t]
+      }
+      std::size_t t = 0;
+      for (std::size_t r = 1; r < ranges; ++r) {
+        const std::size_t target = total * r / ranges;
+        // The boundary whose prefix of work lies nearest the target.
+        while (t < tiles_ && tile_work[t] <= target) ++t;
+        const std::size_t below = t == 0 ? 0 : tile_work[t - 1];
+        const std::size_t bound = t < tiles_ && tile_work[t] - target < target - below ? t + 1 : t;
+        first_tile[r] = std::max(first_tile[r - 1], bound);
+      }
+    }
+    const auto body = [&, l0, l1, zero](std::size_t r) {
       // Locals, not the lambda's references: the stores into X (memcpy, which may alias
       // anything) would otherwise make the compiler reload these through the closure per term.
       float* const xl = x;
       const Term* const terms = terms_.data();
-      const std::size_t t0 = tiles_ * r / ranges, t1 = tiles_ * (r + 1) / ranges;
+      const std::size_t t0 = first_tile[r], t1 = first_tile[r + 1];
       for (std::size_t t = t0; t < t1; ++t) {
         if (zero) {
           const std::size_t lo = t * tile_, hi = std::min(S, lo + tile_);

@@ -174,6 +174,55 @@ TEST(CompressedRelighter, Equation8MatchesDenseProductForEveryWaveletPair) {
 // A domain of several scatter tiles (4096 coefficients each) with columns of every depth, dense
 // and sparse: every channel count (4 is X's padded width, 1 and 2 use the scalar paths), the
 // sparse entry points, RelightSparseAdd and a frame with no lights against the dense product.
+// Terms piled into the first tile (as the Mallat layout piles the coarse coefficients), one in
+// 64 elsewhere: the frame splits the tiles between its threads by work, so one thread gets the
+// first tile alone and another the rest; every tile must still be zeroed and added exactly
+// once, in every frame (the second frame finds the first one's X in the pooled buffer).
+// Enough terms for the parallel path.
+TEST(CompressedRelighter, TermsPiledIntoOneTileMatchDenseProduct) {
+  CompressedTransport t;
+  t.header.cubemap_n = 2;
+  t.header.bits = 11;
+  t.header.domain = TwoSegmentDomain(20000, 67, 61, 5);
+  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+  const std::size_t S = t.header.sample_count, M = t.header.column_count();
+  ASSERT_GT(S, 5u * 4096u);
+  std::mt19937 rng(23);
+  const int maxd = MaxColumnDepth(t.header.domain);
+  for (uint32_t j = 0; j < M; ++j) {
+    CompressedColumn c;
+    c.column = j;
+    c.depth = static_cast<uint8_t>(j % (maxd + 1));
+    c.scale = 1.0f;
+    for (uint32_t i = 0; i < S; ++i) {
+      if (i >= 4096 && rng() % 64 != 0) continue;
+      c.index.push_back(i);
+      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
+      c.q.push_back(q == 0 ? 1 : q);
+    }
+    t.columns.push_back(c);
+  }
+  ASSERT_GT(M * 4096, std::size_t{1} << 15);
+  const std::vector<float> That = DecompressToRowWaveletBasis(t);
+  const CompressedRelighter relighter(t);
+  const int channels = 3;
+  for (int frame = 0; frame < 2; ++frame) {
+    std::vector<float> Lhat(M * channels);
+    for (float& v : Lhat) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+    std::vector<double> ref(S * channels);
+    for (int ch = 0; ch < channels; ++ch)
+      for (std::size_t s = 0; s < S; ++s) {
+        double a = 0;
+        for (std::size_t j = 0; j < M; ++j)
+          a += static_cast<double>(That[s * M + j]) * Lhat[ch * M + j];
+        ref[ch * S + s] = a;
+      }
+    std::vector<float> B(S * channels, -7.0f);
+    relighter.Relight(Lhat, channels, B);
+    EXPECT_LT(RelErr(std::vector<double>(B.begin(), B.end()), ref), 1e-5) << frame;
+  }
+}
+
 TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
   CompressedTransport t;
   t.header.cubemap_n = 2;
