@@ -38,6 +38,20 @@ double RelErr(const std::vector<double>& got, const std::vector<double>& want) {
   return std::sqrt(num / std::max(den, 1e-300));
 }
 
+// B = T̂ · L̂ per channel in double: ref[ch·S + s] = Σ_j That[s·M + j] · Lhat[ch·M + j].
+std::vector<double> DenseProduct(const std::vector<float>& That, const std::vector<float>& Lhat,
+                                 std::size_t S, std::size_t M, int channels) {
+  std::vector<double> ref(S * static_cast<std::size_t>(channels));
+  for (std::size_t ch = 0; ch < static_cast<std::size_t>(channels); ++ch)
+    for (std::size_t s = 0; s < S; ++s) {
+      double a = 0;
+      for (std::size_t j = 0; j < M; ++j)
+        a += static_cast<double>(That[s * M + j]) * Lhat[ch * M + j];
+      ref[ch * S + s] = a;
+    }
+  return ref;
+}
+
 TEST(ColumnTransform, ForwardInverseRoundTripAtEveryDepth) {
   const SpatialDomain d = TwoSegmentDomain();
   EXPECT_EQ(MaxColumnDepth(d), 6);  // ⌈log2 45⌉
@@ -171,96 +185,54 @@ TEST(CompressedRelighter, Equation8MatchesDenseProductForEveryWaveletPair) {
   }
 }
 
+// A transport at n = 2 (24 columns), 11 bits, on TwoSegmentDomain(mesh_count, 67, 61, 5): column
+// j has depth j mod (maximum + 1) and stores coefficient i where stored(j, i), with a random
+// non-zero quantised value (no column where it stores nothing).
+template <class Stored>
+CompressedTransport TiledTransport(uint32_t mesh_count, std::mt19937& rng, Stored stored) {
+  CompressedTransport t;
+  t.header.cubemap_n = 2;
+  t.header.bits = 11;
+  t.header.domain = TwoSegmentDomain(mesh_count, 67, 61, 5);
+  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+  const uint32_t S = t.header.sample_count;
+  const auto M = static_cast<uint32_t>(t.header.column_count());
+  const int maxd = MaxColumnDepth(t.header.domain);
+  for (uint32_t j = 0; j < M; ++j) {
+    CompressedColumn c;
+    c.column = j;
+    c.depth = static_cast<uint8_t>(j % static_cast<uint32_t>(maxd + 1));
+    c.scale = 1.0f;
+    for (uint32_t i = 0; i < S; ++i) {
+      if (!stored(j, i)) continue;
+      c.index.push_back(i);
+      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
+      c.q.push_back(q == 0 ? 1 : q);
+    }
+    if (!c.index.empty()) t.columns.push_back(c);
+  }
+  return t;
+}
+
 // A domain of several scatter tiles (4096 coefficients each) with columns of every depth, dense
 // and sparse: every channel count (4 is X's padded width, 1 and 2 use the scalar paths), the
 // sparse entry points, RelightSparseAdd and a frame with no lights against the dense product.
-// Terms piled into the first tile (as the Mallat layout piles the coarse coefficients), one in
-// 64 elsewhere: the frame splits the tiles between its threads by work, so one thread gets the
-// first tile alone and another the rest; every tile must still be zeroed and added exactly
-// once, in every frame (the second frame finds the first one's X in the pooled buffer).
-// Enough terms for the parallel path.
-TEST(CompressedRelighter, TermsPiledIntoOneTileMatchDenseProduct) {
-  CompressedTransport t;
-  t.header.cubemap_n = 2;
-  t.header.bits = 11;
-  t.header.domain = TwoSegmentDomain(20000, 67, 61, 5);
-  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
-  const std::size_t S = t.header.sample_count, M = t.header.column_count();
-  ASSERT_GT(S, 5u * 4096u);
-  std::mt19937 rng(23);
-  const int maxd = MaxColumnDepth(t.header.domain);
-  for (uint32_t j = 0; j < M; ++j) {
-    CompressedColumn c;
-    c.column = j;
-    c.depth = static_cast<uint8_t>(j % (maxd + 1));
-    c.scale = 1.0f;
-    for (uint32_t i = 0; i < S; ++i) {
-      if (i >= 4096 && rng() % 64 != 0) continue;
-      c.index.push_back(i);
-      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
-      c.q.push_back(q == 0 ? 1 : q);
-    }
-    t.columns.push_back(c);
-  }
-  ASSERT_GT(M * 4096, std::size_t{1} << 15);
-  const std::vector<float> That = DecompressToRowWaveletBasis(t);
-  const CompressedRelighter relighter(t);
-  const int channels = 3;
-  for (int frame = 0; frame < 2; ++frame) {
-    std::vector<float> Lhat(M * channels);
-    for (float& v : Lhat) v = std::uniform_real_distribution<float>(-1, 1)(rng);
-    std::vector<double> ref(S * channels);
-    for (int ch = 0; ch < channels; ++ch)
-      for (std::size_t s = 0; s < S; ++s) {
-        double a = 0;
-        for (std::size_t j = 0; j < M; ++j)
-          a += static_cast<double>(That[s * M + j]) * Lhat[ch * M + j];
-        ref[ch * S + s] = a;
-      }
-    std::vector<float> B(S * channels, -7.0f);
-    relighter.Relight(Lhat, channels, B);
-    EXPECT_LT(RelErr(std::vector<double>(B.begin(), B.end()), ref), 1e-5) << frame;
-  }
-}
-
 TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
-  CompressedTransport t;
-  t.header.cubemap_n = 2;
-  t.header.bits = 11;
-  t.header.domain = TwoSegmentDomain(9001, 67, 61, 5);
-  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+  std::mt19937 rng(17);
+  const CompressedTransport t = TiledTransport(9001, rng, [&](uint32_t j, uint32_t) {
+    if (j % 7 == 3) return false;                                  // absent columns
+    const uint32_t keep = j % 3 == 0 ? 1 : (j % 3 == 1 ? 5 : 50);  // 100 %, 20 %, 2 % dense
+    return rng() % keep == 0;
+  });
   const std::size_t S = t.header.sample_count, M = t.header.column_count();
   ASSERT_GT(S, 3u * 4096u);
-  std::mt19937 rng(17);
   const int maxd = MaxColumnDepth(t.header.domain);
-  for (uint32_t j = 0; j < M; ++j) {
-    if (j % 7 == 3) continue;  // absent columns
-    CompressedColumn c;
-    c.column = j;
-    c.depth = static_cast<uint8_t>(j % (maxd + 1));
-    c.scale = 1.0f;
-    const uint32_t keep = j % 3 == 0 ? 1 : (j % 3 == 1 ? 5 : 50);  // 100 %, 20 %, 2 % dense
-    for (uint32_t i = 0; i < S; ++i) {
-      if (rng() % keep) continue;
-      c.index.push_back(i);
-      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
-      c.q.push_back(q == 0 ? 1 : q);
-    }
-    t.columns.push_back(c);
-  }
   const std::vector<float> That = DecompressToRowWaveletBasis(t);
   const CompressedRelighter relighter(t);
   for (int channels = 1; channels <= 4; ++channels) {
     std::vector<float> Lhat(M * channels);
     for (float& v : Lhat) v = std::uniform_real_distribution<float>(-1, 1)(rng);
-    std::vector<double> ref(S * channels);
-    for (int ch = 0; ch < channels; ++ch)
-      for (std::size_t s = 0; s < S; ++s) {
-        double a = 0;
-        for (std::size_t j = 0; j < M; ++j)
-          a += static_cast<double>(That[s * M + j]) * Lhat[ch * M + j];
-        ref[ch * S + s] = a;
-      }
+    const std::vector<double> ref = DenseProduct(That, Lhat, S, M, channels);
     std::vector<float> B(S * channels, -7.0f);
     relighter.Relight(Lhat, channels, B);
     EXPECT_LT(RelErr(std::vector<double>(B.begin(), B.end()), ref), 1e-5) << channels;
@@ -332,6 +304,31 @@ TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
     std::vector<float> Bf(S * channels, -7.0f);
     relighter.RelightSparse(few, wf, channels, Bf);
     EXPECT_LT(RelErr(std::vector<double>(Bf.begin(), Bf.end()), ref_few), 1e-5) << channels;
+  }
+}
+
+// Terms piled into the first tile (as the Mallat layout piles the coarse coefficients), one in
+// 64 elsewhere: the frame splits the tiles between its threads by work, so one thread gets the
+// first tile alone and another the rest; every tile must still be zeroed and added exactly
+// once, in every frame (the second frame finds the first one's X in the pooled buffer).
+// Enough terms for the parallel path.
+TEST(CompressedRelighter, TermsPiledIntoOneTileMatchDenseProduct) {
+  std::mt19937 rng(23);
+  const CompressedTransport t =
+      TiledTransport(20000, rng, [&](uint32_t, uint32_t i) { return i < 4096 || rng() % 64 == 0; });
+  const std::size_t S = t.header.sample_count, M = t.header.column_count();
+  ASSERT_GT(S, 5u * 4096u);
+  ASSERT_GT(M * 4096, std::size_t{1} << 15);
+  const std::vector<float> That = DecompressToRowWaveletBasis(t);
+  const CompressedRelighter relighter(t);
+  const int channels = 3;
+  for (int frame = 0; frame < 2; ++frame) {
+    std::vector<float> Lhat(M * channels);
+    for (float& v : Lhat) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+    const std::vector<double> ref = DenseProduct(That, Lhat, S, M, channels);
+    std::vector<float> B(S * channels, -7.0f);
+    relighter.Relight(Lhat, channels, B);
+    EXPECT_LT(RelErr(std::vector<double>(B.begin(), B.end()), ref), 1e-5) << frame;
   }
 }
 
