@@ -5,8 +5,10 @@
 //   (1) TransportSampler::ComputeRows over a set of spatial samples (rays traced per second),
 //   (2) a bare rtcOccluded1 loop (EmbreeScene::CountOccluded) over exactly the rays of (1),
 //       pre-generated into an array by TransportSampler::AppendRowRays,
-// and prints (1)/(2) (goal ≥ 0.8), plus (1) on all threads and (2) on the same rays shuffled
-// (incoherent) and the cost of generating the rays without tracing them
+//   (4) the same rays through EmbreeScene::CountOccludedInPackets (packets of 16, as the sampler
+//       traces them since 27 Nov 2026),
+// and prints (1)/(2) (goal ≥ 0.8) and (1)/(4), plus (1) on all threads and (2) on the same rays
+// shuffled (incoherent) and the cost of generating the rays without tracing them
 // (ComputeUnoccludedTexels), for context. Each time is the best of several passes after a warm-up.
 //
 // Usage: transport_bench [mesh file] [cubemap n] [rays per texel] [samples] [passes]
@@ -147,15 +149,17 @@ int main(int argc, char** argv) {
   std::vector<prt::OcclusionRay> shuffled = rays;
   std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937_64(7));
   const int threads = tbb::this_task_arena::max_concurrency();
-  Timing t_rows, t_raw, t_shuffled, t_rows_mt, t_generate, warm_up;
+  Timing t_rows, t_raw, t_shuffled, t_rows_mt, t_generate, warm_up, t_packets;
   std::vector<uint32_t> all_texels(m);
   for (std::size_t j = 0; j < m; ++j) all_texels[j] = static_cast<uint32_t>(j);
-  std::size_t occluded = 0;
+  std::size_t occluded = 0, occluded_packets = 0;
   for (int p = 0; p <= passes; ++p) {  // pass 0 warms caches, page tables and TBB up
     TimeOnce(p == 0 ? warm_up : t_rows,
              [&] { one.execute([&] { stats = sampler.ComputeRows(samples, 0, rows.data()); }); });
     TimeOnce(p == 0 ? warm_up : t_raw, [&] { occluded = scene.CountOccluded(rays); });
     TimeOnce(p == 0 ? warm_up : t_shuffled, [&] { scene.CountOccluded(shuffled); });
+    TimeOnce(p == 0 ? warm_up : t_packets,
+             [&] { occluded_packets = scene.CountOccludedInPackets(rays); });
     TimeOnce(p == 0 ? warm_up : t_generate, [&] {
       for (std::size_t i = 0; i < samples.size(); ++i) {
         sampler.ComputeUnoccludedTexels(samples[i], i, all_texels, rows.data() + i * m);
@@ -166,6 +170,11 @@ int main(int argc, char** argv) {
     TimeOnce(t_rows_mt, [&] { sampler.ComputeRows(samples, 0, rows.data()); });
   }
 
+  if (occluded_packets != occluded) {
+    std::fprintf(stderr, "transport_bench: packets found %zu occluded rays, rtcOccluded1 %zu\n",
+                 occluded_packets, occluded);
+    return 1;
+  }
   if (stats.rays_traced != rays.size()) {
     std::fprintf(stderr, "transport_bench: ComputeRows traced %llu rays, AppendRowRays gave %zu\n",
                  static_cast<unsigned long long>(stats.rays_traced), rays.size());
@@ -195,6 +204,8 @@ int main(int argc, char** argv) {
   line("(1) ComputeRows, 1 thread, wall clock", t_rows.wall, 1);
   line("(2) bare rtcOccluded1 loop, wall clock", t_raw.wall, 1);
   std::printf("  %-44s %9s %9.3f\n", "(3) ratio (1)/(2), wall clock", "", t_raw.wall / t_rows.wall);
+  line("(4) same rays in packets of 16, CPU", t_packets.cpu, 1);
+  std::printf("  %-44s %9s %9.3f\n", "(5) ratio (1)/(4), CPU time", "", t_packets.cpu / t_rows.cpu);
   line("bare loop, same rays shuffled (incoherent)", t_shuffled.cpu, 1);
   line("ray generation only (no tracing), CPU", t_generate.cpu, 1);
   const std::string mt = "ComputeRows, " + std::to_string(threads) + " threads, wall clock";

@@ -227,6 +227,37 @@ bool EmbreeScene::Occluded(const OcclusionRay& ray) const {
   return OccludedOne(impl_->scene, ray);
 }
 
+void EmbreeScene::OccludedPacket(std::span<const OcclusionRay> rays, bool* blocked) const {
+  if (rays.size() > kPacket) {
+    throw std::invalid_argument("EmbreeScene::OccludedPacket: " + std::to_string(rays.size()) +
+                                " rays, at most " + std::to_string(kPacket));
+  }
+  if (rays.empty()) return;
+  alignas(64) RTCRay16 packet;
+  alignas(64) int valid[kPacket];
+  for (std::size_t i = 0; i < kPacket; ++i) {
+    // Lanes past the rays repeat the first one, masked off.
+    const OcclusionRay& r = rays[i < rays.size() ? i : 0];
+    valid[i] = i < rays.size() ? -1 : 0;
+    packet.org_x[i] = r.origin[0];
+    packet.org_y[i] = r.origin[1];
+    packet.org_z[i] = r.origin[2];
+    packet.tnear[i] = r.tnear;
+    packet.dir_x[i] = r.direction[0];
+    packet.dir_y[i] = r.direction[1];
+    packet.dir_z[i] = r.direction[2];
+    packet.time[i] = 0.0f;
+    packet.tfar[i] = r.tfar;
+    packet.mask[i] = std::numeric_limits<unsigned>::max();
+    packet.id[i] = static_cast<unsigned>(i);
+    packet.flags[i] = 0;
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  rtcOccluded16(valid, impl_->scene, &context, &packet);
+  for (std::size_t i = 0; i < rays.size(); ++i) blocked[i] = packet.tfar[i] < 0.0f;
+}
+
 bool EmbreeScene::Intersect(const OcclusionRay& r, RayHit& hit) const {
   const ScopedFlushDenormals ftz;
   RTCIntersectContext context;
@@ -262,6 +293,18 @@ std::size_t EmbreeScene::CountOccluded(std::span<const OcclusionRay> rays) const
   const ScopedFlushDenormals ftz;
   std::size_t hits = 0;
   for (const OcclusionRay& r : rays) hits += OccludedOne(impl_->scene, r) ? 1 : 0;
+  return hits;
+}
+
+std::size_t EmbreeScene::CountOccludedInPackets(std::span<const OcclusionRay> rays) const {
+  const ScopedFlushDenormals ftz;
+  std::size_t hits = 0;
+  bool blocked[kPacket];
+  for (std::size_t i = 0; i < rays.size(); i += kPacket) {
+    const std::size_t count = std::min(kPacket, rays.size() - i);
+    OccludedPacket(rays.subspan(i, count), blocked);
+    for (std::size_t j = 0; j < count; ++j) hits += blocked[j] ? 1 : 0;
+  }
   return hits;
 }
 

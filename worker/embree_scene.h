@@ -68,12 +68,21 @@ class EmbreeScene {
 
   // True when the ray hits any triangle with t in (tnear, tfar). Thread-safe.
   bool Occluded(const OcclusionRay& ray) const;
+  // Occluded() for each of up to kPacket rays at once (blocked[i] for rays[i]), traced as one
+  // Embree packet: rays from one point in neighbouring directions share most of their traversal
+  // (2.3× the throughput of one rtcOccluded1 call per ray on the demo's rays,
+  // bench/transport_bench.cpp). Throws std::invalid_argument on more than kPacket rays.
+  // Thread-safe; the caller sets flush-to-zero (ScopedFlushDenormals) as for Occluded().
+  static constexpr std::size_t kPacket = 16;
+  void OccludedPacket(std::span<const OcclusionRay> rays, bool* blocked) const;
   // Closest hit with t in (tnear, tfar), for primary rays (e.g. camera-pixel samples); false
   // when the ray hits nothing. Thread-safe.
   bool Intersect(const OcclusionRay& ray, RayHit& hit) const;
   // A bare rtcOccluded1 loop over the rays (the raw-throughput reference of
   // bench/transport_bench.cpp); returns how many are occluded.
   std::size_t CountOccluded(std::span<const OcclusionRay> rays) const;
+  // The same rays kPacket at a time through OccludedPacket (bench/transport_bench.cpp).
+  std::size_t CountOccludedInPackets(std::span<const OcclusionRay> rays) const;
 
  private:
   struct Impl;
