@@ -2,9 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <limits>
+#include <random>
+#include <span>
+#include <stdexcept>
 #include <vector>
 
 #include "vocabulary/errors.h"
@@ -59,6 +63,47 @@ TEST(EmbreeScene, OccludedHitsAndMissesBothSidesAndRespectsTfar) {
                                           Ray({0.5, 0, 0.5}, {0, -1, 0}),
                                           Ray({0.2, 0, 0.7}, {0.1, 1, 0.1})};
   EXPECT_EQ(scene.CountOccluded(rays), 2u);
+}
+
+// Packets give each ray Occluded()'s answer, whatever the packet's size (1…16), its lanes'
+// origins and limits (rays from different points, tfar before and after the square, rays
+// grazing its edges), and refuse more than 16 rays; the counting loop agrees with CountOccluded.
+TEST(EmbreeScene, OccludedPacketAgreesWithOccludedRayByRay) {
+  SceneGeometry g;
+  g.meshes = {Square(1.0), Square(2.5, "upper")};
+  const EmbreeScene scene(g);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.5, 1.5);
+  std::vector<OcclusionRay> rays;
+  for (int i = 0; i < 997; ++i) {
+    const Vec3 o{u(rng), u(rng) - 0.5, u(rng)};
+    const Vec3 d{u(rng) - 0.5, u(rng), u(rng) - 0.5};
+    if (Length(d) == 0) continue;
+    rays.push_back(Ray(o, d, i % 3 == 0 ? static_cast<float>(0.2 + u(rng)) : kInf));
+  }
+  rays.push_back(Ray({1.0, 0, 0.5}, {0, 1, 0}));  // along an edge
+  rays.push_back(Ray({0.0, 0, 0.0}, {0, 1, 0}));  // through a corner
+  const ScopedFlushDenormals ftz;
+  std::size_t checked = 0, occluded = 0;
+  for (std::size_t i = 0, size = 1; i < rays.size(); i += size, size = size % 16 + 1) {
+    const std::size_t count = std::min(size, rays.size() - i);
+    bool blocked[EmbreeScene::kPacket];
+    std::fill_n(blocked, EmbreeScene::kPacket, false);
+    scene.OccludedPacket(std::span<const OcclusionRay>(rays).subspan(i, count), blocked);
+    for (std::size_t j = 0; j < count; ++j) {
+      EXPECT_EQ(blocked[j], scene.Occluded(rays[i + j])) << i + j;
+      occluded += blocked[j] ? 1 : 0;
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, rays.size());
+  EXPECT_GT(occluded, rays.size() / 10);  // both answers occur
+  EXPECT_LT(occluded, rays.size() * 9 / 10);
+  EXPECT_EQ(scene.CountOccludedInPackets(rays), scene.CountOccluded(rays));
+  scene.OccludedPacket({}, nullptr);  // nothing to do
+  bool blocked[17];
+  EXPECT_THROW(scene.OccludedPacket(std::span<const OcclusionRay>(rays).first(17), blocked),
+               std::invalid_argument);
 }
 
 TEST(EmbreeScene, IntersectReportsTheClosestHit) {
