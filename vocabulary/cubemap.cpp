@@ -8,7 +8,9 @@ namespace prt {
 
 namespace {
 // Antiderivative of the solid angle over the face plane z = 1: ∫∫ (1+u²+v²)^(−3/2) du dv.
-double SolidAngleCorner(double u, double v) { return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0)); }
+double SolidAngleCorner(double u, double v) {
+  return std::atan2(u * v, std::sqrt(u * u + v * v + 1.0));
+}
 }  // namespace
 
 double FaceRectSolidAngle(double u0, double u1, double v0, double v1) {
@@ -54,7 +56,9 @@ CubemapLayout::CubemapLayout(int n) : n_(n) {
   }
 }
 
-const std::vector<Vec3>& CubemapLayout::TexelVectorIrradiance() const { return vector_irradiance_; }
+const std::vector<Vec3>& CubemapLayout::TexelVectorIrradiance() const {
+  return vector_irradiance_;
+}
 
 std::size_t CubemapLayout::AboveHorizonMask(const Vec3& nrm, uint8_t* mask,
                                             uint8_t* fully_above) const {
@@ -93,17 +97,6 @@ TexelCoord CubemapLayout::Coord(std::size_t index) const {
   return c;
 }
 
-Vec3 CubemapLayout::FacePoint(int face, double u, double v) {
-  switch (face) {
-    case 0: return {1, u, v};
-    case 1: return {-1, u, v};
-    case 2: return {u, 1, v};
-    case 3: return {u, -1, v};
-    case 4: return {u, v, 1};
-    default: return {u, v, -1};
-  }
-}
-
 Vec3 CubemapLayout::FaceDirection(int face, double u, double v) {
   return Normalize(FacePoint(face, u, v));
 }
@@ -136,7 +129,9 @@ Vec3 CubemapLayout::TexelDirection(std::size_t index, double s, double t) const 
   return FaceDirection(c.face, -1 + h * (c.x + s), -1 + h * (c.y + t));
 }
 
-Vec3 CubemapLayout::TexelCenter(std::size_t index) const { return TexelDirection(index, 0.5, 0.5); }
+Vec3 CubemapLayout::TexelCenter(std::size_t index) const {
+  return TexelDirection(index, 0.5, 0.5);
+}
 
 std::size_t CubemapLayout::TexelOf(const Vec3& d) const {
   int face;

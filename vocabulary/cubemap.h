@@ -3,7 +3,8 @@
 // faces +X −X +Y −Y +Z −Z, +Y up. A texel is a small square area of its face (not a point):
 // texel (face, x, y) covers face coordinates u ∈ [−1 + 2x/n, −1 + 2(x+1)/n] and likewise v with y,
 // and its direction is, as in Imf::CubeMap::direction,
-//   +X: ( 1, u, v)   −X: (−1, u, v)   +Y: (u,  1, v)   −Y: (u, −1, v)   +Z: (u, v,  1)   −Z: (u, v, −1)
+//   +X: ( 1, u, v)   −X: (−1, u, v)   +Y: (u,  1, v)   −Y: (u, −1, v)   +Z: (u, v,  1)   −Z: (u, v,
+//   −1)
 // Texel index = face·n² + y·n + x. See docs/conventions.md.
 #pragma once
 
@@ -40,7 +41,23 @@ class CubemapLayout {
   // Unit direction through face coordinates (u, v) ∈ [−1, 1]² of a face.
   static Vec3 FaceDirection(int face, double u, double v);
   // Unnormalised point on the unit cube for (face, u, v).
-  static Vec3 FacePoint(int face, double u, double v);
+  // Defined here so that per-ray loops (the transport sampler's directions) inline it.
+  static Vec3 FacePoint(int face, double u, double v) {
+    switch (face) {
+      case 0:
+        return {1, u, v};
+      case 1:
+        return {-1, u, v};
+      case 2:
+        return {u, 1, v};
+      case 3:
+        return {u, -1, v};
+      case 4:
+        return {u, v, 1};
+      default:
+        return {u, v, -1};
+    }
+  }
   // Face and face coordinates (u, v) ∈ [−1, 1]² hit by a direction (need not be normalised).
   static void DirectionToFace(const Vec3& d, int& face, double& u, double& v);
 
@@ -64,7 +81,8 @@ class CubemapLayout {
   // (n+1)² corner dot products; writes texel_count() bytes and returns how many are above.
   // fully_above (optional, texel_count() bytes) marks texels whose four corners are all
   // strictly above, i.e. entirely in the upper hemisphere.
-  std::size_t AboveHorizonMask(const Vec3& nrm, uint8_t* mask, uint8_t* fully_above = nullptr) const;
+  std::size_t AboveHorizonMask(const Vec3& nrm, uint8_t* mask,
+                               uint8_t* fully_above = nullptr) const;
 
   // Vector irradiance of each texel: Φ_j = ∫_texel ω dω (Arvo 1995: for a spherical polygon
   // with vertices v_i, Φ = ½ Σ_i θ_i · normalize(v_i × v_{i+1}), θ_i the arc length of edge i).
@@ -73,7 +91,7 @@ class CubemapLayout {
 
  private:
   int n_;
-  std::vector<double> solid_angle_;  // one face; every face has the same texel solid angles
+  std::vector<double> solid_angle_;      // one face; every face has the same texel solid angles
   std::vector<Vec3> vector_irradiance_;  // all faces
 };
 

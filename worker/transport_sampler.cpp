@@ -198,36 +198,52 @@ struct TransportSampler::Impl {
     if (b.opened == Batch::kRays + 1) Flush(b, trace);
     int slot = b.opened++;
     b.open[slot] = Batch::Open{0, 0, value, unoccluded, false};
+    // Directions are computed a chunk of strata at a time before any joins the batch: the
+    // chunk's computations (a square root and a division each) are independent, so they overlap
+    // instead of each waiting on the bookkeeping of the one before. Each ray's arithmetic and the
+    // order of the sums do not depend on the chunking.
+    constexpr int kChunk = 16;
+    float dir[kChunk][3];
+    double cosine[kChunk];
     int su = 0, sv = 0;
-    for (int s = 0; s < k; ++s) {
-      // Jitter = pure function of (seed, sample index, texel, stratum); open interval (0, 1).
-      const uint64_t bits = SplitMix64(f.key ^ (base + static_cast<uint64_t>(s)));
-      const double ju = (static_cast<double>(bits >> 32) + 0.5) * 0x1p-32;
-      const double jv = (static_cast<double>(bits & 0xFFFFFFFFull) + 0.5) * 0x1p-32;
-      const double u = u0 + (su + ju) * du;
-      const double v = v0 + (sv + jv) * dv;
-      if (++su == strata_u) {  // stratum s = sv·strata_u + su
-        su = 0;
-        ++sv;
+    for (int s0 = 0; s0 < k; s0 += kChunk) {
+      const int count = std::min(kChunk, k - s0);
+      for (int i = 0; i < count; ++i) {
+        // Jitter = pure function of (seed, sample index, texel, stratum); open interval (0, 1).
+        const uint64_t bits = SplitMix64(f.key ^ (base + static_cast<uint64_t>(s0 + i)));
+        const double ju = (static_cast<double>(bits >> 32) + 0.5) * 0x1p-32;
+        const double jv = (static_cast<double>(bits & 0xFFFFFFFFull) + 0.5) * 0x1p-32;
+        const double u = u0 + (su + ju) * du;
+        const double v = v0 + (sv + jv) * dv;
+        const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
+        const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
+        cosine[i] = Dot(f.normal, d);
+        dir[i][0] = static_cast<float>(d.x);
+        dir[i][1] = static_cast<float>(d.y);
+        dir[i][2] = static_cast<float>(d.z);
+        if (++su == strata_u) {  // stratum s = sv·strata_u + su
+          su = 0;
+          ++sv;
+        }
       }
-      const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
-      const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
-      const double c = Dot(f.normal, d);
-      if (!(c > 0)) {  // below the horizon inside a partly visible texel: 0, not traced
-        ++stats.rays_below_horizon;
-        continue;
-      }
-      ++stats.rays_traced;
-      OcclusionRay& ray = b.rays[b.count];
-      ray = f.ray;
-      ray.direction[0] = static_cast<float>(d.x);
-      ray.direction[1] = static_cast<float>(d.y);
-      ray.direction[2] = static_cast<float>(d.z);
-      b.weight[b.count] = omega[s] * c;
-      b.slot[b.count] = slot;
-      if (++b.count == Batch::kRays) {
-        Flush(b, trace);
-        slot = b.opened - 1;  // this texel, the one left open, moved to the front
+      for (int i = 0; i < count; ++i) {
+        const double c = cosine[i];
+        if (!(c > 0)) {  // below the horizon inside a partly visible texel: 0, not traced
+          ++stats.rays_below_horizon;
+          continue;
+        }
+        ++stats.rays_traced;
+        OcclusionRay& ray = b.rays[b.count];
+        ray = f.ray;
+        ray.direction[0] = dir[i][0];
+        ray.direction[1] = dir[i][1];
+        ray.direction[2] = dir[i][2];
+        b.weight[b.count] = omega[s0 + i] * c;
+        b.slot[b.count] = slot;
+        if (++b.count == Batch::kRays) {
+          Flush(b, trace);
+          slot = b.opened - 1;  // this texel, the one left open, moved to the front
+        }
       }
     }
     b.open[slot].complete = true;
