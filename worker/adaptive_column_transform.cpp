@@ -90,12 +90,12 @@ ApproximationEnergy MeasureApproximation(const float* c, std::size_t n, std::siz
   };
   using U4 = uint32_t __attribute__((vector_size(16)));
   const U4 abs_mask = {0x7FFFFFFFu, 0x7FFFFFFFu, 0x7FFFFFFFu, 0x7FFFFFFFu};
-  const U4 below = {threshold, threshold, threshold, threshold};
+  const U4 threshold4 = {threshold, threshold, threshold, threshold};
   std::size_t i = 0;
   for (; i + 4 <= n; i += 4) {
     U4 bits;
     std::memcpy(&bits, c + i, sizeof bits);
-    const U4 at_or_above = ((bits & abs_mask) >> kShift) >= below;  // lanes: all ones or zero
+    const U4 at_or_above = ((bits & abs_mask) >> kShift) >= threshold4;  // lanes: all ones or 0
     uint64_t any[2];
     std::memcpy(any, &at_or_above, sizeof any);
     if ((any[0] | any[1]) == 0) continue;
