@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|relight|glossy|sweep|stress] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|viewer|relight|glossy|sweep|stress] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -53,6 +53,18 @@ run_relight() {
   "$BUILD_DIR/bench/relight_microbench" --benchmark_repetitions=5 \
     --benchmark_report_aggregates_only=true "$pack"
 }
+# Google Benchmark of the farm's per-column compression kernels on real columns: the raw T of a
+# demo-scene farm run kept with --keep-raw (made once in $OUT/compress-run; PRT_RAW_TRANSPORT
+# names another transport.prtt).
+run_compress() {
+  local raw="${PRT_RAW_TRANSPORT:-$OUT/compress-run/transport.prtt}"
+  if [ ! -f "$raw" ]; then
+    mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$OUT/compress-run" --force \
+      --keep-raw -q
+  fi
+  "$BUILD_DIR/bench/compress_microbench" --benchmark_repetitions=5 \
+    --benchmark_report_aggregates_only=true "$raw"
+}
 run_viewer() { [ -x "$BUILD_DIR/bench/viewer_bench" ] && "$BUILD_DIR/bench/viewer_bench" || echo "viewer_bench not built"; }
 run_sweep() {
   local np="${PRT_BENCH_NP:-1}" launch=()
@@ -69,7 +81,7 @@ run_stress() {
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
-  all) run_transport; run_scaling; run_sparse; run_compression; run_viewer; run_relight; run_glossy ;;
-  transport|scaling|sparse|compression|viewer|relight|glossy|sweep|stress) "run_$WHAT" ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|viewer|relight|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
+  all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_viewer; run_relight; run_glossy ;;
+  transport|scaling|sparse|compression|compress|viewer|relight|glossy|sweep|stress) "run_$WHAT" ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|viewer|relight|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
 esac
