@@ -15,7 +15,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -24,6 +23,7 @@
 
 #include "bench/bench_scenes.h"
 #include "vocabulary/image_io.h"
+#include "vocabulary/transport_file.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
@@ -305,15 +305,10 @@ int main(int argc, char** argv) {
           (trace_cpu / static_cast<double>(std::max<uint64_t>(1, traced))) /
               (brute_cpu / static_cast<double>(std::max<uint64_t>(1, bst.texels_traced))),
           (cpu - trace_cpu) / brute_cpu);
-      {  // A fingerprint of the rows: optimisations that must not change them compare it.
-        uint64_t h = 1469598103934665603ull;  // FNV-1a over the float bits
-        for (const float x : rows) {
-          uint32_t bits;
-          std::memcpy(&bits, &x, sizeof bits);
-          h = (h ^ bits) * 1099511628211ull;
-        }
-        std::printf("    rows fingerprint %016llx\n", static_cast<unsigned long long>(h));
-      }
+      // A fingerprint of the rows (the transport file's block checksum): optimisations that
+      // must not change them compare it.
+      std::printf("    rows fingerprint %016llx\n", static_cast<unsigned long long>(Checksum64(
+                                                        rows.data(), rows.size() * sizeof(float))));
       md << "| " << v.name << " | " << v.plan.radius << " | " << sec << " | " << cpu / brute_cpu
          << " | " << 100 * dense_spatial << "% | " << 100 * dense_ang << "% | " << 100 * sparse_ang
          << "% | " << 100 * rep.SampledFraction() << "% | " << rep.dense_fallback << " |";
