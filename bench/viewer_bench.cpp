@@ -42,6 +42,8 @@
 #include "viewer/per_band_incremental.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/compressed_relight.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/transport_file.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_compressor.h"
@@ -123,6 +125,26 @@ Traced TraceDefaultScene(int n, int rays) {
   return t;
 }
 
+// The default scene's rows as a farm run wrote them (`prt-farm --keep-raw`: RUN/transport.prtt),
+// so that table 2 measures the transport prtfarm actually ships (its sampling method and rays per
+// texel) instead of the in-process trace.
+Traced ReadDefaultSceneRaw(const std::string& path) {
+  Traced t;
+  const prt::TransportFileReader reader(path);
+  const prt::TransportFileInfo& info = reader.info();
+  t.scene = prt::bench::BenchScene("default", static_cast<int>(info.cubemap_n));
+  t.geometry = prt::BuildSceneGeometry(t.scene);
+  if (info.rows != t.geometry.vertex_count())
+    throw prt::InputError(path, "holds " + std::to_string(info.rows) +
+                                    " rows, the default scene has " +
+                                    std::to_string(t.geometry.vertex_count()) + " samples");
+  t.rows.resize(info.rows * info.cols());
+  const auto t0 = Clock::now();
+  reader.ReadRows(0, info.rows, t.rows.data());
+  t.trace_s = Seconds(t0);
+  return t;
+}
+
 std::string CameraJson(const prt::Camera& c) {
   char buf[512];
   std::snprintf(
@@ -185,7 +207,11 @@ int main(int argc, char** argv) {
   std::string pack_path, out_dir = "viewer_bench_out";
   int n = 16, rays = 1, frames = 120, hold = 60;
   double deg = 0.5, pack_keep = 0.0;
-  std::string pack_scheme;
+  std::string pack_scheme, raw_path;
+  std::vector<double> sweep_2d, sweep_4d;
+  // Overrides of the scene's [compression] settings, for the pack and for table 2's sweep (both
+  // schemes alike), so that each can be measured against the Figure 9 comparison.
+  prt::CompressionSettings overrides;
   bool quick = false;
   CLI::App app{"viewer_bench: relighting speed, 2D against 4D, PBI against NWA"};
   app.add_option("pack", pack_path, "a .prtpack (default: trace the default scene in-process)");
@@ -196,6 +222,22 @@ int main(int argc, char** argv) {
   app.add_option("--scheme", pack_scheme,
                  "compression scheme of the in-process pack, 2d | 4d | adaptive4d (default: the "
                  "scene's)");
+  app.add_option("--raw", raw_path,
+                 "the default scene's raw transport from a farm run (prt-farm --keep-raw: "
+                 "RUN/transport.prtt) instead of the in-process trace");
+  app.add_option("--sweep-2d", sweep_2d, "table 2's kept fractions for 2D (comma-separated)")
+      ->delimiter(',');
+  app.add_option("--sweep-4d", sweep_4d,
+                 "table 2's kept fractions for adaptive 4D (comma-separated)")
+      ->delimiter(',');
+  app.add_option("--bits", overrides.bits, "quantisation bits (default: the scene's)");
+  app.add_option("--column-wavelet", overrides.column_wavelet,
+                 "column wavelet, legall53 | cdf97 (default: the scene's)");
+  app.add_option("--budget", overrides.budget, "global | column (default: the scene's)");
+  app.add_option("--light-weight", overrides.light_weight,
+                 "global budget's row-level weight (default: the scene's)");
+  app.add_option("--order-normal-weight", overrides.order_normal_weight,
+                 "mesh column order's normal weight (default: the scene's)");
   app.add_option("--deg", deg, "rotation per frame, degrees");
   app.add_option("--frames", frames, "rotating frames");
   app.add_option("--hold", hold, "still frames");
@@ -210,15 +252,29 @@ int main(int argc, char** argv) {
   Traced traced;
   const bool own_pack = pack_path.empty();
   if (own_pack) {
-    traced = TraceDefaultScene(n, rays);
-    std::printf("default scene traced in-process: %zu samples, n = %d, %d ray(s)/texel, %.1f s\n",
-                traced.geometry.vertex_count(), n, rays, traced.trace_s);
+    traced = raw_path.empty() ? TraceDefaultScene(n, rays) : ReadDefaultSceneRaw(raw_path);
+    if (!raw_path.empty()) n = traced.scene.cubemap_n;
+    {
+      prt::CompressionSettings& s = traced.scene.compression;
+      if (app.count("--bits")) s.bits = overrides.bits;
+      if (app.count("--column-wavelet")) s.column_wavelet = overrides.column_wavelet;
+      if (app.count("--budget")) s.budget = overrides.budget;
+      if (app.count("--light-weight")) s.light_weight = overrides.light_weight;
+      if (app.count("--order-normal-weight")) s.order_normal_weight = overrides.order_normal_weight;
+    }
+    if (raw_path.empty())
+      std::printf("default scene traced in-process: %zu samples, n = %d, %d ray(s)/texel, %.1f s\n",
+                  traced.geometry.vertex_count(), n, rays, traced.trace_s);
+    else
+      std::printf("default scene's rows read from %s: %zu samples, n = %d, %.1f s\n",
+                  raw_path.c_str(), traced.geometry.vertex_count(), n, traced.trace_s);
     prt::CompressionOptions o = prt::CompressionOptionsFrom(traced.scene.compression, "default");
     if (pack_keep > 0) o.keep_fraction = pack_keep;
     if (!pack_scheme.empty()) o.scheme = prt::ParseCompressionScheme(pack_scheme, "--scheme");
     const auto t0 = Clock::now();
-    const prt::CompressedTransport ct =
-        prt::CompressTransport(traced.rows.data(), n, prt::SpatialDomainOf(traced.geometry), o);
+    const prt::CompressedTransport ct = prt::CompressTransport(
+        traced.rows.data(), n,
+        prt::SpatialDomainOf(traced.geometry, traced.scene.compression.order_normal_weight), o);
     pack_path = (fs::path(out_dir) / "default_scene.prtpack").string();
     WritePackOf(traced, ct, pack_path);
     std::printf("compressed (%s, keep %.3g, %d bits) and packed in %.1f s: %s\n",
@@ -317,12 +373,14 @@ int main(int argc, char** argv) {
     };
     // curves[scheme][N index]
     std::map<std::string, std::vector<std::vector<Point>>> curves;
-    const std::vector<double> keeps = quick ? std::vector<double>{0.003, 0.01, 0.05}
-                                            : std::vector<double>{0.003, 0.01, 0.03, 0.1};
+    std::vector<double> keeps = quick ? std::vector<double>{0.003, 0.01, 0.05}
+                                      : std::vector<double>{0.003, 0.01, 0.03, 0.1};
     // 2D one keep further, so that its errors bracket 4D's at keep 0.03 (2D needs more terms
     // for the same error) and the table has a row at that lower error too.
-    const std::vector<double> keeps_2d =
+    std::vector<double> keeps_2d =
         quick ? keeps : std::vector<double>{0.003, 0.01, 0.03, 0.1, 0.25};
+    if (!sweep_4d.empty()) keeps = sweep_4d;
+    if (!sweep_2d.empty()) keeps_2d = sweep_2d;
     // Every compression first (errors in the pack's order: refs, albedo), then the timings in
     // interleaved rounds, each configuration a few repetitions per round and its fastest over
     // all rounds kept: a machine whose speed drifts over the minutes of the sweep slows 2D and
@@ -347,7 +405,9 @@ int main(int argc, char** argv) {
         o.keep_fraction = keep;
         Config c{scheme, keep, nullptr, nullptr, nullptr, {}, {}};
         c.ct = std::make_unique<prt::CompressedTransport>(prt::CompressTransport(
-            traced.rows.data(), n, prt::SpatialDomainOf(traced.geometry), o));
+            traced.rows.data(), n,
+            prt::SpatialDomainOf(traced.geometry, traced.scene.compression.order_normal_weight),
+            o));
         c.relighter = std::make_unique<prt::CompressedRelighter>(*c.ct);
         c.fast = std::make_unique<prt::CompressedTransportOperator>(
             *c.relighter, prt::SampleOrder::kCoefficients);
