@@ -207,7 +207,7 @@ int main(int argc, char** argv) {
   std::string pack_path, out_dir = "viewer_bench_out";
   int n = 16, rays = 1, frames = 120, hold = 60;
   double deg = 0.5, pack_keep = 0.0;
-  std::string pack_scheme, raw_path;
+  std::string pack_scheme, raw_path, truth_path;
   std::vector<double> sweep_2d, sweep_4d;
   // Overrides of the scene's [compression] settings, for the pack and for table 2's sweep (both
   // schemes alike), so that each can be measured against the Figure 9 comparison.
@@ -225,6 +225,9 @@ int main(int argc, char** argv) {
   app.add_option("--raw", raw_path,
                  "the default scene's raw transport from a farm run (prt-farm --keep-raw: "
                  "RUN/transport.prtt) instead of the in-process trace");
+  app.add_option("--truth", truth_path,
+                 "an independent estimate of the same T (e.g. prt-farm --method brute with many "
+                 "rays per texel, --keep-raw): table 2 then also gives every error against it");
   app.add_option("--sweep-2d", sweep_2d, "table 2's kept fractions for 2D (comma-separated)")
       ->delimiter(',');
   app.add_option("--sweep-4d", sweep_4d,
@@ -353,26 +356,42 @@ int main(int argc, char** argv) {
     // The errors are computed in the pack's order (the traced rows'), with its albedo.
     std::vector<prt::Rgb> albedo(ns);
     for (std::size_t p = 0; p < ns; ++p) albedo[session->pack_sample()[p]] = session->albedo()[p];
-    for (std::size_t terms : term_counts) {
-      lights.push_back(prt::NonlinearLightingApproximation(sunrise, basis, terms));
-      const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, lights.back());
+    // Relit samples of uncompressed rows (texel basis) under lighting q, in the pack's order.
+    const auto relit = [&](const float* rows, std::size_t q) {
+      const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, lights[q]);
       std::vector<float> ref(3 * ns);
       const std::size_t texels = approx_cube.TexelCount();
       for (std::size_t s = 0; s < ns; ++s)
         for (int c = 0; c < 3; ++c) {
           double acc = 0;
-          const float* row = traced.rows.data() + s * texels;
+          const float* row = rows + s * texels;
           for (std::size_t j = 0; j < texels; ++j)
             acc += double(row[j]) * approx_cube.Channel(c)[j];
           ref[3 * s + c] = static_cast<float>(acc * albedo[s][static_cast<std::size_t>(c)]);
         }
-      refs.push_back(std::move(ref));
+      return ref;
+    };
+    for (std::size_t terms : term_counts) {
+      lights.push_back(prt::NonlinearLightingApproximation(sunrise, basis, terms));
+      refs.push_back(relit(traced.rows.data(), lights.size() - 1));
+    }
+    // The same lighting through an independent estimate of T: how far each relit image is from
+    // the truth, the uncompressed T's own estimation error included.
+    std::vector<std::vector<float>> truths;
+    if (!truth_path.empty()) {
+      const Traced truth = ReadDefaultSceneRaw(truth_path);
+      if (truth.scene.cubemap_n != n)
+        throw prt::InputError(truth_path, "has n = " + std::to_string(truth.scene.cubemap_n) +
+                                              ", the transport compared has " + std::to_string(n));
+      for (std::size_t q = 0; q < term_counts.size(); ++q) {
+        truths.push_back(relit(truth.rows.data(), q));
+        std::printf("N = %zu: the uncompressed T against %s: image error %.4g\n", term_counts[q],
+                    truth_path.c_str(), prt::RelativeRmsError(refs[q], truths[q]));
+      }
     }
     struct Point {
       double error, ms;
     };
-    // curves[scheme][N index]
-    std::map<std::string, std::vector<std::vector<Point>>> curves;
     std::vector<double> keeps = quick ? std::vector<double>{0.003, 0.01, 0.05}
                                       : std::vector<double>{0.003, 0.01, 0.03, 0.1};
     // 2D one keep further, so that its errors bracket 4D's at keep 0.03 (2D needs more terms
@@ -392,8 +411,9 @@ int main(int argc, char** argv) {
       std::unique_ptr<prt::CompressedTransport> ct;
       std::unique_ptr<prt::CompressedRelighter> relighter;
       std::unique_ptr<prt::CompressedTransportOperator> fast;
-      std::vector<double> error;  // per N
-      std::vector<Timing> best;   // per N
+      std::vector<double> error;        // per N, against the uncompressed T
+      std::vector<double> error_truth;  // per N, against --truth
+      std::vector<Timing> best;         // per N
     };
     std::vector<Config> configs;
     for (prt::CompressionScheme scheme :
@@ -403,7 +423,7 @@ int main(int argc, char** argv) {
             prt::CompressionOptionsFrom(traced.scene.compression, "default");
         o.scheme = scheme;
         o.keep_fraction = keep;
-        Config c{scheme, keep, nullptr, nullptr, nullptr, {}, {}};
+        Config c{scheme, keep, nullptr, nullptr, nullptr, {}, {}, {}};
         c.ct = std::make_unique<prt::CompressedTransport>(prt::CompressTransport(
             traced.rows.data(), n,
             prt::SpatialDomainOf(traced.geometry, traced.scene.compression.order_normal_weight),
@@ -415,6 +435,7 @@ int main(int argc, char** argv) {
         for (std::size_t q = 0; q < term_counts.size(); ++q) {
           const std::vector<float> rgb = prt::ShadeSamples(op.Apply(lights[q]), albedo);
           c.error.push_back(prt::RelativeRmsError(rgb, refs[q]));
+          if (!truths.empty()) c.error_truth.push_back(prt::RelativeRmsError(rgb, truths[q]));
         }
         c.best.assign(term_counts.size(), Timing{1e300, 1e300});
         configs.push_back(std::move(c));
@@ -431,36 +452,47 @@ int main(int argc, char** argv) {
         }
       }
     }
+    const bool with_truth = !truths.empty();
     std::printf(
-        "| scheme | keep | stored terms | N | image error | relight ms | relight CPU ms |\n"
-        "|---|---|---|---|---|---|---|\n");
+        "| scheme | keep | stored terms | N | image error |%s relight ms | relight CPU ms |\n"
+        "|---|---|---|---|---|%s---|---|\n",
+        with_truth ? " error vs truth |" : "", with_truth ? "---|" : "");
+    // curves[reference][scheme][N index]: reference 0 the uncompressed T, 1 the truth.
+    std::map<std::string, std::vector<std::vector<Point>>> curves[2];
     for (const Config& c : configs) {
-      auto& curve = curves[prt::ToString(c.scheme)];
-      curve.resize(term_counts.size());
+      for (auto& by_scheme : curves) by_scheme[prt::ToString(c.scheme)].resize(term_counts.size());
       for (std::size_t q = 0; q < term_counts.size(); ++q) {
         const Timing& t = c.best[q];
-        curve[q].push_back({c.error[q], 1e3 * std::min(t.wall, t.cpu)});
-        std::printf("| %s | %.3g | %zu | %zu | %.4g | %.3f | %.3f |\n", prt::ToString(c.scheme),
-                    c.keep, c.ct->term_count(), term_counts[q], c.error[q], 1e3 * t.wall,
-                    1e3 * t.cpu);
+        const double ms = 1e3 * std::min(t.wall, t.cpu);
+        curves[0][prt::ToString(c.scheme)][q].push_back({c.error[q], ms});
+        if (with_truth) curves[1][prt::ToString(c.scheme)][q].push_back({c.error_truth[q], ms});
+        char truth_cell[32] = "";
+        if (with_truth) std::snprintf(truth_cell, sizeof truth_cell, " %.4g |", c.error_truth[q]);
+        std::printf("| %s | %.3g | %zu | %zu | %.4g |%s %.3f | %.3f |\n", prt::ToString(c.scheme),
+                    c.keep, c.ct->term_count(), term_counts[q], c.error[q], truth_cell,
+                    1e3 * t.wall, 1e3 * t.cpu);
       }
     }
     // Equal error: 2D's time interpolated (log-log) at each adaptive-4D point's error.
-    std::printf(
-        "\n| N | image error | adaptive 4D ms | 2D ms (interpolated) | 2D / 4D time |\n"
-        "|---|---|---|---|---|\n");
-    for (std::size_t q = 0; q < term_counts.size(); ++q) {
-      std::vector<Point> c2 = curves["2d"][q];
-      std::sort(c2.begin(), c2.end(),
-                [](const Point& a, const Point& b) { return a.error < b.error; });
-      for (const Point& p : curves["adaptive4d"][q]) {
-        for (std::size_t k = 0; k + 1 < c2.size(); ++k) {
-          if (p.error >= c2[k].error && p.error <= c2[k + 1].error && c2[k].error > 0) {
-            const double u =
-                std::log(p.error / c2[k].error) / std::log(c2[k + 1].error / c2[k].error);
-            const double ms2 = std::exp(std::log(c2[k].ms) + u * std::log(c2[k + 1].ms / c2[k].ms));
-            std::printf("| %zu | %.4g | %.3f | %.3f | %.2f |\n", term_counts[q], p.error, p.ms, ms2,
-                        ms2 / p.ms);
+    for (int r = 0; r < (with_truth ? 2 : 1); ++r) {
+      std::printf(
+          "\n| N | image error%s | adaptive 4D ms | 2D ms (interpolated) | 2D / 4D time |\n"
+          "|---|---|---|---|---|\n",
+          r == 0 ? "" : " vs truth");
+      for (std::size_t q = 0; q < term_counts.size(); ++q) {
+        std::vector<Point> c2 = curves[r]["2d"][q];
+        std::sort(c2.begin(), c2.end(),
+                  [](const Point& a, const Point& b) { return a.error < b.error; });
+        for (const Point& p : curves[r]["adaptive4d"][q]) {
+          for (std::size_t k = 0; k + 1 < c2.size(); ++k) {
+            if (p.error >= c2[k].error && p.error <= c2[k + 1].error && c2[k].error > 0) {
+              const double u =
+                  std::log(p.error / c2[k].error) / std::log(c2[k + 1].error / c2[k].error);
+              const double ms2 =
+                  std::exp(std::log(c2[k].ms) + u * std::log(c2[k + 1].ms / c2[k].ms));
+              std::printf("| %zu | %.4g | %.3f | %.3f | %.2f |\n", term_counts[q], p.error, p.ms,
+                          ms2, ms2 / p.ms);
+            }
           }
         }
       }

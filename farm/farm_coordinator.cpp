@@ -413,7 +413,8 @@ class SetupPhase : public FarmPhase {
 
     ctx.params.rows = rows;
     ctx.params.geometry_bytes = geometry_bytes.size();
-    ctx.params.seed = scene.sampling.seed;
+    const uint64_t seed = o.seed ? *o.seed : scene.sampling.seed;
+    ctx.params.seed = seed;
     ctx.params.cubemap_n = n;
     ctx.params.rays_per_texel = rays;
     if (visibility) {
@@ -430,7 +431,7 @@ class SetupPhase : public FarmPhase {
     manifest.cubemap_n = n;
     manifest.rays_per_texel = rays;
     if (visibility) manifest.visibility_bits = vis.bits;
-    manifest.seed = scene.sampling.seed;
+    manifest.seed = seed;
     manifest.rows = rows;
     manifest.rows_per_block = o.rows_per_block;
     manifest.scene_checksum = Checksum64(scene_text.data(), scene_text.size());
@@ -448,7 +449,7 @@ class SetupPhase : public FarmPhase {
       rep.visibility.bits = vis.bits;
       rep.visibility.vertices = rows;
     }
-    rep.seed = scene.sampling.seed;
+    rep.seed = seed;
     rep.rows = rows;
     rep.rows_per_block = o.rows_per_block;
 

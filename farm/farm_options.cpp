@@ -48,6 +48,9 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_option("--rays-per-texel", o.rays_per_texel,
                  "Occlusion rays per cubemap texel (default: the scene's)")
       ->check(CLI::Range(1, 1024));
+  app.add_option("--seed", o.seed,
+                 "Seed of the occlusion rays' random numbers (default: the scene's), e.g. for an "
+                 "independent reference estimate of the same transport");
   app.add_option("--job-seconds", o.job_seconds, "Target wall time of one job")
       ->check(CLI::Range(0.001, 86400.0))
       ->capture_default_str();

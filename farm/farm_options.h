@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <iosfwd>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -40,6 +41,7 @@ struct FarmOptions {
   std::string method;                  // empty: the scene's [sampling] method
   std::string job;                     // empty: the scene's [sampling] job (transport|visibility)
   int rays_per_texel = 0;              // 0: the scene's value
+  std::optional<uint64_t> seed;        // unset: the scene's [sampling] seed
   double job_seconds = 4.0;            // target wall time of one job
   uint32_t rows_per_block = 256;       // rows per checksummed block of transport.prtt
   double log_interval_s = 5.0;         // progress line interval on rank 0

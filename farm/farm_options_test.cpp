@@ -23,7 +23,7 @@ TEST(FarmOptionsTest, ParsesTheDocumentedOptions) {
   FarmOptions o;
   ASSERT_EQ(Parse({"scene.toml", "--out", "r", "--threads", "3", "--resume", "--method", "brute",
                    "--rays-per-texel", "16", "--job-seconds", "2.5", "--rows-per-block", "64",
-                   "--coordinator-only"},
+                   "--coordinator-only", "--seed", "7"},
                   o),
             -1);
   EXPECT_EQ(o.scene_path, "scene.toml");
@@ -32,6 +32,7 @@ TEST(FarmOptionsTest, ParsesTheDocumentedOptions) {
   EXPECT_TRUE(o.resume);
   EXPECT_EQ(o.method, "brute");
   EXPECT_EQ(o.rays_per_texel, 16);
+  EXPECT_EQ(o.seed, std::optional<uint64_t>(7));
   EXPECT_DOUBLE_EQ(o.job_seconds, 2.5);
   EXPECT_EQ(o.rows_per_block, 64u);
   EXPECT_FALSE(o.coordinator_works);

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|viewer|relight|glossy|sweep|stress] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -65,6 +65,24 @@ run_compress() {
   "$BUILD_DIR/bench/compress_microbench" --benchmark_repetitions=5 \
     --benchmark_report_aggregates_only=true "$raw"
 }
+# Cheslack-Postava et al. Figure 9 on the T the farm ships: viewer_bench's 2D/4D sweep on the raw
+# T of a default-scene farm run (the one run_compress keeps), with every image error also
+# measured against an independent 64-ray brute-force estimate of T (made once, seed 7), so the
+# table shows where compression error falls below the uncompressed T's own error.
+run_figure9() {
+  local raw="${PRT_RAW_TRANSPORT:-$OUT/compress-run/transport.prtt}"
+  local truth="$OUT/truth-run/transport.prtt"
+  if [ ! -f "$raw" ]; then
+    mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$OUT/compress-run" --force \
+      --keep-raw -q
+  fi
+  if [ ! -f "$truth" ]; then
+    mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$OUT/truth-run" --force \
+      --method brute --rays-per-texel 64 --seed 7 --no-compress -q
+  fi
+  "$BUILD_DIR/bench/viewer_bench" --raw "$raw" --truth "$truth" --frames 0 --hold 0 \
+    --sweep-4d 0.003,0.01,0.03,0.05,0.1 --out-dir "$OUT/figure9" $QUICK
+}
 run_viewer() { [ -x "$BUILD_DIR/bench/viewer_bench" ] && "$BUILD_DIR/bench/viewer_bench" || echo "viewer_bench not built"; }
 run_sweep() {
   local np="${PRT_BENCH_NP:-1}" launch=()
@@ -81,7 +99,7 @@ run_stress() {
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
-  all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_viewer; run_relight; run_glossy ;;
-  transport|scaling|sparse|compression|compress|viewer|relight|glossy|sweep|stress) "run_$WHAT" ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|viewer|relight|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
+  all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_figure9; run_viewer; run_relight; run_glossy ;;
+  transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress) "run_$WHAT" ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
 esac

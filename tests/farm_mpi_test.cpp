@@ -479,6 +479,15 @@ TEST(FarmMpiTest, UsageErrorsHelpAndForeignCheckpoints) {
       Farm(1, kScene + " --out " + run + kSmallJobs + " --rays-per-texel 9 --resume");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("rays_per_texel 4 -> 9"), std::string::npos) << r.output;
+  // --seed overrides the scene's: another estimate of the same T, which a resume must not mix.
+  const RunResult seeded = Farm(1, kScene + " --out " + run + kSmallJobs + " --seed 7 --resume");
+  EXPECT_EQ(seeded.exit_code, 2) << seeded.output;
+  EXPECT_NE(seeded.output.find("seed 3 -> 7"), std::string::npos) << seeded.output;
+  const std::string other = dir + "/seed7";
+  ASSERT_EQ(Farm(1, kScene + " --out " + other + kSmallJobs + " --seed 7").exit_code, 0);
+  EXPECT_EQ(ReadReport(other)["seed"], 7);
+  EXPECT_EQ(ReadReport(run)["seed"], 3);
+  EXPECT_NE(ReadWholeFile(other + "/transport.prtt"), ReadWholeFile(run + "/transport.prtt"));
 }
 
 }  // namespace
