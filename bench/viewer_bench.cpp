@@ -201,9 +201,7 @@ std::vector<float> ShadeWith(const prt::ViewerSession& s, const prt::SampleRadia
   return s.Shade(r);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   std::string pack_path, out_dir = "viewer_bench_out";
   int n = 16, rays = 1, frames = 120, hold = 60;
   double deg = 0.5, pack_keep = 0.0;
@@ -566,4 +564,17 @@ int main(int argc, char** argv) {
       "radiance against exact lighting through the same compressed T)\n",
       frames);
   return 0;
+}
+
+}  // namespace
+
+// Bad input (a missing or foreign --raw / --truth file, a bad pack) ends with one line naming the
+// file and what is wrong.
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "viewer_bench: %s\n", e.what());
+    return 1;
+  }
 }
