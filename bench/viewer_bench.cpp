@@ -354,24 +354,14 @@ int Run(int argc, char** argv) {
     // The errors are computed in the pack's order (the traced rows'), with its albedo.
     std::vector<prt::Rgb> albedo(ns);
     for (std::size_t p = 0; p < ns; ++p) albedo[session->pack_sample()[p]] = session->albedo()[p];
-    // Relit samples of uncompressed rows (texel basis) under lighting q, in the pack's order.
-    const auto relit = [&](const float* rows, std::size_t q) {
-      const prt::CubemapRgb approx_cube = prt::ReconstructLighting(n, lights[q]);
-      std::vector<float> ref(3 * ns);
-      const std::size_t texels = approx_cube.TexelCount();
-      for (std::size_t s = 0; s < ns; ++s)
-        for (int c = 0; c < 3; ++c) {
-          double acc = 0;
-          const float* row = rows + s * texels;
-          for (std::size_t j = 0; j < texels; ++j)
-            acc += double(row[j]) * approx_cube.Channel(c)[j];
-          ref[3 * s + c] = static_cast<float>(acc * albedo[s][static_cast<std::size_t>(c)]);
-        }
-      return ref;
+    // Relit samples of uncompressed rows (texel basis) under lighting q, in the pack's order
+    // (the traced rows', the scene's global order) with the scene's albedo.
+    const auto relit = [&](const Traced& t, std::size_t q) {
+      return prt::bench::RelitRadiance(t.geometry, t.rows, prt::ReconstructLighting(n, lights[q]));
     };
     for (std::size_t terms : term_counts) {
       lights.push_back(prt::NonlinearLightingApproximation(sunrise, basis, terms));
-      refs.push_back(relit(traced.rows.data(), lights.size() - 1));
+      refs.push_back(relit(traced, lights.size() - 1));
     }
     // The same lighting through an independent estimate of T: how far each relit image is from
     // the truth, the uncompressed T's own estimation error included.
@@ -382,7 +372,7 @@ int Run(int argc, char** argv) {
         throw prt::InputError(truth_path, "has n = " + std::to_string(truth.scene.cubemap_n) +
                                               ", the transport compared has " + std::to_string(n));
       for (std::size_t q = 0; q < term_counts.size(); ++q) {
-        truths.push_back(relit(truth.rows.data(), q));
+        truths.push_back(relit(truth, q));
         std::printf("N = %zu: the uncompressed T against %s: image error %.4g\n", term_counts[q],
                     truth_path.c_str(), prt::RelativeRmsError(refs[q], truths[q]));
       }
