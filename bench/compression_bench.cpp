@@ -42,6 +42,7 @@
 #include "vocabulary/compressed_relight.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/envmap.h"
+#include "formats/run_folder.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/transport_file.h"

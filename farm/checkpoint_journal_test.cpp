@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "farm/run_folder.h"
+#include "farm/run_manifest.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/transport_file.h"
 

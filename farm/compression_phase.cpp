@@ -4,7 +4,6 @@
 
 #include <fcntl.h>
 #include <spdlog/spdlog.h>
-#include <tbb/global_control.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -15,12 +14,11 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <optional>
-#include <thread>
 
+#include "farm/distributed_transpose.h"
+#include "farm/farm_context.h"
 #include "farm/mpi_support.h"
-#include "farm/run_folder.h"
 #include "vocabulary/compressed_transport.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
@@ -37,7 +35,7 @@ namespace fs = std::filesystem;
 namespace {
 
 double Now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  return FarmNow();
 }
 
 // The compression options every rank needs besides the header (PrepareRows' per-row budget).
@@ -46,24 +44,6 @@ struct OptionsPod {
   uint32_t terms_per_column;
   double keep_fraction;
   uint64_t dither_seed;
-};
-
-// BlockTransposer reports a failed spill write or read as std::runtime_error: that is an I/O
-// error of the spill folder (exit code 3); its std::invalid_argument (a row missing or added
-// twice) stays an internal error.
-struct SpillIo {
-  std::string dir;
-  explicit SpillIo(std::string d) : dir(std::move(d)) {}
-  template <class F>
-  void operator()(F&& f) const {
-    try {
-      f();
-    } catch (const std::invalid_argument&) {
-      throw;
-    } catch (const std::runtime_error& e) {
-      throw FileIoError(dir, e.what());
-    }
-  }
 };
 
 // The global budget's first pass keeps each rank's transformed column blocks (and depths) until
@@ -139,290 +119,13 @@ class TransformedBlockStash {
   std::FILE* file_ = nullptr;
 };
 
-}  // namespace
-
-std::pair<uint32_t, uint32_t> OwnedColumns(uint32_t cols, int rank, int ranks) {
-  const uint64_t c = cols, r = static_cast<uint64_t>(rank), p = static_cast<uint64_t>(ranks);
-  return {static_cast<uint32_t>(c * r / p), static_cast<uint32_t>(c * (r + 1) / p)};
-}
-
-std::pair<uint64_t, uint64_t> ChunkShare(uint64_t first, uint64_t count, int rank, int ranks) {
-  const uint64_t r = static_cast<uint64_t>(rank), p = static_cast<uint64_t>(ranks);
-  const uint64_t a = count * r / p, b = count * (r + 1) / p;
-  return {first + a, b - a};
-}
-
-uint64_t ChunkRows(uint64_t row_bytes, uint32_t rows_per_block, uint64_t memory_budget,
-                   uint64_t rows) {
-  const uint64_t block_bytes =
-      std::max<uint64_t>(1, row_bytes * std::max<uint32_t>(1, rows_per_block));
-  const uint64_t target = std::min<uint64_t>(memory_budget / 4, 64ull << 20);
-  const uint64_t blocks = std::max<uint64_t>(1, target / block_bytes);
-  return std::max<uint64_t>(
-      1, std::min<uint64_t>(rows, blocks * std::max<uint32_t>(1, rows_per_block)));
-}
-
-// §4.4 step 3, distributed: chunks of rows are scattered from rank 0, row-transformed where they
-// land, then exchanged all-to-all so that each rank receives, for every row of the chunk, the
-// slab of columns it owns; its BlockTransposer buffers (and spills) them and finally merges
-// them into column blocks. No rank holds more than one chunk, its share, the exchange buffers
-// and its transposer's budget.
-TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
-                                    uint64_t chunk_rows, const RowReader& read,
-                                    const RowPreparer& prepare, const BlockSpillOptions& spill,
-                                    const ColumnBlockSink& sink, Progress* progress) {
-  int rank = 0, size = 1;
-  CheckMpi(MPI_Comm_rank(comm, &rank), "MPI_Comm_rank");
-  CheckMpi(MPI_Comm_size(comm, &size), "MPI_Comm_size");
-  if (chunk_rows == 0) throw std::invalid_argument("DistributedTranspose: chunk_rows is 0");
-  if (chunk_rows * cols > static_cast<uint64_t>(std::numeric_limits<int>::max()))
-    throw std::invalid_argument("DistributedTranspose: chunk exceeds 2^31 floats");
-  TransposeStats st;
-  const auto [cb, ce] = OwnedColumns(cols, rank, size);
-  const uint32_t width = ce - cb;
-  std::optional<BlockTransposer> tr;
-  if (width > 0) {
-    // Counted as buffering: with the owned data inside the budget, the transposer allocates and
-    // first-touches all its column blocks here.
-    const double t = Now();
-    tr.emplace(rows, cb, ce, spill);
-    st.buffer_seconds += Now() - t;
-  }
-  std::vector<uint32_t> col_first(static_cast<std::size_t>(size)),
-      col_width(static_cast<std::size_t>(size));
-  for (int r = 0; r < size; ++r) {
-    const auto [a, b] = OwnedColumns(cols, r, size);
-    col_first[static_cast<std::size_t>(r)] = a;
-    col_width[static_cast<std::size_t>(r)] = b - a;
-  }
-  const std::size_t P = static_cast<std::size_t>(size);
-  std::vector<float> chunk, mine, sendbuf, recvbuf;
-  std::vector<int> counts(P), displs(P), scounts(P), sdispls(P), rcounts(P), rdispls(P);
-  for (uint64_t first = 0; first < rows; first += chunk_rows) {
-    const uint64_t count = std::min(chunk_rows, rows - first);
-    // Rank 0 reads the chunk; a failure is broadcast so that no rank waits forever.
-    int ok = 1;
-    std::exception_ptr failure;
-    if (rank == 0) {
-      const double t = Now();
-      try {
-        ReserveFreshHuge(chunk, count * cols);
-        chunk.resize(count * cols);
-        read(first, count, chunk.data());
-      } catch (...) {
-        ok = 0;
-        failure = std::current_exception();
-      }
-      st.read_seconds += Now() - t;
-    }
-    double t = Now();
-    CheckMpi(MPI_Bcast(&ok, 1, MPI_INT, 0, comm), "MPI_Bcast");
-    if (!ok) {
-      if (failure) std::rethrow_exception(failure);
-      throw RankFailure("rank 0 could not read rows " + std::to_string(first) + "..");
-    }
-    // Scatter: rank r gets rows ChunkShare(r) of the chunk.
-    for (std::size_t r = 0; r < P; ++r) {
-      const auto [f, c] = ChunkShare(first, count, static_cast<int>(r), size);
-      counts[r] = static_cast<int>(c * cols);
-      displs[r] = static_cast<int>((f - first) * cols);
-      if (rank == 0 && static_cast<int>(r) != 0) st.bytes_sent += c * cols * sizeof(float);
-    }
-    const auto [my_first, my_count] = ChunkShare(first, count, rank, size);
-    ReserveFreshHuge(mine, my_count * cols);
-    mine.resize(my_count * cols);
-    if (size == 1) {
-      mine.swap(chunk);
-    } else {
-      CheckMpi(MPI_Scatterv(chunk.data(), counts.data(), displs.data(), MPI_FLOAT, mine.data(),
-                            static_cast<int>(my_count * cols), MPI_FLOAT, 0, comm),
-               "MPI_Scatterv");
-    }
-    st.exchange_seconds += Now() - t;
-    t = Now();
-    prepare(my_first, my_count, mine.data());
-    st.row_transform_seconds += Now() - t;
-    // All-to-all: rank j receives rows_i × columns_j from every rank i.
-    t = Now();
-    const float* slabs = nullptr;
-    if (size == 1) {
-      slabs = mine.data();
-    } else {
-      int so = 0, ro = 0;
-      for (std::size_t j = 0; j < P; ++j) {
-        scounts[j] = static_cast<int>(my_count * col_width[j]);
-        sdispls[j] = so;
-        so += scounts[j];
-        if (static_cast<int>(j) != rank)
-          st.bytes_sent += static_cast<uint64_t>(scounts[j]) * sizeof(float);
-        const uint64_t ci = ChunkShare(first, count, static_cast<int>(j), size).second;
-        rcounts[j] = static_cast<int>(ci * width);
-        rdispls[j] = ro;
-        ro += rcounts[j];
-      }
-      ReserveFreshHuge(sendbuf, static_cast<std::size_t>(so));
-      ReserveFreshHuge(recvbuf, static_cast<std::size_t>(ro));
-      sendbuf.resize(static_cast<std::size_t>(so));
-      recvbuf.resize(static_cast<std::size_t>(ro));
-      for (std::size_t j = 0; j < P; ++j) {
-        float* dst = sendbuf.data() + sdispls[j];
-        for (uint64_t r = 0; r < my_count; ++r)
-          std::memcpy(dst + r * col_width[j], mine.data() + r * cols + col_first[j],
-                      col_width[j] * sizeof(float));
-      }
-      CheckMpi(MPI_Alltoallv(sendbuf.data(), scounts.data(), sdispls.data(), MPI_FLOAT,
-                             recvbuf.data(), rcounts.data(), rdispls.data(), MPI_FLOAT, comm),
-               "MPI_Alltoallv");
-      slabs = recvbuf.data();
-    }
-    st.exchange_seconds += Now() - t;
-    t = Now();
-    if (tr) {
-      SpillIo io(spill.spill_dir);
-      for (std::size_t i = 0; i < P; ++i) {
-        const auto [f, c] = ChunkShare(first, count, static_cast<int>(i), size);
-        if (c == 0) continue;
-        io([&] {
-          tr->AddRows(f, c, size == 1 ? slabs : slabs + rdispls[i], size == 1 ? cols : width);
-        });
-      }
-    }
-    st.buffer_seconds += Now() - t;
-    if (size == 1) mine.swap(chunk);
-    if (progress) progress->Advance(count);
-  }
-  if (tr) {
-    uint32_t f = 0, c = 0;
-    std::vector<float> columns;
-    for (;;) {
-      double t = Now();
-      bool more = false;
-      SpillIo(spill.spill_dir)([&] { more = tr->NextColumnBlock(f, c, columns); });
-      st.merge_seconds += Now() - t;
-      if (!more) break;
-      t = Now();
-      sink(f, c, columns);
-      st.sink_seconds += Now() - t;
-    }
-    st.bytes_spilled = tr->bytes_spilled();
-    st.runs_spilled = tr->runs_spilled();
-  }
-  return st;
-}
-
-double CompressionPhaseReport::TransposeMbPerSecond() const {
-  return transpose_seconds > 0 ? static_cast<double>(raw_bytes) / transpose_seconds / 1e6 : 0;
-}
-double CompressionPhaseReport::PhaseMbPerSecond() const {
-  return wall_seconds > 0 ? static_cast<double>(raw_bytes) / wall_seconds / 1e6 : 0;
-}
-double CompressionPhaseReport::Ratio() const {
-  return raw_bytes > 0 ? static_cast<double>(compressed_bytes) / static_cast<double>(raw_bytes) : 0;
-}
-
-std::string MergeCompressionReport(const std::string& report_json, const CompressionPhaseReport& r,
-                                   const std::string& name) {
-  using Json = nlohmann::ordered_json;
-  Json j = Json::parse(report_json, nullptr, false);
-  if (j.is_discarded() || !j.is_object()) throw InputError(name, "not a JSON object");
-  Json c;
-  c["wall_seconds"] = r.wall_seconds;
-  c["ranks"] = r.ranks;
-  c["scheme"] = r.scheme;
-  c["row_wavelet"] = r.row_wavelet;
-  c["column_wavelet"] = r.column_wavelet;
-  c["bits"] = r.bits;
-  c["keep_fraction"] = r.keep_fraction;
-  c["memory_budget_bytes"] = r.memory_budget_bytes;
-  c["raw_bytes"] = r.raw_bytes;
-  c["bytes_moved"] = r.bytes_moved;
-  c["spill_bytes"] = r.spill_bytes;
-  c["spill_runs"] = r.spill_runs;
-  c["transpose_seconds"] = r.transpose_seconds;
-  c["transpose_mb_per_second"] = r.TransposeMbPerSecond();
-  c["phase_mb_per_second"] = r.PhaseMbPerSecond();
-  c["stage_seconds"] = {
-      {"read", r.read_seconds},         {"row_transform", r.row_transform_seconds},
-      {"exchange", r.exchange_seconds}, {"buffer", r.buffer_seconds},
-      {"merge", r.merge_seconds},       {"compress", r.compress_seconds},
-      {"write", r.write_seconds}};
-  c["compressed_bytes"] = r.compressed_bytes;
-  c["terms"] = r.terms;
-  c["columns_stored"] = r.columns_stored;
-  c["ratio_to_raw"] = r.Ratio();
-  c["raw_kept"] = r.raw_kept;
-  if (r.memory_bandwidth_mb_s > 0) c["memory_bandwidth_mb_per_second"] = r.memory_bandwidth_mb_s;
-  if (r.disk_write_bandwidth_mb_s > 0)
-    c["disk_write_bandwidth_mb_per_second"] = r.disk_write_bandwidth_mb_s;
-  j["compression"] = c;
-  if (!j.contains("phases") || !j["phases"].is_array()) j["phases"] = Json::array();
-  j["phases"].push_back({{"name", "compress"}, {"wall_seconds", r.wall_seconds}});
-  if (j.contains("wall_seconds") && j["wall_seconds"].is_number())
-    j["wall_seconds"] = j["wall_seconds"].get<double>() + r.wall_seconds;
-  return j.dump(2) + "\n";
-}
-
-double MeasureMemoryBandwidth(std::size_t bytes) {
-  std::vector<char> a(bytes, 1), b(bytes, 2);
-  double best = 0;
-  for (int pass = 0; pass < 4; ++pass) {
-    const double t = Now();
-    std::memcpy(b.data(), a.data(), bytes);
-    const double dt = Now() - t;
-    if (dt > 0) best = std::max(best, static_cast<double>(bytes) / dt / 1e6);
-    a[static_cast<std::size_t>(pass) % bytes] = b[bytes / 2];  // keep the copies observable
-  }
-  return best;
-}
-
-double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
-  const std::string path = (fs::path(dir) / ".prt-farm-disk-bench.tmp").string();
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw FileIoError(path, std::strerror(errno));
-  std::vector<char> buf(8u << 20);
-  for (std::size_t i = 0; i < buf.size(); ++i) buf[i] = static_cast<char>(i * 2654435761u >> 24);
-  const double t = Now();
-  std::size_t done = 0;
-  bool failed = false;
-  while (done < bytes && !failed) {
-    const std::size_t n = std::min(buf.size(), bytes - done);
-    const ssize_t w = ::write(fd, buf.data(), n);
-    if (w <= 0)
-      failed = true;
-    else
-      done += static_cast<std::size_t>(w);
-  }
-  if (!failed && ::fsync(fd) != 0) failed = true;
-  const double dt = Now() - t;
-  const int err = errno;
-  ::close(fd);
-  std::error_code ec;
-  fs::remove(path, ec);
-  if (failed) throw FileIoError(path, std::strerror(err));
-  return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
-}
-
-namespace {
-// --fail-in (tests of killed runs): this rank dies now, without cleaning up.
-[[noreturn]] void ExitAbruptly(int rank, const std::string& where) {
-  spdlog::warn("debug: rank {} exits abruptly {} (--fail-in)", rank, where);
-  spdlog::default_logger()->flush();
-  std::_Exit(kExitRankFailed);
-}
-}  // namespace
-
-int RunCompressionPhase(const FarmOptions& options) {
-  if (options.no_compress) return kExitOk;
-  MPI_Comm comm = MPI_COMM_WORLD;
-  MPI_Comm_set_errhandler(comm, MPI_ERRORS_RETURN);
-  int rank = 0, size = 1;
-  MPI_Comm_rank(comm, &rank);
-  MPI_Comm_size(comm, &size);
+void Compress(FarmContext& ctx) {
+  const FarmOptions& options = ctx.options;
+  MPI_Comm comm = ctx.comm;
+  const int rank = ctx.rank;
+  const int size = ctx.size;
   const double start = Now();
-  const RunFolder folder(options.out_dir);
-  const int threads = options.threads > 0 ? options.threads : AutoThreads(comm);
-  tbb::global_control threads_limit(tbb::global_control::max_allowed_parallelism,
-                                    static_cast<std::size_t>(threads));
+  const RunFolder& folder = ctx.folder;
 
   // Setup on rank 0: the rows' file, the scene's [compression] settings, the spatial domain.
   std::unique_ptr<TransportFileReader> reader;
@@ -434,13 +137,13 @@ int RunCompressionPhase(const FarmOptions& options) {
   if (rank == 0) {
     try {
       reader = std::make_unique<TransportFileReader>(folder.transport);
-      const SceneDescription scene =
-          ParseScene(ReadWholeFile(folder.scene_copy), folder.scene_copy, folder.dir);
-      copt = CompressionOptionsFrom(scene.compression, folder.scene_copy);
+      // The scene and geometry setup parsed and decoded (nothing is read again but the rows).
+      const SceneDescription& scene = ctx.scene;
+      copt = CompressionOptionsFrom(scene.compression, scene.file);
       if (!options.compression_scheme.empty())
         copt.scheme = ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
-      const SpatialDomain domain = SpatialDomainOf(ReadSceneGeometryFile(folder.geometry),
-                                                   scene.compression.order_normal_weight);
+      const SpatialDomain domain =
+          SpatialDomainOf(ctx.geometry, scene.compression.order_normal_weight);
       if (domain.sample_count() != reader->info().rows)
         throw InputError(folder.transport,
                          std::to_string(reader->info().rows) + " rows, but " + folder.geometry +
@@ -461,12 +164,13 @@ int RunCompressionPhase(const FarmOptions& options) {
       setup[0] =
           static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, "compression phase"));
       spdlog::error("compression: {}", message);
+      ctx.report.error = message;
     }
   }
   MPI_Bcast(setup, 3, MPI_UINT64_T, 0, comm);
-  if (setup[0] != kExitOk) return static_cast<int>(setup[0]);
+  if (setup[0] != kExitOk) throw CollectiveStop{static_cast<int>(setup[0])};
 
-  CompressionPhaseReport rep;
+  CompressionFarmReport& rep = ctx.report.compression;
   TransposeStats st;
   std::vector<CompressedColumn> mine;
   try {
@@ -638,7 +342,7 @@ int RunCompressionPhase(const FarmOptions& options) {
           t.columns.push_back(std::move(c));
       }
       const std::vector<uint8_t> file = EncodeCompressedTransport(t);
-      const std::string prtc = (fs::path(folder.dir) / kCompressedTransportFile).string();
+      const std::string& prtc = folder.compressed;
       if (options.fail_in == "write" && options.fail_rank == 0) {
         // As if killed inside WriteFileDurably: half of its temporary file is on disk.
         std::ofstream(prtc + ".tmp", std::ios::binary)
@@ -668,14 +372,9 @@ int RunCompressionPhase(const FarmOptions& options) {
         rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
       }
       rep.wall_seconds = Now() - start;
-      // The report, then (the compressed file being durable) the raw matrix goes.
-      std::string report_text = "{}";
-      if (fs::exists(folder.report, ec)) report_text = ReadWholeFile(folder.report);
-      WriteFileDurably(folder.report, MergeCompressionReport(report_text, rep, folder.report));
-      if (!options.keep_raw) {
-        fs::remove(folder.transport);
-        SyncDirectory(folder.dir);
-      }
+      // RunFarm writes the report, then (the compressed file being durable) removes the raw
+      // matrix unless --keep-raw.
+      rep.enabled = true;
       if (!options.quiet) {
         spdlog::info(
             "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), {} terms in {} "
@@ -700,13 +399,61 @@ int RunCompressionPhase(const FarmOptions& options) {
         "rank {}: compression: {} (the transport is complete: rerun with --resume to "
         "redo only the compression)",
         rank, message);
-    spdlog::default_logger()->flush();
-    MPI_Abort(comm, code);
-    return code;
+    (void)code;
+    throw;  // RunFarm writes the failed report and aborts the job
   }
-  int code = kExitOk;
-  MPI_Bcast(&code, 1, MPI_INT, 0, comm);
-  return code;
+}
+
+class CompressionPhase final : public FarmPhase {
+ public:
+  const char* name() const override { return "compress"; }
+  void Run(FarmContext& ctx) override { Compress(ctx); }
+};
+
+}  // namespace
+
+double MeasureMemoryBandwidth(std::size_t bytes) {
+  std::vector<char> a(bytes, 1), b(bytes, 2);
+  double best = 0;
+  for (int pass = 0; pass < 4; ++pass) {
+    const double t = Now();
+    std::memcpy(b.data(), a.data(), bytes);
+    const double dt = Now() - t;
+    if (dt > 0) best = std::max(best, static_cast<double>(bytes) / dt / 1e6);
+    a[static_cast<std::size_t>(pass) % bytes] = b[bytes / 2];  // keep the copies observable
+  }
+  return best;
+}
+
+double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
+  const std::string path = (fs::path(dir) / ".prt-farm-disk-bench.tmp").string();
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw FileIoError(path, std::strerror(errno));
+  std::vector<char> buf(8u << 20);
+  for (std::size_t i = 0; i < buf.size(); ++i) buf[i] = static_cast<char>(i * 2654435761u >> 24);
+  const double t = Now();
+  std::size_t done = 0;
+  bool failed = false;
+  while (done < bytes && !failed) {
+    const std::size_t n = std::min(buf.size(), bytes - done);
+    const ssize_t w = ::write(fd, buf.data(), n);
+    if (w <= 0)
+      failed = true;
+    else
+      done += static_cast<std::size_t>(w);
+  }
+  if (!failed && ::fsync(fd) != 0) failed = true;
+  const double dt = Now() - t;
+  const int err = errno;
+  ::close(fd);
+  std::error_code ec;
+  fs::remove(path, ec);
+  if (failed) throw FileIoError(path, std::strerror(err));
+  return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
+}
+
+std::unique_ptr<FarmPhase> MakeCompressionPhase() {
+  return std::make_unique<CompressionPhase>();
 }
 
 }  // namespace prt

@@ -1,6 +1,6 @@
 // The MPI-free parts of the compression phase (farm/compression_phase.h): column ownership and
 // chunk shares partition exactly, chunk sizes follow the budget in whole file blocks, the report
-// merge keeps RunFarm's keys and adds the phase, and the bandwidth probes return positive rates.
+// report carries the phase's figures last, and the bandwidth probes return positive rates.
 // The distributed transpose itself runs under mpirun in tests/ (distributed_transpose_mpi_check,
 // compression_phase_mpi_tests).
 #include "farm/compression_phase.h"
@@ -10,6 +10,8 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "farm/distributed_transpose.h"
+#include "farm/farm_report.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/transport_file.h"
 
@@ -47,8 +49,14 @@ TEST(CompressionPhase, ChunkRowsAreWholeBlocksWithinAQuarterOfTheBudget) {
   EXPECT_EQ(ChunkRows(1536, 16, 4096, 72), 16u);
 }
 
-TEST(CompressionPhase, MergeReportAddsThePhaseAndKeepsRunFarmKeys) {
-  CompressionPhaseReport r;
+TEST(CompressionPhase, ReportCarriesThePhaseLastAndOnlyWhenItRan) {
+  FarmReport rep;
+  rep.status = "ok";
+  rep.wall_seconds = 12.5;
+  rep.phases = {{"setup", 0.5}, {"compress", 2}};
+  EXPECT_FALSE(nlohmann::json::parse(rep.ToJsonText()).contains("compression"));
+  CompressionFarmReport& r = rep.compression;
+  r.enabled = true;
   r.wall_seconds = 2;
   r.raw_bytes = 8000000;
   r.compressed_bytes = 400000;
@@ -59,19 +67,17 @@ TEST(CompressionPhase, MergeReportAddsThePhaseAndKeepsRunFarmKeys) {
   EXPECT_DOUBLE_EQ(r.TransposeMbPerSecond(), 16.0);
   EXPECT_DOUBLE_EQ(r.PhaseMbPerSecond(), 4.0);
   EXPECT_DOUBLE_EQ(r.Ratio(), 0.05);
-  const std::string in =
-      R"({"status":"ok","wall_seconds":10.5,"phases":[{"name":"setup","wall_seconds":0.5}]})";
-  const nlohmann::json j = nlohmann::json::parse(MergeCompressionReport(in, r, "report.json"));
+  const nlohmann::ordered_json j = nlohmann::ordered_json::parse(rep.ToJsonText());
   EXPECT_EQ(j["status"], "ok");
   EXPECT_DOUBLE_EQ(j["wall_seconds"].get<double>(), 12.5);
   ASSERT_EQ(j["phases"].size(), 2u);
   EXPECT_EQ(j["phases"][1]["name"], "compress");
+  EXPECT_EQ(j.back(), j["compression"]);  // the last key, where readers of older reports found it
   EXPECT_EQ(j["compression"]["spill_bytes"], 123);
   EXPECT_EQ(j["compression"]["terms"], 99);
   EXPECT_DOUBLE_EQ(j["compression"]["ratio_to_raw"].get<double>(), 0.05);
   EXPECT_DOUBLE_EQ(j["compression"]["transpose_mb_per_second"].get<double>(), 16.0);
   EXPECT_FALSE(j["compression"].contains("memory_bandwidth_mb_per_second"));
-  EXPECT_THROW(MergeCompressionReport("{not json", r, "report.json"), InputError);
 }
 
 TEST(CompressionPhase, BandwidthProbesArePositive) {

@@ -6,9 +6,8 @@
 #include <iostream>
 #include <sstream>
 
-#include "farm/compression_phase.h"
-#include "farm/farm_coordinator.h"
 #include "farm/farm_options.h"
+#include "farm/farm_run.h"
 
 int main(int argc, char** argv) {
   // Blocks up to 32 MiB (glibc's largest mmap threshold) come from the heap and stay there when
@@ -38,11 +37,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "prt-farm: this MPI does not provide MPI_THREAD_FUNNELED\n");
       code = prt::kExitRankFailed;
     } else {
-      // The compression phase (farm/compression_phase.h) runs once the transport is complete.
-      // RunFarm reports transport = false for a visibility run and for a finished run.
-      bool transport = true;
-      code = prt::RunFarm(options, &transport);
-      if (code == prt::kExitOk && transport) code = prt::RunCompressionPhase(options);
+      code = prt::RunFarm(options);
     }
   }
   MPI_Finalize();

@@ -129,7 +129,50 @@ std::string FarmReport::ToJsonText() const {
         {"changes", v.changes},
     };
   }
+  if (compression.enabled) {
+    const CompressionFarmReport& r = compression;
+    Json c;
+    c["wall_seconds"] = r.wall_seconds;
+    c["ranks"] = r.ranks;
+    c["scheme"] = r.scheme;
+    c["row_wavelet"] = r.row_wavelet;
+    c["column_wavelet"] = r.column_wavelet;
+    c["bits"] = r.bits;
+    c["keep_fraction"] = r.keep_fraction;
+    c["memory_budget_bytes"] = r.memory_budget_bytes;
+    c["raw_bytes"] = r.raw_bytes;
+    c["bytes_moved"] = r.bytes_moved;
+    c["spill_bytes"] = r.spill_bytes;
+    c["spill_runs"] = r.spill_runs;
+    c["transpose_seconds"] = r.transpose_seconds;
+    c["transpose_mb_per_second"] = r.TransposeMbPerSecond();
+    c["phase_mb_per_second"] = r.PhaseMbPerSecond();
+    c["stage_seconds"] = {
+        {"read", r.read_seconds},         {"row_transform", r.row_transform_seconds},
+        {"exchange", r.exchange_seconds}, {"buffer", r.buffer_seconds},
+        {"merge", r.merge_seconds},       {"compress", r.compress_seconds},
+        {"write", r.write_seconds}};
+    c["compressed_bytes"] = r.compressed_bytes;
+    c["terms"] = r.terms;
+    c["columns_stored"] = r.columns_stored;
+    c["ratio_to_raw"] = r.Ratio();
+    c["raw_kept"] = r.raw_kept;
+    if (r.memory_bandwidth_mb_s > 0) c["memory_bandwidth_mb_per_second"] = r.memory_bandwidth_mb_s;
+    if (r.disk_write_bandwidth_mb_s > 0)
+      c["disk_write_bandwidth_mb_per_second"] = r.disk_write_bandwidth_mb_s;
+    j["compression"] = c;
+  }
   return j.dump(2) + "\n";
+}
+
+double CompressionFarmReport::TransposeMbPerSecond() const {
+  return transpose_seconds > 0 ? static_cast<double>(raw_bytes) / transpose_seconds / 1e6 : 0;
+}
+double CompressionFarmReport::PhaseMbPerSecond() const {
+  return wall_seconds > 0 ? static_cast<double>(raw_bytes) / wall_seconds / 1e6 : 0;
+}
+double CompressionFarmReport::Ratio() const {
+  return raw_bytes > 0 ? static_cast<double>(compressed_bytes) / static_cast<double>(raw_bytes) : 0;
 }
 
 }  // namespace prt

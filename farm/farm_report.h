@@ -59,6 +59,35 @@ struct VisibilityFarmReport {
   uint64_t blocks_zero = 0, blocks_one = 0, blocks_mixed = 0, changes = 0;
 };
 
+// The compression phase's figures (report.json "compression"; docs/farm-compression.md).
+struct CompressionFarmReport {
+  bool enabled = false;  // the phase ran (not for --no-compress or the visibility job)
+  double wall_seconds = 0;
+  int ranks = 1;
+  std::string scheme, row_wavelet, column_wavelet;
+  int bits = 0;
+  double keep_fraction = 0;
+  uint64_t memory_budget_bytes = 0;
+  uint64_t raw_bytes = 0;    // rows × cols × 4
+  uint64_t bytes_moved = 0;  // between ranks, all ranks
+  uint64_t spill_bytes = 0;  // all ranks
+  uint64_t spill_runs = 0;
+  double transpose_seconds = 0;  // max over ranks of exchange + buffer + merge
+  double read_seconds = 0, row_transform_seconds = 0, exchange_seconds = 0, buffer_seconds = 0,
+         merge_seconds = 0, compress_seconds = 0, write_seconds = 0;  // max over ranks
+  uint64_t compressed_bytes = 0;                                      // transport.prtc
+  uint64_t terms = 0;
+  uint64_t columns_stored = 0;
+  bool raw_kept = true;
+  // --measure-bandwidth (0 when not measured): memcpy and write+fsync in the run folder, MB/s.
+  double memory_bandwidth_mb_s = 0;
+  double disk_write_bandwidth_mb_s = 0;
+
+  double TransposeMbPerSecond() const;  // raw_bytes / transpose_seconds
+  double PhaseMbPerSecond() const;      // raw_bytes / wall_seconds
+  double Ratio() const;                 // compressed_bytes / raw_bytes
+};
+
 struct FarmReport {
   std::string status = "running";  // ok | failed | running
   int exit_code = 0;
@@ -98,6 +127,7 @@ struct FarmReport {
   std::vector<RankReport> rank_reports;
   SparseFarmReport sparse;
   VisibilityFarmReport visibility;
+  CompressionFarmReport compression;  // last in report.json
 
   // max / mean busy time over the computing ranks (1 = perfect balance; 0 when none computed).
   double LoadImbalance() const;

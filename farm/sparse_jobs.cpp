@@ -56,7 +56,7 @@ std::size_t VectorBytes(const std::vector<T>& v) {
 
 class ByteReader {
  public:
-  ByteReader(const std::string& bytes, std::size_t at) : bytes_(bytes), at_(at) {}
+  ByteReader(std::string_view bytes, std::size_t at) : bytes_(bytes), at_(at) {}
   template <typename T>
   T Get() {
     T v;
@@ -82,7 +82,7 @@ class ByteReader {
     if (bytes_.size() - at_ < n || at_ > bytes_.size())
       throw std::runtime_error("truncated sparse job message");
   }
-  const std::string& bytes_;
+  std::string_view bytes_;
   std::size_t at_;
 };
 
@@ -193,7 +193,7 @@ std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job) {
   return std::move(w.bytes());
 }
 
-SparseJobHeader PeekSparseJobHeader(const std::string& job_bytes) {
+SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes) {
   ByteReader r(job_bytes, 0);
   return GetHeader(r, kJobMagic);
 }
@@ -218,7 +218,7 @@ std::string EncodeSparseJobResult(const SparseJobResult& res) {
   return std::move(b);
 }
 
-SparseJobResult DecodeSparseJobResult(const std::string& bytes) {
+SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
   if (bytes.size() < sizeof(uint64_t)) throw std::runtime_error("truncated sparse job result");
   const std::size_t body = bytes.size() - sizeof(uint64_t);
   uint64_t sum;
@@ -241,7 +241,7 @@ SparseJobResult DecodeSparseJobResult(const std::string& bytes) {
 
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
-                             const std::string& job_bytes) {
+                             std::string_view job_bytes) {
   ByteReader r(job_bytes, 0);
   SparseJobResult res;
   res.header = GetHeader(r, kJobMagic);

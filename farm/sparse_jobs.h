@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "worker/sparse_precomputation.h"
@@ -98,14 +99,14 @@ std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job);
 std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job);
 std::string EncodeSparseJobResult(const SparseJobResult& r);
 // Throws std::runtime_error on a truncated or foreign message (and on a checksum mismatch).
-SparseJobResult DecodeSparseJobResult(const std::string& bytes);
-SparseJobHeader PeekSparseJobHeader(const std::string& job_bytes);
+SparseJobResult DecodeSparseJobResult(std::string_view bytes);
+SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes);
 
 // Runs one encoded job on this rank (TBB threads) and returns the encoded result. Throws
 // NumericalError for a non-finite value, std::runtime_error for a malformed job.
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
-                             const std::string& job_bytes);
+                             std::string_view job_bytes);
 
 // XXH64 of what a dense job leaves on disk, per sample in order: T row, visibility row, feature
 // row. `rows` samples, `texels` each.

@@ -26,8 +26,6 @@
 
 namespace prt {
 
-inline constexpr const char* kVisibilityFileName = "visibility.prtv";
-inline constexpr const char* kVisibilityChunksFileName = "visibility.chunks";
 inline constexpr const char* kVisibilityPhaseName = "visibility";
 
 struct VisibilityJobResult {

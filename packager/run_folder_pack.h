@@ -5,17 +5,11 @@
 #include <cstdint>
 #include <string>
 
+#include "formats/run_folder.h"
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_writer.h"
 
 namespace prt::pack {
-
-// The compressed transport inside a run folder: EncodeCompressedTransport's bytes
-// (vocabulary/compressed_transport.h).
-inline constexpr const char* kCompressedTransportFileName = "transport.prtc";
-// The farm's visibility job output (farm/visibility_jobs.h): EncodeVisibilityBlocks of every
-// spatial sample's map.
-inline constexpr const char* kVisibilityFileName = "visibility.prtv";
 
 struct RunPackOptions {
   // Compressed transport file; empty means <run>/transport.prtc.

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "farm/compression_phase.h"
+#include "farm/distributed_transpose.h"
 
 namespace {
 

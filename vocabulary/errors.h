@@ -17,6 +17,18 @@ class InputError : public std::runtime_error {
   std::string file_;
 };
 
+// A failure of the operating system to create, write, sync or rename a file (disk full,
+// read-only or missing folder). Names the file and the system's reason.
+class FileIoError : public std::runtime_error {
+ public:
+  FileIoError(const std::string& file, const std::string& what)
+      : std::runtime_error(file + ": " + what), file_(file) {}
+  const std::string& file() const { return file_; }
+
+ private:
+  std::string file_;
+};
+
 // A NaN or Inf found at a stage boundary; `where` says which stage and which element.
 class NumericalError : public std::runtime_error {
  public:

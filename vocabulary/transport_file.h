@@ -17,27 +17,10 @@
 #include <string_view>
 #include <vector>
 
+#include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
 
 namespace prt {
-
-// A failure of the operating system to create, write, sync or rename a file (disk full,
-// read-only or missing folder). Names the file and the system's reason.
-class FileIoError : public std::runtime_error {
- public:
-  FileIoError(const std::string& file, const std::string& what)
-      : std::runtime_error(file + ": " + what), file_(file) {}
-  const std::string& file() const { return file_; }
-
- private:
-  std::string file_;
-};
-
-// File names inside a run folder.
-inline constexpr const char* kTransportFileName = "transport.prtt";
-inline constexpr const char* kGeometryFileName = "geometry.prtg";
-inline constexpr const char* kSceneCopyFileName = "scene.toml";
-inline constexpr const char* kReportFileName = "report.json";
 
 // ---------------------------------------------------------------------------------------------
 // Blocked transport file (docs/transport-format.md).

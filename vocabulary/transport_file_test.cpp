@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/run_folder.h"
 #include "vocabulary/errors.h"
 
 namespace prt {

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <string>
 
 #include "worker/column_order.h"
 #include "worker/local_rank.h"
@@ -118,131 +119,194 @@ std::vector<float> RunSparsePrecomputation(
   return out;
 }
 
-void RunSparsePrecomputation(
-    const TransportSampler& sampler, std::span<const SpatialSample> samples, const SparsePlan& plan,
-    SparseReport& report, float* out,
-    const std::function<void(const char*, std::size_t, std::size_t)>& progress) {
-  const std::size_t N = samples.size();
-  const CubemapLayout& layout = sampler.layout();
-  const std::size_t T = layout.texel_count();
-  const int n = layout.n();
-  const int m = SparseRankResolution(plan, n);
-  const std::size_t Tm = static_cast<std::size_t>(6) * m * m;
-  report = SparseReport{};
-  report.samples = N;
-  report.is_dense.assign(N, 0);
-  report.local_rank.assign(N, -1);
-  if (N == 0) return;
+SparseScheduleCounts RunSparseSchedule(std::size_t N, const SparsePlan& plan, SparseSteps& steps) {
+  SparseScheduleCounts c;
+  c.is_dense.assign(N, 0);
+  if (N == 0) return c;
+  auto mark = [&](std::span<const uint32_t> ids) {
+    for (uint32_t s : ids) c.is_dense[s] = 1;
+  };
+  // §4.1: the initial random dense set, then rank-weighted rounds.
+  const std::size_t budget = SparseDenseBudget(N, plan);
+  std::vector<uint32_t> dense = InitialDenseSet(N, SparseInitialDenseCount(N, plan), plan.seed);
+  c.dense_initial = dense.size();
+  steps.Dense("dense-initial", dense);
+  mark(dense);
+  const int rounds = SparseRounds(plan);
+  for (int it = 0; it < rounds && dense.size() < budget; ++it) {
+    const std::size_t picks = SparsePicksForRound(budget, dense.size(), rounds, it);
+    const std::vector<uint32_t> cand = SparseRankCandidates(c.is_dense, picks, plan, it);
+    const std::string k = std::to_string(it + 1);
+    const std::vector<double> weight = steps.Rank("rank-" + k, it, dense, cand);
+    const std::vector<uint32_t> next = SparsePickByRank(cand, weight, picks, plan, it);
+    c.candidates_ranked += cand.size();
+    c.dense_by_rank += next.size();
+    steps.Dense("dense-rank-" + k, next);
+    mark(next);
+    dense.insert(dense.end(), next.begin(), next.end());
+  }
+  // §5: every other sample from its dense neighbours; fallbacks become dense.
+  std::sort(dense.begin(), dense.end());
+  const std::vector<uint32_t> fallback = steps.Reconstruct("sparse-reconstruct", dense, c.is_dense);
+  c.dense_fallback = fallback.size();
+  steps.Dense("dense-fallback", fallback);
+  mark(fallback);
+  return c;
+}
 
-  // Dense records, indexed by sample.
-  std::vector<std::vector<float>> vis(N), low(N);
-  std::vector<std::vector<uint8_t>> feat(N);
-  std::mutex stats_mutex;
-  auto sample_dense = [&](std::span<const uint32_t> ids, const char* phase) {
+namespace {
+
+// The steps in this process: every row in memory, TBB threads.
+class InProcessSteps final : public SparseSteps {
+ public:
+  using ProgressFn = std::function<void(const char*, std::size_t, std::size_t)>;
+  InProcessSteps(const TransportSampler& sampler, std::span<const SpatialSample> samples,
+                 const SparsePlan& plan, SparseReport& report, float* out,
+                 const ProgressFn& progress)
+      : sampler_(sampler),
+        samples_(samples),
+        plan_(plan),
+        report_(report),
+        out_(out),
+        progress_(progress),
+        T_(sampler.layout().texel_count()),
+        n_(sampler.layout().n()),
+        m_(SparseRankResolution(plan, n_)),
+        Tm_(static_cast<std::size_t>(6) * m_ * m_),
+        vis_(samples.size()),
+        low_(samples.size()),
+        feat_(samples.size()) {}
+
+  void Dense(const std::string& step, std::span<const uint32_t> ids) override {
     const double t0 = Now();
     std::size_t done = 0;
     tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
       const uint32_t s = ids[i];
       DenseRow row;
-      const AngularStats st = SampleDenseRowAdaptive(sampler, samples[s], s, plan.angular, row);
-      std::copy(row.transport.begin(), row.transport.end(), out + s * T);
-      low[s].resize(Tm);
-      DownsampleRow(row.transport.data(), n, m, low[s].data());
-      vis[s] = std::move(row.visibility);
-      feat[s] = std::move(row.feature);
-      std::lock_guard<std::mutex> lock(stats_mutex);
-      report.dense_angular += st;
-      report.is_dense[s] = 1;
-      if (progress && (++done % 256 == 0 || done == ids.size())) progress(phase, done, ids.size());
+      const AngularStats st = SampleDenseRowAdaptive(sampler_, samples_[s], s, plan_.angular, row);
+      std::copy(row.transport.begin(), row.transport.end(), out_ + s * T_);
+      low_[s].resize(Tm_);
+      DownsampleRow(row.transport.data(), n_, m_, low_[s].data());
+      vis_[s] = std::move(row.visibility);
+      feat_[s] = std::move(row.feature);
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      report_.dense_angular += st;
+      if (progress_ && (++done % 256 == 0 || done == ids.size()))
+        progress_(step.c_str(), done, ids.size());
     });
-    report.seconds_dense += Now() - t0;
-  };
+    report_.seconds_dense += Now() - t0;
+  }
 
-  // Phase 1: initial random set, then rank-weighted rounds.
-  const std::size_t budget = SparseDenseBudget(N, plan);
-  const std::size_t initial = SparseInitialDenseCount(N, plan);
-  std::vector<uint32_t> dense = InitialDenseSet(N, initial, plan.seed);
-  report.dense_initial = dense.size();
-  sample_dense(dense, "dense-initial");
-  const int rounds = SparseRounds(plan);
-  for (int it = 0; it < rounds && dense.size() < budget; ++it) {
+  std::vector<double> Rank(const std::string&, int, std::span<const uint32_t> dense,
+                           std::span<const uint32_t> cand) override {
     const double t0 = Now();
-    const std::size_t picks = SparsePicksForRound(budget, dense.size(), rounds, it);
-    std::vector<Vec3> pts;
-    pts.reserve(dense.size());
-    for (uint32_t d : dense) pts.push_back(samples[d].position);
-    NeighborIndex index(pts, dense);
-    // Candidates: a deterministic random subset of the non-dense samples.
-    const std::vector<uint32_t> cand = SparseRankCandidates(report.is_dense, picks, plan, it);
+    const NeighborIndex index = IndexOf(dense);
     std::vector<double> weight(cand.size(), 0.0);
     tbb::parallel_for(std::size_t{0}, cand.size(), [&](std::size_t i) {
       const std::vector<uint32_t> nb =
-          index.RadiusSearch(samples[cand[i]].position, plan.radius, plan.max_neighbors);
+          index.RadiusSearch(samples_[cand[i]].position, plan_.radius, plan_.max_neighbors);
       std::vector<const float*> rows;
       rows.reserve(nb.size());
-      for (uint32_t d : nb) rows.push_back(low[d].data());
-      weight[i] = SparseCandidateWeight(rows, Tm, plan);
+      for (uint32_t d : nb) rows.push_back(low_[d].data());
+      weight[i] = SparseCandidateWeight(rows, Tm_, plan_);
     });
-    const std::vector<uint32_t> next = SparsePickByRank(cand, weight, picks, plan, it);
     for (std::size_t i = 0; i < cand.size(); ++i)
-      report.local_rank[cand[i]] = static_cast<int>(weight[i]);
-    report.seconds_rank += Now() - t0;
-    report.dense_by_rank += next.size();
-    sample_dense(next, "dense-rank");
-    dense.insert(dense.end(), next.begin(), next.end());
+      report_.local_rank[cand[i]] = static_cast<int>(weight[i]);
+    report_.seconds_rank += Now() - t0;
+    return weight;
   }
 
-  // Phase 2: sparse vertices from their dense neighbours.
-  {
+  std::vector<uint32_t> Reconstruct(const std::string& step, std::span<const uint32_t> dense,
+                                    std::span<const uint8_t> is_dense) override {
     const double t0 = Now();
-    std::vector<Vec3> pts;
-    std::sort(dense.begin(), dense.end());
-    pts.reserve(dense.size());
-    for (uint32_t d : dense) pts.push_back(samples[d].position);
-    NeighborIndex index(pts, dense);
+    const std::size_t N = samples_.size();
+    const NeighborIndex index = IndexOf(dense);
     // Along a Hilbert curve of the positions, as the farm orders its sparse jobs (there by Morton
     // key): consecutive vertices share most of their dense neighbours, so the neighbours' rows
     // (48 KB each, read twice per vertex) come from cache instead of memory. The result does not
     // depend on the order.
     std::vector<Vec3> all_positions(N);
-    for (std::size_t s = 0; s < N; ++s) all_positions[s] = samples[s].position;
+    for (std::size_t s = 0; s < N; ++s) all_positions[s] = samples_[s].position;
     std::vector<uint32_t> sparse_ids;
     for (uint32_t s : HilbertOrder(all_positions))
-      if (!report.is_dense[s]) sparse_ids.push_back(s);
+      if (!is_dense[s]) sparse_ids.push_back(s);
     std::vector<uint8_t> fallback(N, 0);
     tbb::enumerable_thread_specific<L1Solver> solvers([&] {
       L1Options o;
-      o.lambda = plan.sparse.lambda;
+      o.lambda = plan_.sparse.lambda;
       return L1Solver(o);
     });
     std::size_t done = 0;
     tbb::parallel_for(std::size_t{0}, sparse_ids.size(), [&](std::size_t i) {
       const uint32_t s = sparse_ids[i];
       const std::vector<uint32_t> nb =
-          index.RadiusSearch(samples[s].position, plan.radius, plan.max_neighbors);
+          index.RadiusSearch(samples_[s].position, plan_.radius, plan_.max_neighbors);
       std::vector<DenseNeighbor> nbs;
       nbs.reserve(nb.size());
       for (uint32_t d : nb)
-        nbs.push_back({out + static_cast<std::size_t>(d) * T, vis[d].data(), feat[d].data(),
-                       samples[d].normal});
+        nbs.push_back({out_ + static_cast<std::size_t>(d) * T_, vis_[d].data(), feat_[d].data(),
+                       samples_[d].normal});
       SparseStats st;
       const SparseOutcome o =
-          ReconstructSparseRow(sampler, samples[s], s, nbs, plan.sparse, solvers.local(),
-                               out + static_cast<std::size_t>(s) * T, st);
+          ReconstructSparseRow(sampler_, samples_[s], s, nbs, plan_.sparse, solvers.local(),
+                               out_ + static_cast<std::size_t>(s) * T_, st);
       if (o != SparseOutcome::kReconstructed) fallback[s] = 1;
-      std::lock_guard<std::mutex> lock(stats_mutex);
-      report.sparse_stats += st;
-      if (progress && (++done % 1024 == 0 || done == sparse_ids.size()))
-        progress("sparse", done, sparse_ids.size());
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      report_.sparse_stats += st;
+      if (progress_ && (++done % 1024 == 0 || done == sparse_ids.size()))
+        progress_(step.c_str(), done, sparse_ids.size());
     });
-    report.seconds_sparse += Now() - t0;
+    report_.seconds_sparse += Now() - t0;
     std::vector<uint32_t> fb;
     for (uint32_t s = 0; s < N; ++s)
       if (fallback[s]) fb.push_back(s);
-    report.dense_fallback = fb.size();
-    report.sparse = report.sparse_stats.reconstructed;
-    if (!fb.empty()) sample_dense(fb, "dense-fallback");
+    return fb;
   }
+
+ private:
+  // Over the dense positions, in the order given (as the farm builds it).
+  NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
+    std::vector<Vec3> pts;
+    pts.reserve(dense.size());
+    for (uint32_t d : dense) pts.push_back(samples_[d].position);
+    return NeighborIndex(pts, dense);
+  }
+
+  const TransportSampler& sampler_;
+  std::span<const SpatialSample> samples_;
+  const SparsePlan& plan_;
+  SparseReport& report_;
+  float* out_;
+  const ProgressFn& progress_;
+  const std::size_t T_;
+  const int n_;
+  const int m_;
+  const std::size_t Tm_;
+  // Dense records, indexed by sample.
+  std::vector<std::vector<float>> vis_, low_;
+  std::vector<std::vector<uint8_t>> feat_;
+  std::mutex stats_mutex_;
+};
+
+}  // namespace
+
+void RunSparsePrecomputation(
+    const TransportSampler& sampler, std::span<const SpatialSample> samples, const SparsePlan& plan,
+    SparseReport& report, float* out,
+    const std::function<void(const char*, std::size_t, std::size_t)>& progress) {
+  const std::size_t N = samples.size();
+  report = SparseReport{};
+  report.samples = N;
+  report.is_dense.assign(N, 0);
+  report.local_rank.assign(N, -1);
+  if (N == 0) return;
+  InProcessSteps steps(sampler, samples, plan, report, out, progress);
+  SparseScheduleCounts counts = RunSparseSchedule(N, plan, steps);
+  report.dense_initial = counts.dense_initial;
+  report.dense_by_rank = counts.dense_by_rank;
+  report.dense_fallback = counts.dense_fallback;
+  report.is_dense = std::move(counts.is_dense);
+  report.sparse = report.sparse_stats.reconstructed;
   report.texels_above_horizon_total =
       report.dense_angular.texels_above_horizon + report.sparse_stats.texels_above_horizon;
 }

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "vocabulary/scene.h"
@@ -63,8 +64,7 @@ struct SparseReport {
 // Deterministic initial dense set: `count` distinct sample indices, sorted.
 std::vector<uint32_t> InitialDenseSet(std::size_t sample_count, std::size_t count, uint64_t seed);
 
-// The per-phase steps of the dense-vertex selection (§4.1), shared by RunSparsePrecomputation
-// and the farm's MPI driver (farm/sparse_farm_phases.cpp) so that both produce the same T.
+// The pieces of the dense-vertex selection (§4.1) that RunSparseSchedule strings together.
 // Total number of dense vertices aimed for: ceil(dense_budget · N), at most N.
 std::size_t SparseDenseBudget(std::size_t sample_count, const SparsePlan& plan);
 // Size of the initial random dense set: ceil(initial_fraction · N) in [1, budget].
@@ -89,6 +89,43 @@ std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
                                        const SparsePlan& plan, int it);
 // Resolution m of the downsampled rows used for rank estimation at cubemap resolution n.
 int SparseRankResolution(const SparsePlan& plan, int cubemap_n);
+
+// ---- the one driver of the method: the order of its steps, shared by the in-process run below
+// and the farm's distributed one (farm/sparse_phase.cpp), which differ only in how a step is
+// computed (TBB threads here, jobs over MPI ranks there).
+//
+//   dense-initial        InitialDenseSet                                       §4.1
+//   rank-k, dense-rank-k candidates of round k, their local rank, picks by rank §4.1, k = 1…
+//   sparse-reconstruct   every non-dense sample from its dense neighbours      §5
+//   dense-fallback       the samples whose reconstruction fell back
+class SparseSteps {
+ public:
+  virtual ~SparseSteps() = default;
+  // Samples `ids` densely (§4.2: adaptive angular sampling; T, visibility and feature rows).
+  virtual void Dense(const std::string& step, std::span<const uint32_t> ids) = 0;
+  // The weight of each candidate (SparseCandidateWeight of its dense neighbours' downsampled
+  // rows), with `dense` the dense samples so far (in the order they became dense).
+  virtual std::vector<double> Rank(const std::string& step, int round,
+                                   std::span<const uint32_t> dense,
+                                   std::span<const uint32_t> candidates) = 0;
+  // Reconstructs every sample that is not dense (§5) from `dense` (sorted); returns the samples
+  // that fell back, sorted.
+  virtual std::vector<uint32_t> Reconstruct(const std::string& step,
+                                            std::span<const uint32_t> dense,
+                                            std::span<const uint8_t> is_dense) = 0;
+};
+
+struct SparseScheduleCounts {
+  uint64_t dense_initial = 0;
+  uint64_t dense_by_rank = 0;
+  uint64_t candidates_ranked = 0;
+  uint64_t dense_fallback = 0;
+  std::vector<uint8_t> is_dense;  // per sample, at the end: 1 for every dense sample
+};
+
+// Runs the method's steps for `sample_count` samples in order; deterministic in plan.seed.
+SparseScheduleCounts RunSparseSchedule(std::size_t sample_count, const SparsePlan& plan,
+                                       SparseSteps& steps);
 
 // Runs every phase in this process (TBB threads). Returns T as sample_count rows of
 // texel_count floats. `progress` (may be empty) receives (phase name, done, total).

@@ -1,5 +1,5 @@
-// Run folder paths and the checkpoint manifest (see run_folder.h).
-#include "farm/run_folder.h"
+// The checkpoint manifest (see run_manifest.h).
+#include "farm/run_manifest.h"
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -8,18 +8,6 @@
 #include "vocabulary/transport_file.h"
 
 namespace prt {
-
-RunFolder::RunFolder(const std::string& d) : dir(d) {
-  const std::filesystem::path p(d);
-  transport = (p / kTransportFileName).string();
-  partial = transport + ".partial";
-  geometry = (p / kGeometryFileName).string();
-  scene_copy = (p / kSceneCopyFileName).string();
-  report = (p / kReportFileName).string();
-  checkpoints = (p / "checkpoints").string();
-  manifest = (p / "checkpoints" / "manifest.json").string();
-  journal = (p / "checkpoints" / "journal.txt").string();
-}
 
 namespace {
 

@@ -1,24 +1,14 @@
-// The run folder prt-farm writes (docs/farm.md, "Run folder") and the manifest that ties its
-// checkpoints to one set of inputs, so that --resume never mixes rows of two different runs.
+// The manifest that ties a run folder's checkpoints (docs/farm.md, "Run folder") to one set of
+// inputs, so that --resume never mixes rows of two different runs. The folder's file names are
+// formats/run_folder.h.
 #pragma once
 
 #include <cstdint>
 #include <string>
 
-namespace prt {
+#include "formats/run_folder.h"
 
-struct RunFolder {
-  explicit RunFolder(const std::string& dir);
-  std::string dir;
-  std::string transport;    // transport.prtt (final, complete)
-  std::string partial;      // transport.prtt.partial (rows written in place while running)
-  std::string geometry;     // geometry.prtg
-  std::string scene_copy;   // scene.toml
-  std::string report;       // report.json
-  std::string checkpoints;  // checkpoints/
-  std::string manifest;     // checkpoints/manifest.json
-  std::string journal;      // checkpoints/journal.txt
-};
+namespace prt {
 
 // Everything that determines the bytes of transport.prtt. Two runs with equal manifests produce
 // bit-identical files, whatever the number of ranks, threads or job sizes.

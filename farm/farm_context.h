@@ -1,0 +1,133 @@
+// What prt-farm's phases share on one rank, and the interface every phase implements
+// (docs/architecture.md, "Adding a farm phase"). Internal to farm/: only the phase files and
+// farm_run.cpp include this.
+//
+// Every rank runs the same list of phases (SPMD). A phase that hands out work builds a JobBatch
+// and runs it on the job loop (farm/job_loop.h); a phase that only finishes files runs on rank 0
+// and returns elsewhere.
+#pragma once
+
+#include <mpi.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "farm/checkpoint_journal.h"
+#include "farm/farm_options.h"
+#include "farm/farm_report.h"
+#include "farm/visibility_jobs.h"
+#include "formats/run_folder.h"
+#include "vocabulary/scene.h"
+#include "vocabulary/transport_file.h"
+#include "worker/embree_scene.h"
+#include "worker/sparse_precomputation.h"
+#include "worker/transport_sampler.h"
+#include "worker/visibility_sampler.h"
+
+namespace prt {
+
+// Seconds on a monotonic clock.
+inline double FarmNow() {
+  using Clock = std::chrono::steady_clock;
+  return std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
+}
+
+// What setup decided, broadcast from rank 0 to every rank as bytes.
+struct SetupParams {
+  uint64_t rows = 0;
+  uint64_t geometry_bytes = 0;
+  uint64_t seed = 1;
+  int32_t cubemap_n = 32;
+  int32_t rays_per_texel = 4;
+  int32_t sparse = 0;      // 1: method sparse (the SparsePlan follows in a second broadcast)
+  int32_t visibility = 0;  // 1: the visibility job (cubemap_n is then the maps' n)
+  int32_t visibility_supersample = 1;
+  int32_t visibility_bits = 1;
+  // 1: --resume of a transport run that already finished (transport.prtc written, the raw
+  // matrix removed) whose inputs still match its manifest: nothing is left to do.
+  int32_t complete = 0;
+};
+
+// All ranks stop the run with this exit code (they have agreed on it collectively).
+struct CollectiveStop {
+  int exit_code;
+};
+
+struct FarmContext {
+  // ---- every rank
+  FarmOptions options;
+  MPI_Comm comm = MPI_COMM_WORLD;
+  int rank = 0;
+  int size = 1;
+  int threads = 1;
+  std::string host;
+  RunFolder folder{"run"};
+  SetupParams params;
+  std::string method = "brute";  // "brute", "sparse" or "visibility"
+  SceneGeometry geometry;        // decoded from the bytes rank 0 broadcast
+  std::vector<SpatialSample> samples;
+  // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
+  std::unique_ptr<EmbreeScene> embree;
+  std::unique_ptr<TransportSampler> sampler;
+  std::unique_ptr<VisibilitySampler> visibility_sampler;
+  SparsePlan plan;  // method sparse: every rank has rank 0's plan
+
+  // ---- rank 0 only
+  bool folder_ready = false;  // the run folder is this run's (a report can be written)
+  SceneDescription scene;     // as parsed by setup (the compression phase reads its settings)
+  std::optional<TransportFileWriter> writer;  // transport.prtt.partial while sampling
+  std::unique_ptr<CheckpointJournal> journal;
+  // The journal's lines of the method's phase, verified by that phase before it re-uses them
+  // (brute force: already verified against the rows by setup).
+  std::vector<JournalEntry> journal_entries;
+  // The visibility job: the chunks of visibility.chunks that make up the result (verified
+  // re-used ones and this run's), for the visibility-finalize phase.
+  std::vector<VisibilityChunkRef> visibility_chunks;
+  FarmReport report;
+
+  bool computes_here() const { return rank != 0 || size == 1 || options.coordinator_works; }
+  int computing_ranks() const {
+    return size - 1 + ((size == 1 || options.coordinator_works) ? 1 : 0);
+  }
+  // How long a job may stay out (or a rank stay silent) before rank 0 gives up.
+  double rank_timeout() const {
+    return options.rank_timeout_s > 0 ? options.rank_timeout_s
+                                      : std::max(300.0, 50.0 * options.job_seconds);
+  }
+};
+
+class FarmPhase {
+ public:
+  virtual ~FarmPhase() = default;
+  // The name in report.json's "phases" (and in progress lines).
+  virtual const char* name() const = 0;
+  // Runs on every rank. Throws CollectiveStop when all ranks agreed to stop; any other
+  // exception on a rank is fatal for the whole job (RunFarm aborts it).
+  virtual void Run(FarmContext& ctx) = 0;
+};
+
+// The phases, one file each (farm/*_phase.cpp), in the order RunFarm runs them.
+std::unique_ptr<FarmPhase> MakeSetupPhase();
+std::unique_ptr<FarmPhase> MakeBrutePhase();
+std::unique_ptr<FarmPhase> MakeSparsePhase();
+std::unique_ptr<FarmPhase> MakeFinalizePhase();
+std::unique_ptr<FarmPhase> MakeVisibilityPhase();
+std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
+std::unique_ptr<FarmPhase> MakeCompressionPhase();
+
+// Max-reduces every rank's status; if any is non-zero, every rank stops with it.
+void AgreeOrStop(FarmContext& ctx, int local_status);
+
+// --fail-after-jobs K --fail-rank R (tests of killed runs): whether this rank is due to fail
+// after `jobs` jobs, and the failure itself (_Exit(4), or sleeping forever with --fail-mode hang).
+bool FailureDue(const FarmContext& ctx, int jobs);
+[[noreturn]] void InjectFailure(const FarmContext& ctx, int jobs);
+// --fail-in POINT: this rank dies now, without cleaning up.
+[[noreturn]] void ExitAbruptly(int rank, const std::string& where);
+
+}  // namespace prt

@@ -1,0 +1,531 @@
+// The job loop every phase of prt-farm runs its jobs on (see job_loop.h and docs/farm.md).
+#include "farm/job_loop.h"
+
+#include <mpi.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <condition_variable>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <exception>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "farm/mpi_support.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/progress.h"
+
+namespace prt {
+
+namespace {
+
+enum Tag : int {
+  kTagReady = 1,
+  kTagJob,
+  kTagStop,
+  kTagResult,
+  kTagFailed,
+};
+
+struct ReadyMsg {
+  int32_t threads = 0;
+  char host[64] = {};
+};
+
+// The fixed start of every job and result message (the batch is echoed back, so that a result
+// of another batch is recognised).
+struct JobEnvelope {
+  uint32_t batch = 0;
+  uint32_t reserved = 0;
+  uint64_t first = 0;
+  uint64_t count = 0;
+  double busy_seconds = 0;  // results: the worker's time computing the job
+};
+static_assert(sizeof(JobEnvelope) == 32, "JobEnvelope travels as bytes");
+
+JobEnvelope PeekEnvelope(const std::string& message, const std::string& what) {
+  if (message.size() < sizeof(JobEnvelope))
+    throw RankFailure(what + " is shorter than its envelope (" + std::to_string(message.size()) +
+                      " bytes)");
+  JobEnvelope e;
+  std::memcpy(&e, message.data(), sizeof e);
+  return e;
+}
+
+std::string_view PayloadOf(const std::string& message) {
+  return std::string_view(message).substr(sizeof(JobEnvelope));
+}
+
+// A worker waits for rank 0's next message without spinning: MPI_Probe busy-polls, and where
+// ranks share cores (2 ranks on a laptop or in CI, oversubscribed nodes) a waiting worker took a
+// core from rank 0's coordinator and its worker thread. Polls with MPI_Iprobe, sleeping 20 µs
+// doubling to 1 ms in between (a job takes tens of milliseconds at least).
+int ProbeFromRankZero(MPI_Comm comm, MPI_Status* st) {
+  auto pause = std::chrono::microseconds(20);
+  for (;;) {
+    int flag = 0;
+    const int rc = MPI_Iprobe(0, MPI_ANY_TAG, comm, &flag, st);
+    if (rc != MPI_SUCCESS || flag) return rc;
+    std::this_thread::sleep_for(pause);
+    pause = std::min(pause * 2, std::chrono::microseconds(1000));
+  }
+}
+
+// Receives the probed message into `into` (resized; its capacity is reused between messages).
+void ReceiveBytes(MPI_Comm comm, const MPI_Status& st, std::string& into, const std::string& what) {
+  int len = 0;
+  MPI_Get_count(&st, MPI_BYTE, &len);
+  into.resize(static_cast<std::size_t>(std::max(0, len)));
+  CheckMpi(MPI_Recv(into.data(), len, MPI_BYTE, st.MPI_SOURCE, st.MPI_TAG, comm, MPI_STATUS_IGNORE),
+           what);
+}
+
+// Messages sent with MPI_Isend whose buffers must live until the send completes, oldest first
+// (a deque keeps its elements in place, so a buffer never moves while MPI holds it).
+class BackgroundSends {
+ public:
+  void Send(std::string bytes, int dest, int tag, MPI_Comm comm, const std::string& what) {
+    if (bytes.size() > static_cast<std::size_t>(INT_MAX))
+      throw RankFailure(what + ": a message of " + std::to_string(bytes.size()) +
+                        " bytes exceeds 2 GiB; lower --job-seconds or --max-job-rows");
+    auto& [request, buffer] = sends_.emplace_back(MPI_REQUEST_NULL, std::move(bytes));
+    CheckMpi(MPI_Isend(buffer.data(), static_cast<int>(buffer.size()), MPI_BYTE, dest, tag, comm,
+                       &request),
+             what);
+  }
+  // Frees the buffers of the sends that have left (and keeps MPI progressing).
+  void Retire() {
+    while (!sends_.empty()) {
+      int sent = 0;
+      CheckMpi(MPI_Test(&sends_.front().first, &sent, MPI_STATUS_IGNORE), "MPI_Test");
+      if (!sent) return;
+      sends_.pop_front();
+    }
+  }
+  void WaitAll() {
+    for (auto& [request, buffer] : sends_)
+      CheckMpi(MPI_Wait(&request, MPI_STATUS_IGNORE), "MPI_Wait");
+    sends_.clear();
+  }
+
+ private:
+  std::deque<std::pair<MPI_Request, std::string>> sends_;
+};
+
+// One computed job: the whole result message (envelope filled in) or the error.
+struct ComputedJob {
+  std::string message;
+  std::exception_ptr error;
+};
+
+// Computes a job into a result message: envelope first, then compute's payload.
+ComputedJob ComputeJob(const JobCompute& compute, const JobEnvelope& job,
+                       std::string_view payload) {
+  ComputedJob r;
+  r.message.resize(sizeof(JobEnvelope));
+  const double t0 = FarmNow();
+  compute({job.first, job.count}, payload, r.message);
+  JobEnvelope e = job;
+  e.busy_seconds = FarmNow() - t0;
+  std::memcpy(r.message.data(), &e, sizeof e);
+  return r;
+}
+
+// Rank 0's own worker thread (when rank 0 computes): takes one job at a time from the
+// coordinator's main thread, which alone calls MPI, computes it (an exception is carried in the
+// result) and queues the result.
+class LocalWorker {
+ public:
+  explicit LocalWorker(JobCompute compute)
+      : compute_(std::move(compute)), thread_([this] { Loop(); }) {}
+  ~LocalWorker() {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+
+  // Queues a job (the worker takes them in order).
+  void Give(JobEnvelope job, std::string payload) {
+    {
+      std::lock_guard lock(mutex_);
+      jobs_.push_back({job, std::move(payload)});
+    }
+    cv_.notify_all();
+  }
+  std::optional<ComputedJob> Poll() {
+    std::lock_guard lock(mutex_);
+    if (results_.empty()) return std::nullopt;
+    ComputedJob r = std::move(results_.front());
+    results_.pop_front();
+    return r;
+  }
+  // Sleeps until a result arrives or `seconds` pass.
+  void Wait(double seconds) {
+    std::unique_lock lock(mutex_);
+    cv_done_.wait_for(lock, std::chrono::duration<double>(seconds),
+                      [&] { return !results_.empty(); });
+  }
+
+ private:
+  void Loop() {
+    for (;;) {
+      std::pair<JobEnvelope, std::string> job;
+      {
+        std::unique_lock lock(mutex_);
+        cv_.wait(lock, [&] { return stop_ || !jobs_.empty(); });
+        if (stop_) return;
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
+      }
+      ComputedJob r;
+      try {
+        r = ComputeJob(compute_, job.first, job.second);
+      } catch (...) {
+        r.error = std::current_exception();
+      }
+      {
+        std::lock_guard lock(mutex_);
+        results_.push_back(std::move(r));
+      }
+      cv_done_.notify_all();
+    }
+  }
+
+  JobCompute compute_;
+  std::mutex mutex_;
+  std::condition_variable cv_, cv_done_;
+  std::deque<std::pair<JobEnvelope, std::string>> jobs_;
+  std::deque<ComputedJob> results_;
+  bool stop_ = false;
+  std::thread thread_;  // last: starts after every other member exists
+};
+
+// --fail-after-jobs K on rank 0: when several finished jobs are committed together, journal only
+// those up to the K-th, so that the kill lands after exactly K journaled jobs.
+void KeepJobsBeforeFailure(const FarmContext& ctx, int jobs_so_far,
+                           std::vector<JournalEntry>& pending) {
+  if (ctx.options.fail_after_jobs < 0 || ctx.rank != ctx.options.fail_rank) return;
+  const int left = std::max(0, ctx.options.fail_after_jobs - jobs_so_far);
+  if (pending.size() > static_cast<std::size_t>(left))
+    pending.resize(static_cast<std::size_t>(left));
+}
+
+// A worker rank (1..N−1): READY, then jobs until STOP.
+void ServeJobs(FarmContext& ctx, const JobCompute& compute) {
+  ReadyMsg ready;
+  ready.threads = ctx.threads;
+  std::snprintf(ready.host, sizeof ready.host, "%s", ctx.host.c_str());
+  CheckMpi(MPI_Send(&ready, sizeof ready, MPI_BYTE, 0, kTagReady, ctx.comm), "MPI_Send ready");
+  int jobs = 0;
+  std::string message;
+  BackgroundSends sending;  // results on their way
+  for (;;) {
+    sending.Retire();
+    MPI_Status st;
+    CheckMpi(ProbeFromRankZero(ctx.comm, &st), "MPI_Iprobe from rank 0");
+    if (st.MPI_TAG == kTagStop) {
+      // Rank 0 stops a worker only once it has every result, so these have left.
+      sending.WaitAll();
+      CheckMpi(MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE),
+               "MPI_Recv stop");
+      return;
+    }
+    if (st.MPI_TAG != kTagJob)
+      throw RankFailure("unexpected message tag " + std::to_string(st.MPI_TAG) + " from rank 0");
+    ReceiveBytes(ctx.comm, st, message, "MPI_Recv job");
+    const JobEnvelope job = PeekEnvelope(message, "a job from rank 0");
+    if (FailureDue(ctx, jobs)) InjectFailure(ctx, jobs);
+    ComputedJob result;
+    try {
+      result = ComputeJob(compute, job, PayloadOf(message));
+    } catch (const std::exception& e) {
+      // Tell rank 0 (which writes the report and aborts the job), then wait to be killed.
+      const std::string what = e.what();
+      spdlog::error("rank {}: {}", ctx.rank, what);
+      MPI_Send(what.data(), static_cast<int>(what.size()), MPI_CHAR, 0, kTagFailed, ctx.comm);
+      MPI_Recv(nullptr, 0, MPI_BYTE, 0, kTagStop, ctx.comm, MPI_STATUS_IGNORE);
+      throw CollectiveStop{kExitRankFailed};
+    }
+    // Sent in the background while the next job is received and computed: a blocking send of
+    // a large result spins until rank 0 gets round to receiving it, on a core rank 0's threads
+    // may need.
+    sending.Send(std::move(result.message), 0, kTagResult, ctx.comm, "MPI_Isend result");
+    ++jobs;
+  }
+}
+
+}  // namespace
+
+struct JobLoop::State {
+  struct Slot {
+    int rank = 0;
+    bool local = false;
+    bool ready = false;
+    std::deque<RowRange> jobs;  // given to the rank and not returned, oldest first
+    double since = 0;           // when the oldest began (or the slot opened)
+    BackgroundSends sends;      // remote ranks: the encoded jobs on their way
+  };
+
+  FarmContext& ctx;
+  std::deque<Slot> slots;  // a deque: a Slot (holding MPI requests) never moves
+  std::unique_ptr<LocalWorker> local;
+  uint32_t batch_number = 0;
+  int jobs_this_run = 0;
+  std::string incoming;  // the receive buffer, reused
+
+  explicit State(FarmContext& c) : ctx(c) {}
+
+  Slot& SlotOf(int rank) {
+    for (Slot& s : slots)
+      if (s.rank == rank) return s;
+    throw RankFailure("a message from rank " + std::to_string(rank) + ", which has no slot");
+  }
+
+  void MarkReady(int src, const ReadyMsg& ready_msg) {
+    ReadyMsg ready = ready_msg;
+    ready.host[sizeof ready.host - 1] = '\0';
+    ctx.report.rank_reports[src].threads = ready.threads;
+    ctx.report.rank_reports[src].host = ready.host;
+  }
+};
+
+JobLoop::JobLoop(FarmContext& ctx, JobCompute compute) : s_(std::make_unique<State>(ctx)) {
+  const double start = FarmNow();
+  for (int r = 1; r < ctx.size; ++r) {
+    State::Slot& s = s_->slots.emplace_back();
+    s.rank = r;
+    s.since = start;
+  }
+  if (ctx.computes_here()) {
+    State::Slot& s = s_->slots.emplace_back();
+    s.rank = 0;
+    s.local = true;
+    s.ready = true;
+    s.since = start;
+    s_->local = std::make_unique<LocalWorker>(std::move(compute));
+  }
+  RankReport& r0 = ctx.report.rank_reports[0];
+  r0.threads = ctx.threads;
+  r0.host = ctx.host;
+  r0.computes = ctx.computes_here();
+  if (FailureDue(ctx, 0)) InjectFailure(ctx, 0);
+}
+
+JobLoop::~JobLoop() = default;
+
+void JobLoop::Run(JobBatch& batch) {
+  State& st = *s_;
+  FarmContext& ctx = st.ctx;
+  FarmReport& rep = ctx.report;
+  JobPlanner planner(batch.items, batch.done, BatchSizing(ctx, batch.max_items));
+
+  ProgressOptions po;
+  po.unit = batch.unit;
+  po.rate_unit = batch.rate_unit;
+  po.log_interval_s = ctx.options.log_interval_s;
+  po.log = !ctx.options.quiet;
+  po.already_done = planner.done_before_rows();
+  Progress progress(batch.name, batch.items, po);
+
+  const double timeout = ctx.rank_timeout();
+  const uint32_t number = st.batch_number;
+  double last_commit = FarmNow();
+  std::vector<JournalEntry> pending;
+
+  // A finished job: stored by the phase now, counted once the journal has it (commit).
+  auto accept = [&](int rank, const std::string& message) {
+    State::Slot& s = st.SlotOf(rank);
+    const JobEnvelope e = PeekEnvelope(message, "a result from rank " + std::to_string(rank));
+    if (s.jobs.empty() || e.batch != number || s.jobs.front().first != e.first ||
+        s.jobs.front().count != e.count) {
+      throw RankFailure("rank " + std::to_string(rank) + " returned " + batch.name + " items " +
+                        std::to_string(e.first) + "+" + std::to_string(e.count) +
+                        " it was not given");
+    }
+    JournalEntry line = batch.accept(rank, s.jobs.front(), PayloadOf(message));
+    line.rank = rank;
+    line.busy_seconds = e.busy_seconds;
+    pending.push_back(std::move(line));
+    planner.Measured(rank, e.count, e.busy_seconds);
+    s.jobs.pop_front();
+    s.since = FarmNow();
+  };
+
+  auto commit = [&] {
+    if (pending.empty()) return;
+    KeepJobsBeforeFailure(ctx, st.jobs_this_run, pending);
+    if (batch.sync) batch.sync();  // results durable first,
+    ctx.journal->Append(pending);  // then the journal lines that count them
+    for (const JournalEntry& e : pending) {
+      RankReport& rr = rep.rank_reports[e.rank];
+      ++rr.jobs;
+      rr.rows += e.rows.count;
+      rr.rays_traced += e.rays_traced;
+      rr.busy_seconds += e.busy_seconds;
+      ++rep.jobs_done;
+      if (batch.committed) batch.committed(e);
+      progress.Advance(e.rows.count, e.rays_traced);
+      ++st.jobs_this_run;
+    }
+    pending.clear();
+    if (FailureDue(ctx, st.jobs_this_run)) InjectFailure(ctx, st.jobs_this_run);
+  };
+
+  auto outstanding = [&] {
+    return std::any_of(st.slots.begin(), st.slots.end(),
+                       [](const State::Slot& s) { return !s.jobs.empty(); });
+  };
+
+  for (;;) {
+    // Hand out work: every ready rank holds up to jobs_ahead jobs.
+    for (State::Slot& s : st.slots) {
+      s.sends.Retire();
+      while (s.ready && s.jobs.size() < batch.jobs_ahead) {
+        const std::optional<RowRange> next = planner.Next(s.rank);
+        if (!next) break;
+        RowRange range = *next;
+        std::string payload = batch.make_job ? batch.make_job(range) : std::string();
+        if (range.count < next->count) planner.Return({range.end(), next->count - range.count});
+        if (s.jobs.empty()) s.since = FarmNow();
+        s.jobs.push_back(range);
+        JobEnvelope e;
+        e.batch = number;
+        e.first = range.first;
+        e.count = range.count;
+        if (s.local) {
+          st.local->Give(e, std::move(payload));
+        } else {
+          std::string message(sizeof e, '\0');
+          std::memcpy(message.data(), &e, sizeof e);
+          message += payload;
+          s.sends.Send(std::move(message), s.rank, kTagJob, ctx.comm,
+                       "MPI_Isend job to rank " + std::to_string(s.rank));
+        }
+      }
+    }
+    if (!outstanding() && pending.empty() && planner.unassigned_rows() == 0) {
+      // Every job came back, so every send has left; complete the requests.
+      for (State::Slot& s : st.slots) s.sends.WaitAll();
+      break;
+    }
+
+    bool busy = false;
+    if (st.local) {
+      while (std::optional<ComputedJob> r = st.local->Poll()) {
+        if (r->error) std::rethrow_exception(r->error);
+        accept(0, r->message);
+        busy = true;
+      }
+    }
+    for (;;) {
+      int flag = 0;
+      MPI_Status ms;
+      CheckMpi(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, ctx.comm, &flag, &ms), "MPI_Iprobe");
+      if (!flag) break;
+      busy = true;
+      const int src = ms.MPI_SOURCE;
+      if (ms.MPI_TAG == kTagReady) {
+        ReadyMsg ready;
+        CheckMpi(
+            MPI_Recv(&ready, sizeof ready, MPI_BYTE, src, kTagReady, ctx.comm, MPI_STATUS_IGNORE),
+            "MPI_Recv ready");
+        st.MarkReady(src, ready);
+        st.SlotOf(src).ready = true;
+      } else if (ms.MPI_TAG == kTagResult) {
+        ReceiveBytes(ctx.comm, ms, st.incoming, "MPI_Recv result from rank " + std::to_string(src));
+        accept(src, st.incoming);
+      } else if (ms.MPI_TAG == kTagFailed) {
+        std::string message;
+        ReceiveBytes(ctx.comm, ms, message, "MPI_Recv failure of rank " + std::to_string(src));
+        throw RankFailure("rank " + std::to_string(src) + " failed: " + message);
+      } else {
+        throw RankFailure("unexpected message tag " + std::to_string(ms.MPI_TAG) + " from rank " +
+                          std::to_string(src));
+      }
+    }
+    // Results become durable (fdatasync'ed, then their journal lines) every commit interval and
+    // when no job is out. A failure-injection run commits every result, as its resume tests
+    // count on.
+    if (!outstanding() || ctx.options.fail_after_jobs >= 0 ||
+        FarmNow() - last_commit >= batch.commit_interval_s) {
+      commit();
+      last_commit = FarmNow();
+    }
+
+    // A rank that neither answers nor dies (mpirun aborts the job when one dies) must not keep
+    // rank 0 waiting forever.
+    const double now = FarmNow();
+    for (const State::Slot& s : st.slots) {
+      if ((s.ready && s.jobs.empty()) || now - s.since <= timeout) continue;
+      const std::string what = s.jobs.empty()
+                                   ? std::string(" never reported ready")
+                                   : " has not returned its job (" + batch.name + " items " +
+                                         std::to_string(s.jobs.front().first) + ".." +
+                                         std::to_string(s.jobs.front().end() - 1) + ")";
+      throw RankFailure("rank " + std::to_string(s.rank) + what + " for " +
+                        std::to_string(static_cast<int>(now - s.since)) +
+                        " s (--rank-timeout); giving up");
+    }
+    progress.Advance(0);
+    if (!busy) {
+      if (st.local) {
+        st.local->Wait(0.001);
+      } else {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+    }
+  }
+  progress.Finish();
+  ++st.batch_number;
+}
+
+void JobLoop::Finish() {
+  State& st = *s_;
+  for (State::Slot& s : st.slots) {
+    if (s.local) continue;
+    if (!s.ready) {
+      ReadyMsg ready;
+      CheckMpi(MPI_Recv(&ready, sizeof ready, MPI_BYTE, s.rank, kTagReady, st.ctx.comm,
+                        MPI_STATUS_IGNORE),
+               "MPI_Recv ready");
+      st.MarkReady(s.rank, ready);
+      s.ready = true;
+    }
+    s.sends.WaitAll();
+    CheckMpi(MPI_Send(nullptr, 0, MPI_BYTE, s.rank, kTagStop, st.ctx.comm),
+             "MPI_Send stop to rank " + std::to_string(s.rank));
+  }
+  st.local.reset();
+}
+
+void RunJobPhase(FarmContext& ctx, const JobCompute& compute,
+                 const std::function<void(JobLoop&)>& coordinate) {
+  if (ctx.rank != 0) {
+    ServeJobs(ctx, compute);
+    return;
+  }
+  JobLoop loop(ctx, compute);
+  coordinate(loop);
+  loop.Finish();
+}
+
+JobSizing BatchSizing(const FarmContext& ctx, uint64_t max_items) {
+  JobSizing sizing;
+  sizing.job_seconds = ctx.options.job_seconds;
+  sizing.workers = ctx.computing_ranks();
+  sizing.max_rows =
+      ctx.options.max_job_rows > 0 ? ctx.options.max_job_rows : std::max<uint64_t>(1, max_items);
+  sizing.initial_rows = ctx.options.initial_job_rows > 0 ? ctx.options.initial_job_rows
+                                                         : 4 * static_cast<uint64_t>(ctx.threads);
+  return sizing;
+}
+
+}  // namespace prt

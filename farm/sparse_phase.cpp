@@ -1,0 +1,458 @@
+// The sparse method (Huang & Ramamoorthi 2010 §4–5) on the job loop; docs/farm.md, "Sparse
+// method". Its order of steps is the worker's one driver, RunSparseSchedule
+// (worker/sparse_precomputation.h), the same the in-process RunSparsePrecomputation runs: here each
+// step is a batch of jobs (farm/sparse_jobs.h) on the JobLoop. Rank 0 plans every step
+// deterministically from the seed and the previous steps' durable results, so the transport file
+// is bit-identical to the in-process one for any number of ranks and after any resume:
+//   dense-initial       InitialDenseSet                        jobs: chunks of sample ids
+//   rank-k              candidates of round k (NeighborIndex over the dense positions)
+//                                                              jobs: chunks of candidates
+//   dense-rank-k        SparsePickByRank, on rank 0 only       jobs: chunks of sample ids
+//   sparse-reconstruct  non-dense samples in Morton order      jobs: chunks of that order
+//   dense-fallback      the vertices whose reconstruction fell back
+// Dense T rows and reconstructed rows go into transport.prtt.partial as they arrive; dense
+// visibility and feature rows into run/sparse/dense_aux.bin (5·texels bytes per sample, at the
+// sample's offset: a sparse file), candidate weights into run/sparse/rank-k.bin (int32 per
+// candidate), sparse outcomes into run/sparse/sparse_outcome.bin (a byte per Morton position).
+// Every job is journaled after its results are durable ("sjob <step> …").
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "farm/farm_context.h"
+#include "farm/job_loop.h"
+#include "farm/side_file.h"
+#include "farm/sparse_jobs.h"
+#include "vocabulary/errors.h"
+#include "worker/local_rank.h"
+#include "worker/neighbor_index.h"
+#include "worker/sparse_precomputation.h"
+
+namespace prt {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// A job's rows (the dense neighbours it is sent, or the rows it returns) fit in 24 MiB: glibc
+// serves blocks above its mmap threshold (at most 32 MiB) with fresh pages on every allocation,
+// so jobs of ~100 MiB paid a page fault per 4 KiB of every copy of every job (encode, MPI,
+// decode, result) — 14 % of a 2-rank run's samples (docs/farm.md). Below it the buffers are
+// reused from the heap.
+constexpr uint64_t kMaxSparseJobBytes = uint64_t{24} << 20;
+// Jobs a rank holds at once: the one it computes and the next, encoded and sent while it
+// computes, so that it never waits for rank 0 to read its neighbours' rows (a 2-rank run's
+// sparse-reconstruct workers were idle 45 % of the time; docs/farm.md).
+constexpr std::size_t kJobsAhead = 2;
+// Results become durable every 0.5 s and when no job is out: an fdatasync per result cost 2 s of
+// a 27 s 2-rank run.
+constexpr double kCommitIntervalSeconds = 0.5;
+
+// One step's jobs: what differs between the kinds.
+struct StepJobs {
+  std::string name;
+  SparseJobKind kind = SparseJobKind::kDense;
+  uint64_t items = 0;
+  std::string unit = "samples";
+  // Verifies a journaled job against the files and applies it to rank 0's state.
+  std::function<bool(const JournalEntry&)> reuse;
+  // Encodes the job for items h.first…; may lower h.count (too many bytes).
+  std::function<std::string(SparseJobHeader&)> make_job;
+  // Writes a result into the files and rank 0's state; returns its durable checksum and the
+  // number of transport rows it wrote.
+  std::function<uint64_t(const SparseJobResult&, uint64_t& rows_written)> accept;
+  std::function<void()> sync;  // makes what accept wrote durable
+};
+
+// Rank 0: the method's steps as batches of jobs.
+class FarmSparseSteps final : public SparseSteps {
+ public:
+  FarmSparseSteps(FarmContext& ctx, JobLoop& loop)
+      : ctx_(ctx),
+        loop_(loop),
+        N_(ctx.samples.size()),
+        T_(6ull * ctx.params.cubemap_n * ctx.params.cubemap_n),
+        n_(ctx.params.cubemap_n),
+        m_(SparseRankResolution(ctx.plan, ctx.params.cubemap_n)),
+        Tm_(static_cast<std::size_t>(6) * m_ * m_),
+        low_(N_) {
+    fs::create_directories(ctx.folder.sparse);
+    aux_ = std::make_unique<SideFile>((fs::path(ctx.folder.sparse) / "dense_aux.bin").string());
+  }
+
+  // ---- dense rows (§4.2): T into the transport file, visibility + features into dense_aux.bin
+  void Dense(const std::string& name, std::span<const uint32_t> ids) override {
+    StepJobs p;
+    p.name = name;
+    p.kind = SparseJobKind::kDense;
+    p.items = ids.size();
+    const uint64_t aux_row = 5 * T_;
+    auto apply = [&](uint32_t s, const float* row) {
+      low_[s].resize(Tm_);
+      DownsampleRow(row, n_, m_, low_[s].data());
+    };
+    p.reuse = [&, aux_row](const JournalEntry& e) {
+      const std::size_t c = static_cast<std::size_t>(e.rows.count);
+      std::vector<float> tr(c * T_), vis(c * T_);
+      std::vector<uint8_t> feat(c * T_);
+      std::vector<char> buf(aux_row);
+      for (std::size_t i = 0; i < c; ++i) {
+        const uint32_t s = ids[e.rows.first + i];
+        ctx_.writer->ReadRows(s, 1, tr.data() + i * T_);
+        if (!aux_->Read(buf.data(), aux_row, s * aux_row)) return false;
+        std::memcpy(vis.data() + i * T_, buf.data(), T_ * sizeof(float));
+        std::memcpy(feat.data() + i * T_, buf.data() + T_ * sizeof(float), T_);
+      }
+      if (DenseResultChecksum(c, T_, tr.data(), vis.data(), feat.data()) != e.rows_checksum)
+        return false;
+      for (std::size_t i = 0; i < c; ++i) apply(ids[e.rows.first + i], tr.data() + i * T_);
+      return true;
+    };
+    p.make_job = [&](SparseJobHeader& h) {
+      DenseJob job;
+      job.ids.assign(ids.begin() + static_cast<std::ptrdiff_t>(h.first),
+                     ids.begin() + static_cast<std::ptrdiff_t>(h.first + h.count));
+      return EncodeDenseJob(h, job);
+    };
+    p.accept = [&, aux_row](const SparseJobResult& r, uint64_t& rows_written) {
+      const std::size_t c = static_cast<std::size_t>(r.header.count);
+      if (r.transport.size() != c * T_ || r.visibility.size() != c * T_ ||
+          r.feature.size() != c * T_)
+        throw RankFailure("a dense job came back with the wrong number of rows");
+      std::vector<char> buf(aux_row);
+      for (std::size_t i = 0; i < c; ++i) {
+        const uint32_t s = ids[r.header.first + i];
+        ctx_.writer->WriteRows(s, 1, r.transport.data() + i * T_);
+        std::memcpy(buf.data(), r.visibility.data() + i * T_, T_ * sizeof(float));
+        std::memcpy(buf.data() + T_ * sizeof(float), r.feature.data() + i * T_, T_);
+        aux_->Write(buf.data(), aux_row, s * aux_row);
+        apply(s, r.transport.data() + i * T_);
+      }
+      rows_written = c;
+      return DenseResultChecksum(c, T_, r.transport.data(), r.visibility.data(), r.feature.data());
+    };
+    p.sync = [&] {
+      ctx_.writer->Sync();
+      aux_->Sync();
+    };
+    RunStep(p);
+  }
+
+  // ---- local rank of candidates (§4.1)
+  std::vector<double> Rank(const std::string& name, int, std::span<const uint32_t> dense,
+                           std::span<const uint32_t> cand) override {
+    const double t0 = FarmNow();
+    // Built once per step over the dense positions, in the order the in-process run uses.
+    const NeighborIndex index = IndexOf(dense);
+    index_seconds_ += FarmNow() - t0;
+    SideFile file((fs::path(ctx_.folder.sparse) / (name + ".bin")).string());
+    std::vector<double> weight(cand.size(), 0.0);
+    StepJobs p;
+    p.name = name;
+    p.kind = SparseJobKind::kRank;
+    p.items = cand.size();
+    p.unit = "candidates";
+    p.reuse = [&](const JournalEntry& e) {
+      std::vector<int32_t> w(static_cast<std::size_t>(e.rows.count));
+      if (!file.Read(w.data(), w.size() * sizeof(int32_t), e.rows.first * sizeof(int32_t)) ||
+          Checksum64(w.data(), w.size() * sizeof(int32_t)) != e.rows_checksum)
+        return false;
+      for (std::size_t i = 0; i < w.size(); ++i) weight[e.rows.first + i] = w[i];
+      return true;
+    };
+    p.make_job = [&](SparseJobHeader& h) {
+      RankJob job;
+      job.low_dim = static_cast<uint32_t>(Tm_);
+      std::unordered_map<uint32_t, uint32_t> local;
+      job.offsets.push_back(0);
+      for (uint64_t i = h.first; i < h.first + h.count; ++i) {
+        for (uint32_t d : index.RadiusSearch(ctx_.samples[cand[i]].position, ctx_.plan.radius,
+                                             ctx_.plan.max_neighbors)) {
+          auto [at, added] = local.emplace(d, static_cast<uint32_t>(local.size()));
+          if (added) job.low_rows.insert(job.low_rows.end(), low_[d].begin(), low_[d].end());
+          job.neighbors.push_back(at->second);
+        }
+        job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
+      }
+      return EncodeRankJob(h, job);
+    };
+    p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
+      if (r.weights.size() != r.header.count)
+        throw RankFailure("a rank job came back with the wrong number of weights");
+      file.Write(r.weights.data(), r.weights.size() * sizeof(int32_t),
+                 r.header.first * sizeof(int32_t));
+      for (std::size_t i = 0; i < r.weights.size(); ++i) weight[r.header.first + i] = r.weights[i];
+      rows_written = 0;
+      return Checksum64(r.weights.data(), r.weights.size() * sizeof(int32_t));
+    };
+    p.sync = [&] { file.Sync(); };
+    RunStep(p, t0);
+    return weight;
+  }
+
+  // ---- sparse vertices (§5); returns the fallbacks, sorted
+  std::vector<uint32_t> Reconstruct(const std::string& name, std::span<const uint32_t> dense,
+                                    std::span<const uint8_t> is_dense) override {
+    const double t0 = FarmNow();
+    const NeighborIndex index = IndexOf(dense);
+    index_seconds_ += FarmNow() - t0;
+    // Spatially coherent order: a job's vertices share most of their neighbours.
+    std::vector<std::pair<uint32_t, uint32_t>> keyed;
+    for (uint32_t s = 0; s < N_; ++s) {
+      if (!is_dense[s]) {
+        keyed.push_back({MortonKey(ctx_.samples[s].position, ctx_.geometry.bounds_min,
+                                   ctx_.geometry.bounds_max),
+                         s});
+      }
+    }
+    std::sort(keyed.begin(), keyed.end());
+    std::vector<uint32_t> order;
+    for (const auto& k : keyed) order.push_back(k.second);
+    std::vector<uint8_t> outcome(order.size(), 0xff);
+    SideFile file((fs::path(ctx_.folder.sparse) / "sparse_outcome.bin").string());
+    const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
+
+    StepJobs p;
+    p.name = name;
+    p.kind = SparseJobKind::kSparse;
+    p.items = order.size();
+    p.reuse = [&](const JournalEntry& e) {
+      std::vector<uint8_t> o(static_cast<std::size_t>(e.rows.count));
+      if (!file.Read(o.data(), o.size(), e.rows.first)) return false;
+      std::vector<float> rows;
+      for (std::size_t i = 0; i < o.size(); ++i) {
+        if (o[i] != ok) continue;
+        rows.resize(rows.size() + T_);
+        ctx_.writer->ReadRows(order[e.rows.first + i], 1, rows.data() + rows.size() - T_);
+      }
+      if (SparseResultChecksum(o, rows) != e.rows_checksum) return false;
+      std::copy(o.begin(), o.end(), outcome.begin() + static_cast<std::ptrdiff_t>(e.rows.first));
+      return true;
+    };
+    p.make_job = [&](SparseJobHeader& h) {
+      SparseJob job;
+      job.texels = static_cast<uint32_t>(T_);
+      std::unordered_map<uint32_t, uint32_t> local;
+      std::vector<uint32_t> union_ids;
+      job.offsets.push_back(0);
+      std::vector<uint32_t> nbs;
+      for (uint64_t i = h.first; i < h.first + h.count; ++i) {
+        nbs = index.RadiusSearch(ctx_.samples[order[i]].position, ctx_.plan.radius,
+                                 ctx_.plan.max_neighbors);
+        std::size_t added = 0;
+        for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
+        // A job's rows stay within the job byte limit (at least one vertex per job).
+        if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxSparseJobBytes) {
+          h.count = i - h.first;
+          break;
+        }
+        job.vertices.push_back(order[i]);
+        for (uint32_t d : nbs) {
+          auto [at, is_new] = local.emplace(d, static_cast<uint32_t>(union_ids.size()));
+          if (is_new) union_ids.push_back(d);
+          job.neighbors.push_back(at->second);
+        }
+        job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
+      }
+      // The dense neighbours' rows, read back from the run folder.
+      const std::size_t u = union_ids.size();
+      job.transport.resize(u * T_);
+      job.visibility.resize(u * T_);
+      job.feature.resize(u * T_);
+      std::vector<char> buf(5 * T_);
+      for (std::size_t k = 0; k < u; ++k) {
+        const uint32_t d = union_ids[k];
+        ctx_.writer->ReadRows(d, 1, job.transport.data() + k * T_);
+        if (!aux_->Read(buf.data(), buf.size(), d * 5 * T_))
+          throw FileIoError(ctx_.folder.sparse,
+                            "dense_aux.bin lacks dense sample " + std::to_string(d));
+        std::memcpy(job.visibility.data() + k * T_, buf.data(), T_ * sizeof(float));
+        std::memcpy(job.feature.data() + k * T_, buf.data() + T_ * sizeof(float), T_);
+      }
+      rows_shipped_ += u;
+      job.union_ids = std::move(union_ids);
+      return EncodeSparseJob(h, job);
+    };
+    p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
+      const std::size_t c = static_cast<std::size_t>(r.header.count);
+      if (r.outcomes.size() != c) throw RankFailure("a sparse job came back incomplete");
+      std::size_t k = 0;
+      for (std::size_t i = 0; i < c; ++i) {
+        if (r.outcomes[i] != ok) continue;
+        if ((k + 1) * T_ > r.transport.size())
+          throw RankFailure("a sparse job came back with too few rows");
+        ctx_.writer->WriteRows(order[r.header.first + i], 1, r.transport.data() + k * T_);
+        ++k;
+      }
+      if (k * T_ != r.transport.size())
+        throw RankFailure("a sparse job came back with too many rows");
+      file.Write(r.outcomes.data(), c, r.header.first);
+      std::copy(r.outcomes.begin(), r.outcomes.end(),
+                outcome.begin() + static_cast<std::ptrdiff_t>(r.header.first));
+      rows_written = k;
+      return SparseResultChecksum(r.outcomes, r.transport);
+    };
+    p.sync = [&] {
+      ctx_.writer->Sync();
+      file.Sync();
+    };
+    RunStep(p, t0);
+    ctx_.report.sparse.dense_rows_shipped = rows_shipped_;
+    ctx_.report.sparse.index_seconds = index_seconds_;
+    std::vector<uint32_t> fb;
+    for (std::size_t i = 0; i < order.size(); ++i)
+      if (outcome[i] != ok) fb.push_back(order[i]);
+    std::sort(fb.begin(), fb.end());
+    return fb;
+  }
+
+ private:
+  NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
+    std::vector<Vec3> pts;
+    pts.reserve(dense.size());
+    for (uint32_t d : dense) pts.push_back(ctx_.samples[d].position);
+    return NeighborIndex(pts, dense);
+  }
+
+  void Count(const SparseJobCounters& c, bool this_run) {
+    FarmReport& rep = ctx_.report;
+    rep.sparse.counters += c;
+    rep.rays_traced_all += c.rays_traced;
+    rep.texels_below_horizon_all += c.texels_below_horizon;
+    if (this_run) {
+      rep.rays_traced += c.rays_traced;
+      rep.texels_traced += c.texels_traced;
+      rep.texels_below_horizon += c.texels_below_horizon;
+      rep.rays_below_horizon += c.rays_below_horizon;
+    }
+  }
+
+  // One step as a batch on the job loop; its journaled jobs that still verify are not redone.
+  void RunStep(StepJobs& p, double t0 = -1) {
+    if (t0 < 0) t0 = FarmNow();
+    FarmReport& rep = ctx_.report;
+    JobBatch batch;
+    uint64_t reused_jobs = 0;
+    for (const JournalEntry& e : ctx_.journal_entries) {
+      if (e.phase != p.name || e.rows.end() > p.items) continue;
+      const bool overlaps = std::any_of(
+          batch.done.begin(), batch.done.end(),
+          [&](const RowRange& d) { return e.rows.first < d.end() && d.first < e.rows.end(); });
+      if (overlaps) continue;
+      if (!p.reuse(e)) {
+        ++rep.checkpoints_rejected;
+        continue;
+      }
+      batch.done.push_back(e.rows);
+      ++reused_jobs;
+      ++rep.jobs_reused;
+      if (p.kind != SparseJobKind::kRank) {
+        rep.rows_reused += p.kind == SparseJobKind::kDense
+                               ? e.rows.count
+                               : SparseJobCounters::FromVector(e.counters).reconstructed;
+      }
+      Count(SparseJobCounters::FromVector(e.counters), false);
+    }
+    if (reused_jobs > 0)
+      spdlog::info("[{}] {} job(s) re-used from checkpoints", p.name, reused_jobs);
+
+    batch.name = p.name;
+    batch.items = p.items;
+    batch.unit = p.unit;
+    batch.rate_unit = p.kind == SparseJobKind::kRank ? "" : "rays";
+    const uint64_t per_item_bytes = p.kind == SparseJobKind::kRank ? 64 : 9 * T_;
+    batch.max_items = std::max<uint64_t>(1, kMaxSparseJobBytes / per_item_bytes);
+    batch.jobs_ahead = kJobsAhead;
+    batch.commit_interval_s = kCommitIntervalSeconds;
+    batch.make_job = [&](RowRange& range) {
+      SparseJobHeader h;
+      h.kind = static_cast<uint32_t>(p.kind);
+      h.phase = step_number_;
+      h.first = range.first;
+      h.count = range.count;
+      std::string job = p.make_job(h);
+      range.count = h.count;
+      return job;
+    };
+    batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
+      SparseJobResult r;
+      try {
+        r = DecodeSparseJobResult(payload);
+      } catch (const std::exception& e) {
+        throw RankFailure("rank " + std::to_string(rank) + ": " + e.what());
+      }
+      if (r.header.first != range.first || r.header.count != range.count ||
+          r.header.phase != step_number_)
+        throw RankFailure("rank " + std::to_string(rank) + " returned a job it was not given");
+      uint64_t rows_written = 0;
+      JournalEntry e;
+      e.phase = p.name;
+      e.rows = range;
+      e.rows_checksum = p.accept(r, rows_written);
+      e.counters = r.counters.ToVector();
+      e.rays_traced = r.counters.rays_traced;
+      e.texels_traced = r.counters.texels_traced;
+      e.texels_below_horizon = rows_written;  // (rows written; not journaled for sjob lines)
+      return e;
+    };
+    batch.sync = p.sync;
+    batch.committed = [&](const JournalEntry& e) {
+      rep.rows_done += e.texels_below_horizon;
+      Count(SparseJobCounters::FromVector(e.counters), true);
+    };
+    loop_.Run(batch);
+    ++step_number_;
+    rep.sparse.phases.push_back({p.name, FarmNow() - t0, p.items, reused_jobs});
+  }
+
+  FarmContext& ctx_;
+  JobLoop& loop_;
+  const std::size_t N_;
+  const std::size_t T_;
+  const int n_;
+  const int m_;
+  const std::size_t Tm_;
+  std::unique_ptr<SideFile> aux_;
+  std::vector<std::vector<float>> low_;  // downsampled rows of the dense vertices
+  uint32_t step_number_ = 0;
+  uint64_t rows_shipped_ = 0;
+  double index_seconds_ = 0;
+};
+
+class SparsePhase final : public FarmPhase {
+ public:
+  const char* name() const override { return "sparse"; }
+
+  void Run(FarmContext& ctx) override {
+    RunJobPhase(
+        ctx,
+        [&ctx](const RowRange&, std::string_view payload, std::string& out) {
+          out += ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload);
+        },
+        [&ctx](JobLoop& loop) {
+          FarmReport& rep = ctx.report;
+          rep.sparse.enabled = true;
+          FarmSparseSteps steps(ctx, loop);
+          const SparseScheduleCounts c = RunSparseSchedule(ctx.samples.size(), ctx.plan, steps);
+          rep.sparse.dense_initial = c.dense_initial;
+          rep.sparse.candidates_ranked += c.candidates_ranked;
+          rep.sparse.dense_by_rank += c.dense_by_rank;
+          rep.sparse.dense_fallback = c.dense_fallback;
+          rep.jobs_total = rep.jobs_done + rep.jobs_reused;
+        });
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<FarmPhase> MakeSparsePhase() {
+  return std::make_unique<SparsePhase>();
+}
+
+}  // namespace prt
