@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
 #include "vocabulary/wavelets.h"
 #include "worker/adaptive_column_transform.h"
 

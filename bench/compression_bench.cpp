@@ -39,13 +39,14 @@
 #include <vector>
 
 #include "bench/bench_scene.h"
-#include "vocabulary/compressed_relight.h"
-#include "vocabulary/compressed_transport.h"
+#include "viewer/compressed_relight.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/envmap.h"
 #include "formats/run_folder.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
+#include "formats/geometry_file.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/row_transform.h"

@@ -37,7 +37,7 @@
 #include "viewer/triple_product.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/image_io.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"
 #include "worker/visibility_sampler.h"

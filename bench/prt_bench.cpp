@@ -57,7 +57,7 @@
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/relight.h"
-#include "vocabulary/compressed_relight.h"
+#include "viewer/compressed_relight.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"

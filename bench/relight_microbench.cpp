@@ -23,7 +23,7 @@
 #include "bench/bench_scenes.h"
 #include "viewer/lighting.h"
 #include "viewer/viewer_session.h"
-#include "vocabulary/compressed_relight.h"
+#include "viewer/compressed_relight.h"
 #include "vocabulary/wavelets.h"
 
 namespace {

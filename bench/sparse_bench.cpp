@@ -23,7 +23,7 @@
 
 #include "bench/bench_scenes.h"
 #include "vocabulary/image_io.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/hash.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"

@@ -9,12 +9,17 @@ if(PRT_SANITIZE)
   target_link_options(prt_options INTERFACE -fsanitize=address,undefined)
 endif()
 
-# prt_library(name DIR dir LIBS ...): one library per stage from every .cpp in the folder
-# that is neither a test (*_test.cpp) nor an executable entry point (*_main.cpp).
+# prt_library(name LIBS ... [SOURCES ...] [EXCLUDE regex...]): one library per stage from every
+# .cpp in the folder that is neither a test (*_test.cpp) nor an executable entry point
+# (*_main.cpp), or from the SOURCES given (a folder that builds two libraries, docs/architecture.md).
 function(prt_library name)
-  cmake_parse_arguments(A "" "" "LIBS;EXCLUDE" ${ARGN})
-  file(GLOB srcs CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/*.cpp)
-  list(FILTER srcs EXCLUDE REGEX "(_test|_main|_fuzz)\\.cpp$")
+  cmake_parse_arguments(A "" "" "LIBS;EXCLUDE;SOURCES" ${ARGN})
+  if(A_SOURCES)
+    set(srcs ${A_SOURCES})
+  else()
+    file(GLOB srcs CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/*.cpp)
+    list(FILTER srcs EXCLUDE REGEX "(_test|_main|_fuzz)\\.cpp$")
+  endif()
   foreach(ex ${A_EXCLUDE})
     list(FILTER srcs EXCLUDE REGEX "${ex}")
   endforeach()

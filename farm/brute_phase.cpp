@@ -9,7 +9,7 @@
 #include "farm/farm_context.h"
 #include "farm/job_loop.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 

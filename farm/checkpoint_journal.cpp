@@ -10,7 +10,8 @@
 #include <sstream>
 
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 

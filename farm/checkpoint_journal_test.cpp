@@ -8,7 +8,6 @@
 
 #include "farm/run_manifest.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
 
 namespace prt {
 namespace {

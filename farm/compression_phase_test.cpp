@@ -13,7 +13,6 @@
 #include "farm/distributed_transpose.h"
 #include "farm/farm_report.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
 
 namespace prt {
 namespace {

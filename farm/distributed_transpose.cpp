@@ -13,8 +13,7 @@
 #include "farm/mpi_support.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
-#include "vocabulary/progress.h"
-#include "vocabulary/transport_file.h"
+#include "farm/progress.h"
 
 namespace prt {
 

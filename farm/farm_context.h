@@ -23,7 +23,7 @@
 #include "farm/visibility_jobs.h"
 #include "formats/run_folder.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"

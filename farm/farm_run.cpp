@@ -16,8 +16,8 @@
 #include "farm/farm_context.h"
 #include "farm/mpi_support.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/progress.h"
-#include "vocabulary/transport_file.h"
+#include "farm/progress.h"
+#include "vocabulary/durable_file.h"
 
 namespace prt {
 

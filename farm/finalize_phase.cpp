@@ -5,7 +5,7 @@
 #include <filesystem>
 
 #include "farm/farm_context.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/durable_file.h"
 
 namespace prt {
 

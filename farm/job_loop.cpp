@@ -18,7 +18,7 @@
 
 #include "farm/mpi_support.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/progress.h"
+#include "farm/progress.h"
 
 namespace prt {
 

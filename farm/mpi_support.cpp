@@ -8,7 +8,6 @@
 
 #include "farm/farm_options.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
 
 namespace prt {
 

@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 

@@ -14,7 +14,9 @@
 #include "formats/run_folder.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
+#include "formats/geometry_file.h"
+#include "vocabulary/durable_file.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
 #define PRT_DEFAULT_DATA_DIR ""

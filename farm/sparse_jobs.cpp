@@ -13,7 +13,7 @@
 #include <type_traits>
 
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 

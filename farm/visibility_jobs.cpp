@@ -8,7 +8,7 @@
 #include <stdexcept>
 
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 

@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "farm/checkpoint_journal.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 #include "worker/visibility_sampler.h"
 
 namespace prt {

@@ -16,7 +16,8 @@
 #include "farm/side_file.h"
 #include "farm/visibility_jobs.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 

@@ -21,7 +21,7 @@
 #include "packager/run_folder_pack.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/mesh.h"
-#include "vocabulary/transport_file.h"
+#include "vocabulary/durable_file.h"
 
 #ifndef PRT_VERSION
 #define PRT_VERSION "0"

@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "vocabulary/mesh.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 
 namespace prt::pack {
 

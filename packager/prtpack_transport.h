@@ -9,7 +9,7 @@
 
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_writer.h"
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 
 namespace prt::pack {
 

@@ -16,7 +16,7 @@
 #include "packager/draco_mesh_codec.h"
 #include "packager/prtpack_format.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 
 namespace prt::pack {
 namespace {

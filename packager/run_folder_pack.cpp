@@ -12,11 +12,13 @@
 
 #include "packager/prtpack_format.h"
 #include "packager/prtpack_transport.h"
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/transport_file.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/transport_file.h"
+#include "formats/geometry_file.h"
+#include "vocabulary/durable_file.h"
+#include "formats/visibility_blocks.h"
 
 namespace prt::pack {
 namespace {

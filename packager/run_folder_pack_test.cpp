@@ -10,9 +10,11 @@
 
 #include "packager/prtpack_test_util.h"
 #include "packager/prtpack_transport.h"
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/errors.h"
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
+#include "formats/geometry_file.h"
+#include "vocabulary/durable_file.h"
 
 namespace prt::pack {
 namespace {

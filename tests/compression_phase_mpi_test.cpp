@@ -18,9 +18,11 @@
 #include <vector>
 
 #include "tests/run_prt_farm.h"
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
+#include "formats/geometry_file.h"
+#include "vocabulary/durable_file.h"
 #include "worker/column_order.h"
 #include "worker/transport_compressor.h"
 

@@ -18,8 +18,8 @@
 #include "tests/run_prt_farm.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/transport_file.h"
-#include "vocabulary/visibility_blocks.h"
+#include "vocabulary/durable_file.h"
+#include "formats/visibility_blocks.h"
 #include "worker/embree_scene.h"
 #include "worker/visibility_sampler.h"
 

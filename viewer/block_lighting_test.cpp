@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "viewer/brdf.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 
 namespace prt {
 namespace {

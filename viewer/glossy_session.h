@@ -19,7 +19,7 @@
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 
 namespace prt {
 

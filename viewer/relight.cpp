@@ -10,7 +10,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "vocabulary/compressed_relight.h"
+#include "viewer/compressed_relight.h"
 
 namespace prt {
 

@@ -19,7 +19,7 @@
 #include <span>
 #include <vector>
 
-#include "vocabulary/compressed_relight.h"
+#include "viewer/compressed_relight.h"
 #include "vocabulary/scene.h"
 
 namespace prt {

@@ -13,8 +13,8 @@
 
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
-#include "vocabulary/compressed_relight.h"
-#include "vocabulary/compressed_transport.h"
+#include "viewer/compressed_relight.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/wavelets.h"
 

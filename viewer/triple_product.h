@@ -25,7 +25,7 @@
 
 #include "viewer/block_lighting.h"
 #include "viewer/brdf.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 
 namespace prt {
 

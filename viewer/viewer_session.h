@@ -22,7 +22,7 @@
 
 #include "viewer/lighting.h"
 #include "viewer/relight.h"
-#include "vocabulary/compressed_relight.h"
+#include "viewer/compressed_relight.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene.h"

@@ -25,7 +25,7 @@
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/window_test_support.h"
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 #include "vocabulary/errors.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"

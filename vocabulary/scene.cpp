@@ -622,12 +622,6 @@ SceneDescription LoadDefaultScene(const std::string& data_dir) {
   return ParseScene(DefaultSceneText(), "<default scene>", "", {data_dir});
 }
 
-std::size_t SceneGeometry::vertex_count() const {
-  std::size_t n = 0;
-  for (const SceneMesh& m : meshes) n += m.mesh.positions.size();
-  return n;
-}
-
 void TransformInstance(const MeshInstance& instance, TriangleMesh& mesh) {
   Mat3 up;
   double fit_scale = 1.0;

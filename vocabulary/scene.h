@@ -12,11 +12,10 @@
 #include <vector>
 
 #include "vocabulary/mesh.h"
+#include "vocabulary/scene_geometry.h"
 #include "vocabulary/vec3.h"
 
 namespace prt {
-
-using Rgb = std::array<float, 3>;
 
 // Fit a mesh into a box standing on the ground: the mesh is rotated so that `up_axis` becomes
 // +Y, scaled uniformly so that the largest extent of its bounding box equals `size`, and moved
@@ -175,23 +174,6 @@ std::string FindDataFile(const std::string& path, const std::vector<std::string>
 // FindDataFile over scene.search_dirs; throws InputError naming the scene file (and `line` when
 // > 0) and listing every place it looked.
 std::string ResolveScenePath(const SceneDescription& scene, const std::string& path, int line = 0);
-
-// One world-space mesh of the scene with its material.
-struct SceneMesh {
-  std::string name;
-  TriangleMesh mesh;  // world space; normals unit
-  Rgb albedo{0.8f, 0.8f, 0.8f};
-  bool is_ground = false;
-  int grid_resolution = 0;  // ground only: grid vertices per side
-};
-
-struct SceneGeometry {
-  std::vector<SceneMesh> meshes;  // scene meshes in file order, ground plane last
-  Vec3 bounds_min{0, 0, 0};
-  Vec3 bounds_max{0, 0, 0};
-  std::size_t vertex_count() const;
-  double diagonal() const { return Length(bounds_max - bounds_min); }
-};
 
 // Loads every mesh, applies flip_winding, fit, then scale/rotate/translate (normals rotated
 // with the mesh), appends the ground grid last and computes the bounds. Throws InputError

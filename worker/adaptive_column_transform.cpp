@@ -8,7 +8,7 @@
 #include <cstring>
 #include <numeric>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {

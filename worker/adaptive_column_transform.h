@@ -12,7 +12,7 @@
 #include <span>
 #include <vector>
 
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 
 namespace prt {
 

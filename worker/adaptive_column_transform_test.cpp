@@ -7,7 +7,7 @@
 #include <numeric>
 #include <random>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 
 namespace prt {
 namespace {

@@ -10,7 +10,7 @@
 #include <span>
 #include <vector>
 
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/vec3.h"
 

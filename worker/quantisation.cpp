@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 
 namespace prt {
 

@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <span>
 
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 
 namespace prt {
 

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <random>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 
 namespace prt {
 namespace {

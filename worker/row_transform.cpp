@@ -7,7 +7,7 @@
 #include <numeric>
 #include <stdexcept>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {

@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 
 namespace prt {
 

@@ -8,7 +8,7 @@
 #include <cstring>
 #include <limits>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 #include "vocabulary/errors.h"
 #include "worker/adaptive_column_transform.h"
 #include "worker/quantisation.h"

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/scene.h"
 
 namespace prt {

@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "vocabulary/cubemap.h"
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"
 

@@ -1,4 +1,4 @@
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <numeric>
 #include <random>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 #include "vocabulary/errors.h"
 
 namespace prt {

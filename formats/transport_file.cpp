@@ -1,5 +1,5 @@
 // Blocked transport file and geometry file (formats in docs/transport-format.md).
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -15,7 +15,9 @@
 #include <limits>
 #include <utility>
 
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 
@@ -25,14 +27,8 @@ static_assert(std::endian::native == std::endian::little,
 namespace {
 
 constexpr char kTransportMagic[8] = {'P', 'R', 'T', 'T', 'R', 'A', 'N', 'S'};
-constexpr char kGeometryMagic[8] = {'P', 'R', 'T', 'G', 'E', 'O', 'M', '1'};
-constexpr uint32_t kGeometryVersion = 1;
 constexpr uint32_t kFlagComplete = 1;
 constexpr std::size_t kHeaderChecksumOffset = 88;
-
-std::string SystemReason(const std::string& what) {
-  return what + ": " + std::strerror(errno);
-}
 
 template <typename T>
 void Put(std::string& out, T value) {
@@ -51,44 +47,6 @@ T GetAt(const unsigned char* in, std::size_t offset) {
   T value;
   std::memcpy(&value, in + offset, sizeof(T));
   return value;
-}
-
-void PwriteAll(int fd, const void* data, std::size_t bytes, uint64_t offset,
-               const std::string& path) {
-  const auto* p = static_cast<const char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pwrite(fd, p, bytes, static_cast<off_t>(offset));
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      throw FileIoError(path, SystemReason("write failed"));
-    }
-    p += n;
-    bytes -= static_cast<std::size_t>(n);
-    offset += static_cast<uint64_t>(n);
-  }
-}
-
-// Returns false at end of file before `bytes` were read.
-bool PreadAll(int fd, void* data, std::size_t bytes, uint64_t offset, const std::string& path) {
-  auto* p = static_cast<char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pread(fd, p, bytes, static_cast<off_t>(offset));
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      throw InputError(path, SystemReason("read failed"));
-    }
-    if (n == 0) return false;
-    p += n;
-    bytes -= static_cast<std::size_t>(n);
-    offset += static_cast<uint64_t>(n);
-  }
-  return true;
-}
-
-uint64_t FileSize(int fd, const std::string& path) {
-  struct stat st {};
-  if (::fstat(fd, &st) != 0) throw InputError(path, SystemReason("cannot stat"));
-  return static_cast<uint64_t>(st.st_size);
 }
 
 // Header layout (docs/transport-format.md): fixed 96 bytes, then the checksum table.
@@ -176,10 +134,6 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
 }
 
 }  // namespace
-
-uint64_t Checksum64(const void* data, std::size_t bytes) {
-  return XXH64(data, bytes, 0);
-}
 
 uint64_t TransportFileInfo::RowsInBlock(uint64_t block) const {
   const uint64_t first = FirstRowOfBlock(block);
@@ -380,196 +334,6 @@ int64_t TransportFileReader::FindCorruptBlock() const {
     }
   }
   return -1;
-}
-
-// ----------------------------------------------------------------------------- geometry
-
-std::string SerializeSceneGeometry(const SceneGeometry& geometry) {
-  std::string out(kGeometryMagic, 8);
-  Put<uint32_t>(out, kGeometryVersion);
-  Put<uint32_t>(out, static_cast<uint32_t>(geometry.meshes.size()));
-  for (const Vec3& v : {geometry.bounds_min, geometry.bounds_max}) {
-    Put(out, v.x);
-    Put(out, v.y);
-    Put(out, v.z);
-  }
-  for (const SceneMesh& m : geometry.meshes) {
-    Put<uint32_t>(out, static_cast<uint32_t>(m.name.size()));
-    out += m.name;
-    for (float a : m.albedo) Put(out, a);
-    Put<uint32_t>(out, m.is_ground ? 1u : 0u);
-    Put<uint32_t>(out, static_cast<uint32_t>(m.grid_resolution));
-    Put<uint64_t>(out, m.mesh.positions.size());
-    Put<uint64_t>(out, m.mesh.triangles.size());
-    for (const auto* list : {&m.mesh.positions, &m.mesh.normals}) {
-      if (list->size() != m.mesh.positions.size()) {
-        throw std::invalid_argument("SerializeSceneGeometry: mesh '" + m.name +
-                                    "' has a normal count different from its vertex count");
-      }
-      for (const Vec3& v : *list) {
-        Put(out, v.x);
-        Put(out, v.y);
-        Put(out, v.z);
-      }
-    }
-    for (const auto& t : m.mesh.triangles) {
-      for (uint32_t i : t) Put(out, i);
-    }
-  }
-  Put<uint64_t>(out, Checksum64(out.data(), out.size()));
-  return out;
-}
-
-namespace {
-
-class ByteCursor {
- public:
-  ByteCursor(std::string_view bytes, const std::string& name) : bytes_(bytes), name_(name) {}
-  template <typename T>
-  T Get(const char* what) {
-    Need(sizeof(T), what);
-    T value;
-    std::memcpy(&value, bytes_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return value;
-  }
-  std::string_view Take(std::size_t n, const char* what) {
-    Need(n, what);
-    const auto s = bytes_.substr(pos_, n);
-    pos_ += n;
-    return s;
-  }
-  std::size_t remaining() const { return bytes_.size() - pos_; }
-  void Need(std::size_t n, const char* what) const {
-    if (n > remaining()) throw InputError(name_, std::string("truncated geometry file in ") + what);
-  }
-  Vec3 GetVec3(const char* what) {
-    Vec3 v;
-    v.x = Get<double>(what);
-    v.y = Get<double>(what);
-    v.z = Get<double>(what);
-    if (!IsFinite(v)) throw InputError(name_, std::string("non-finite value in ") + what);
-    return v;
-  }
-
- private:
-  std::string_view bytes_;
-  const std::string& name_;
-  std::size_t pos_ = 0;
-};
-
-}  // namespace
-
-SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name) {
-  if (bytes.size() < 16 || std::memcmp(bytes.data(), kGeometryMagic, 8) != 0) {
-    throw InputError(name, "not a prtfarm geometry file (bad magic)");
-  }
-  const std::size_t body = bytes.size() - 8;
-  uint64_t stored;
-  std::memcpy(&stored, bytes.data() + body, 8);
-  if (Checksum64(bytes.data(), body) != stored) {
-    throw InputError(name, "geometry file checksum mismatch: the file is damaged");
-  }
-  ByteCursor in(bytes.substr(0, body), name);
-  in.Take(8, "magic");
-  const auto version = in.Get<uint32_t>("header");
-  if (version != kGeometryVersion) {
-    throw InputError(name,
-                     "geometry file version " + std::to_string(version) + " is not supported");
-  }
-  const auto mesh_count = in.Get<uint32_t>("header");
-  SceneGeometry g;
-  g.bounds_min = in.GetVec3("bounds");
-  g.bounds_max = in.GetVec3("bounds");
-  for (uint32_t m = 0; m < mesh_count; ++m) {
-    SceneMesh sm;
-    const auto name_len = in.Get<uint32_t>("mesh name");
-    sm.name = std::string(in.Take(name_len, "mesh name"));
-    for (float& a : sm.albedo) {
-      a = in.Get<float>("albedo");
-      if (!std::isfinite(a)) throw InputError(name, "non-finite albedo in mesh " + sm.name);
-    }
-    sm.is_ground = in.Get<uint32_t>("mesh flags") != 0;
-    sm.grid_resolution = static_cast<int>(in.Get<uint32_t>("mesh flags"));
-    const auto vertices = in.Get<uint64_t>("mesh counts");
-    const auto triangles = in.Get<uint64_t>("mesh counts");
-    in.Need(vertices > in.remaining() / 48 ? in.remaining() + 1 : vertices * 48, "vertices");
-    in.Need(triangles > in.remaining() / 12 ? in.remaining() + 1 : triangles * 12, "triangles");
-    sm.mesh.source = name;
-    sm.mesh.positions.resize(vertices);
-    sm.mesh.normals.resize(vertices);
-    for (Vec3& p : sm.mesh.positions) p = in.GetVec3("positions");
-    for (Vec3& n : sm.mesh.normals) n = in.GetVec3("normals");
-    sm.mesh.triangles.resize(triangles);
-    for (auto& t : sm.mesh.triangles) {
-      for (uint32_t& i : t) {
-        i = in.Get<uint32_t>("triangles");
-        if (i >= vertices) {
-          throw InputError(
-              name, "triangle index " + std::to_string(i) + " out of range in mesh " + sm.name);
-        }
-      }
-    }
-    g.meshes.push_back(std::move(sm));
-  }
-  if (in.remaining() != 0) throw InputError(name, "trailing bytes after the last mesh");
-  return g;
-}
-
-void WriteSceneGeometryFile(const std::string& path, const SceneGeometry& geometry) {
-  WriteFileDurably(path, SerializeSceneGeometry(geometry));
-}
-
-SceneGeometry ReadSceneGeometryFile(const std::string& path) {
-  return ParseSceneGeometry(ReadWholeFile(path), path);
-}
-
-// ----------------------------------------------------------------------------- helpers
-
-void SyncDirectory(const std::string& dir) {
-  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) throw FileIoError(dir, SystemReason("cannot open folder"));
-  const int rc = ::fsync(fd);
-  ::close(fd);
-  if (rc != 0 && errno != EINVAL) throw FileIoError(dir, SystemReason("fsync of folder failed"));
-}
-
-void WriteFileDurably(const std::string& path, std::string_view bytes) {
-  const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw FileIoError(tmp, SystemReason("cannot create"));
-  try {
-    PwriteAll(fd, bytes.data(), bytes.size(), 0, tmp);
-    if (::fsync(fd) != 0) throw FileIoError(tmp, SystemReason("fsync failed"));
-  } catch (...) {
-    ::close(fd);
-    ::unlink(tmp.c_str());  // a full disk leaves no stray temporary file behind
-    throw;
-  }
-  ::close(fd);
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const FileIoError error(path, SystemReason("cannot rename " + tmp + " to it"));
-    ::unlink(tmp.c_str());
-    throw error;
-  }
-  SyncDirectory(std::filesystem::path(path).parent_path().string());
-}
-
-std::string ReadWholeFile(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw InputError(path, SystemReason("cannot open"));
-  std::string bytes;
-  try {
-    bytes.resize(static_cast<std::size_t>(FileSize(fd, path)));
-    if (!PreadAll(fd, bytes.data(), bytes.size(), 0, path)) {
-      throw InputError(path, "file shrank while being read");
-    }
-  } catch (...) {
-    ::close(fd);
-    throw;
-  }
-  ::close(fd);
-  return bytes;
 }
 
 }  // namespace prt

@@ -1,4 +1,4 @@
-#include "vocabulary/visibility_blocks.h"
+#include "formats/visibility_blocks.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // Data structures and binary encoding of compressed transport (docs/compression.md).
 // Decoders are safe on untrusted input: every read is bounds-checked, every count is checked
 // against what the remaining bytes can hold before anything is allocated.
-#include "vocabulary/compressed_transport.h"
+#include "formats/compressed_transport.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +10,7 @@
 #include <limits>
 #include <string>
 
-#include "vocabulary/compressed_relight.h"
+#include "formats/column_coding.h"
 #include "vocabulary/errors.h"
 
 namespace prt {

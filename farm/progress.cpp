@@ -1,5 +1,5 @@
 // Progress lines for long loops (see progress.h).
-#include "vocabulary/progress.h"
+#include "farm/progress.h"
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>

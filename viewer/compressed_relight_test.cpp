@@ -1,4 +1,4 @@
-#include "vocabulary/compressed_relight.h"
+#include "viewer/compressed_relight.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "vocabulary/progress.h"
+#include "farm/progress.h"
 
 #include <gtest/gtest.h>
 

@@ -1,11 +1,7 @@
-// The farm's run folder as later stages read it, without MPI and without the original scene
-// files (docs/transport-format.md):
-//   run/transport.prtt   rows of the transport matrix T, one per spatial sample in global sample
-//                        order, in fixed-size blocks of rows with one XXH64 checksum per block
-//   run/geometry.prtg    the world-space meshes the samples came from (names, albedo, positions,
-//                        normals, triangles, ground grid resolution)
-//   run/scene.toml       a verbatim copy of the scene description
-// Both binary formats are little-endian; this code requires a little-endian host.
+// run/transport.prtt (docs/transport-format.md): rows of the transport matrix T, one per spatial
+// sample in global sample order, in fixed-size blocks of rows with one XXH64 checksum per block.
+// Written in place by the farm while it samples (TransportFileWriter), read back block by block
+// (TransportFileReader). Little-endian; this code requires a little-endian host.
 // Readers are safe on untrusted input: every size is checked against the file before use.
 #pragma once
 
@@ -18,7 +14,7 @@
 #include <vector>
 
 #include "vocabulary/errors.h"
-#include "vocabulary/scene.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 
@@ -116,29 +112,5 @@ class TransportFileReader {
   std::vector<uint64_t> checksums_;
   int fd_ = -1;
 };
-
-// XXH64 (seed 0) of a byte range, the checksum every prtfarm file format uses.
-uint64_t Checksum64(const void* data, std::size_t bytes);
-
-// ---------------------------------------------------------------------------------------------
-// Geometry file (docs/transport-format.md, "geometry.prtg"): the SceneGeometry the samples were
-// taken from, in double precision so that any row can be recomputed bit-exactly from it.
-
-std::string SerializeSceneGeometry(const SceneGeometry& geometry);
-// `name` is used in error messages. Throws InputError on any inconsistency.
-SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name);
-void WriteSceneGeometryFile(const std::string& path, const SceneGeometry& geometry);
-SceneGeometry ReadSceneGeometryFile(const std::string& path);
-
-// ---------------------------------------------------------------------------------------------
-// Small durable-file helpers the farm and later stages share.
-
-// Writes `bytes` to path.tmp, fsyncs it, renames it over `path` and fsyncs the folder, so that
-// `path` holds either its old or its new content after a crash. Throws FileIoError.
-void WriteFileDurably(const std::string& path, std::string_view bytes);
-// Whole file as bytes; throws InputError when it cannot be read.
-std::string ReadWholeFile(const std::string& path);
-// fsync of a folder (makes renames and creations inside it durable). Throws FileIoError.
-void SyncDirectory(const std::string& dir);
 
 }  // namespace prt

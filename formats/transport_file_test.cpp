@@ -1,4 +1,4 @@
-#include "vocabulary/transport_file.h"
+#include "formats/transport_file.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -11,7 +11,9 @@
 #include <string>
 #include <vector>
 
+#include "formats/geometry_file.h"
 #include "formats/run_folder.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 
 namespace prt {

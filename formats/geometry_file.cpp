@@ -1,0 +1,172 @@
+// run/geometry.prtg (see geometry_file.h and docs/transport-format.md, "geometry.prtg").
+#include "formats/geometry_file.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+#include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
+
+namespace prt {
+
+static_assert(std::endian::native == std::endian::little,
+              "prtfarm's file formats are little-endian; this host is not");
+
+namespace {
+
+constexpr char kGeometryMagic[8] = {'P', 'R', 'T', 'G', 'E', 'O', 'M', '1'};
+constexpr uint32_t kGeometryVersion = 1;
+
+template <typename T>
+void Put(std::string& out, T value) {
+  char bytes[sizeof(T)];
+  std::memcpy(bytes, &value, sizeof(T));
+  out.append(bytes, sizeof(T));
+}
+
+}  // namespace
+
+std::string SerializeSceneGeometry(const SceneGeometry& geometry) {
+  std::string out(kGeometryMagic, 8);
+  Put<uint32_t>(out, kGeometryVersion);
+  Put<uint32_t>(out, static_cast<uint32_t>(geometry.meshes.size()));
+  for (const Vec3& v : {geometry.bounds_min, geometry.bounds_max}) {
+    Put(out, v.x);
+    Put(out, v.y);
+    Put(out, v.z);
+  }
+  for (const SceneMesh& m : geometry.meshes) {
+    Put<uint32_t>(out, static_cast<uint32_t>(m.name.size()));
+    out += m.name;
+    for (float a : m.albedo) Put(out, a);
+    Put<uint32_t>(out, m.is_ground ? 1u : 0u);
+    Put<uint32_t>(out, static_cast<uint32_t>(m.grid_resolution));
+    Put<uint64_t>(out, m.mesh.positions.size());
+    Put<uint64_t>(out, m.mesh.triangles.size());
+    for (const auto* list : {&m.mesh.positions, &m.mesh.normals}) {
+      if (list->size() != m.mesh.positions.size()) {
+        throw std::invalid_argument("SerializeSceneGeometry: mesh '" + m.name +
+                                    "' has a normal count different from its vertex count");
+      }
+      for (const Vec3& v : *list) {
+        Put(out, v.x);
+        Put(out, v.y);
+        Put(out, v.z);
+      }
+    }
+    for (const auto& t : m.mesh.triangles) {
+      for (uint32_t i : t) Put(out, i);
+    }
+  }
+  Put<uint64_t>(out, Checksum64(out.data(), out.size()));
+  return out;
+}
+
+namespace {
+
+class ByteCursor {
+ public:
+  ByteCursor(std::string_view bytes, const std::string& name) : bytes_(bytes), name_(name) {}
+  template <typename T>
+  T Get(const char* what) {
+    Need(sizeof(T), what);
+    T value;
+    std::memcpy(&value, bytes_.data() + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return value;
+  }
+  std::string_view Take(std::size_t n, const char* what) {
+    Need(n, what);
+    const auto s = bytes_.substr(pos_, n);
+    pos_ += n;
+    return s;
+  }
+  std::size_t remaining() const { return bytes_.size() - pos_; }
+  void Need(std::size_t n, const char* what) const {
+    if (n > remaining()) throw InputError(name_, std::string("truncated geometry file in ") + what);
+  }
+  Vec3 GetVec3(const char* what) {
+    Vec3 v;
+    v.x = Get<double>(what);
+    v.y = Get<double>(what);
+    v.z = Get<double>(what);
+    if (!IsFinite(v)) throw InputError(name_, std::string("non-finite value in ") + what);
+    return v;
+  }
+
+ private:
+  std::string_view bytes_;
+  const std::string& name_;
+  std::size_t pos_ = 0;
+};
+
+}  // namespace
+
+SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name) {
+  if (bytes.size() < 16 || std::memcmp(bytes.data(), kGeometryMagic, 8) != 0) {
+    throw InputError(name, "not a prtfarm geometry file (bad magic)");
+  }
+  const std::size_t body = bytes.size() - 8;
+  uint64_t stored;
+  std::memcpy(&stored, bytes.data() + body, 8);
+  if (Checksum64(bytes.data(), body) != stored) {
+    throw InputError(name, "geometry file checksum mismatch: the file is damaged");
+  }
+  ByteCursor in(bytes.substr(0, body), name);
+  in.Take(8, "magic");
+  const auto version = in.Get<uint32_t>("header");
+  if (version != kGeometryVersion) {
+    throw InputError(name,
+                     "geometry file version " + std::to_string(version) + " is not supported");
+  }
+  const auto mesh_count = in.Get<uint32_t>("header");
+  SceneGeometry g;
+  g.bounds_min = in.GetVec3("bounds");
+  g.bounds_max = in.GetVec3("bounds");
+  for (uint32_t m = 0; m < mesh_count; ++m) {
+    SceneMesh sm;
+    const auto name_len = in.Get<uint32_t>("mesh name");
+    sm.name = std::string(in.Take(name_len, "mesh name"));
+    for (float& a : sm.albedo) {
+      a = in.Get<float>("albedo");
+      if (!std::isfinite(a)) throw InputError(name, "non-finite albedo in mesh " + sm.name);
+    }
+    sm.is_ground = in.Get<uint32_t>("mesh flags") != 0;
+    sm.grid_resolution = static_cast<int>(in.Get<uint32_t>("mesh flags"));
+    const auto vertices = in.Get<uint64_t>("mesh counts");
+    const auto triangles = in.Get<uint64_t>("mesh counts");
+    in.Need(vertices > in.remaining() / 48 ? in.remaining() + 1 : vertices * 48, "vertices");
+    in.Need(triangles > in.remaining() / 12 ? in.remaining() + 1 : triangles * 12, "triangles");
+    sm.mesh.source = name;
+    sm.mesh.positions.resize(vertices);
+    sm.mesh.normals.resize(vertices);
+    for (Vec3& p : sm.mesh.positions) p = in.GetVec3("positions");
+    for (Vec3& n : sm.mesh.normals) n = in.GetVec3("normals");
+    sm.mesh.triangles.resize(triangles);
+    for (auto& t : sm.mesh.triangles) {
+      for (uint32_t& i : t) {
+        i = in.Get<uint32_t>("triangles");
+        if (i >= vertices) {
+          throw InputError(
+              name, "triangle index " + std::to_string(i) + " out of range in mesh " + sm.name);
+        }
+      }
+    }
+    g.meshes.push_back(std::move(sm));
+  }
+  if (in.remaining() != 0) throw InputError(name, "trailing bytes after the last mesh");
+  return g;
+}
+
+void WriteSceneGeometryFile(const std::string& path, const SceneGeometry& geometry) {
+  WriteFileDurably(path, SerializeSceneGeometry(geometry));
+}
+
+SceneGeometry ReadSceneGeometryFile(const std::string& path) {
+  return ParseSceneGeometry(ReadWholeFile(path), path);
+}
+
+}  // namespace prt
