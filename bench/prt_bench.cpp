@@ -31,7 +31,6 @@
 //                  [--schemes ..] [--keeps ..] [--bits ..] [--terms ..] [--frames 24] [--deg 1]
 //        prt-bench --check DIR           (sanity checks on DIR's CSV and summary, exit 1 if not)
 //        prt-bench --compare DIR1 DIR2   (every non-timing column equal, exit 1 if not)
-#include <mpi.h>
 #include <tbb/global_control.h>
 
 #include <CLI/CLI.hpp>
@@ -54,10 +53,11 @@
 #include <vector>
 
 #include "bench/bench_scenes.h"
+#include "farm/mpi_session.h"
+#include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/relight.h"
-#include "viewer/compressed_relight.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
@@ -280,31 +280,19 @@ class SceneBench {
   const SparsePlan& base_plan() const { return base_plan_; }
 
   // Brute force over this rank's slice of the samples, gathered on every rank.
-  Record TraceBrute(int rank, int size) {
+  Record TraceBrute(const MpiSession& mpi) {
     brute_.assign(S_ * M_, 0.0f);
-    std::vector<int> counts(size), displs(size);
-    for (int r = 0; r < size; ++r) {
-      const std::size_t a = S_ * r / size, b = S_ * (r + 1) / size;
-      counts[r] = static_cast<int>(b - a);
-      displs[r] = static_cast<int>(a);
-    }
-    MPI_Barrier(MPI_COMM_WORLD);
+    mpi.Barrier();
     const auto t0 = Clock::now();
     const double c0 = CpuSeconds();
-    const std::size_t first = static_cast<std::size_t>(displs[rank]);
-    const SampleStats st = sampler_->ComputeRows(std::span(samples_).subspan(first, counts[rank]),
-                                                 first, brute_.data() + first * M_);
-    double cpu = CpuSeconds() - c0;
-    MPI_Datatype row;
-    MPI_Type_contiguous(static_cast<int>(M_), MPI_FLOAT, &row);
-    MPI_Type_commit(&row);
-    MPI_Allgatherv(MPI_IN_PLACE, 0, row, brute_.data(), counts.data(), displs.data(), row,
-                   MPI_COMM_WORLD);
-    MPI_Type_free(&row);
+    const std::size_t first = MpiSession::SliceBegin(S_, mpi.rank(), mpi.size());
+    const std::size_t count = MpiSession::SliceBegin(S_, mpi.rank() + 1, mpi.size()) - first;
+    const SampleStats st = sampler_->ComputeRows(std::span(samples_).subspan(first, count), first,
+                                                 brute_.data() + first * M_);
+    const double cpu = mpi.SumOverRanks(CpuSeconds() - c0);
+    mpi.AllGatherRowSlices(brute_.data(), S_, M_);
     const double wall = Seconds(t0);
-    uint64_t rays = st.rays_traced;
-    MPI_Allreduce(MPI_IN_PLACE, &rays, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
-    MPI_Allreduce(MPI_IN_PLACE, &cpu, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+    const uint64_t rays = mpi.SumOverRanks(static_cast<uint64_t>(st.rays_traced));
     for (float v : brute_) t_energy_ += static_cast<double>(v) * v;
     // References: relit radiance of the brute-force T under each environment.
     Record r = NewRecord("brute", "brute force");
@@ -582,25 +570,6 @@ std::vector<Point> SweepPoints(const Options& o) {
       pts.push_back(p);
     }
   return pts;
-}
-
-// Gathers every rank's "index<TAB>csv" lines on rank 0.
-std::string GatherText(const std::string& mine, int rank, int size) {
-  int len = static_cast<int>(mine.size());
-  std::vector<int> lens(size), displs(size);
-  MPI_Gather(&len, 1, MPI_INT, lens.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
-  std::string all;
-  if (rank == 0) {
-    int total = 0;
-    for (int r = 0; r < size; ++r) {
-      displs[r] = total;
-      total += lens[r];
-    }
-    all.resize(total);
-  }
-  MPI_Gatherv(mine.data(), len, MPI_CHAR, all.data(), lens.data(), displs.data(), MPI_CHAR, 0,
-              MPI_COMM_WORLD);
-  return all;
 }
 
 // ---- Summary: Pareto fronts, targets, the papers' operating points ----
@@ -1082,13 +1051,15 @@ int main(int argc, char** argv) {
   o.terms = Numbers(terms);
   o.eval_every = std::max(1, o.frames / 6);
 
-  if (MPI_Init(&argc, &argv) != MPI_SUCCESS) {
-    std::fprintf(stderr, "prt-bench: MPI_Init failed\n");
+  std::optional<MpiSession> session;
+  try {
+    session.emplace(&argc, &argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "prt-bench: %s\n", e.what());
     return 2;
   }
-  int rank = 0, size = 1;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  const MpiSession& mpi = *session;
+  const int rank = mpi.rank(), size = mpi.size();
   if (threads <= 0)
     threads = std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / size);
   const tbb::global_control gc(tbb::global_control::max_allowed_parallelism, threads);
@@ -1110,7 +1081,7 @@ int main(int argc, char** argv) {
         std::printf("== %s: %zu samples, n = %d, %d ray(s)/texel, %zu points on %d rank(s) ==\n",
                     o.scenes[si].c_str(), sb.samples(), o.n, sb.rays_per_texel(), points.size() + 1,
                     size);
-      Record brute = sb.TraceBrute(rank, size);
+      Record brute = sb.TraceBrute(mpi);
       Finish(brute);
       if (rank == 0) {
         mine << si << ' ' << 0 << '\t' << ToCsv(brute) << '\n';
@@ -1128,7 +1099,7 @@ int main(int argc, char** argv) {
         std::fflush(stdout);
         mine << si << ' ' << i + 1 << '\t' << ToCsv(r) << '\n';
       }
-      const std::string all = GatherText(mine.str(), rank, size);
+      const std::string all = mpi.GatherText(mine.str());
       if (rank != 0) continue;
       for (const std::string& line : SplitList(all, '\n')) {
         if (line.empty()) continue;
@@ -1156,9 +1127,7 @@ int main(int argc, char** argv) {
     if (rank == 0 && self_check) rc = Report(CheckOutputs(out_dir), "check " + out_dir);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "prt-bench (rank %d): %s\n", rank, e.what());
-    MPI_Abort(MPI_COMM_WORLD, 1);
+    mpi.Abort(1);
   }
-  MPI_Bcast(&rc, 1, MPI_INT, 0, MPI_COMM_WORLD);
-  MPI_Finalize();
-  return rc;
+  return mpi.Broadcast(rc);
 }

@@ -20,6 +20,7 @@
 #include <stdexcept>
 
 #include "vocabulary/cubemap.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -347,19 +348,6 @@ void RefineCubeLeaf(TexelAccumulator& a, int face, double u0, double u1, double 
 // Smallest angular edge length of a texel of an n-cubemap (at a cube corner): 2/n · √2/3.
 double MinTexelAngle(int n) {
   return 2.0 / n * std::sqrt(2.0) / 3.0;
-}
-
-std::string ReadWholeFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path, "cannot open for reading");
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw InputError(path, "cannot determine the file size");
-  if (size > (std::streamoff{1} << 33)) throw InputError(path, "file larger than 8 GiB");
-  in.seekg(0, std::ios::beg);
-  std::string data(static_cast<std::size_t>(size), '\0');
-  if (!in.read(data.data(), size)) throw InputError(path, "read failed");
-  return data;
 }
 
 }  // namespace

@@ -5,19 +5,12 @@
 #include <cmath>
 #include <numeric>
 
+#include "vocabulary/hash.h"
+
 namespace prt {
 
-namespace {
-uint64_t Mix(uint64_t z) {
-  z += 0x9E3779B97F4A7C15ull;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-}  // namespace
-
 double HashUniform(uint64_t seed, uint64_t a, uint64_t b) {
-  const uint64_t h = Mix(Mix(Mix(seed) ^ a) ^ (b * 0xD6E8FEB86659FD93ull));
+  const uint64_t h = SplitMix64(SplitMix64(SplitMix64(seed) ^ a) ^ (b * 0xD6E8FEB86659FD93ull));
   return static_cast<double>(h >> 11) * 0x1.0p-53;
 }
 

@@ -13,19 +13,11 @@
 #include <string>
 
 #include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 
 namespace {
-
-// SplitMix64 finaliser (Steele, Lea & Flood 2014): a bijective 64-bit mixer, used as a
-// counter-based hash so that every jitter is a pure function of its key (no RNG state).
-constexpr uint64_t SplitMix64(uint64_t z) {
-  z += 0x9E3779B97F4A7C15ull;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
 
 // Key of one row: depends on (seed, global sample index) only.
 constexpr uint64_t RowKey(uint64_t seed, uint64_t sample_index) {
