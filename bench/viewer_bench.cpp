@@ -40,6 +40,7 @@
 #include "packager/prtpack_writer.h"
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
+#include "viewer/rotation_plot.h"
 #include "viewer/viewer_session.h"
 #include "viewer/compressed_relight.h"
 #include "vocabulary/errors.h"

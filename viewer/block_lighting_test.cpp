@@ -8,8 +8,8 @@
 #include <random>
 #include <vector>
 
-#include "viewer/brdf.h"
 #include "formats/visibility_blocks.h"
+#include "viewer/brdf.h"
 
 namespace prt {
 namespace {

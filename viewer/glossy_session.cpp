@@ -6,8 +6,8 @@
 #include <stdexcept>
 
 #include "packager/prtpack_reader.h"
+#include "viewer/camera_metadata.h"
 #include "viewer/rasterizer.h"
-#include "viewer/viewer_session.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -84,7 +84,11 @@ std::vector<Material> GlossyMaterialsFromMetadata(const std::string& metadata_js
 }
 
 std::unique_ptr<GlossySession> GlossySession::Open(const std::string& pack_path) {
-  const pack::PackReader reader = pack::PackReader::OpenFile(pack_path);
+  return FromReader(pack::PackReader::OpenFile(pack_path), pack_path);
+}
+
+std::unique_ptr<GlossySession> GlossySession::FromReader(const pack::PackReader& reader,
+                                                         const std::string& pack_path) {
   if (!reader.has_visibility()) {
     throw InputError(pack_path,
                      "the pack has no visibility (VISB) sections; farm it with [sampling] job = "

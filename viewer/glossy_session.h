@@ -13,15 +13,19 @@
 #include <string>
 #include <vector>
 
+#include "formats/visibility_blocks.h"
 #include "viewer/block_lighting.h"
 #include "viewer/brdf.h"
 #include "viewer/triple_product.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene.h"
-#include "formats/visibility_blocks.h"
 
 namespace prt {
+
+namespace pack {
+class PackReader;
+}  // namespace pack
 
 // The Material of one mesh from its scene settings: `albedo` is the diffuse part; Lambert has no
 // specular lobe. Throws std::invalid_argument on an unknown brdf name.
@@ -40,6 +44,9 @@ class GlossySession {
   // Reads meshes, materials, metadata and every mesh's visibility. Throws prt::InputError naming
   // the file on: an unreadable or corrupt pack (PackReader's errors), no VISB sections.
   static std::unique_ptr<GlossySession> Open(const std::string& pack_path);
+  // The same from a pack the caller already opened (`pack_path` names it in errors).
+  static std::unique_ptr<GlossySession> FromReader(const pack::PackReader& reader,
+                                                   const std::string& pack_path);
 
   GlossySession(const GlossySession&) = delete;
   GlossySession& operator=(const GlossySession&) = delete;

@@ -11,10 +11,10 @@
 #include <random>
 #include <stdexcept>
 
+#include "formats/compressed_transport.h"
+#include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
-#include "viewer/compressed_relight.h"
-#include "formats/compressed_transport.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/wavelets.h"
 

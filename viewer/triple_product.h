@@ -23,9 +23,9 @@
 #include <cstdint>
 #include <span>
 
+#include "formats/visibility_blocks.h"
 #include "viewer/block_lighting.h"
 #include "viewer/brdf.h"
-#include "formats/visibility_blocks.h"
 
 namespace prt {
 

@@ -12,8 +12,10 @@
 #include <string>
 
 #include "packager/prtpack_reader.h"
+#include "viewer/camera_metadata.h"
 #include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"
+#include "viewer/rotation_plot.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/errors.h"
@@ -51,11 +53,11 @@ struct Options {
 };
 
 // A pack with visibility through the triple-product renderer (docs/viewer.md, "Glossy assets").
-int RunGlossy(const Options& o) {
+int RunGlossy(const Options& o, const prt::pack::PackReader& reader,
+              std::chrono::steady_clock::time_point t_open) {
   if (o.frames > 0 || o.hold > 0)
     throw std::invalid_argument("--frames/--hold: not available for glossy assets");
-  const auto t_open = std::chrono::steady_clock::now();
-  const auto session = prt::GlossySession::Open(o.pack);
+  const auto session = prt::GlossySession::FromReader(reader, o.pack);
   prt::Camera camera = session->camera();
   if (!o.camera.empty()) camera = prt::ParseCameraSpec(o.camera, camera);
   if (o.width > 0) camera.width = o.width;
@@ -119,15 +121,18 @@ int RunGlossy(const Options& o) {
 }
 
 int Run(const Options& o) {
-  {
-    // Glossy when asked, or when the pack has visibility but no transport.
-    const prt::pack::PackReader reader = prt::pack::PackReader::OpenFile(o.pack);
-    if (o.glossy || (!reader.has_transport() && reader.has_visibility())) return RunGlossy(o);
-  }
-  if (o.reference || o.paper_cosine)
-    throw std::invalid_argument("--reference/--paper-cosine apply to glossy assets only");
+  // The pack is opened (and its sections indexed and checked) once, for either renderer.
   const auto t_open = std::chrono::steady_clock::now();
-  const auto session = prt::ViewerSession::Open(o.pack);
+  std::unique_ptr<prt::ViewerSession> session;
+  {
+    const prt::pack::PackReader reader = prt::pack::PackReader::OpenFile(o.pack);
+    // Glossy when asked, or when the pack has visibility but no transport.
+    if (o.glossy || (!reader.has_transport() && reader.has_visibility()))
+      return RunGlossy(o, reader, t_open);
+    if (o.reference || o.paper_cosine)
+      throw std::invalid_argument("--reference/--paper-cosine apply to glossy assets only");
+    session = prt::ViewerSession::FromReader(reader, o.pack);
+  }
   prt::Camera camera = session->camera();
   if (!o.camera.empty()) camera = prt::ParseCameraSpec(o.camera, camera);
   if (o.width > 0) camera.width = o.width;

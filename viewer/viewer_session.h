@@ -20,15 +20,19 @@
 #include <string>
 #include <vector>
 
+#include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/relight.h"
-#include "viewer/compressed_relight.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/vec3.h"
 
 namespace prt {
+
+namespace pack {
+class PackReader;
+}  // namespace pack
 
 enum class LightingMode { kNwa, kBi, kPbi };
 // "nwa" | "bi" | "pbi" (throws std::invalid_argument otherwise), and back.
@@ -53,6 +57,9 @@ class ViewerSession {
   // transport, a transport whose row count differs from the meshes' vertex count, a row wavelet
   // other than Haar (the lighting basis of viewer/lighting.h).
   static std::unique_ptr<ViewerSession> Open(const std::string& pack_path);
+  // The same from a pack the caller already opened (`pack_path` names it in errors).
+  static std::unique_ptr<ViewerSession> FromReader(const pack::PackReader& reader,
+                                                   const std::string& pack_path);
 
   ViewerSession(const ViewerSession&) = delete;
   ViewerSession& operator=(const ViewerSession&) = delete;
@@ -101,15 +108,6 @@ class ViewerSession {
   std::vector<std::array<uint32_t, 3>> triangles_;
   std::vector<uint32_t> pack_sample_;  // session position → pack sample
 };
-
-// The scene's camera from a pack's metadata JSON: "scene" → "camera" (eye, target, up, fov,
-// width, height; missing keys keep Camera{}'s defaults). Returns false (camera untouched) when
-// there is none; throws prt::InputError(name, ...) on a camera whose values have the wrong type.
-bool CameraFromMetadata(const std::string& metadata_json, const std::string& name, Camera& camera);
-
-// "ex,ey,ez,tx,ty,tz" with optionally ",ux,uy,uz" and then ",fov": overrides those fields of
-// `base`. Throws std::invalid_argument on any other count or a non-finite number.
-Camera ParseCameraSpec(const std::string& spec, const Camera& base);
 
 // ‖b − ref‖ / ‖ref‖ over all entries (double); 0 when both are zero, 1 when only ref is.
 double RelativeRmsError(std::span<const float> b, std::span<const float> ref);
@@ -161,13 +159,6 @@ std::vector<RotationFrame> RunRotation(
 // Writes the frames as CSV: frame, angle_deg, then lighting and image error of nwa, bi, pbi.
 void WriteRotationCsv(const std::vector<RotationFrame>& frames, std::size_t terms,
                       const std::string& path);
-// Plots the CSV like Overbeck et al. Figure 7 (image error against frame for NWA, BI and PBI,
-// log scale, the rotation's end marked) into `png_path` with gnuplot, from a generated script
-// written next to it. Returns false (and writes nothing but the script) when gnuplot is not on
-// the PATH or fails.
-bool PlotRotationErrors(const std::string& csv_path, const std::string& png_path,
-                        const RotationOptions& options);
-
 // First hold frame (counted from the frame the rotation stopped, 1 = the first still frame)
 // whose image error for mode `index` (0 NWA, 1 BI, 2 PBI) is below `threshold`; -1 if none.
 int FramesToConverge(const std::vector<RotationFrame>& frames, const RotationOptions& options,

@@ -20,12 +20,13 @@
 #include <string>
 #include <vector>
 
+#include "formats/column_coding.h"
 #include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
+#include "viewer/camera_metadata.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/window_test_support.h"
-#include "formats/column_coding.h"
 #include "vocabulary/errors.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
