@@ -2,7 +2,7 @@
 // for glossy triple-product relighting (Inger, Farbman & Lischinski 2013, §4.2), traced by
 // worker/visibility_sampler.h on the same job queue as transport rows. No MPI here: a job is a
 // contiguous range of spatial samples (farm/job_planner.h), its result the block-differential
-// encoding of those samples' maps (EncodeVisibilityBlocks, vocabulary/visibility_blocks.h) with
+// encoding of those samples' maps (EncodeVisibilityBlocks, formats/visibility_blocks.h) with
 // its counters, as one self-checking message.
 //
 // Run folder (rank 0 writes):

@@ -92,7 +92,7 @@ inline PackInput MakeSmallGlossyInput() {
   return in;
 }
 
-// A valid compressed transport (vocabulary/compressed_transport.h) for 12 samples at n = 2,
+// A valid compressed transport (formats/compressed_transport.h) for 12 samples at n = 2,
 // split into blocks of 5 columns.
 inline TransportInput MakeSmallCompressedTransportInput() {
   CompressedTransport ct;

@@ -1,5 +1,5 @@
 // Compressed transport ↔ TRNS section (docs/prtpack-format.md, "TRNS"; the column blocks are
-// those of Cheslack-Postava et al. 2008 §4 as encoded by vocabulary/compressed_transport.h).
+// those of Cheslack-Postava et al. 2008 §4 as encoded by formats/compressed_transport.h).
 #include "packager/prtpack_transport.h"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// The compressed transport (vocabulary/compressed_transport.h) in a .prtpack TRNS section:
+// The compressed transport (formats/compressed_transport.h) in a .prtpack TRNS section:
 // the encoded CompressedTransportHeader is the section's global parameters, and each block of
 // `columns_per_block` columns is one EncodeColumnBlock byte string, zstd-compressed on its own,
 // so that a runtime decodes only the blocks it needs (docs/prtpack-format.md, "TRNS").

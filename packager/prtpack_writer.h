@@ -44,7 +44,7 @@ struct ExtraSectionInput {
 };
 
 // Per-mesh visibility cubemaps for glossy triple-product relighting (the VISB sections,
-// docs/prtpack-format.md): for mesh i, EncodeVisibilityBlocks (vocabulary/visibility_blocks.h)
+// docs/prtpack-format.md): for mesh i, EncodeVisibilityBlocks (formats/visibility_blocks.h)
 // of its vertices' maps in vertex order. The writer zstd-compresses each on its own.
 struct VisibilityInput {
   std::vector<std::vector<uint8_t>> per_mesh;

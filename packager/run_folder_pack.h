@@ -1,4 +1,4 @@
-// From the farm's run folder (vocabulary/transport_file.h) to .prtpack inputs, and a readable
+// From the farm's run folder (formats/run_folder.h, formats/transport_file.h) to .prtpack inputs, and a readable
 // summary of a pack: the library side of `prt-pack pack` and `prt-pack inspect`.
 #pragma once
 

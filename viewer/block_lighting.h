@@ -30,7 +30,7 @@
 namespace prt {
 
 // Geometry of the 16×16 blocks of a resolution-n cubemap (block numbering of
-// vocabulary/visibility_blocks.h): texel indices, texel-centre directions, solid angles, block
+// formats/visibility_blocks.h): texel indices, texel-centre directions, solid angles, block
 // centres and the sample directions of Eq. 4.
 class CubemapBlocks {
  public:

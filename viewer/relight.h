@@ -9,7 +9,7 @@
 //
 // TransportOperator is the seam where other representations plug in: DenseTransport and
 // SparseTransport here, CompressedTransportOperator for the adaptive 4D compressed columns of
-// vocabulary/compressed_relight.h (Cheslack-Postava et al. 2008 Eq. 8).
+// viewer/compressed_relight.h (Cheslack-Postava et al. 2008 Eq. 8).
 #pragma once
 
 #include <array>
@@ -108,11 +108,11 @@ class SparseTransport final : public TransportOperator {
 };
 
 // Relighting straight from adaptively compressed columns (Cheslack-Postava et al. 2008 §4.5,
-// Eq. 8) through vocabulary/compressed_relight.h. The relighter must outlive the operator and
+// Eq. 8) through viewer/compressed_relight.h. The relighter must outlive the operator and
 // its row wavelet must be Haar (the lighting basis here; std::invalid_argument otherwise).
 // Lighting values pass to the compressed path in float, and its radiance comes back in float:
 // expect ~1e-7 relative rounding per Accumulate (the incremental state stays in double).
-// Its outputs are in the relighter's sample order `order` (vocabulary/compressed_relight.h):
+// Its outputs are in the relighter's sample order `order` (viewer/compressed_relight.h):
 // kSamples, the pack's order, or kCoefficients, the depth-0 coefficient layout, which spares the
 // frame the gather through the Hilbert permutation (ViewerSession renders in that order).
 class CompressedTransportOperator final : public TransportOperator {

@@ -44,7 +44,7 @@ const char* ToString(LightingMode mode);
 // Sample order. Everything the session computes per spatial sample — the SampleRadiance of
 // transport(), RelightExact and the incremental relighters built on transport(), Shade's
 // colours, Render's input — is in the session's order: the compressed transport's depth-0
-// coefficient layout (SampleOrder::kCoefficients of vocabulary/compressed_relight.h; each mesh
+// coefficient layout (SampleOrder::kCoefficients of viewer/compressed_relight.h; each mesh
 // along its Hilbert order), the order the Eq. 8 inverse steps leave the frame in, so a frame
 // needs no gather through the permutation. The per-sample arrays albedo() and positions() are
 // moved to that order once at Open, and triangles() index them there. pack_sample(p) names the

@@ -1,6 +1,6 @@
 // Adaptive-depth column transform (Cheslack-Postava et al. 2008 §4.2 and §4.4 step 4).
 // A column of T̂ (one row-wavelet coefficient for every spatial sample) is transformed over the
-// spatial domain (vocabulary/compressed_relight.h) to every depth 0 … max in turn; at each depth
+// spatial domain (formats/column_coding.h) to every depth 0 … max in turn; at each depth
 // the column's `budget`-term non-linear approximation is measured on the original (unscaled)
 // coefficients. The chosen depth keeps the largest fraction of the column's energy; when several
 // depths keep all of it (at most `budget` non-zeros) the one with the fewest terms wins. Every

@@ -1,10 +1,10 @@
 // In-memory compression of the transport matrix T into adaptive 4D wavelet form
 // (Cheslack-Postava et al. 2008 §4): rows → row transform (§4.1) → columns → adaptive column
 // transform (§4.2) → non-linear approximation → 2^(l·d/2) scaling, normalisation, dithered
-// quantisation (§4.3) → compressed columns (vocabulary/compressed_transport.h). The 2D baseline
+// quantisation (§4.3) → compressed columns (formats/compressed_transport.h). The 2D baseline
 // (Ng et al. 2003) and full non-adaptive 4D run through the same code. The stages are exposed
 // separately so that the farm can run them on row blocks and column blocks (worker/block_spill.h)
-// without ever holding T. Inverse: vocabulary/compressed_relight.h (DecompressTransport).
+// without ever holding T. Inverse: formats/column_coding.h (DecompressTransport).
 #pragma once
 
 #include <cstddef>

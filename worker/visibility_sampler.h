@@ -1,6 +1,6 @@
 // Worker kernel: per-vertex visibility cubemaps for triple-product relighting (Inger, Farbman &
 // Lischinski 2013, §4 and §4.2), traced with Embree and stored in the block-differential
-// representation of vocabulary/visibility_blocks.h.
+// representation of formats/visibility_blocks.h.
 //
 // Binary maps (bits = 1, supersample = 1): one occlusion ray through each texel centre,
 // V = 1 when it escapes. Anti-aliased maps (§4.2, Figure 3): a supersample×supersample grid of
