@@ -14,33 +14,12 @@
 #include "vocabulary/hash.h"
 
 namespace prt {
-void SegmentShape(const SpatialSegment& s, int& w, int& h) {
-  if (s.kind == SpatialSegment::Kind::kGrid2D) {
-    w = static_cast<int>(s.width);
-    h = static_cast<int>(s.height);
-  } else {
-    w = static_cast<int>(s.count);
-    h = 1;
-  }
-}
 
 WaveletFilter ToWaveletFilter(RowWavelet w) {
   return w == RowWavelet::kHaar ? WaveletFilter::kHaar : WaveletFilter::kDaubechies4;
 }
 WaveletFilter ToWaveletFilter(ColumnWavelet w) {
   return w == ColumnWavelet::kLeGall53 ? WaveletFilter::kLeGall53 : WaveletFilter::kCdf97;
-}
-
-int MaxSegmentDepth(const SpatialSegment& s) {
-  int w, h;
-  SegmentShape(s, w, h);
-  return WaveletMaxDepth2D(WaveletFilter::kLeGall53, w, h);
-}
-
-int MaxColumnDepth(const SpatialDomain& d) {
-  int m = 0;
-  for (const auto& s : d.segments) m = std::max(m, MaxSegmentDepth(s));
-  return m;
 }
 
 void SamplesToCoefficientOrder(const SpatialDomain& domain, const float* samples, float* out) {

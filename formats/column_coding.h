@@ -23,15 +23,8 @@
 
 namespace prt {
 
-// Segment as a w×h region of the wavelet transform (a mesh is count×1).
-void SegmentShape(const SpatialSegment& s, int& w, int& h);
-
 WaveletFilter ToWaveletFilter(RowWavelet w);
 WaveletFilter ToWaveletFilter(ColumnWavelet w);
-
-// Largest depth of one segment / of the whole domain (the maximum over segments).
-int MaxSegmentDepth(const SpatialSegment& s);
-int MaxColumnDepth(const SpatialDomain& d);
 
 // Column in global sample order ↔ coefficient layout at `depth` (in place, `column` has
 // domain.sample_count() floats). Depth 0 only applies the Hilbert permutation.

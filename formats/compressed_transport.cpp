@@ -10,8 +10,8 @@
 #include <limits>
 #include <string>
 
-#include "formats/column_coding.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/wavelets.h"
 
 namespace prt {
 namespace {
@@ -698,6 +698,28 @@ CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
   if (next_column != t.header.column_count()) r.Fail("column blocks do not cover every column");
   if (off != bytes.size()) r.Fail("trailing bytes after the last column block");
   return t;
+}
+
+void SegmentShape(const SpatialSegment& s, int& w, int& h) {
+  if (s.kind == SpatialSegment::Kind::kGrid2D) {
+    w = static_cast<int>(s.width);
+    h = static_cast<int>(s.height);
+  } else {
+    w = static_cast<int>(s.count);
+    h = 1;
+  }
+}
+
+int MaxSegmentDepth(const SpatialSegment& s) {
+  int w, h;
+  SegmentShape(s, w, h);
+  return WaveletMaxDepth2D(WaveletFilter::kLeGall53, w, h);
+}
+
+int MaxColumnDepth(const SpatialDomain& d) {
+  int m = 0;
+  for (const auto& s : d.segments) m = std::max(m, MaxSegmentDepth(s));
+  return m;
 }
 
 }  // namespace prt

@@ -135,4 +135,12 @@ std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
 CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
                                               const std::string& name);
 
+// The spatial domain's wavelet shape (what a column transform may do with it).
+// Segment as a w×h region of the wavelet transform (a mesh is count×1).
+void SegmentShape(const SpatialSegment& s, int& w, int& h);
+
+// Largest depth of one segment / of the whole domain (the maximum over segments).
+int MaxSegmentDepth(const SpatialSegment& s);
+int MaxColumnDepth(const SpatialDomain& d);
+
 }  // namespace prt

@@ -5,7 +5,7 @@
 set -euo pipefail
 
 PACKAGES=(
-  build-essential cmake ninja-build ccache pkg-config git
+  build-essential cmake ninja-build ccache pkg-config git python3
   libembree-dev libopenmpi-dev openmpi-bin libopenexr-dev libflann-dev liblz4-dev libdraco-dev
   libzstd-dev libeigen3-dev libtbb-dev libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev libtomlplusplus-dev libspdlog-dev nlohmann-json3-dev libxxhash-dev
