@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "vocabulary/mesh.h"
+#include "vocabulary/mesh_io.h"
 #include "vocabulary/scene.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"

@@ -12,6 +12,7 @@
 
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_writer.h"
+#include "vocabulary/mesh_io.h"
 
 namespace prt::pack {
 namespace {

@@ -19,9 +19,10 @@
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_writer.h"
 #include "packager/run_folder_pack.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/mesh.h"
-#include "vocabulary/durable_file.h"
+#include "vocabulary/mesh_io.h"
 
 #ifndef PRT_VERSION
 #define PRT_VERSION "0"

@@ -16,6 +16,7 @@
 #include "packager/prtpack_test_util.h"
 #include "packager/prtpack_writer.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/mesh_io.h"
 
 namespace prt::pack {
 namespace {

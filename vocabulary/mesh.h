@@ -44,19 +44,6 @@ struct TriangleMesh {
   MeshImportReport report;
 };
 
-// Reads PLY (ascii, binary little and big endian), OBJ, OFF or STL (ascii and binary), chosen by
-// the file extension (case-insensitive). Vertex order is preserved (STL: welded in order of first
-// appearance); polygons are fan-triangulated; degenerate triangles are dropped and counted;
-// normals come from the file when present (PLY nx ny nz, OFF NOFF, OBJ vn when consistent per
-// position), else area-weighted. Throws prt::InputError naming the file and the line (text) or
-// element (binary) on: missing/unreadable file, unknown extension or format, truncated file,
-// NaN/Inf numbers, out-of-range indices, empty mesh (no vertices or no triangles).
-TriangleMesh LoadMesh(const std::string& path);
-
-// Same, from bytes already in memory; `name` (a file name) picks the format by extension and
-// names the source in error messages.
-TriangleMesh ParseMesh(const std::string& bytes, const std::string& name);
-
 // Recomputes area-weighted vertex normals from the triangles: n_v = normalize(Σ (p1−p0)×(p2−p0))
 // over the triangles using v (each term is twice the triangle's area times its unit normal).
 // Vertices without a triangle (or whose sum vanishes) get +Y.

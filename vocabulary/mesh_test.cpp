@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "vocabulary/errors.h"
+#include "vocabulary/mesh_io.h"
 
 namespace prt {
 namespace {

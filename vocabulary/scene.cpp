@@ -17,6 +17,7 @@
 #include <string_view>
 
 #include "vocabulary/errors.h"
+#include "vocabulary/mesh_io.h"
 
 namespace prt {
 namespace {
