@@ -5,6 +5,8 @@
 
 #include "viewer/rasterizer.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
 
 namespace prt::bench {
 

@@ -42,6 +42,8 @@
 #include "viewer/compressed_relight.h"
 #include "formats/compressed_transport.h"
 #include "vocabulary/envmap.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
 #include "formats/run_folder.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"

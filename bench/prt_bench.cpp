@@ -63,6 +63,8 @@
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_sampler.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
 
 namespace {
 

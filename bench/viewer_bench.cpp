@@ -49,6 +49,7 @@
 #include "worker/embree_scene.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_sampler.h"
+#include "vocabulary/environment_io.h"
 
 namespace {
 

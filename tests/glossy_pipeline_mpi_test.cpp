@@ -17,6 +17,8 @@
 
 #include "tests/run_prt_farm.h"
 #include "vocabulary/envmap.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/sky.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/durable_file.h"
 #include "formats/visibility_blocks.h"

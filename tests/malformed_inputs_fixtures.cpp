@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "vocabulary/envmap.h"
+#include "vocabulary/environment_io.h"
 
 namespace prt::testing {
 namespace {

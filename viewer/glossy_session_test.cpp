@@ -24,6 +24,9 @@
 #include "vocabulary/errors.h"
 #include "worker/embree_scene.h"
 #include "worker/visibility_sampler.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/sky.h"
 
 namespace prt {
 namespace {

@@ -16,6 +16,8 @@
 #include "viewer/relight.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/envmap.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {

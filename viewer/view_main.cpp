@@ -18,6 +18,8 @@
 #include "viewer/rotation_plot.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/envmap.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/image_io.h"
 

@@ -22,6 +22,7 @@
 #include "viewer/per_band_incremental.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/image_io.h"
+#include "vocabulary/cubemap_resample.h"
 
 namespace {
 

@@ -17,6 +17,7 @@
 #include "viewer/per_band_incremental.h"
 #include "viewer/rasterizer.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/cubemap_resample.h"
 
 namespace prt {
 

@@ -32,6 +32,8 @@
 #include "worker/embree_scene.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_sampler.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
 
 namespace prt {
 namespace {

@@ -1,15 +1,13 @@
-// Environment maps: reading lat-long and cube EXRs and Radiance .hdr files, and resampling an
-// environment to the lighting vector L, a cubemap of 6·n·n texels holding the AVERAGE radiance
-// over each texel (DESIGN.md, "Conventions"). Directions follow OpenEXR's ImfEnvmap.h exactly;
-// docs/conventions.md writes the mappings, the pixel cells and the units down.
-//
-// Readers are safe on untrusted input: every size is validated before it is used, truncated or
-// corrupt files throw prt::InputError naming the file, NaN/Inf pixels throw InputError naming the
-// file and the pixel (x, y, channel), and negative radiance is clamped to 0 and counted.
+// Environment maps as images: lat-long and cube layouts, their pixel cells and directions
+// (OpenEXR's ImfEnvmap.h exactly; docs/conventions.md writes the mappings, the pixel cells and
+// the units down), and the lighting vector's cubemap type. Reading and writing them:
+// environment_io.h; resampling to the lighting vector: cubemap_resample.h; a procedural sky:
+// sky.h.
 #pragma once
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -47,24 +45,6 @@ struct EnvironmentLoadInfo {
   double most_negative = 0;            // the smallest value clamped (≤ 0)
 };
 
-// Reads an environment: OpenEXR (any compression, half or float, scanline or tiled; R, G, B
-// channels, or Y alone as grey) or Radiance RGBE (.hdr/.pic, flat, old-RLE or new-RLE scanlines),
-// chosen by the file's magic bytes. The layout comes from the EXR `envmap` attribute; without it
-// (and always for .hdr) a 2:1 image is lat-long and a 1:6 image is a cube, and a log line says
-// so; any other shape throws InputError. A lat-long map must be at least 2×2 (OpenEXR maps
-// pixel 0 and pixel w−1 to the two ends of the longitude range); a cube map must be w × 6w.
-EnvironmentImage ReadEnvironment(const std::string& path, EnvironmentLoadInfo* info = nullptr);
-EnvironmentImage ReadEnvironmentExr(const std::string& path, EnvironmentLoadInfo* info = nullptr);
-EnvironmentImage ReadRadianceHdr(const std::string& path, EnvironmentLoadInfo* info = nullptr);
-
-// Writes float RGB OpenEXR (ZIP) with the `envmap` attribute set from image.layout.
-// Throws InputError naming the file when it cannot be written.
-void WriteEnvironmentExr(const EnvironmentImage& image, const std::string& path);
-// Writes Radiance RGBE ("-Y h +X w"), new-RLE scanlines when rle and 8 ≤ width ≤ 32767, flat
-// scanlines otherwise. RGBE keeps 8 bits of mantissa: values round-trip within 1/256 of the
-// pixel's largest channel. Negative values are written as 0.
-void WriteRadianceHdr(const EnvironmentImage& image, const std::string& path, bool rle = true);
-
 // ---- Directions (OpenEXR ImfEnvmap.h, in double precision) ----
 
 // Imf::LatLongMap::direction for a w × h map with data window (0,0)–(w−1,h−1): pixel position
@@ -91,6 +71,26 @@ double PixelSolidAngle(const EnvironmentImage& image, int x, int y);
 // Σ radiance × cell solid angle over the image, per channel (double).
 std::array<double, 3> EnvironmentPower(const EnvironmentImage& image);
 
+// ---- Pixel cells (docs/conventions.md) ----
+// OpenEXR places pixel centres on the poles, on both ends of the longitude range and on cube
+// face edges. A pixel's cell reaches half way to its neighbours, clipped at those ends.
+
+struct PixelInterval {
+  double lo, hi;
+};
+// Latitude interval of lat-long row y of h (θ grows upwards; row 0 is the north pole).
+PixelInterval LatLongRowCell(int h, int y);
+// Longitude interval of lat-long column x of w (φ decreases with x from π to −π).
+PixelInterval LatLongColumnCell(int w, int x);
+// Cube image pixel → face and integer position in face (Imf::CubeMap::pixelPosition inverted).
+void CubePixelToFace(int s, int px, int py, int& face, int& pifx, int& pify);
+// Face-coordinate interval (u or v ∈ [−1, 1]) of integer position i on a face of s pixels.
+PixelInterval CubeCell(int s, int i);
+
+// Throws InputError(path) unless a w × h image is a valid `layout` map of at most 2^28 pixels.
+void ValidateEnvironmentShape(const std::string& path, EnvmapLayout layout, std::int64_t w,
+                              std::int64_t h);
+
 // ---- The lighting vector ----
 
 // Average radiance over each texel of a cubemap (vocabulary/cubemap.h layout: texel index =
@@ -104,42 +104,5 @@ struct CubemapRgb {
 };
 // Σ texel average × exact texel solid angle, per channel (double).
 std::array<double, 3> CubemapPower(const CubemapRgb& cube);
-
-// Resamples an environment, rotated by rotation_y radians about +Y (see RotateAboutY), to an
-// n×n-per-face cubemap by integrating over each texel's solid angle: every source pixel cell is
-// split into leaves small against the target texel, each leaf carries its exact solid angle and
-// is shared between the texels it overlaps (first-order exact overlap, see envmap.cpp), and each
-// texel divides its accumulated radiance × solid angle by its accumulated solid angle. A constant
-// map stays constant; a one-pixel sun keeps its power. n: power of two in [1, 256]
-// (std::invalid_argument otherwise). A NaN/Inf pixel throws prt::NumericalError naming it.
-// Parallel (TBB) and deterministic (independent of the thread count).
-CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation_y = 0.0);
-
-// Diagnostic: the source solid angle credited to each texel by ResampleToCubemap's integration
-// (6·n² values). Equals CubemapLayout::TexelSolidAngle up to the integration error, which bounds
-// the relative power error of a small sun anywhere in that texel. Sums to 4π.
-std::vector<double> ResampledTexelSolidAngles(const EnvironmentImage& env, int n,
-                                              double rotation_y = 0.0);
-
-// ---- Procedural environments for tests and demos ----
-
-struct SkySunParams {
-  Vec3 sun_direction{0.3, 0.5, 0.8};   // need not be normalised
-  double sun_angular_radius = 0.0232;  // radians (≈ 1.33°)
-  std::array<float, 3> sun_radiance{5000.f, 4700.f, 4200.f};
-  std::array<float, 3> zenith{0.15f, 0.3f, 0.8f};
-  std::array<float, 3> horizon{0.8f, 0.85f, 0.9f};
-  std::array<float, 3> ground{0.25f, 0.2f, 0.15f};
-};
-// Smooth sky radiance (zenith → horizon gradient above, ground below) without the sun.
-std::array<float, 3> SkyRadiance(const SkySunParams& p, const Vec3& d);
-// Lat-long (width × height) or cube (width × 6·width) image of sky plus sun disc. The sky is
-// sampled at the pixel direction; the sun disc is box-filtered over the pixel cell with
-// supersamples × supersamples samples, so its power is right even when it is under a pixel.
-EnvironmentImage MakeSkyWithSun(EnvmapLayout layout, int width, int height,
-                                const SkySunParams& params, int supersamples = 8);
-// Samples f at each pixel's direction (OpenEXR mapping).
-EnvironmentImage SampleEnvironment(EnvmapLayout layout, int width, int height,
-                                   const std::function<std::array<float, 3>(const Vec3&)>& f);
 
 }  // namespace prt

@@ -1,4 +1,7 @@
 #include "vocabulary/envmap.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/sky.h"
 
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfEnvmap.h>
