@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 
@@ -26,65 +27,19 @@ double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-class ByteWriter {
- public:
-  template <typename T>
-  void Put(const T& v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    const auto* p = reinterpret_cast<const char*>(&v);
-    bytes_.append(p, sizeof(T));
-  }
-  template <typename T>
-  void PutVector(const std::vector<T>& v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    Put(static_cast<uint64_t>(v.size()));
-    bytes_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
-  }
-  // The message's size in advance: growing a 20 MiB string by doubling copies it ~twice over.
-  void Reserve(std::size_t bytes) { bytes_.reserve(bytes); }
-  std::string& bytes() { return bytes_; }
-
- private:
-  std::string bytes_;
-};
-
 // Bytes PutVector writes for v.
 template <typename T>
 std::size_t VectorBytes(const std::vector<T>& v) {
   return sizeof(uint64_t) + v.size() * sizeof(T);
 }
 
-class ByteReader {
- public:
-  ByteReader(std::string_view bytes, std::size_t at) : bytes_(bytes), at_(at) {}
-  template <typename T>
-  T Get() {
-    T v;
-    Need(sizeof(T));
-    std::memcpy(&v, bytes_.data() + at_, sizeof(T));
-    at_ += sizeof(T);
-    return v;
-  }
-  template <typename T>
-  std::vector<T> GetVector() {
-    const uint64_t n = Get<uint64_t>();
-    if (n > (bytes_.size() - at_) / sizeof(T)) throw std::runtime_error("truncated sparse job");
-    std::vector<T> v(static_cast<std::size_t>(n));
-    // An empty vector's data() may be null, and memcpy's source and destination must not be
-    // (UBSan: nonnull-attribute), even for zero bytes.
-    if (!v.empty()) std::memcpy(v.data(), bytes_.data() + at_, v.size() * sizeof(T));
-    at_ += v.size() * sizeof(T);
-    return v;
-  }
-
- private:
-  void Need(std::size_t n) const {
-    if (bytes_.size() - at_ < n || at_ > bytes_.size())
-      throw std::runtime_error("truncated sparse job message");
-  }
-  std::string_view bytes_;
-  std::size_t at_;
-};
+// A sparse job message's reader: a short message is a std::runtime_error (rank 0 turns it into a
+// RankFailure naming the rank).
+ByteReader MessageReader(std::string_view bytes) {
+  return ByteReader(bytes, [](const char*, std::size_t) {
+    throw std::runtime_error("truncated sparse job message");
+  });
+}
 
 void PutHeader(ByteWriter& w, uint32_t magic, const SparseJobHeader& h) {
   w.Put(magic);
@@ -92,8 +47,8 @@ void PutHeader(ByteWriter& w, uint32_t magic, const SparseJobHeader& h) {
 }
 
 SparseJobHeader GetHeader(ByteReader& r, uint32_t magic) {
-  if (r.Get<uint32_t>() != magic) throw std::runtime_error("not a sparse job message");
-  return r.Get<SparseJobHeader>();
+  if (r.Get<uint32_t>("message") != magic) throw std::runtime_error("not a sparse job message");
+  return r.Get<SparseJobHeader>("message");
 }
 
 // A neighbour list is well-formed: offsets start at 0, never decrease, end at neighbors.size(),
@@ -194,7 +149,7 @@ std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job) {
 }
 
 SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes) {
-  ByteReader r(job_bytes, 0);
+  ByteReader r = MessageReader(job_bytes);
   return GetHeader(r, kJobMagic);
 }
 
@@ -225,24 +180,24 @@ SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
   std::memcpy(&sum, bytes.data() + body, sizeof sum);
   if (Checksum64(bytes.data(), body) != sum)
     throw std::runtime_error("sparse job result arrived damaged (checksum mismatch)");
-  ByteReader r(bytes, 0);
+  ByteReader r = MessageReader(bytes);
   SparseJobResult res;
   res.header = GetHeader(r, kResultMagic);
-  res.busy_seconds = r.Get<double>();
-  const std::vector<uint64_t> counters = r.GetVector<uint64_t>();
+  res.busy_seconds = r.Get<double>("message");
+  const std::vector<uint64_t> counters = r.GetVector<uint64_t>("message");
   res.counters = SparseJobCounters::FromVector(counters);
-  res.transport = r.GetVector<float>();
-  res.visibility = r.GetVector<float>();
-  res.feature = r.GetVector<uint8_t>();
-  res.weights = r.GetVector<int32_t>();
-  res.outcomes = r.GetVector<uint8_t>();
+  res.transport = r.GetVector<float>("message");
+  res.visibility = r.GetVector<float>("message");
+  res.feature = r.GetVector<uint8_t>("message");
+  res.weights = r.GetVector<int32_t>("message");
+  res.outcomes = r.GetVector<uint8_t>("message");
   return res;
 }
 
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
                              std::string_view job_bytes) {
-  ByteReader r(job_bytes, 0);
+  ByteReader r = MessageReader(job_bytes);
   SparseJobResult res;
   res.header = GetHeader(r, kJobMagic);
   const double t0 = Now();
@@ -250,7 +205,7 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
   std::mutex mutex;
   switch (static_cast<SparseJobKind>(res.header.kind)) {
     case SparseJobKind::kDense: {
-      const std::vector<uint32_t> ids = r.GetVector<uint32_t>();
+      const std::vector<uint32_t> ids = r.GetVector<uint32_t>("message");
       for (uint32_t s : ids)
         if (s >= samples.size()) throw std::runtime_error("dense job names a missing sample");
       res.transport.resize(ids.size() * T);
@@ -283,10 +238,10 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       break;
     }
     case SparseJobKind::kRank: {
-      const auto low_dim = r.Get<uint32_t>();
-      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>();
-      const std::vector<uint32_t> nb = r.GetVector<uint32_t>();
-      const std::vector<float> low = r.GetVector<float>();
+      const auto low_dim = r.Get<uint32_t>("message");
+      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
+      const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
+      const std::vector<float> low = r.GetVector<float>("message");
       if (low_dim == 0 || low.size() % low_dim != 0)
         throw std::runtime_error("malformed rank job rows");
       if (offsets.empty()) throw std::runtime_error("malformed rank job");
@@ -302,15 +257,15 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       break;
     }
     case SparseJobKind::kSparse: {
-      const auto texels = r.Get<uint32_t>();
+      const auto texels = r.Get<uint32_t>("message");
       if (texels != T) throw std::runtime_error("sparse job for another cubemap resolution");
-      const std::vector<uint32_t> vertices = r.GetVector<uint32_t>();
-      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>();
-      const std::vector<uint32_t> nb = r.GetVector<uint32_t>();
-      const std::vector<float> tr = r.GetVector<float>();
-      const std::vector<float> vis = r.GetVector<float>();
-      const std::vector<uint8_t> feat = r.GetVector<uint8_t>();
-      const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>();
+      const std::vector<uint32_t> vertices = r.GetVector<uint32_t>("message");
+      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
+      const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
+      const std::vector<float> tr = r.GetVector<float>("message");
+      const std::vector<float> vis = r.GetVector<float>("message");
+      const std::vector<uint8_t> feat = r.GetVector<uint8_t>("message");
+      const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
       const std::size_t rows = tr.size() / T;
       if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T ||
           union_ids.size() != rows)

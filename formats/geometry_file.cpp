@@ -6,6 +6,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -20,88 +21,63 @@ namespace {
 constexpr char kGeometryMagic[8] = {'P', 'R', 'T', 'G', 'E', 'O', 'M', '1'};
 constexpr uint32_t kGeometryVersion = 1;
 
-template <typename T>
-void Put(std::string& out, T value) {
-  char bytes[sizeof(T)];
-  std::memcpy(bytes, &value, sizeof(T));
-  out.append(bytes, sizeof(T));
-}
-
 }  // namespace
 
 std::string SerializeSceneGeometry(const SceneGeometry& geometry) {
-  std::string out(kGeometryMagic, 8);
-  Put<uint32_t>(out, kGeometryVersion);
-  Put<uint32_t>(out, static_cast<uint32_t>(geometry.meshes.size()));
+  ByteWriter w;
+  w.PutBytes(kGeometryMagic, 8);
+  w.Put<uint32_t>(kGeometryVersion);
+  w.Put<uint32_t>(static_cast<uint32_t>(geometry.meshes.size()));
   for (const Vec3& v : {geometry.bounds_min, geometry.bounds_max}) {
-    Put(out, v.x);
-    Put(out, v.y);
-    Put(out, v.z);
+    w.Put(v.x);
+    w.Put(v.y);
+    w.Put(v.z);
   }
   for (const SceneMesh& m : geometry.meshes) {
-    Put<uint32_t>(out, static_cast<uint32_t>(m.name.size()));
-    out += m.name;
-    for (float a : m.albedo) Put(out, a);
-    Put<uint32_t>(out, m.is_ground ? 1u : 0u);
-    Put<uint32_t>(out, static_cast<uint32_t>(m.grid_resolution));
-    Put<uint64_t>(out, m.mesh.positions.size());
-    Put<uint64_t>(out, m.mesh.triangles.size());
+    w.Put<uint32_t>(static_cast<uint32_t>(m.name.size()));
+    w.PutBytes(m.name.data(), m.name.size());
+    for (float a : m.albedo) w.Put(a);
+    w.Put<uint32_t>(m.is_ground ? 1u : 0u);
+    w.Put<uint32_t>(static_cast<uint32_t>(m.grid_resolution));
+    w.Put<uint64_t>(m.mesh.positions.size());
+    w.Put<uint64_t>(m.mesh.triangles.size());
     for (const auto* list : {&m.mesh.positions, &m.mesh.normals}) {
       if (list->size() != m.mesh.positions.size()) {
         throw std::invalid_argument("SerializeSceneGeometry: mesh '" + m.name +
                                     "' has a normal count different from its vertex count");
       }
       for (const Vec3& v : *list) {
-        Put(out, v.x);
-        Put(out, v.y);
-        Put(out, v.z);
+        w.Put(v.x);
+        w.Put(v.y);
+        w.Put(v.z);
       }
     }
     for (const auto& t : m.mesh.triangles) {
-      for (uint32_t i : t) Put(out, i);
+      for (uint32_t i : t) w.Put(i);
     }
   }
-  Put<uint64_t>(out, Checksum64(out.data(), out.size()));
-  return out;
+  std::string& out = w.bytes();
+  w.Put<uint64_t>(Checksum64(out.data(), out.size()));
+  return std::move(out);
 }
 
 namespace {
 
-class ByteCursor {
- public:
-  ByteCursor(std::string_view bytes, const std::string& name) : bytes_(bytes), name_(name) {}
-  template <typename T>
-  T Get(const char* what) {
-    Need(sizeof(T), what);
-    T value;
-    std::memcpy(&value, bytes_.data() + pos_, sizeof(T));
-    pos_ += sizeof(T);
-    return value;
-  }
-  std::string_view Take(std::size_t n, const char* what) {
-    Need(n, what);
-    const auto s = bytes_.substr(pos_, n);
-    pos_ += n;
-    return s;
-  }
-  std::size_t remaining() const { return bytes_.size() - pos_; }
-  void Need(std::size_t n, const char* what) const {
-    if (n > remaining()) throw InputError(name_, std::string("truncated geometry file in ") + what);
-  }
-  Vec3 GetVec3(const char* what) {
-    Vec3 v;
-    v.x = Get<double>(what);
-    v.y = Get<double>(what);
-    v.z = Get<double>(what);
-    if (!IsFinite(v)) throw InputError(name_, std::string("non-finite value in ") + what);
-    return v;
-  }
+// The geometry file's reader: a truncated file is an InputError naming it and the field.
+ByteReader GeometryReader(std::string_view bytes, const std::string& name) {
+  return ByteReader(bytes, [&name](const char* what, std::size_t) {
+    throw InputError(name, std::string("truncated geometry file in ") + what);
+  });
+}
 
- private:
-  std::string_view bytes_;
-  const std::string& name_;
-  std::size_t pos_ = 0;
-};
+Vec3 GetVec3(ByteReader& in, const std::string& name, const char* what) {
+  Vec3 v;
+  v.x = in.Get<double>(what);
+  v.y = in.Get<double>(what);
+  v.z = in.Get<double>(what);
+  if (!IsFinite(v)) throw InputError(name, std::string("non-finite value in ") + what);
+  return v;
+}
 
 }  // namespace
 
@@ -115,7 +91,7 @@ SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name
   if (Checksum64(bytes.data(), body) != stored) {
     throw InputError(name, "geometry file checksum mismatch: the file is damaged");
   }
-  ByteCursor in(bytes.substr(0, body), name);
+  ByteReader in = GeometryReader(bytes.substr(0, body), name);
   in.Take(8, "magic");
   const auto version = in.Get<uint32_t>("header");
   if (version != kGeometryVersion) {
@@ -124,8 +100,8 @@ SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name
   }
   const auto mesh_count = in.Get<uint32_t>("header");
   SceneGeometry g;
-  g.bounds_min = in.GetVec3("bounds");
-  g.bounds_max = in.GetVec3("bounds");
+  g.bounds_min = GetVec3(in, name, "bounds");
+  g.bounds_max = GetVec3(in, name, "bounds");
   for (uint32_t m = 0; m < mesh_count; ++m) {
     SceneMesh sm;
     const auto name_len = in.Get<uint32_t>("mesh name");
@@ -143,8 +119,8 @@ SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name
     sm.mesh.source = name;
     sm.mesh.positions.resize(vertices);
     sm.mesh.normals.resize(vertices);
-    for (Vec3& p : sm.mesh.positions) p = in.GetVec3("positions");
-    for (Vec3& n : sm.mesh.normals) n = in.GetVec3("normals");
+    for (Vec3& p : sm.mesh.positions) p = GetVec3(in, name, "positions");
+    for (Vec3& n : sm.mesh.normals) n = GetVec3(in, name, "normals");
     sm.mesh.triangles.resize(triangles);
     for (auto& t : sm.mesh.triangles) {
       for (uint32_t& i : t) {
