@@ -31,10 +31,10 @@ nlohmann::json SceneJson(const std::string& text, const std::string& file) {
     std::ostringstream out;
     out << toml::json_formatter{table};
     nlohmann::json j = nlohmann::json::parse(out.str());
-    j["file"] = "scene.toml";
+    j["file"] = kSceneCopyFileName;
     return j;
   } catch (const std::exception&) {
-    return {{"file", "scene.toml"}, {"toml", text}};
+    return {{"file", kSceneCopyFileName}, {"toml", text}};
   }
 }
 
