@@ -13,9 +13,6 @@
 
 namespace prt {
 
-static_assert(std::endian::native == std::endian::little,
-              "prtfarm's file formats are little-endian; this host is not");
-
 namespace {
 
 constexpr char kGeometryMagic[8] = {'P', 'R', 'T', 'G', 'E', 'O', 'M', '1'};
