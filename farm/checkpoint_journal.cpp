@@ -9,8 +9,8 @@
 #include <cstring>
 #include <sstream>
 
-#include "vocabulary/errors.h"
 #include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 
 namespace prt {

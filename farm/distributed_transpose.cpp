@@ -11,9 +11,9 @@
 
 #include "farm/farm_options.h"
 #include "farm/mpi_support.h"
+#include "farm/progress.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
-#include "farm/progress.h"
 
 namespace prt {
 

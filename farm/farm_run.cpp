@@ -15,9 +15,9 @@
 
 #include "farm/farm_context.h"
 #include "farm/mpi_support.h"
-#include "vocabulary/errors.h"
 #include "farm/progress.h"
 #include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 

@@ -17,8 +17,8 @@
 #include <thread>
 
 #include "farm/mpi_support.h"
-#include "vocabulary/errors.h"
 #include "farm/progress.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 
@@ -152,11 +152,11 @@ class LocalWorker {
     thread_.join();
   }
 
-  // Queues a job (the worker takes them in order).
-  void Give(JobEnvelope job, std::string payload) {
+  // Queues a job message (envelope and payload; the worker takes them in order).
+  void Give(JobEnvelope job, std::string message) {
     {
       std::lock_guard lock(mutex_);
-      jobs_.push_back({job, std::move(payload)});
+      jobs_.push_back({job, std::move(message)});
     }
     cv_.notify_all();
   }
@@ -187,7 +187,7 @@ class LocalWorker {
       }
       ComputedJob r;
       try {
-        r = ComputeJob(compute_, job.first, job.second);
+        r = ComputeJob(compute_, job.first, PayloadOf(job.second));
       } catch (...) {
         r.error = std::current_exception();
       }
@@ -392,7 +392,8 @@ void JobLoop::Run(JobBatch& batch) {
         const std::optional<RowRange> next = planner.Next(s.rank);
         if (!next) break;
         RowRange range = *next;
-        std::string payload = batch.make_job ? batch.make_job(range) : std::string();
+        std::string message(sizeof(JobEnvelope), '\0');  // the envelope, filled in below
+        if (batch.make_job) batch.make_job(range, message);
         if (range.count < next->count) planner.Return({range.end(), next->count - range.count});
         if (s.jobs.empty()) s.since = FarmNow();
         s.jobs.push_back(range);
@@ -400,12 +401,10 @@ void JobLoop::Run(JobBatch& batch) {
         e.batch = number;
         e.first = range.first;
         e.count = range.count;
+        std::memcpy(message.data(), &e, sizeof e);
         if (s.local) {
-          st.local->Give(e, std::move(payload));
+          st.local->Give(e, std::move(message));
         } else {
-          std::string message(sizeof e, '\0');
-          std::memcpy(message.data(), &e, sizeof e);
-          message += payload;
           s.sends.Send(std::move(message), s.rank, kTagJob, ctx.comm,
                        "MPI_Isend job to rank " + std::to_string(s.rank));
         }

@@ -44,9 +44,10 @@ struct JobBatch {
   // out, and always when none is (0: after every pass over the incoming messages).
   double commit_interval_s = 0;
 
-  // Rank 0: the payload of the job for `range`; may lower range.count (the rest is handed out
+  // Rank 0: appends the payload of the job for `range` to `message` (which holds the envelope;
+  // an encoder that builds on it copies no byte); may lower range.count (the rest is handed out
   // again). Empty: no payload (the range says it all).
-  std::function<std::string(RowRange& range)> make_job;
+  std::function<void(RowRange& range, std::string& message)> make_job;
   // Rank 0: checks and stores the result of `range` from `rank`, and returns the journal line
   // for it (rows, checksum, counters; the loop fills in rank and busy_seconds). Throws
   // RankFailure for a result that does not fit its job.

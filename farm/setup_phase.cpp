@@ -11,12 +11,12 @@
 #include "farm/farm_context.h"
 #include "farm/mpi_support.h"
 #include "farm/run_manifest.h"
+#include "formats/geometry_file.h"
 #include "formats/run_folder.h"
+#include "formats/transport_file.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "formats/transport_file.h"
-#include "formats/geometry_file.h"
-#include "vocabulary/durable_file.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
 #define PRT_DEFAULT_DATA_DIR ""

@@ -114,15 +114,15 @@ SparseJobCounters& SparseJobCounters::operator+=(const SparseJobCounters& o) {
   return *this;
 }
 
-std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job) {
-  ByteWriter w;
+std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job, std::string prefix) {
+  ByteWriter w(std::move(prefix));
   PutHeader(w, kJobMagic, h);
   w.PutVector(job.ids);
   return std::move(w.bytes());
 }
 
-std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job) {
-  ByteWriter w;
+std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job, std::string prefix) {
+  ByteWriter w(std::move(prefix));
   PutHeader(w, kJobMagic, h);
   w.Put(job.low_dim);
   w.PutVector(job.offsets);
@@ -131,11 +131,12 @@ std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job) {
   return std::move(w.bytes());
 }
 
-std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job) {
-  ByteWriter w;
-  w.Reserve(sizeof(uint32_t) + sizeof h + sizeof job.texels + VectorBytes(job.vertices) +
-            VectorBytes(job.offsets) + VectorBytes(job.neighbors) + VectorBytes(job.transport) +
-            VectorBytes(job.visibility) + VectorBytes(job.feature) + VectorBytes(job.union_ids));
+std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job, std::string prefix) {
+  ByteWriter w(std::move(prefix));
+  w.Reserve(w.bytes().size() + sizeof(uint32_t) + sizeof h + sizeof job.texels +
+            VectorBytes(job.vertices) + VectorBytes(job.offsets) + VectorBytes(job.neighbors) +
+            VectorBytes(job.transport) + VectorBytes(job.visibility) + VectorBytes(job.feature) +
+            VectorBytes(job.union_ids));
   PutHeader(w, kJobMagic, h);
   w.Put(job.texels);
   w.PutVector(job.vertices);
@@ -153,12 +154,14 @@ SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes) {
   return GetHeader(r, kJobMagic);
 }
 
-std::string EncodeSparseJobResult(const SparseJobResult& res) {
-  ByteWriter w;
+std::string EncodeSparseJobResult(const SparseJobResult& res, std::string prefix) {
+  ByteWriter w(std::move(prefix));
+  const std::size_t start = w.bytes().size();  // the checksum covers this message only
   const std::vector<uint64_t> counters = res.counters.ToVector();
-  w.Reserve(sizeof(uint32_t) + sizeof res.header + sizeof res.busy_seconds + VectorBytes(counters) +
-            VectorBytes(res.transport) + VectorBytes(res.visibility) + VectorBytes(res.feature) +
-            VectorBytes(res.weights) + VectorBytes(res.outcomes) + sizeof(uint64_t));
+  w.Reserve(start + sizeof(uint32_t) + sizeof res.header + sizeof res.busy_seconds +
+            VectorBytes(counters) + VectorBytes(res.transport) + VectorBytes(res.visibility) +
+            VectorBytes(res.feature) + VectorBytes(res.weights) + VectorBytes(res.outcomes) +
+            sizeof(uint64_t));
   PutHeader(w, kResultMagic, res.header);
   w.Put(res.busy_seconds);
   w.PutVector(counters);
@@ -168,7 +171,7 @@ std::string EncodeSparseJobResult(const SparseJobResult& res) {
   w.PutVector(res.weights);
   w.PutVector(res.outcomes);
   std::string& b = w.bytes();
-  const uint64_t sum = Checksum64(b.data(), b.size());
+  const uint64_t sum = Checksum64(b.data() + start, b.size() - start);
   b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
   return std::move(b);
 }
@@ -196,7 +199,7 @@ SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
 
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
-                             std::string_view job_bytes) {
+                             std::string_view job_bytes, std::string prefix) {
   ByteReader r = MessageReader(job_bytes);
   SparseJobResult res;
   res.header = GetHeader(r, kJobMagic);
@@ -324,7 +327,7 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       throw std::runtime_error("unknown sparse job kind " + std::to_string(res.header.kind));
   }
   res.busy_seconds = Now() - t0;
-  return EncodeSparseJobResult(res);
+  return EncodeSparseJobResult(res, std::move(prefix));
 }
 
 uint64_t DenseResultChecksum(std::size_t rows, std::size_t texels, const float* transport,

@@ -94,10 +94,13 @@ struct SparseJobResult {
   std::vector<uint8_t> outcomes;
 };
 
-std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job);
-std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job);
-std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job);
-std::string EncodeSparseJobResult(const SparseJobResult& r);
+// Each encoder appends its message to `prefix` (moved in: the job loop's envelope, so that a job
+// of 20 MiB is never copied to put 32 bytes in front of it) and returns the whole.
+std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job, std::string prefix = {});
+std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job, std::string prefix = {});
+std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job,
+                            std::string prefix = {});
+std::string EncodeSparseJobResult(const SparseJobResult& r, std::string prefix = {});
 // Throws std::runtime_error on a truncated or foreign message (and on a checksum mismatch).
 SparseJobResult DecodeSparseJobResult(std::string_view bytes);
 SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes);
@@ -106,7 +109,7 @@ SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes);
 // NumericalError for a non-finite value, std::runtime_error for a malformed job.
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
-                             std::string_view job_bytes);
+                             std::string_view job_bytes, std::string prefix = {});
 
 // XXH64 of what a dense job leaves on disk, per sample in order: T row, visibility row, feature
 // row. `rows` samples, `texels` each.

@@ -62,8 +62,9 @@ struct StepJobs {
   std::string unit = "samples";
   // Verifies a journaled job against the files and applies it to rank 0's state.
   std::function<bool(const JournalEntry&)> reuse;
-  // Encodes the job for items h.first…; may lower h.count (too many bytes).
-  std::function<std::string(SparseJobHeader&)> make_job;
+  // Encodes the job for items h.first… after `prefix` (the envelope); may lower h.count (too
+  // many bytes).
+  std::function<std::string(SparseJobHeader&, std::string prefix)> make_job;
   // Writes a result into the files and rank 0's state; returns its durable checksum and the
   // number of transport rows it wrote.
   std::function<uint64_t(const SparseJobResult&, uint64_t& rows_written)> accept;
@@ -114,11 +115,11 @@ class FarmSparseSteps final : public SparseSteps {
       for (std::size_t i = 0; i < c; ++i) apply(ids[e.rows.first + i], tr.data() + i * T_);
       return true;
     };
-    p.make_job = [&](SparseJobHeader& h) {
+    p.make_job = [&](SparseJobHeader& h, std::string prefix) {
       DenseJob job;
       job.ids.assign(ids.begin() + static_cast<std::ptrdiff_t>(h.first),
                      ids.begin() + static_cast<std::ptrdiff_t>(h.first + h.count));
-      return EncodeDenseJob(h, job);
+      return EncodeDenseJob(h, job, std::move(prefix));
     };
     p.accept = [&, aux_row](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
@@ -166,7 +167,7 @@ class FarmSparseSteps final : public SparseSteps {
       for (std::size_t i = 0; i < w.size(); ++i) weight[e.rows.first + i] = w[i];
       return true;
     };
-    p.make_job = [&](SparseJobHeader& h) {
+    p.make_job = [&](SparseJobHeader& h, std::string prefix) {
       RankJob job;
       job.low_dim = static_cast<uint32_t>(Tm_);
       std::unordered_map<uint32_t, uint32_t> local;
@@ -180,7 +181,7 @@ class FarmSparseSteps final : public SparseSteps {
         }
         job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
       }
-      return EncodeRankJob(h, job);
+      return EncodeRankJob(h, job, std::move(prefix));
     };
     p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
       if (r.weights.size() != r.header.count)
@@ -235,7 +236,7 @@ class FarmSparseSteps final : public SparseSteps {
       std::copy(o.begin(), o.end(), outcome.begin() + static_cast<std::ptrdiff_t>(e.rows.first));
       return true;
     };
-    p.make_job = [&](SparseJobHeader& h) {
+    p.make_job = [&](SparseJobHeader& h, std::string prefix) {
       SparseJob job;
       job.texels = static_cast<uint32_t>(T_);
       std::unordered_map<uint32_t, uint32_t> local;
@@ -277,7 +278,7 @@ class FarmSparseSteps final : public SparseSteps {
       }
       rows_shipped_ += u;
       job.union_ids = std::move(union_ids);
-      return EncodeSparseJob(h, job);
+      return EncodeSparseJob(h, job, std::move(prefix));
     };
     p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
@@ -370,15 +371,14 @@ class FarmSparseSteps final : public SparseSteps {
     batch.max_items = std::max<uint64_t>(1, kMaxSparseJobBytes / per_item_bytes);
     batch.jobs_ahead = kJobsAhead;
     batch.commit_interval_s = kCommitIntervalSeconds;
-    batch.make_job = [&](RowRange& range) {
+    batch.make_job = [&](RowRange& range, std::string& message) {
       SparseJobHeader h;
       h.kind = static_cast<uint32_t>(p.kind);
       h.phase = step_number_;
       h.first = range.first;
       h.count = range.count;
-      std::string job = p.make_job(h);
+      message = p.make_job(h, std::move(message));
       range.count = h.count;
-      return job;
     };
     batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
       SparseJobResult r;
@@ -433,7 +433,7 @@ class SparsePhase final : public FarmPhase {
     RunJobPhase(
         ctx,
         [&ctx](const RowRange&, std::string_view payload, std::string& out) {
-          out += ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload);
+          out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out));
         },
         [&ctx](JobLoop& loop) {
           FarmReport& rep = ctx.report;

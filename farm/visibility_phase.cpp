@@ -15,8 +15,8 @@
 #include "farm/job_loop.h"
 #include "farm/side_file.h"
 #include "farm/visibility_jobs.h"
-#include "vocabulary/errors.h"
 #include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 
 namespace prt {

@@ -11,6 +11,7 @@
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace prt {
@@ -21,6 +22,9 @@ static_assert(std::endian::native == std::endian::little,
 // Appends values to a byte string.
 class ByteWriter {
  public:
+  ByteWriter() = default;
+  // Appends after `prefix` (a message's envelope, say), which is moved in, not copied.
+  explicit ByteWriter(std::string prefix) : bytes_(std::move(prefix)) {}
   template <typename T>
   void Put(const T& v) {
     static_assert(std::is_trivially_copyable_v<T>);
