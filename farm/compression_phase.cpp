@@ -139,17 +139,15 @@ void Compress(FarmContext& ctx) {
     try {
       reader = std::make_unique<TransportFileReader>(folder.transport);
       // The scene and geometry setup parsed and decoded (nothing is read again but the rows).
-      const SceneDescription& scene = ctx.scene;
-      copt = CompressionOptionsFrom(scene.compression, scene.file);
-      if (!options.compression_scheme.empty())
-        copt.scheme = ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
-      const SpatialDomain domain =
-          SpatialDomainOf(ctx.geometry, scene.compression.order_normal_weight);
-      if (domain.sample_count() != reader->info().rows)
-        throw InputError(folder.transport,
-                         std::to_string(reader->info().rows) + " rows, but " + folder.geometry +
-                             " has " + std::to_string(domain.sample_count()) + " spatial samples");
-      header = MakeCompressedHeader(copt, static_cast<int>(reader->info().cubemap_n), domain);
+      CompressionPlan plan = PlanCompression(ctx.scene, ctx.geometry,
+                                             static_cast<int>(reader->info().cubemap_n), options);
+      if (plan.header.sample_count != reader->info().rows)
+        throw InputError(folder.transport, std::to_string(reader->info().rows) + " rows, but " +
+                                               folder.geometry + " has " +
+                                               std::to_string(plan.header.sample_count) +
+                                               " spatial samples");
+      copt = plan.options;
+      header = std::move(plan.header);
       header_bytes = EncodeHeader(header);
       pod = {static_cast<uint8_t>(copt.row_wavelet),
              static_cast<uint8_t>(copt.column_wavelet),
@@ -451,6 +449,46 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   fs::remove(path, ec);
   if (failed) throw FileIoError(path, std::strerror(err));
   return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
+}
+
+CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
+                                int cubemap_n, const FarmOptions& options) {
+  CompressionPlan plan;
+  plan.options = CompressionOptionsFrom(scene.compression, scene.file);
+  if (!options.compression_scheme.empty())
+    plan.options.scheme =
+        ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
+  const SpatialDomain domain = SpatialDomainOf(geometry, scene.compression.order_normal_weight);
+  plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain);
+  return plan;
+}
+
+std::string CompressedHeaderDifferences(const CompressedTransportHeader& was,
+                                        const CompressedTransportHeader& now) {
+  if (EncodeHeader(was) == EncodeHeader(now)) return "";
+  std::string d;
+  auto add = [&d](const std::string& what, const std::string& a, const std::string& b) {
+    if (a == b) return;
+    d += (d.empty() ? "" : ", ") + what + " " + a + " -> " + b;
+  };
+  auto num = [](double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.6g", v);
+    return std::string(buf);
+  };
+  add("scheme", ToString(was.scheme), ToString(now.scheme));
+  add("row_wavelet", ToString(was.row_wavelet), ToString(now.row_wavelet));
+  add("column_wavelet", ToString(was.column_wavelet), ToString(now.column_wavelet));
+  add("bits", std::to_string(was.bits), std::to_string(now.bits));
+  add("keep_fraction", num(was.keep_fraction), num(now.keep_fraction));
+  add("budget", ToString(was.budget), ToString(now.budget));
+  add("light_weight", std::to_string(was.light_weight), std::to_string(now.light_weight));
+  add("dither_seed", std::to_string(was.dither_seed), std::to_string(now.dither_seed));
+  add("terms_per_column", std::to_string(was.terms_per_column),
+      std::to_string(now.terms_per_column));
+  add("samples", std::to_string(was.sample_count), std::to_string(now.sample_count));
+  add("cubemap_n", std::to_string(was.cubemap_n), std::to_string(now.cubemap_n));
+  return d.empty() ? "the spatial order of the samples (order_normal_weight)" : d;
 }
 
 std::unique_ptr<FarmPhase> MakeCompressionPhase() {

@@ -8,9 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "farm/compression_phase.h"
 #include "farm/farm_context.h"
 #include "farm/mpi_support.h"
 #include "farm/run_manifest.h"
+#include "formats/compressed_transport.h"
 #include "formats/geometry_file.h"
 #include "formats/run_folder.h"
 #include "formats/transport_file.h"
@@ -202,11 +204,12 @@ class SetupPhase final : public FarmPhase {
     ctx.scene = std::move(scene);  // the compression phase reads its [compression] settings
 
     // 2. The run folder (I/O errors: exit code 3).
-    PrepareRunFolder(ctx, manifest, scene_text, geometry_bytes);
+    PrepareRunFolder(ctx, manifest, scene_text, geometry_bytes, geometry);
   }
 
   static void PrepareRunFolder(FarmContext& ctx, const RunManifest& manifest,
-                               const std::string& scene_text, const std::string& geometry_bytes) {
+                               const std::string& scene_text, const std::string& geometry_bytes,
+                               const SceneGeometry& geometry) {
     const FarmOptions& o = ctx.options;
     const RunFolder& f = ctx.folder;
     std::error_code ec;
@@ -235,6 +238,22 @@ class SetupPhase final : public FarmPhase {
       if (!ctx.params.visibility && !o.no_compress && !fs::exists(f.partial, ec) &&
           !fs::exists(f.transport, ec) && fs::exists(f.journal, ec) &&
           fs::exists(f.compressed, ec)) {
+        // No silent staleness: the finished asset must be what these settings would write now.
+        // The raw matrix is gone, so other compression settings cannot be applied without
+        // tracing again (docs/farm.md, "Checkpoints and resume").
+        const std::string bytes = ReadWholeFile(f.compressed);
+        const CompressedTransport finished = DecodeCompressedTransport(
+            std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
+            f.compressed);
+        const std::string changed = CompressedHeaderDifferences(
+            finished.header, PlanCompression(ctx.scene, geometry, manifest.cubemap_n, o).header);
+        if (!changed.empty()) {
+          throw InputError(f.compressed,
+                           "was compressed with other settings (" + changed +
+                               ") and the raw transport.prtt is gone (the run did not use "
+                               "--keep-raw), so it cannot be compressed again without tracing: "
+                               "use --force to run it again, or the settings it was made with");
+        }
         ctx.params.complete = 1;
         if (!o.quiet) {
           std::fprintf(stderr,

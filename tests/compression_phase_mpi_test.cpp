@@ -240,5 +240,35 @@ TEST(CompressionPhase, ResumeRedoesOnlyTheCompression) {
   EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
 }
 
+// The stale-asset trap (issue 27): --resume of a finished run (transport.prtc written, the raw
+// matrix removed) with other compression settings used to print "nothing to do" and keep the old
+// asset. Now it is refused, naming the asset and what changed, and nothing is touched; the same
+// settings still have nothing to do; with the raw matrix kept, the new settings are applied.
+TEST(CompressionPhase, ResumeWithOtherCompressionSettingsIsNeverReportedDone) {
+  const std::string run = WorkDir("stale");
+  ASSERT_EQ(Farm(2, kScene + " --out " + run + kArgs).exit_code, 0);
+  const std::string asset = ReadWholeFile(run + "/transport.prtc");
+  const std::string report = ReadWholeFile(run + "/report.json");
+  const std::string resume = " --rows-per-block 16 --max-job-rows 9 --resume";
+  const RunResult other = Farm(1, kScene + " --out " + run + resume + " --compression-scheme 2d");
+  EXPECT_EQ(other.exit_code, 2) << other.output;
+  EXPECT_EQ(other.output.find("nothing to do"), std::string::npos) << other.output;
+  EXPECT_NE(other.output.find("transport.prtc"), std::string::npos) << other.output;
+  EXPECT_NE(other.output.find("scheme adaptive4d -> 2d"), std::string::npos) << other.output;
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == asset);
+  EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
+  const RunResult same = Farm(1, kScene + " --out " + run + resume);
+  EXPECT_EQ(same.exit_code, 0) << same.output;
+  EXPECT_NE(same.output.find("nothing to do"), std::string::npos) << same.output;
+
+  const std::string kept = WorkDir("stale-kept");
+  ASSERT_EQ(Farm(2, kScene + " --out " + kept + kArgs + " --keep-raw").exit_code, 0);
+  const RunResult again =
+      Farm(2, kScene + " --out " + kept + resume + " --keep-raw --compression-scheme 2d --quiet");
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(Report(kept)["compression"]["scheme"], "2d");
+  EXPECT_EQ(Report(kept)["jobs"]["done"], 0);
+}
+
 }  // namespace
 }  // namespace prt
