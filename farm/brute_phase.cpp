@@ -15,8 +15,6 @@ namespace prt {
 
 namespace {
 
-constexpr uint64_t kMaxJobBytes = uint64_t{256} << 20;  // a job's rows fit in 256 MiB
-
 // What a worker returns before the rows (count × cols floats).
 struct BruteResultHeader {
   uint64_t rows_checksum = 0;

@@ -35,10 +35,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-double Now() {
-  return FarmNow();
-}
-
 // The compression options every rank needs besides the header (PrepareRows' per-row budget).
 struct OptionsPod {
   uint8_t row_wavelet, column_wavelet, scheme, bits;
@@ -125,7 +121,7 @@ void Compress(FarmContext& ctx) {
   MPI_Comm comm = ctx.comm;
   const int rank = ctx.rank;
   const int size = ctx.size;
-  const double start = Now();
+  const double start = FarmNow();
   const RunFolder& folder = ctx.folder;
 
   // Setup on rank 0: the rows' file, the scene's [compression] settings, the spatial domain.
@@ -274,7 +270,7 @@ void Compress(FarmContext& ctx) {
                              MPI_UINT64_T, MPI_SUM, comm),
                "MPI_Allreduce histogram");
       const float threshold = ThresholdFromHistogram(all.data(), GlobalTermBudget(header));
-      const double tq = Now();
+      const double tq = FarmNow();
       stash.Replay(
           [&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
             for (CompressedColumn& c :
@@ -283,13 +279,13 @@ void Compress(FarmContext& ctx) {
               mine.push_back(std::move(c));
             }
           });
-      st.sink_seconds += Now() - tq;
+      st.sink_seconds += FarmNow() - tq;
       st.bytes_spilled += stash.spilled_bytes();
     }
     fs::remove_all(spill_dir, ec);
 
     // Gather the compressed columns on rank 0 as one encoded column block per rank.
-    const double tw = Now();
+    const double tw = FarmNow();
     std::vector<uint8_t> bytes;
     if (owned.second > owned.first) {
       CompressedColumnBlock block;
@@ -351,7 +347,7 @@ void Compress(FarmContext& ctx) {
       }
       WriteFileDurably(prtc,
                        std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
-      rep.write_seconds = Now() - tw;
+      rep.write_seconds = FarmNow() - tw;
       rep.bytes_moved = total[0];
       rep.spill_bytes = total[1];
       rep.spill_runs = total[2];
@@ -370,7 +366,7 @@ void Compress(FarmContext& ctx) {
         rep.memory_bandwidth_mb_s = MeasureMemoryBandwidth(256u << 20);
         rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
       }
-      rep.wall_seconds = Now() - start;
+      rep.wall_seconds = FarmNow() - start;
       // RunFarm writes the report, then (the compressed file being durable) removes the raw
       // matrix unless --keep-raw.
       rep.enabled = true;
@@ -415,9 +411,9 @@ double MeasureMemoryBandwidth(std::size_t bytes) {
   std::vector<char> a(bytes, 1), b(bytes, 2);
   double best = 0;
   for (int pass = 0; pass < 4; ++pass) {
-    const double t = Now();
+    const double t = FarmNow();
     std::memcpy(b.data(), a.data(), bytes);
-    const double dt = Now() - t;
+    const double dt = FarmNow() - t;
     if (dt > 0) best = std::max(best, static_cast<double>(bytes) / dt / 1e6);
     a[static_cast<std::size_t>(pass) % bytes] = b[bytes / 2];  // keep the copies observable
   }
@@ -430,7 +426,7 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   if (fd < 0) throw FileIoError(path, std::strerror(errno));
   std::vector<char> buf(8u << 20);
   for (std::size_t i = 0; i < buf.size(); ++i) buf[i] = static_cast<char>(i * 2654435761u >> 24);
-  const double t = Now();
+  const double t = FarmNow();
   std::size_t done = 0;
   bool failed = false;
   while (done < bytes && !failed) {
@@ -442,7 +438,7 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
       done += static_cast<std::size_t>(w);
   }
   if (!failed && ::fsync(fd) != 0) failed = true;
-  const double dt = Now() - t;
+  const double dt = FarmNow() - t;
   const int err = errno;
   ::close(fd);
   std::error_code ec;

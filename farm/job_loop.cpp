@@ -48,9 +48,12 @@ struct JobEnvelope {
 };
 static_assert(sizeof(JobEnvelope) == 32, "JobEnvelope travels as bytes");
 
-JobEnvelope PeekEnvelope(const std::string& message, const std::string& what) {
+// `from`: the rank a result came from, or -1 for a job from rank 0; named only on failure.
+JobEnvelope PeekEnvelope(const std::string& message, int from) {
   if (message.size() < sizeof(JobEnvelope))
-    throw RankFailure(what + " is shorter than its envelope (" + std::to_string(message.size()) +
+    throw RankFailure((from < 0 ? std::string("a job from rank 0")
+                                : "a result from rank " + std::to_string(from)) +
+                      " is shorter than its envelope (" + std::to_string(message.size()) +
                       " bytes)");
   JobEnvelope e;
   std::memcpy(&e, message.data(), sizeof e);
@@ -241,7 +244,7 @@ void ServeJobs(FarmContext& ctx, const JobCompute& compute) {
     if (st.MPI_TAG != kTagJob)
       throw RankFailure("unexpected message tag " + std::to_string(st.MPI_TAG) + " from rank 0");
     ReceiveBytes(ctx.comm, st, message, "MPI_Recv job");
-    const JobEnvelope job = PeekEnvelope(message, "a job from rank 0");
+    const JobEnvelope job = PeekEnvelope(message, -1);
     if (FailureDue(ctx, jobs)) InjectFailure(ctx, jobs);
     ComputedJob result;
     try {
@@ -343,7 +346,7 @@ void JobLoop::Run(JobBatch& batch) {
   // A finished job: stored by the phase now, counted once the journal has it (commit).
   auto accept = [&](int rank, const std::string& message) {
     State::Slot& s = st.SlotOf(rank);
-    const JobEnvelope e = PeekEnvelope(message, "a result from rank " + std::to_string(rank));
+    const JobEnvelope e = PeekEnvelope(message, rank);
     if (s.jobs.empty() || e.batch != number || s.jobs.front().first != e.first ||
         s.jobs.front().count != e.count) {
       throw RankFailure("rank " + std::to_string(rank) + " returned " + batch.name + " items " +

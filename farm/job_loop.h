@@ -24,6 +24,10 @@
 
 namespace prt {
 
+// A job's result (brute rows, encoded visibility maps) fits in 256 MiB: one MPI message, far below
+// the 2 GiB an MPI count can address. Phases size their largest job from it.
+inline constexpr uint64_t kMaxJobBytes = uint64_t{256} << 20;
+
 // Computes one job on any computing rank (rank 0's worker thread included): the items `range`
 // of the current batch, with the payload rank 0's make_job encoded. Appends the result's payload
 // to `out` (which already holds the envelope's bytes). Throws on failure: the worker reports the

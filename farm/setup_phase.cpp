@@ -10,6 +10,7 @@
 
 #include "farm/compression_phase.h"
 #include "farm/farm_context.h"
+#include "farm/job_loop.h"
 #include "farm/mpi_support.h"
 #include "farm/run_manifest.h"
 #include "formats/compressed_transport.h"
@@ -31,7 +32,6 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kDefaultSceneName = "<default scene>";
-constexpr uint64_t kMaxJobBytes = uint64_t{256} << 20;  // a brute job's rows fit in 256 MiB
 constexpr uint64_t kMaxBroadcastBytes = uint64_t{1} << 30;
 
 void BroadcastBytes(FarmContext& ctx, std::string& bytes, uint64_t size) {
@@ -241,12 +241,9 @@ class SetupPhase final : public FarmPhase {
         // No silent staleness: the finished asset must be what these settings would write now.
         // The raw matrix is gone, so other compression settings cannot be applied without
         // tracing again (docs/farm.md, "Checkpoints and resume").
-        const std::string bytes = ReadWholeFile(f.compressed);
-        const CompressedTransport finished = DecodeCompressedTransport(
-            std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
-            f.compressed);
         const std::string changed = CompressedHeaderDifferences(
-            finished.header, PlanCompression(ctx.scene, geometry, manifest.cubemap_n, o).header);
+            ReadCompressedTransportHeader(f.compressed),
+            PlanCompression(ctx.scene, geometry, manifest.cubemap_n, o).header);
         if (!changed.empty()) {
           throw InputError(f.compressed,
                            "was compressed with other settings (" + changed +

@@ -25,8 +25,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr uint64_t kMaxJobBytes = uint64_t{256} << 20;  // a job's maps fit in 256 MiB
-
 class VisibilityPhase final : public FarmPhase {
  public:
   const char* name() const override { return kVisibilityPhaseName; }

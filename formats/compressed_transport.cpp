@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <string>
 
@@ -698,6 +699,29 @@ CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
   if (next_column != t.header.column_count()) r.Fail("column blocks do not cover every column");
   if (off != bytes.size()) r.Fail("trailing bytes after the last column block");
   return t;
+}
+
+CompressedTransportHeader ReadCompressedTransportHeader(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, "cannot open for reading");
+  std::vector<uint8_t> start(12);
+  in.read(reinterpret_cast<char*>(start.data()), static_cast<std::streamsize>(start.size()));
+  start.resize(static_cast<std::size_t>(std::max<std::streamsize>(0, in.gcount())));
+  Reader r(start, path);
+  r.Magic(kFileMagic, 8, "file magic");
+  const uint32_t hsize = r.U32("header size");
+  // The size is checked against the file before anything is allocated (safe on hostile input).
+  const std::streampos here = in.tellg();
+  in.seekg(0, std::ios::end);
+  const std::streamoff left = in.tellg() - here;
+  in.seekg(here);
+  if (!in || left < static_cast<std::streamoff>(hsize))
+    Reader(start, path).Fail("truncated: header");
+  std::vector<uint8_t> header(hsize);
+  in.read(reinterpret_cast<char*>(header.data()), static_cast<std::streamsize>(hsize));
+  if (in.gcount() != static_cast<std::streamsize>(hsize))
+    Reader(start, path).Fail("truncated: header");
+  return DecodeHeader(header, path);
 }
 
 void SegmentShape(const SpatialSegment& s, int& w, int& h) {

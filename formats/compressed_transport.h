@@ -134,6 +134,9 @@ std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
                                                uint32_t columns_per_block = 1024);
 CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
                                               const std::string& name);
+// The header of a whole-file encoding, read from the file's first bytes only (the columns are
+// neither read nor decoded). Throws InputError naming `path` when it cannot be read or decoded.
+CompressedTransportHeader ReadCompressedTransportHeader(const std::string& path);
 
 // The spatial domain's wavelet shape (what a column transform may do with it).
 // Segment as a w×h region of the wavelet transform (a mesh is count×1).

@@ -3,10 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstring>
 #include <numeric>
 #include <random>
 
 #include "formats/column_coding.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -156,6 +158,31 @@ TEST(CompressedTransportFormat, EveryTruncationIsRejectedWithInputError) {
   std::vector<uint8_t> longer = bytes;
   longer.push_back(0);
   EXPECT_THROW(DecodeCompressedTransport(longer, "long.prtc"), InputError);
+}
+
+// The header alone, from the file's first bytes: equal to the whole decode's header, and every cut
+// inside the magic, the size or the header (or a size larger than the file) is an InputError.
+TEST(CompressedTransportFormat, HeaderIsReadFromTheFileAloneAndTruncationsAreRejected) {
+  const CompressedTransport t = RandomTransport(TestHeader(), 7);
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, 8);
+  const std::string path = testing::TempDir() + "/header_only.prtc";
+  auto write = [&](std::size_t len) {
+    WriteFileDurably(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), len));
+  };
+  write(bytes.size());
+  EXPECT_EQ(EncodeHeader(ReadCompressedTransportHeader(path)), EncodeHeader(t.header));
+  uint32_t hsize = 0;
+  std::memcpy(&hsize, bytes.data() + 8, 4);
+  for (std::size_t len = 0; len < 12 + hsize; ++len) {
+    write(len);
+    EXPECT_THROW(ReadCompressedTransportHeader(path), InputError) << len;
+  }
+  std::vector<uint8_t> huge = bytes;
+  const uint32_t lie = 0xfffffff0u;
+  std::memcpy(huge.data() + 8, &lie, 4);
+  WriteFileDurably(path, std::string_view(reinterpret_cast<const char*>(huge.data()), huge.size()));
+  EXPECT_THROW(ReadCompressedTransportHeader(path), InputError);
+  EXPECT_THROW(ReadCompressedTransportHeader(path + ".missing"), InputError);
 }
 
 TEST(CompressedTransportFormat, CorruptedBytesAreRejectedOrDecodeToValidData) {
