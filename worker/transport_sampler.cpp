@@ -122,15 +122,50 @@ struct TransportSampler::Impl {
       double sum = 0, unocc = 0;
       float* value = nullptr;
       float* unoccluded = nullptr;
+      float* variance = nullptr;  // the collapsed-strata variance estimate (VarianceGroups)
+      // The stratum group being summed (Σx, Σx² of its strata) and the finished groups' total.
+      int group = -1;
+      double gx = 0, gxx = 0, var = 0;
       bool complete = false;
     };
     OcclusionRay rays[kRays];
     double weight[kRays];  // Ω_s·cos of each ray
     int slot[kRays];       // the open texel it belongs to
+    int group[kRays];      // its stratum's variance group (with variance only)
     int count = 0;
     Open open[kRays + 1];
     int opened = 0;
   };
+
+  // The Monte-Carlo variance of a texel's estimate, from its own rays (docs/transport-sampling.md,
+  // "Monte-Carlo error"). One ray per stratum gives no variance per stratum, so the strata are
+  // collapsed into groups of two neighbours along u (the last group takes a third when k is
+  // odd), the classic collapsed-strata estimator (Cochran, Sampling Techniques, §5A.12): for a
+  // group G of g strata with values x_s = Ω_s·V(ω_s)·cos(ω_s) (0 for a stratum below the
+  // horizon),  Var(Σ_{s∈G} x_s) ≈ g/(g−1) · Σ_{s∈G} (x_s − x̄_G)²,  unbiased when the strata of
+  // a group have equal means and conservative otherwise. The texel's variance is the sum over
+  // its groups, divided by π². k = 1 has no group of two: the variance is reported as 0
+  // (VarianceEstimable() is false).
+  int VarianceGroup(int stratum) const {
+    const int k = options.rays_per_texel;
+    return std::min(stratum / 2, std::max(0, k / 2 - 1));
+  }
+  int VarianceGroupSize(int group) const {
+    const int k = options.rays_per_texel;
+    if (k < 2) return 1;
+    return group == k / 2 - 1 ? 2 + k % 2 : 2;
+  }
+  void FoldVarianceGroup(Batch::Open& t) const {
+    if (t.group >= 0) {
+      const int g = VarianceGroupSize(t.group);
+      if (g >= 2) {
+        const double ss = std::max(0.0, t.gxx - t.gx * t.gx / g);
+        t.var += ss * g / (g - 1);
+      }
+    }
+    t.group = -1;
+    t.gx = t.gxx = 0;
+  }
 
   // Traces the batch's rays, adds each one's weight to its texel in order (the unoccluded sum
   // always, the sum when nothing blocks it), writes the texels whose rays are all in, and keeps
@@ -154,10 +189,19 @@ struct TransportSampler::Impl {
       Batch::Open& t = b.open[b.slot[i]];
       t.unocc += b.weight[i];
       if (!blocked[i]) t.sum += b.weight[i];
+      if (t.variance != nullptr) {
+        if (b.group[i] != t.group) {
+          FoldVarianceGroup(t);
+          t.group = b.group[i];
+        }
+        const double x = blocked[i] ? 0.0 : b.weight[i];
+        t.gx += x;
+        t.gxx += x * x;
+      }
     }
     int kept = 0;
     for (int o = 0; o < b.opened; ++o) {
-      const Batch::Open& t = b.open[o];
+      Batch::Open& t = b.open[o];
       if (!t.complete) {
         b.open[kept++] = t;
         continue;
@@ -165,6 +209,10 @@ struct TransportSampler::Impl {
       if (t.value != nullptr) *t.value = static_cast<float>(t.sum * std::numbers::inv_pi);
       if (t.unoccluded != nullptr) {
         *t.unoccluded = static_cast<float>(t.unocc * std::numbers::inv_pi);
+      }
+      if (t.variance != nullptr) {
+        FoldVarianceGroup(t);
+        *t.variance = static_cast<float>(t.var * (std::numbers::inv_pi * std::numbers::inv_pi));
       }
     }
     b.opened = kept;
@@ -179,7 +227,8 @@ struct TransportSampler::Impl {
   // directions' arithmetic serves every caller (see Tracer).
   [[gnu::noinline]] void EvaluateTexel(const SampleFrame& f, int face, int x, int y,
                                        std::size_t texel, SampleStats& stats, const Tracer& trace,
-                                       Batch& b, float* value, float* unoccluded) const {
+                                       Batch& b, float* value, float* unoccluded,
+                                       float* variance) const {
     const int n = layout.n();
     const int k = options.rays_per_texel;
     const double h = 2.0 / n;
@@ -189,7 +238,10 @@ struct TransportSampler::Impl {
     const uint64_t base = static_cast<uint64_t>(texel) * static_cast<uint64_t>(k);
     if (b.opened == Batch::kRays + 1) Flush(b, trace);
     int slot = b.opened++;
-    b.open[slot] = Batch::Open{0, 0, value, unoccluded, false};
+    b.open[slot] = Batch::Open{};
+    b.open[slot].value = value;
+    b.open[slot].unoccluded = unoccluded;
+    b.open[slot].variance = variance;
     // Directions are computed a chunk of strata at a time before any joins the batch: the
     // chunk's computations (a square root and a division each) are independent, so they overlap
     // instead of each waiting on the bookkeeping of the one before. Each ray's arithmetic and the
@@ -232,6 +284,7 @@ struct TransportSampler::Impl {
         ray.direction[2] = dir[i][2];
         b.weight[b.count] = omega[s0 + i] * c;
         b.slot[b.count] = slot;
+        b.group[b.count] = VarianceGroup(s0 + i);
         if (++b.count == Batch::kRays) {
           Flush(b, trace);
           slot = b.opened - 1;  // this texel, the one left open, moved to the front
@@ -260,7 +313,7 @@ struct TransportSampler::Impl {
   }
 
   SampleStats Row(const SpatialSample& sample, uint64_t sample_index, float* row,
-                  const Tracer& trace) const {
+                  const Tracer& trace, float* variance = nullptr) const {
     const ScopedFlushDenormals ftz;
     const SampleFrame f = Frame(sample, sample_index);
     SampleStats stats;
@@ -272,6 +325,9 @@ struct TransportSampler::Impl {
       if (side == FaceSide::kBelow) {
         stats.texels_below_horizon += layout.face_size();
         if (row != nullptr) std::fill(row + j, row + j + layout.face_size(), 0.0f);
+        if (variance != nullptr) {
+          std::fill(variance + j, variance + j + layout.face_size(), 0.0f);
+        }
         j += layout.face_size();
         continue;
       }
@@ -280,10 +336,11 @@ struct TransportSampler::Impl {
           if (side == FaceSide::kMixed && !layout.TexelAboveHorizon(j, f.normal)) {
             ++stats.texels_below_horizon;
             if (row != nullptr) row[j] = 0.0f;
+            if (variance != nullptr) variance[j] = 0.0f;
             continue;
           }
           EvaluateTexel(f, face, x, y, j, stats, trace, batch, row != nullptr ? row + j : nullptr,
-                        nullptr);
+                        nullptr, variance != nullptr ? variance + j : nullptr);
         }
       }
     }
@@ -293,7 +350,7 @@ struct TransportSampler::Impl {
 
   SampleStats Texels(const SpatialSample& sample, uint64_t sample_index,
                      std::span<const uint32_t> texels, float* values, const Tracer& trace,
-                     float* unoccluded = nullptr) const {
+                     float* unoccluded = nullptr, float* variance = nullptr) const {
     const std::size_t count = layout.texel_count();
     for (uint32_t j : texels) {
       if (j >= count) {
@@ -311,11 +368,13 @@ struct TransportSampler::Impl {
         ++stats.texels_below_horizon;
         values[i] = 0.0f;
         if (unoccluded != nullptr) unoccluded[i] = 0.0f;
+        if (variance != nullptr) variance[i] = 0.0f;
         continue;
       }
       const TexelCoord c = layout.Coord(j);
       EvaluateTexel(f, c.face, c.x, c.y, j, stats, trace, batch, values + i,
-                    unoccluded != nullptr ? unoccluded + i : nullptr);
+                    unoccluded != nullptr ? unoccluded + i : nullptr,
+                    variance != nullptr ? variance + i : nullptr);
     }
     Flush(batch, trace);
     return stats;
@@ -377,19 +436,24 @@ class ScopedThreadCpu {
 }  // namespace
 
 SampleStats TransportSampler::ComputeRow(const SpatialSample& sample, uint64_t sample_index,
-                                         float* row) const {
+                                         float* row, float* variance) const {
   const ScopedThreadCpu cpu(impl_->measure_trace_cpu.load(std::memory_order_relaxed),
                             impl_->trace_cpu_ns);
-  return impl_->Row(sample, sample_index, row, Tracer{Tracer::kEmbree, &impl_->scene, nullptr});
+  return impl_->Row(sample, sample_index, row, Tracer{Tracer::kEmbree, &impl_->scene, nullptr},
+                    variance);
+}
+
+bool TransportSampler::VarianceEstimable() const {
+  return impl_->options.rays_per_texel >= 2;
 }
 
 SampleStats TransportSampler::ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
                                             std::span<const uint32_t> texels, float* values,
-                                            float* unoccluded) const {
+                                            float* unoccluded, float* variance) const {
   const ScopedThreadCpu cpu(impl_->measure_trace_cpu.load(std::memory_order_relaxed),
                             impl_->trace_cpu_ns);
   return impl_->Texels(sample, sample_index, texels, values,
-                       Tracer{Tracer::kEmbree, &impl_->scene, nullptr}, unoccluded);
+                       Tracer{Tracer::kEmbree, &impl_->scene, nullptr}, unoccluded, variance);
 }
 
 void TransportSampler::MeasureTraceCpu(bool on) {
@@ -409,13 +473,14 @@ void TransportSampler::ComputeUnoccludedTexels(const SpatialSample& sample, uint
 }
 
 SampleStats TransportSampler::ComputeRows(std::span<const SpatialSample> samples,
-                                          uint64_t first_index, float* out) const {
+                                          uint64_t first_index, float* out, float* variance) const {
   const std::size_t row_size = impl_->layout.texel_count();
   return tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, samples.size()), SampleStats{},
       [&](const tbb::blocked_range<std::size_t>& r, SampleStats acc) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-          acc += ComputeRow(samples[i], first_index + i, out + i * row_size);
+          acc += ComputeRow(samples[i], first_index + i, out + i * row_size,
+                            variance != nullptr ? variance + i * row_size : nullptr);
         }
         return acc;
       },

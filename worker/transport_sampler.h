@@ -86,16 +86,24 @@ class TransportSampler {
   // Full row of T for one sample (layout().texel_count() floats). `sample_index` is the
   // sample's global index: it seeds the jitter, so a row is identical whichever rank, thread
   // or batch computes it. Thread-safe; no allocation inside.
-  SampleStats ComputeRow(const SpatialSample& sample, uint64_t sample_index, float* row) const;
+  // variance (optional, texel_count floats): each texel's Monte-Carlo variance Var(T_j),
+  // estimated from the same rays by collapsing neighbouring strata in pairs (docs/
+  // transport-sampling.md, "Monte-Carlo error"); 0 below the horizon, and 0 everywhere when
+  // !VarianceEstimable(). The row's bytes do not depend on whether it is asked for.
+  SampleStats ComputeRow(const SpatialSample& sample, uint64_t sample_index, float* row,
+                         float* variance = nullptr) const;
+  // Whether the variance outputs mean anything: at least two rays (strata) per texel.
+  bool VarianceEstimable() const;
 
   // Only the listed texels (for adaptive angular sampling and sparse vertices); values[i] is
   // T for texels[i], using the same jitter as ComputeRow (so values agree bit for bit). Throws
   // std::out_of_range on a texel index ≥ layout().texel_count().
   // unoccluded (optional): receives, for each texel, the same estimate with visibility ≡ 1
   // from the same rays (bit-identical to ComputeUnoccludedTexels), at no extra tracing cost.
+  // variance (optional): each listed texel's variance, as ComputeRow's.
   SampleStats ComputeTexels(const SpatialSample& sample, uint64_t sample_index,
                             std::span<const uint32_t> texels, float* values,
-                            float* unoccluded = nullptr) const;
+                            float* unoccluded = nullptr, float* variance = nullptr) const;
 
   // U_j for the listed texels: the estimator of ComputeTexels with visibility ≡ 1 (the same
   // jittered directions and weights, no rays traced), so T_j / U_j ∈ [0, 1] is the visible
@@ -107,8 +115,9 @@ class TransportSampler {
 
   // Rows for samples[0..count) with global indices first_index.., into out (count rows,
   // row-major), in parallel over samples with TBB.
-  SampleStats ComputeRows(std::span<const SpatialSample> samples, uint64_t first_index,
-                          float* out) const;
+  // variance (optional): count rows of per-texel variances, as ComputeRow's.
+  SampleStats ComputeRows(std::span<const SpatialSample> samples, uint64_t first_index, float* out,
+                          float* variance = nullptr) const;
 
   // The occlusion rays ComputeRow traces for this sample, in the order it traces them, appended
   // to `rays` (for the raw-Embree reference in bench/transport_bench.cpp and for tests).
