@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "farm/run_manifest.h"
+#include "formats/run_folder.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -94,23 +94,6 @@ TEST_F(CheckpointJournalTest, MissingJournalIsEmptyAndForeignFileIsRejected) {
   EXPECT_TRUE(c.entries.empty());
   std::ofstream(path_) << "something else\n";
   EXPECT_THROW(ReadJournal(path_), InputError);
-}
-
-TEST(RunManifestTest, KeyChangesWithEveryOutputDeterminingSetting) {
-  RunManifest a;
-  a.rows = 72;
-  a.scene_checksum = 1;
-  a.geometry_checksum = 2;
-  const RunManifest back = RunManifest::FromJsonText(a.ToJsonText(), "m.json");
-  EXPECT_EQ(back.Key(), a.Key());
-  EXPECT_EQ(a.DifferencesFrom(back), "");
-  RunManifest b = a;
-  b.rays_per_texel = 9;
-  b.rows_per_block = 16;
-  EXPECT_NE(b.Key(), a.Key());
-  EXPECT_EQ(b.DifferencesFrom(a), "rays_per_texel 4 -> 9, rows_per_block 256 -> 16");
-  EXPECT_THROW(RunManifest::FromJsonText("{}", "m.json"), InputError);
-  EXPECT_THROW(RunManifest::FromJsonText("not json", "m.json"), InputError);
 }
 
 TEST(RunFolderTest, LayoutNames) {

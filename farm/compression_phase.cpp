@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -28,6 +29,7 @@
 #include "vocabulary/scene.h"
 #include "worker/column_order.h"
 #include "worker/transport_compressor.h"
+#include "worker/transport_error_estimate.h"
 
 namespace prt {
 
@@ -115,6 +117,12 @@ class TransformedBlockStash {
   std::string path_;
   std::FILE* file_ = nullptr;
 };
+
+double SquaredNorm(const float* v, std::size_t n) {
+  double s = 0;
+  for (std::size_t i = 0; i < n; ++i) s += double(v[i]) * v[i];
+  return s;
+}
 
 void Compress(FarmContext& ctx) {
   const FarmOptions& options = ctx.options;
@@ -223,6 +231,33 @@ void Compress(FarmContext& ctx) {
           "{} rows per chunk, memory budget {:.1f} MB per rank",
           rows, cols, static_cast<double>(rep.raw_bytes) / 1e6, rep.scheme, size, chunk,
           static_cast<double>(options.memory_budget_bytes) / 1e6);
+    // The estimate stage's Σ B² (farm/estimate_phase.cpp) from the rows as they pass: rank 0
+    // loads the lights and every rank accumulates over its share of the rows.
+    std::unique_ptr<RadianceNormAccumulator> norms;
+    if (ctx.params.run_estimate) {
+      if (rank == 0) LoadEstimateLights(ctx);
+      uint64_t count = ctx.estimate.lights.size();
+      CheckMpi(MPI_Bcast(&count, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast lights");
+      std::vector<CubemapRgb> lights(static_cast<std::size_t>(count));
+      for (std::size_t l = 0; l < lights.size(); ++l) {
+        CubemapRgb& light = lights[l];
+        light = rank == 0 ? ctx.estimate.lights[l] : CubemapRgb{};
+        light.n = static_cast<int>(header.cubemap_n);
+        for (int c = 0; c < 3; ++c) {
+          std::vector<float>& ch = light.Channel(c);
+          ch.resize(light.TexelCount());
+          CheckMpi(MPI_Bcast(ch.data(), static_cast<int>(ch.size()), MPI_FLOAT, 0, comm),
+                   "MPI_Bcast lights");
+        }
+      }
+      std::vector<uint64_t> mesh_rows;
+      for (const SceneMesh& m : ctx.geometry.meshes) mesh_rows.push_back(m.mesh.positions.size());
+      norms = std::make_unique<RadianceNormAccumulator>(std::move(lights), std::move(mesh_rows));
+    }
+    double row_energy = 0, row_dropped = 0;  // this rank's rows
+    SquaredError column_error;               // this rank's columns
+    const bool truncates_rows =
+        header.scheme == CompressionScheme::k2D && header.budget == CompressionBudget::kColumn;
     const auto owned = OwnedColumns(cols, rank, size);
     ProgressOptions pc = po;
     pc.unit = "columns of rank 0";
@@ -239,7 +274,15 @@ void Compress(FarmContext& ctx) {
         [&](uint64_t first, uint64_t count, float* r) {
           if (options.fail_in == "transpose" && rank == options.fail_rank && first > 0)
             ExitAbruptly(rank, "in the transpose's second chunk of rows");
+          if (norms) norms->AddRows(first, count, r);
+          // ‖T‖² (the orthonormal row transform keeps it) and, for the 2D scheme's per-row
+          // budget, what PrepareRows' truncation drops (its terms are disjoint from the kept ones,
+          // so its square adds to the column stage's).
+          const std::size_t floats = static_cast<std::size_t>(count) * cols;
+          const double before = SquaredNorm(r, floats);
+          row_energy += before;
           PrepareRows(header, copt, r, count);
+          if (truncates_rows) row_dropped += before - SquaredNorm(r, floats);
         },
         spill,
         [&](uint32_t first, uint32_t count, std::vector<float>& columns) {
@@ -253,7 +296,13 @@ void Compress(FarmContext& ctx) {
             AddColumnBlockHistogram(header, first, count, columns.data(), histogram.data());
             stash.Add(first, count, columns, depths);
           } else {
-            for (CompressedColumn& c : CompressColumnBlock(header, first, count, columns.data())) {
+            std::vector<CompressedColumn> block =
+                CompressColumnBlock(header, first, count, columns.data());
+            const SquaredError e =
+                ColumnBlockError(header, first, count, columns.data(), nullptr, block);
+            column_error.error += e.error;
+            column_error.total += e.total;
+            for (CompressedColumn& c : block) {
               terms += c.index.size();
               mine.push_back(std::move(c));
             }
@@ -273,8 +322,12 @@ void Compress(FarmContext& ctx) {
       const double tq = FarmNow();
       stash.Replay(
           [&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
-            for (CompressedColumn& c :
-                 QuantiseColumnBlock(header, first, count, columns, depths, threshold)) {
+            std::vector<CompressedColumn> block =
+                QuantiseColumnBlock(header, first, count, columns, depths, threshold);
+            const SquaredError e = ColumnBlockError(header, first, count, columns, depths, block);
+            column_error.error += e.error;
+            column_error.total += e.total;
+            for (CompressedColumn& c : block) {
               terms += c.index.size();
               mine.push_back(std::move(c));
             }
@@ -283,6 +336,17 @@ void Compress(FarmContext& ctx) {
       st.bytes_spilled += stash.spilled_bytes();
     }
     fs::remove_all(spill_dir, ec);
+    if (norms) {
+      const std::vector<double> mine_norms = norms->Flat();
+      std::vector<double> all_norms(mine_norms.size(), 0.0);
+      CheckMpi(MPI_Reduce(mine_norms.data(), all_norms.data(), static_cast<int>(mine_norms.size()),
+                          MPI_DOUBLE, MPI_SUM, 0, comm),
+               "MPI_Reduce radiance norms");
+      if (rank == 0) {
+        ctx.estimate.norms = std::move(all_norms);
+        ctx.estimate.have_norms = true;
+      }
+    }
 
     // Gather the compressed columns on rank 0 as one encoded column block per rank.
     const double tw = FarmNow();
@@ -310,6 +374,8 @@ void Compress(FarmContext& ctx) {
                       st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
     double maxs[7] = {};
     CheckMpi(MPI_Reduce(secs, maxs, 7, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+    double energy[3] = {row_energy, row_dropped, column_error.error}, energy_all[3] = {};
+    CheckMpi(MPI_Reduce(energy, energy_all, 3, MPI_DOUBLE, MPI_SUM, 0, comm), "MPI_Reduce");
     constexpr uint64_t kPiece = 1ull << 30;
     if (rank != 0) {
       for (uint64_t off = 0; off < my_size; off += kPiece)
@@ -361,7 +427,12 @@ void Compress(FarmContext& ctx) {
       rep.merge_seconds = maxs[4];
       rep.compress_seconds = maxs[5];
       rep.transpose_seconds = maxs[6];
-      rep.raw_kept = options.keep_raw;
+      rep.raw_kept = !options.discard_raw;
+      // ‖T − T̃‖_F / ‖T‖_F, T̃ what transport.prtc decodes to (exact, up to float rounding).
+      rep.relative_frobenius_error =
+          energy_all[0] > 0
+              ? std::sqrt(std::max(0.0, energy_all[1] + energy_all[2]) / energy_all[0])
+              : 0.0;
       if (options.measure_bandwidth) {
         rep.memory_bandwidth_mb_s = MeasureMemoryBandwidth(256u << 20);
         rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
@@ -372,16 +443,17 @@ void Compress(FarmContext& ctx) {
       rep.enabled = true;
       if (!options.quiet) {
         spdlog::info(
-            "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), {} terms in {} "
+            "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative "
+            "Frobenius error {:.3f}%, {} terms in {} "
             "columns; transpose {:.0f} MB/s ({:.1f} MB moved between ranks, {:.1f} MB spilled "
             "in {} runs){}",
             prtc, Progress::FormatDuration(rep.wall_seconds),
             static_cast<double>(rep.raw_bytes) / 1e6,
-            static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(), rep.terms,
-            rep.columns_stored, rep.TransposeMbPerSecond(),
-            static_cast<double>(rep.bytes_moved) / 1e6, static_cast<double>(rep.spill_bytes) / 1e6,
-            rep.spill_runs,
-            options.keep_raw ? "" : "; raw transport.prtt removed (--keep-raw keeps it)");
+            static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
+            100 * rep.relative_frobenius_error, rep.terms, rep.columns_stored,
+            rep.TransposeMbPerSecond(), static_cast<double>(rep.bytes_moved) / 1e6,
+            static_cast<double>(rep.spill_bytes) / 1e6, rep.spill_runs,
+            options.discard_raw ? "; transport.prtt removed (--discard-raw)" : "");
         if (options.measure_bandwidth)
           spdlog::info("compression: memcpy {:.0f} MB/s, disk write+fsync {:.0f} MB/s in {}",
                        rep.memory_bandwidth_mb_s, rep.disk_write_bandwidth_mb_s, folder.dir);

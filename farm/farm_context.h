@@ -20,9 +20,12 @@
 #include "farm/checkpoint_journal.h"
 #include "farm/farm_options.h"
 #include "farm/farm_report.h"
+#include "farm/stage_plan.h"
+#include "farm/variance_accumulator.h"
 #include "farm/visibility_jobs.h"
 #include "formats/run_folder.h"
 #include "formats/transport_file.h"
+#include "vocabulary/envmap.h"
 #include "vocabulary/scene.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
@@ -48,8 +51,13 @@ struct SetupParams {
   int32_t visibility = 0;  // 1: the visibility job (cubemap_n is then the maps' n)
   int32_t visibility_supersample = 1;
   int32_t visibility_bits = 1;
-  // 1: --resume of a transport run that already finished (transport.prtc written, the raw
-  // matrix removed) whose inputs still match its manifest: nothing is left to do.
+  // Which stages run (farm/stage_plan.h): 1 = the rows are sampled (fresh or resumed), the
+  // compression and the estimate run.
+  int32_t run_rows = 1;
+  int32_t run_compression = 1;
+  int32_t run_estimate = 1;
+  // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
+  // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
 };
 
@@ -57,6 +65,20 @@ struct SetupParams {
 struct CollectiveStop {
   int exit_code;
 };
+
+// The lights of the estimate stage (farm/estimate_phase.cpp): a uniform sky and the scene's
+// environments as lighting cubemaps, and Σ B² over each mesh's rows under each of them (no
+// albedo), which the compression phase accumulates while the rows pass through it.
+struct EstimateLights {
+  bool loaded = false;
+  std::vector<std::string> names;
+  std::vector<CubemapRgb> lights;
+  std::string left_out_json = "[]";  // environments that could not be read, and why
+  bool have_norms = false;
+  std::vector<double> norms;  // [light][mesh][channel], flattened
+};
+// Rank 0: loads the lights once (every environment that cannot be read is left out, with why).
+void LoadEstimateLights(struct FarmContext& ctx);
 
 struct FarmContext {
   // ---- every rank
@@ -78,10 +100,16 @@ struct FarmContext {
   SparsePlan plan;  // method sparse: every rank has rank 0's plan
 
   // ---- rank 0 only
-  bool folder_ready = false;  // the run folder is this run's (a report can be written)
-  SceneDescription scene;     // as parsed by setup (the compression phase reads its settings)
+  bool folder_ready = false;    // the run folder is this run's (a report can be written)
+  SceneDescription scene;       // as parsed by setup (the compression phase reads its settings)
+  StagePlan stage_plan;         // what setup decided for each stage (report.json "stages")
+  std::string previous_report;  // report.json of the run being continued ("" if none)
+  std::string estimate_key;     // the estimate stage's key (accuracy.json "key")
+  EstimateLights estimate;
   std::optional<TransportFileWriter> writer;  // transport.prtt.partial while sampling
   std::unique_ptr<CheckpointJournal> journal;
+  // The sampling jobs' Monte-Carlo variance sums (transport runs while the rows are sampled).
+  std::unique_ptr<VarianceAccumulator> variance;
   // The journal's lines of the method's phase, verified by that phase before it re-uses them
   // (brute force: already verified against the rows by setup).
   std::vector<JournalEntry> journal_entries;
@@ -119,6 +147,7 @@ std::unique_ptr<FarmPhase> MakeFinalizePhase();
 std::unique_ptr<FarmPhase> MakeVisibilityPhase();
 std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
 std::unique_ptr<FarmPhase> MakeCompressionPhase();
+std::unique_ptr<FarmPhase> MakeEstimatePhase();
 
 // Max-reduces every rank's status; if any is non-zero, every rank stops with it.
 void AgreeOrStop(FarmContext& ctx, int local_status);

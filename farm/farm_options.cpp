@@ -80,8 +80,13 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_option("--max-job-rows", o.max_job_rows)->group("");
   app.add_flag("--no-compress", o.no_compress,
                "Stop after transport.prtt (no compressed transport.prtc)");
-  app.add_flag("--keep-raw", o.keep_raw,
-               "Keep the raw transport.prtt after writing the compressed transport.prtc");
+  bool keep_raw = false;
+  app.add_flag("--keep-raw", keep_raw,
+               "Keep transport.prtt (packed, ~1/4 of its float32 size) next to transport.prtc: "
+               "the default; accepted for older scripts");
+  app.add_flag("--discard-raw", o.discard_raw,
+               "Remove transport.prtt once transport.prtc is written (a later change of the "
+               "compression settings then traces again)");
   app.add_option("--memory-budget", o.memory_budget_bytes,
                  "Row data each rank buffers in the blocked transpose before spilling to disk "
                  "(bytes; suffixes k, M, G = 2^10, 2^20, 2^30)")
@@ -105,6 +110,10 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
     return code == 0 ? kExitOk : kExitUsage;
   }
   o.coordinator_works = !coordinator_only;
+  if (keep_raw && o.discard_raw) {
+    err << "prt-farm: --keep-raw and --discard-raw contradict each other\n";
+    return kExitUsage;
+  }
   if (o.resume && o.force) {
     err << "prt-farm: --resume and --force contradict each other\n";
     return kExitUsage;

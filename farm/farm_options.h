@@ -62,8 +62,10 @@ struct FarmOptions {
   uint64_t max_job_rows = 0;      // 0: auto (a job's rows fit in 256 MiB)
 
   // Compression phase (farm/compression_phase.h, docs/farm-compression.md).
-  bool no_compress = false;                   // stop after transport.prtt
-  bool keep_raw = false;                      // keep transport.prtt after transport.prtc
+  bool no_compress = false;  // stop after transport.prtt
+  // Remove transport.prtt once transport.prtc is written (by default it stays, packed, so that
+  // other compression settings or environments need no tracing: docs/farm.md, "Disk").
+  bool discard_raw = false;
   uint64_t memory_budget_bytes = 1ull << 30;  // per rank, for the blocked transpose
   std::string compression_scheme;             // empty: the scene's [compression] scheme
   bool measure_bandwidth = false;             // hidden: memcpy and disk bandwidth in the report

@@ -45,6 +45,13 @@ std::string FarmReport::ToJsonText() const {
          {"rays_per_second",
           r.busy_seconds > 0 ? static_cast<double>(r.rays_traced) / r.busy_seconds : 0.0}});
   }
+  Json stages_json = Json::array();
+  for (const StageReport& st : stages) {
+    stages_json.push_back({{"name", st.name},
+                           {"status", st.status},
+                           {"reason", st.reason},
+                           {"wall_seconds", st.wall_seconds}});
+  }
   Json j = {
       {"tool", "prt-farm"},
       {"version", version},
@@ -61,7 +68,9 @@ std::string FarmReport::ToJsonText() const {
       {"rows", rows},
       {"cols", cols},
       {"rows_per_block", rows_per_block},
+      {"transport_bytes", transport_bytes},
       {"wall_seconds", wall_seconds},
+      {"stages", stages_json},
       {"phases", phases_json},
       {"rays_traced", rays_traced},
       {"rays_per_second",
@@ -157,10 +166,23 @@ std::string FarmReport::ToJsonText() const {
     c["columns_stored"] = r.columns_stored;
     c["ratio_to_raw"] = r.Ratio();
     c["raw_kept"] = r.raw_kept;
+    c["relative_frobenius_error"] = r.relative_frobenius_error;
     if (r.memory_bandwidth_mb_s > 0) c["memory_bandwidth_mb_per_second"] = r.memory_bandwidth_mb_s;
     if (r.disk_write_bandwidth_mb_s > 0)
       c["disk_write_bandwidth_mb_per_second"] = r.disk_write_bandwidth_mb_s;
     j["compression"] = c;
+  }
+  if (!carried_json.empty()) {
+    const Json carried = Json::parse(carried_json, nullptr, false);
+    if (carried.is_object()) {
+      for (auto it = carried.begin(); it != carried.end(); ++it) {
+        if (!j.contains(it.key())) j[it.key()] = it.value();
+      }
+    }
+  }
+  if (!accuracy_json.empty()) {
+    const Json accuracy = Json::parse(accuracy_json, nullptr, false);
+    if (!accuracy.is_discarded()) j["accuracy"] = accuracy;
   }
   return j.dump(2) + "\n";
 }

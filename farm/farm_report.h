@@ -25,6 +25,14 @@ struct PhaseReport {
   double wall_seconds = 0;
 };
 
+// One stage of the run (farm/run_manifest.h): what happened to it and why.
+struct StageReport {
+  std::string name;    // rows, compression, estimate, assets
+  std::string status;  // ran, resumed, reused, skipped
+  std::string reason;  // why it ran or was skipped ("" when re-used)
+  double wall_seconds = 0;
+};
+
 // The sparse method's figures (report.json "sparse"; docs/farm.md, "Sparse method").
 struct SparsePhaseReport {
   std::string name;  // dense-initial, rank-1, dense-rank-1, …, sparse-reconstruct, dense-fallback
@@ -79,6 +87,9 @@ struct CompressionFarmReport {
   uint64_t terms = 0;
   uint64_t columns_stored = 0;
   bool raw_kept = true;
+  // ‖T − T̃‖_F / ‖T‖_F with T̃ what transport.prtc decodes to: the exact error the compression
+  // dropped (in the T̂ basis, equal to the texel basis's by the orthonormal row transform).
+  double relative_frobenius_error = 0;
   // --measure-bandwidth (0 when not measured): memcpy and write+fsync in the run folder, MB/s.
   double memory_bandwidth_mb_s = 0;
   double disk_write_bandwidth_mb_s = 0;
@@ -103,7 +114,10 @@ struct FarmReport {
   uint64_t rows = 0;
   uint64_t cols = 0;
   uint32_t rows_per_block = 0;
+  uint64_t transport_bytes =
+      0;  // transport.prtt as kept (packed); 0 when this run did not write it
   std::vector<PhaseReport> phases;
+  std::vector<StageReport> stages;
   double wall_seconds = 0;
   double sampling_seconds = 0;  // wall time of the sampling phase (for rays/s)
 
@@ -128,6 +142,11 @@ struct FarmReport {
   SparseFarmReport sparse;
   VisibilityFarmReport visibility;
   CompressionFarmReport compression;  // last in report.json
+  // Sections of the report of the run this one continued, for the stages it re-used (a JSON
+  // object: "compression", "sparse", …): written where this run has no section of its own.
+  std::string carried_json;
+  // accuracy.json of the estimate stage, as report.json "accuracy" ("" when there is none).
+  std::string accuracy_json;
 
   // max / mean busy time over the computing ranks (1 = perfect balance; 0 when none computed).
   double LoadImbalance() const;

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
@@ -16,6 +17,7 @@
 #include "farm/farm_context.h"
 #include "farm/mpi_support.h"
 #include "farm/progress.h"
+#include "farm/run_manifest.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 
@@ -74,18 +76,74 @@ void ConfigureLogging(const FarmContext& ctx) {
   spdlog::set_level(chatty ? spdlog::level::info : spdlog::level::warn);
 }
 
-// The phases after setup, from what setup told every rank.
+// The phases after setup, from what setup told every rank (the stages that run).
 std::vector<std::unique_ptr<FarmPhase>> PhasesAfterSetup(const FarmContext& ctx) {
   std::vector<std::unique_ptr<FarmPhase>> phases;
   if (ctx.params.visibility) {
-    phases.push_back(MakeVisibilityPhase());
-    phases.push_back(MakeVisibilityFinalizePhase());
+    if (ctx.params.run_rows) {
+      phases.push_back(MakeVisibilityPhase());
+      phases.push_back(MakeVisibilityFinalizePhase());
+    }
     return phases;
   }
-  phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
-  phases.push_back(MakeFinalizePhase());
-  if (!ctx.options.no_compress) phases.push_back(MakeCompressionPhase());
+  if (ctx.params.run_rows) {
+    phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
+    phases.push_back(MakeFinalizePhase());
+  }
+  if (ctx.params.run_compression) phases.push_back(MakeCompressionPhase());
+  if (ctx.params.run_estimate) phases.push_back(MakeEstimatePhase());
   return phases;
+}
+
+// The stage a phase belongs to (report.json "stages" adds up their wall times).
+const char* StageOfPhase(const std::string& phase) {
+  if (phase == "compress") return kStageCompression;
+  if (phase == "estimate") return kStageEstimate;
+  if (phase == "setup") return kStageAssets;
+  return kStageRows;
+}
+
+// Rank 0: report.json's "stages", and the sections of the report of the run this one continued
+// for the stages it re-used (their figures describe the files this run keeps).
+void ReportStages(FarmContext& ctx) {
+  FarmReport& rep = ctx.report;
+  rep.stages.clear();
+  for (const StageDecision& d : ctx.stage_plan.stages) {
+    StageReport st{d.name, ToString(d.action), d.reason, 0};
+    if (d.name == kStageAssets) st.status = d.action == StageAction::kRun ? "updated" : "unchanged";
+    for (const PhaseReport& p : rep.phases)
+      if (d.name == StageOfPhase(p.name) && d.name != kStageAssets)
+        st.wall_seconds += p.wall_seconds;
+    rep.stages.push_back(st);
+  }
+  if (!ctx.previous_report.empty()) {
+    const nlohmann::ordered_json old =
+        nlohmann::ordered_json::parse(ctx.previous_report, nullptr, false);
+    nlohmann::ordered_json carried = nlohmann::ordered_json::object();
+    auto carry = [&](const char* key) {
+      if (old.is_object() && old.contains(key)) carried[key] = old[key];
+    };
+    if (ctx.stage_plan.Has(kStageRows) &&
+        ctx.stage_plan.Get(kStageRows).action == StageAction::kReuse) {
+      for (const char* key : {"sparse", "visibility", "monte_carlo"}) carry(key);
+      if (old.is_object()) {
+        rep.rays_traced_all = old.value("rays_traced_including_reused", uint64_t{0});
+        rep.texels_below_horizon_all =
+            old.value("texels_skipped_below_horizon_including_reused", uint64_t{0});
+      }
+    }
+    if (ctx.stage_plan.Has(kStageCompression) &&
+        ctx.stage_plan.Get(kStageCompression).action == StageAction::kReuse)
+      carry("compression");
+    rep.carried_json = carried.dump();
+  }
+  std::error_code ec;
+  if (std::filesystem::exists(ctx.folder.accuracy, ec)) {
+    try {
+      rep.accuracy_json = ReadWholeFile(ctx.folder.accuracy);
+    } catch (const std::exception&) {
+    }
+  }
 }
 
 }  // namespace
@@ -160,8 +218,10 @@ int RunFarm(const FarmOptions& options) {
     if (std::string(phase->name()) == ctx.method) rep.sampling_seconds = FarmNow() - t0;
     if (exit_code != kExitOk) break;
     if (i == 0) {
-      // Nothing to do: the finished run's report and files stay as they are.
-      if (ctx.params.complete) return kExitOk;
+      // Nothing to do: the finished run's files stay as they are (complete == 2: its report
+      // too; 1: only scene.toml/geometry.prtg changed, the report says so).
+      if (ctx.params.complete == 2) return kExitOk;
+      if (ctx.params.complete) break;
       for (auto& p : PhasesAfterSetup(ctx)) phases.push_back(std::move(p));
     }
   }
@@ -169,10 +229,11 @@ int RunFarm(const FarmOptions& options) {
   rep.status = exit_code == kExitOk ? "ok" : "failed";
   rep.exit_code = exit_code;
   rep.cols = 6ull * rep.cubemap_n * rep.cubemap_n;
+  if (ctx.rank == 0) ReportStages(ctx);
   const bool reported = WriteReport(ctx);
-  // The compressed file and the report being durable, the raw matrix goes (--keep-raw keeps it).
-  if (ctx.rank == 0 && exit_code == kExitOk && reported && rep.compression.enabled &&
-      !options.keep_raw) {
+  // The compressed file and the report being durable, the raw matrix goes if asked to.
+  if (ctx.rank == 0 && exit_code == kExitOk && reported && options.discard_raw &&
+      std::filesystem::exists(ctx.folder.compressed)) {
     std::filesystem::remove(ctx.folder.transport);
     SyncDirectory(ctx.folder.dir);
   }

@@ -1,8 +1,7 @@
-// The checkpoint manifest (see run_manifest.h).
+// The run folder's manifest of stage inputs (see run_manifest.h).
 #include "farm/run_manifest.h"
 
-#include <filesystem>
-#include <nlohmann/json.hpp>
+#include <cstdio>
 
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -11,62 +10,109 @@ namespace prt {
 
 namespace {
 
-nlohmann::json ToJson(const RunManifest& m) {
-  nlohmann::json j{{"format_version", m.format_version},
-                   {"method", m.method},
-                   {"cubemap_n", m.cubemap_n},
-                   {"rays_per_texel", m.rays_per_texel},
-                   {"seed", m.seed},
-                   {"rows", m.rows},
-                   {"rows_per_block", m.rows_per_block},
-                   {"scene_xxh64", m.scene_checksum},
-                   {"geometry_xxh64", m.geometry_checksum}};
-  if (m.method == "visibility") j["visibility_bits"] = m.visibility_bits;
-  return j;
+using Json = nlohmann::ordered_json;
+
+// Every leaf of `now` and `before` whose value differs, as "path a -> b" (objects recursed,
+// arrays and numbers compared whole).
+void Differences(const Json& now, const Json& before, const std::string& prefix, std::string& out) {
+  auto add = [&out](const std::string& what, const Json& a, const Json& b) {
+    if (!out.empty()) out += ", ";
+    out += what + " " + (a.is_null() ? std::string("(none)") : a.dump()) + " -> " +
+           (b.is_null() ? std::string("(none)") : b.dump());
+  };
+  if (now.is_object() && before.is_object()) {
+    for (auto it = now.begin(); it != now.end(); ++it) {
+      const Json b = before.contains(it.key()) ? before.at(it.key()) : Json();
+      Differences(it.value(), b, prefix + it.key() + ".", out);
+    }
+    for (auto it = before.begin(); it != before.end(); ++it) {
+      if (!now.contains(it.key())) add(prefix + it.key(), it.value(), Json());
+    }
+    return;
+  }
+  if (now != before) add(prefix.substr(0, prefix.size() - 1), before, now);
 }
 
 }  // namespace
 
+const Json* RunManifest::Stage(const std::string& name) const {
+  for (const auto& [stage, inputs] : stages)
+    if (stage == name) return &inputs;
+  return nullptr;
+}
+
+void RunManifest::SetStage(const std::string& name, Json inputs) {
+  for (auto& [stage, value] : stages) {
+    if (stage == name) {
+      value = std::move(inputs);
+      return;
+    }
+  }
+  stages.emplace_back(name, std::move(inputs));
+}
+
+uint64_t RunManifest::StageKey(const std::string& name) const {
+  const Json* inputs = Stage(name);
+  if (inputs == nullptr) return 0;
+  // The compression and the estimate are computed from the rows; the rows and the assets
+  // depend on nothing before them.
+  const bool reads_rows = name == kStageCompression || name == kStageEstimate;
+  const std::string text =
+      std::to_string(reads_rows ? StageKey(kStageRows) : 0) + name + inputs->dump();
+  return Checksum64(text.data(), text.size());
+}
+
+std::string RunManifest::StageKeyHex(const std::string& name) const {
+  char key[17];
+  std::snprintf(key, sizeof key, "%016llx", static_cast<unsigned long long>(StageKey(name)));
+  return key;
+}
+
 std::string RunManifest::ToJsonText() const {
-  return ToJson(*this).dump(2) + "\n";
+  Json j;
+  j["format_version"] = format_version;
+  Json s = Json::object();
+  for (const auto& [stage, inputs] : stages)
+    s[stage] = {{"key", StageKeyHex(stage)}, {"inputs", inputs}};
+  j["stages"] = std::move(s);
+  return j.dump(2) + "\n";
 }
 
 RunManifest RunManifest::FromJsonText(const std::string& text, const std::string& file) {
   RunManifest m;
   try {
-    const nlohmann::json j = nlohmann::json::parse(text);
+    const Json j = Json::parse(text);
     m.format_version = j.at("format_version").get<int>();
-    m.method = j.at("method").get<std::string>();
-    m.cubemap_n = j.at("cubemap_n").get<int>();
-    m.rays_per_texel = j.at("rays_per_texel").get<int>();
-    m.seed = j.at("seed").get<uint64_t>();
-    m.rows = j.at("rows").get<uint64_t>();
-    m.rows_per_block = j.at("rows_per_block").get<uint32_t>();
-    m.scene_checksum = j.at("scene_xxh64").get<uint64_t>();
-    m.geometry_checksum = j.at("geometry_xxh64").get<uint64_t>();
-    m.visibility_bits = j.value("visibility_bits", 0);
-  } catch (const nlohmann::json::exception& e) {
+    if (m.format_version == 1) {
+      // prt-farm before stages: one key over the whole scene text. Nothing can be re-used
+      // stage by stage (the caller says so and runs every stage).
+      (void)j.at("scene_xxh64").get<uint64_t>();
+      return m;
+    }
+    if (m.format_version != kManifestFormatVersion) {
+      throw InputError(file, "manifest format " + std::to_string(m.format_version) +
+                                 " is newer than this prt-farm (" +
+                                 std::to_string(kManifestFormatVersion) + ")");
+    }
+    for (auto it = j.at("stages").begin(); it != j.at("stages").end(); ++it) {
+      if (!it.value().at("inputs").is_object())
+        throw InputError(file, "stage inputs not an object");
+      m.stages.emplace_back(it.key(), it.value().at("inputs"));
+    }
+  } catch (const Json::exception& e) {
     throw InputError(file, std::string("not a prt-farm checkpoint manifest: ") + e.what());
   }
   return m;
 }
 
-uint64_t RunManifest::Key() const {
-  const std::string text = ToJsonText();
-  return Checksum64(text.data(), text.size());
-}
-
-std::string RunManifest::DifferencesFrom(const RunManifest& older) const {
-  const nlohmann::json now = ToJson(*this);
-  const nlohmann::json before = ToJson(older);
+std::string RunManifest::StageDifferences(const std::string& stage,
+                                          const RunManifest& older) const {
+  const Json* now = Stage(stage);
+  const Json* before = older.Stage(stage);
+  if (now == nullptr) return "";
+  if (before == nullptr) return "not recorded";
   std::string out;
-  for (auto it = now.begin(); it != now.end(); ++it) {
-    const nlohmann::json b = before.contains(it.key()) ? before.at(it.key()) : nlohmann::json();
-    if (b != it.value()) {
-      if (!out.empty()) out += ", ";
-      out += it.key() + " " + b.dump() + " -> " + it.value().dump();
-    }
-  }
+  Differences(*now, *before, "", out);
   return out;
 }
 

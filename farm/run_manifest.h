@@ -1,38 +1,61 @@
-// The manifest that ties a run folder's checkpoints (docs/farm.md, "Run folder") to one set of
-// inputs, so that --resume never mixes rows of two different runs. The folder's file names are
-// formats/run_folder.h.
+// The manifest of a run folder (docs/farm.md, "Stages and re-runs"): for each stage of the run,
+// exactly the inputs that determine its output. A re-run (--resume) compares them with the
+// inputs given now and recomputes the first stage whose inputs changed and every stage after it;
+// the others are re-used. The folder's file names are formats/run_folder.h.
+//
+// Stages, in pipeline order (each depends on those before it):
+//   rows         transport.prtt (or the visibility job's visibility.prtv) and the per-texel
+//                variance sums: geometry as traced (positions, normals, triangles, ground; not
+//                names or albedos), samples, n, rays per texel, seed, method and its settings,
+//                rows per block
+//   compression  transport.prtc: the compressed-transport header it is written with (scheme,
+//                wavelets, bits, keep fraction, budget, dither seed, the samples' spatial order)
+//   estimate     accuracy.json (the Monte-Carlo error of T and of B under the scene's
+//                environments): the environments (paths and bytes) and the albedos
+//   assets       scene.toml and geometry.prtg as prt-pack reads them (names, albedos,
+//                materials, camera, comments): always rewritten, no computation
 #pragma once
 
 #include <cstdint>
+#include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "formats/run_folder.h"
 
 namespace prt {
 
-// Everything that determines the bytes of transport.prtt. Two runs with equal manifests produce
-// bit-identical files, whatever the number of ranks, threads or job sizes.
+inline constexpr const char* kStageRows = "rows";
+inline constexpr const char* kStageCompression = "compression";
+inline constexpr const char* kStageEstimate = "estimate";
+inline constexpr const char* kStageAssets = "assets";
+
+inline constexpr int kManifestFormatVersion = 2;
+
 struct RunManifest {
-  int format_version = 1;
-  std::string method = "brute";
-  int cubemap_n = 32;
-  int rays_per_texel = 4;
-  uint64_t seed = 1;
-  uint64_t rows = 0;
-  uint32_t rows_per_block = 256;
-  uint64_t scene_checksum = 0;     // XXH64 of the scene text
-  uint64_t geometry_checksum = 0;  // XXH64 of geometry.prtg
-  // method "visibility" only (written only then): levels of the visibility maps. cubemap_n is
-  // then the maps' n and rays_per_texel supersample².
-  int visibility_bits = 0;
+  int format_version = kManifestFormatVersion;
+  // Stage name → its inputs (a JSON object), in pipeline order.
+  std::vector<std::pair<std::string, nlohmann::ordered_json>> stages;
+
+  // The stage's inputs (nullptr when the manifest has no such stage).
+  const nlohmann::ordered_json* Stage(const std::string& name) const;
+  void SetStage(const std::string& name, nlohmann::ordered_json inputs);
+  // XXH64 of the stage's inputs and, for the stages computed from the rows (compression,
+  // estimate), of the rows stage's key: equal keys, equal outputs.
+  uint64_t StageKey(const std::string& name) const;
+  std::string StageKeyHex(const std::string& name) const;  // 16 hex digits
+  // The rows stage's key: the key of the checkpoint journal (its lines stay valid whatever
+  // changes after the rows).
+  uint64_t Key() const { return StageKey(kStageRows); }
 
   std::string ToJsonText() const;
-  // Throws InputError naming `file` when the text is not a manifest.
+  // Throws InputError naming `file` when the text is not a manifest. A manifest of an older
+  // prt-farm (format 1, one key for the whole scene text) is read with no stages.
   static RunManifest FromJsonText(const std::string& text, const std::string& file);
-  // XXH64 of ToJsonText(): the run key stored in the journal.
-  uint64_t Key() const;
-  // "rays_per_texel 4 → 16, ..." for the fields that differ ("" when equal).
-  std::string DifferencesFrom(const RunManifest& older) const;
+  // "rays_per_texel 4 -> 9, sparse.window 7 -> 9" for the inputs of `stage` that differ from
+  // `older`'s ("" when equal; "not recorded" when `older` lacks the stage).
+  std::string StageDifferences(const std::string& stage, const RunManifest& older) const;
 };
 
 }  // namespace prt

@@ -5,6 +5,8 @@
 
 #include <cstring>
 #include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -13,6 +15,8 @@
 #include "farm/job_loop.h"
 #include "farm/mpi_support.h"
 #include "farm/run_manifest.h"
+#include "farm/stage_inputs.h"
+#include "farm/stage_plan.h"
 #include "formats/compressed_transport.h"
 #include "formats/geometry_file.h"
 #include "formats/run_folder.h"
@@ -174,16 +178,15 @@ class SetupPhase final : public FarmPhase {
       ctx.plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
     }
 
-    RunManifest manifest;
-    manifest.method = ctx.method;
-    manifest.cubemap_n = n;
-    manifest.rays_per_texel = rays;
-    if (visibility) manifest.visibility_bits = vis.bits;
-    manifest.seed = seed;
-    manifest.rows = rows;
-    manifest.rows_per_block = o.rows_per_block;
-    manifest.scene_checksum = Checksum64(scene_text.data(), scene_text.size());
-    manifest.geometry_checksum = Checksum64(geometry_bytes.data(), geometry_bytes.size());
+    ResolvedSampling resolved;
+    resolved.job = job;
+    resolved.method = visibility ? std::string("brute") : ctx.method;
+    resolved.cubemap_n = n;
+    resolved.rays_per_texel = rays;
+    resolved.seed = seed;
+    resolved.rows = rows;
+    const RunManifest manifest =
+        MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, o);
 
     FarmReport& rep = ctx.report;
     rep.scene_name = scene.name;
@@ -207,6 +210,57 @@ class SetupPhase final : public FarmPhase {
     PrepareRunFolder(ctx, manifest, scene_text, geometry_bytes, geometry);
   }
 
+  // Whether `path` is a complete transport file (plain or packed): its header says so.
+  static bool TransportComplete(const std::string& path) {
+    std::error_code ec;
+    if (!fs::exists(path, ec)) return false;
+    try {
+      TransportFileReader r(path);
+      return true;
+    } catch (const std::exception&) {
+      return false;
+    }
+  }
+
+  // What the run folder holds for the inputs of `manifest` (RunFolderState).
+  static RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest,
+                                     const SceneGeometry& geometry) {
+    const RunFolder& f = ctx.folder;
+    std::error_code ec;
+    RunFolderState state;
+    state.manifest = fs::exists(f.manifest, ec);
+    if (ctx.params.visibility) {
+      state.rows_complete = fs::exists(f.visibility, ec);
+      state.rows_unfinished = fs::exists(f.journal, ec) || fs::exists(f.visibility_chunks, ec);
+      return state;
+    }
+    state.rows_complete = TransportComplete(f.transport);
+    state.rows_unfinished = !state.rows_complete && fs::exists(f.partial, ec);
+    if (!ctx.options.no_compress && fs::exists(f.compressed, ec)) {
+      try {
+        state.compressed_current =
+            CompressedHeaderDifferences(
+                ReadCompressedTransportHeader(f.compressed),
+                PlanCompression(ctx.scene, geometry,
+                                manifest.Stage(kStageRows)->at("cubemap_n").get<int>(), ctx.options)
+                    .header)
+                .empty();
+      } catch (const InputError&) {
+        state.compressed_current = false;  // damaged: written again
+      }
+    }
+    if (fs::exists(f.accuracy, ec)) {
+      try {
+        const nlohmann::json a = nlohmann::json::parse(ReadWholeFile(f.accuracy));
+        state.estimate_current =
+            a.value("key", std::string()) == manifest.StageKeyHex(kStageEstimate);
+      } catch (const std::exception&) {
+        state.estimate_current = false;
+      }
+    }
+    return state;
+  }
+
   static void PrepareRunFolder(FarmContext& ctx, const RunManifest& manifest,
                                const std::string& scene_text, const std::string& geometry_bytes,
                                const SceneGeometry& geometry) {
@@ -219,74 +273,87 @@ class SetupPhase final : public FarmPhase {
     fs::create_directories(f.checkpoints, ec);
     if (ec) throw FileIoError(f.checkpoints, "cannot create the run folder: " + ec.message());
 
-    const std::string vis_final = f.visibility;
-    const std::string vis_chunks = f.visibility_chunks;
     const bool has_run = fs::exists(f.journal) || fs::exists(f.partial) ||
-                         fs::exists(f.transport) || fs::exists(vis_final);
-    bool fresh = true;
+                         fs::exists(f.transport) || fs::exists(f.visibility) ||
+                         fs::exists(f.compressed);
+    std::optional<RunManifest> older;
     if (o.resume && fs::exists(f.manifest)) {
-      const RunManifest old = RunManifest::FromJsonText(ReadWholeFile(f.manifest), f.manifest);
-      if (old.Key() != manifest.Key()) {
-        throw InputError(f.manifest, "the checkpoints in " + f.dir +
-                                         " belong to a different run (" +
-                                         manifest.DifferencesFrom(old) +
-                                         "); use --force to start over, or another --out");
-      }
-      fresh = false;
-      // A finished transport run (the compression phase wrote transport.prtc and removed the raw
-      // matrix): its inputs were checked just above, so the finished asset stays untouched.
-      if (!ctx.params.visibility && !o.no_compress && !fs::exists(f.partial, ec) &&
-          !fs::exists(f.transport, ec) && fs::exists(f.journal, ec) &&
-          fs::exists(f.compressed, ec)) {
-        // No silent staleness: the finished asset must be what these settings would write now.
-        // The raw matrix is gone, so other compression settings cannot be applied without
-        // tracing again (docs/farm.md, "Checkpoints and resume").
-        const std::string changed = CompressedHeaderDifferences(
-            ReadCompressedTransportHeader(f.compressed),
-            PlanCompression(ctx.scene, geometry, manifest.cubemap_n, o).header);
-        if (!changed.empty()) {
-          throw InputError(f.compressed,
-                           "was compressed with other settings (" + changed +
-                               ") and the raw transport.prtt is gone (the run did not use "
-                               "--keep-raw), so it cannot be compressed again without tracing: "
-                               "use --force to run it again, or the settings it was made with");
-        }
-        ctx.params.complete = 1;
-        if (!o.quiet) {
-          std::fprintf(stderr,
-                       "prt-farm: --resume: %s is complete (%s written, raw matrix removed) and "
-                       "its inputs are unchanged; nothing to do (use --force to start over)\n",
-                       f.dir.c_str(), kCompressedTransportFileName);
-        }
-        return;
-      }
+      older = RunManifest::FromJsonText(ReadWholeFile(f.manifest), f.manifest);
     } else if (o.resume) {
       spdlog::info("--resume: {} holds no checkpoints yet; starting a fresh run", f.dir);
     } else if (has_run && !o.force) {
       throw UsageError(f.dir +
-                       " already holds a prt-farm run; pass --resume to continue it or "
-                       "--force to start over");
+                       " already holds a prt-farm run; pass --resume to continue it (or to "
+                       "re-run what a change to the scene touches) or --force to start over");
+    }
+    // The report of the run being continued: the figures of the stages it re-uses.
+    if (older && fs::exists(f.report)) {
+      try {
+        ctx.previous_report = ReadWholeFile(f.report);
+      } catch (const std::exception&) {
+      }
     }
 
-    const TransportFileInfo info{manifest.rows, static_cast<uint32_t>(manifest.cubemap_n),
-                                 manifest.rows_per_block,
-                                 static_cast<uint32_t>(manifest.rays_per_texel), manifest.seed};
+    StagePlanOptions po;
+    po.force = o.force;
+    po.compress = !o.no_compress && !ctx.params.visibility;
+    po.visibility = ctx.params.visibility != 0;
+    const RunFolderState state = LookAtFolder(ctx, manifest, geometry);
+    ctx.stage_plan = PlanStages(older ? &*older : nullptr, manifest, state, po);
+    const StagePlan& plan = ctx.stage_plan;
+    ctx.estimate_key = manifest.StageKeyHex(kStageEstimate);
+    for (const StageDecision& d : plan.stages) {
+      if (o.resume || d.action != StageAction::kRun || d.name == kStageAssets) {
+        spdlog::info("stage {}: {}{}{}", d.name, ToString(d.action), d.reason.empty() ? "" : " (",
+                     d.reason.empty() ? "" : d.reason + ")");
+      }
+    }
+    const StageAction rows_action = plan.Get(kStageRows).action;
+    ctx.params.run_rows = rows_action == StageAction::kReuse ? 0 : 1;
+    ctx.params.run_compression = plan.Runs(kStageCompression) ? 1 : 0;
+    ctx.params.run_estimate = plan.Runs(kStageEstimate) ? 1 : 0;
+    if (plan.NothingToDo()) {
+      ctx.params.complete = 1;
+      ctx.folder_ready = true;
+      if (plan.Get(kStageAssets).action == StageAction::kReuse) {
+        if (!o.quiet) {
+          std::fprintf(stderr,
+                       "prt-farm: --resume: %s is complete and its inputs are unchanged; "
+                       "nothing to do (use --force to start over)\n",
+                       f.dir.c_str());
+        }
+        ctx.params.complete = 2;  // not even the report changes
+        return;
+      }
+      // Only what prt-pack reads changed (names, albedos, materials, camera, comments).
+      WriteFileDurably(f.scene_copy, scene_text);
+      WriteFileDurably(f.geometry, geometry_bytes);
+      WriteFileDurably(f.manifest, manifest.ToJsonText());
+      return;
+    }
+
+    // Outputs that no longer match their inputs go before anything else is written: a run that
+    // fails from here on leaves no stale asset (the report says what is missing).
+    const bool fresh = rows_action == StageAction::kRun;
     if (fresh) {
-      for (const std::string& p :
-           {f.transport, f.partial, f.journal, f.manifest, f.report, vis_final, vis_chunks}) {
+      for (const std::string& p : {f.transport, f.partial, f.journal, f.manifest, f.report,
+                                   f.visibility, f.visibility_chunks, f.variance, f.variance_log}) {
         fs::remove(p, ec);
       }
       fs::remove_all(f.sparse, ec);
     }
-    // The compressed transport of an earlier run (compression_phase.h) goes only now, once the
-    // scene and settings are valid: a --force with a bad scene must not lose a finished run.
-    if (fresh) fs::remove(f.compressed, ec);
+    if (fresh || plan.Runs(kStageCompression) || o.no_compress) fs::remove(f.compressed, ec);
+    if (fresh || plan.Runs(kStageEstimate)) fs::remove(f.accuracy, ec);
     // From here on the folder is this run's: a failure report may replace an older report.
     ctx.folder_ready = true;
     WriteFileDurably(f.scene_copy, scene_text);
     WriteFileDurably(f.geometry, geometry_bytes);
     WriteFileDurably(f.manifest, manifest.ToJsonText());
+    if (rows_action == StageAction::kReuse) return;  // nothing to sample
 
+    const TransportFileInfo info{manifest.Stage(kStageRows)->at("samples").get<uint64_t>(),
+                                 static_cast<uint32_t>(ctx.params.cubemap_n), o.rows_per_block,
+                                 static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.params.seed};
     std::vector<JournalEntry> reused;
     if (!fresh && ctx.params.visibility) {
       // The chunks are verified against visibility.chunks by the visibility phase.
@@ -298,13 +365,8 @@ class SetupPhase final : public FarmPhase {
       for (const JournalEntry& e : journal.entries) {
         if (e.phase == kVisibilityPhaseName) ctx.journal_entries.push_back(e);
       }
-      fs::remove(vis_final, ec);  // written again by the finalize phase
+      fs::remove(f.visibility, ec);  // written again by the finalize phase
     } else if (!fresh) {
-      if (!fs::exists(f.partial) && fs::exists(f.transport)) {
-        // A finished run: its rows are re-verified and re-used, the file finalized again.
-        fs::rename(f.transport, f.partial);
-        SyncDirectory(f.dir);
-      }
       if (fs::exists(f.partial)) {
         ctx.writer.emplace(TransportFileWriter::Reopen(f.partial, info));
         const JournalContents journal = ReadJournal(f.journal);
@@ -346,6 +408,10 @@ class SetupPhase final : public FarmPhase {
     if (!ctx.writer && !ctx.params.visibility) {
       ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
     }
+    if (!ctx.params.visibility) {
+      ctx.variance = std::make_unique<VarianceAccumulator>(f, geometry, ctx.params.cubemap_n,
+                                                           ctx.params.rays_per_texel, fresh);
+    }
     ctx.journal = std::make_unique<CheckpointJournal>(
         f.journal, manifest.Key(),
         ctx.params.sparse || ctx.params.visibility ? ctx.journal_entries : reused);
@@ -353,7 +419,7 @@ class SetupPhase final : public FarmPhase {
     if (!ctx.params.sparse && !ctx.params.visibility) ctx.journal_entries = std::move(reused);
     if (!fresh && ctx.params.visibility) {
       spdlog::info("--resume: {} journaled visibility job(s) are verified against {}",
-                   ctx.journal_entries.size(), vis_chunks);
+                   ctx.journal_entries.size(), f.visibility_chunks);
     } else if (!fresh && ctx.params.sparse) {
       spdlog::info("--resume: {} journaled sparse job(s) are verified phase by phase",
                    ctx.journal_entries.size());
@@ -361,7 +427,7 @@ class SetupPhase final : public FarmPhase {
       uint64_t rows_reused = 0;
       for (const JournalEntry& e : ctx.journal_entries) rows_reused += e.rows.count;
       spdlog::info("--resume: {} finished job(s) ({} of {} samples) re-used from checkpoints",
-                   ctx.journal_entries.size(), rows_reused, manifest.rows);
+                   ctx.journal_entries.size(), rows_reused, info.rows);
     }
   }
 };

@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "formats/transport_variance.h"
 #include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -170,6 +171,7 @@ std::string EncodeSparseJobResult(const SparseJobResult& res, std::string prefix
   w.PutVector(res.feature);
   w.PutVector(res.weights);
   w.PutVector(res.outcomes);
+  w.PutVector(std::vector<char>(res.variance.begin(), res.variance.end()));
   std::string& b = w.bytes();
   const uint64_t sum = Checksum64(b.data() + start, b.size() - start);
   b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
@@ -194,13 +196,23 @@ SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
   res.feature = r.GetVector<uint8_t>("message");
   res.weights = r.GetVector<int32_t>("message");
   res.outcomes = r.GetVector<uint8_t>("message");
+  const std::vector<char> variance = r.GetVector<char>("message");
+  res.variance.assign(variance.begin(), variance.end());
   return res;
 }
 
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
-                             std::string_view job_bytes, std::string prefix) {
+                             std::string_view job_bytes, std::string prefix,
+                             const std::vector<uint64_t>* mesh_rows) {
   ByteReader r = MessageReader(job_bytes);
+  const bool with_variance = mesh_rows != nullptr;
+  TransportVariance sums;
+  if (with_variance) {
+    sums =
+        MakeTransportVariance(static_cast<uint32_t>(sampler.layout().n()),
+                              static_cast<uint32_t>(sampler.options().rays_per_texel), *mesh_rows);
+  }
   SparseJobResult res;
   res.header = GetHeader(r, kJobMagic);
   const double t0 = Now();
@@ -214,11 +226,14 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       res.transport.resize(ids.size() * T);
       res.visibility.resize(ids.size() * T);
       res.feature.resize(ids.size() * T);
+      std::vector<float> variance(with_variance ? ids.size() * T : 0);
       AngularStats total;
       tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
         DenseRow row;
         const AngularStats st =
             SampleDenseRowAdaptive(sampler, samples[ids[i]], ids[i], plan.angular, row);
+        if (with_variance)
+          std::copy(row.variance.begin(), row.variance.end(), variance.begin() + i * T);
         std::copy(row.transport.begin(), row.transport.end(), res.transport.begin() + i * T);
         std::copy(row.visibility.begin(), row.visibility.end(), res.visibility.begin() + i * T);
         std::copy(row.feature.begin(), row.feature.end(), res.feature.begin() + i * T);
@@ -228,6 +243,7 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       for (std::size_t i = 0; i < ids.size(); ++i) {
         CheckFinite(res.transport.data() + i * T, T, "transport", ids[i]);
         CheckFinite(res.visibility.data() + i * T, T, "visibility", ids[i]);
+        if (with_variance) sums.AddRow(ids[i], variance.data() + i * T);
       }
       SparseJobCounters& c = res.counters;
       c.rays_traced = total.trace.rays_traced;
@@ -279,6 +295,7 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       for (uint32_t s : vertices)
         if (s >= samples.size()) throw std::runtime_error("sparse job names a missing sample");
       std::vector<float> out(vertices.size() * T, 0.0f);
+      std::vector<float> variance(with_variance ? vertices.size() * T : 0);
       res.outcomes.assign(vertices.size(), 0);
       tbb::enumerable_thread_specific<L1Solver> solvers([&] {
         L1Options o;
@@ -294,9 +311,9 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
                          samples[union_ids[u]].normal});
         }
         SparseStats st;
-        const SparseOutcome o =
-            ReconstructSparseRow(sampler, samples[vertices[i]], vertices[i], nbs, plan.sparse,
-                                 solvers.local(), out.data() + i * T, st);
+        const SparseOutcome o = ReconstructSparseRow(
+            sampler, samples[vertices[i]], vertices[i], nbs, plan.sparse, solvers.local(),
+            out.data() + i * T, st, with_variance ? variance.data() + i * T : nullptr);
         res.outcomes[i] = static_cast<uint8_t>(o);
         std::lock_guard lock(mutex);
         total += st;
@@ -304,6 +321,7 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       for (std::size_t i = 0; i < vertices.size(); ++i) {
         if (res.outcomes[i] != static_cast<uint8_t>(SparseOutcome::kReconstructed)) continue;
         CheckFinite(out.data() + i * T, T, "transport", vertices[i]);
+        if (with_variance) sums.AddRow(vertices[i], variance.data() + i * T);
         res.transport.insert(res.transport.end(), out.begin() + static_cast<std::ptrdiff_t>(i * T),
                              out.begin() + static_cast<std::ptrdiff_t>((i + 1) * T));
       }
@@ -327,6 +345,8 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       throw std::runtime_error("unknown sparse job kind " + std::to_string(res.header.kind));
   }
   res.busy_seconds = Now() - t0;
+  if (with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank))
+    res.variance = EncodeTransportVariance(sums);
   return EncodeSparseJobResult(res, std::move(prefix));
 }
 

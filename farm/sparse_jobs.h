@@ -92,6 +92,9 @@ struct SparseJobResult {
   std::vector<int32_t> weights;
   // sparse: one SparseOutcome per vertex; `transport` holds the reconstructed rows in order
   std::vector<uint8_t> outcomes;
+  // dense and sparse: the traced texels' Monte-Carlo variance summed per mesh (an encoded
+  // TransportVariance, formats/transport_variance.h; empty when not asked for)
+  std::string variance;
 };
 
 // Each encoder appends its message to `prefix` (moved in: the job loop's envelope, so that a job
@@ -107,9 +110,12 @@ SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes);
 
 // Runs one encoded job on this rank (TBB threads) and returns the encoded result. Throws
 // NumericalError for a non-finite value, std::runtime_error for a malformed job.
+// `mesh_rows` (optional): the scene's vertex count per mesh; with it, dense and sparse results
+// carry their traced texels' variance sums (SparseJobResult::variance).
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
-                             std::string_view job_bytes, std::string prefix = {});
+                             std::string_view job_bytes, std::string prefix = {},
+                             const std::vector<uint64_t>* mesh_rows = nullptr);
 
 // XXH64 of what a dense job leaves on disk, per sample in order: T row, visibility row, feature
 // row. `rows` samples, `texels` each.

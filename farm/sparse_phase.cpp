@@ -29,6 +29,7 @@
 #include "farm/job_loop.h"
 #include "farm/side_file.h"
 #include "farm/sparse_jobs.h"
+#include "formats/transport_variance.h"
 #include "vocabulary/errors.h"
 #include "worker/local_rank.h"
 #include "worker/neighbor_index.h"
@@ -350,6 +351,9 @@ class FarmSparseSteps final : public SparseSteps {
         ++rep.checkpoints_rejected;
         continue;
       }
+      if (p.kind != SparseJobKind::kRank &&
+          !ctx_.variance->Reuse(p.name, e.rows.first, e.rows.count))
+        ++variance_uncovered_jobs_;
       batch.done.push_back(e.rows);
       ++reused_jobs;
       ++rep.jobs_reused;
@@ -395,13 +399,25 @@ class FarmSparseSteps final : public SparseSteps {
       e.phase = p.name;
       e.rows = range;
       e.rows_checksum = p.accept(r, rows_written);
+      if (p.kind != SparseJobKind::kRank) {
+        try {
+          ctx_.variance->Record(p.name, range.first, range.count,
+                                DecodeTransportVariance(
+                                    r.variance, "variance sums from rank " + std::to_string(rank)));
+        } catch (const InputError& err) {
+          throw RankFailure(err.what());
+        }
+      }
       e.counters = r.counters.ToVector();
       e.rays_traced = r.counters.rays_traced;
       e.texels_traced = r.counters.texels_traced;
       e.texels_below_horizon = rows_written;  // (rows written; not journaled for sjob lines)
       return e;
     };
-    batch.sync = p.sync;
+    batch.sync = [&] {
+      p.sync();
+      ctx_.variance->Sync();
+    };
     batch.committed = [&](const JournalEntry& e) {
       rep.rows_done += e.texels_below_horizon;
       Count(SparseJobCounters::FromVector(e.counters), true);
@@ -423,7 +439,16 @@ class FarmSparseSteps final : public SparseSteps {
   uint32_t step_number_ = 0;
   uint64_t rows_shipped_ = 0;
   double index_seconds_ = 0;
+
+ public:
+  uint64_t variance_uncovered_jobs_ = 0;  // re-used jobs without a logged variance record
 };
+
+std::vector<uint64_t> MeshRows(const FarmContext& ctx) {
+  std::vector<uint64_t> rows;
+  for (const SceneMesh& m : ctx.geometry.meshes) rows.push_back(m.mesh.positions.size());
+  return rows;
+}
 
 class SparsePhase final : public FarmPhase {
  public:
@@ -432,8 +457,10 @@ class SparsePhase final : public FarmPhase {
   void Run(FarmContext& ctx) override {
     RunJobPhase(
         ctx,
-        [&ctx](const RowRange&, std::string_view payload, std::string& out) {
-          out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out));
+        [&ctx, mesh_rows = MeshRows(ctx)](const RowRange&, std::string_view payload,
+                                          std::string& out) {
+          out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out),
+                                 &mesh_rows);
         },
         [&ctx](JobLoop& loop) {
           FarmReport& rep = ctx.report;
@@ -444,6 +471,11 @@ class SparsePhase final : public FarmPhase {
           rep.sparse.candidates_ranked += c.candidates_ranked;
           rep.sparse.dense_by_rank += c.dense_by_rank;
           rep.sparse.dense_fallback = c.dense_fallback;
+          if (steps.variance_uncovered_jobs_ > 0)
+            spdlog::warn(
+                "{} re-used job(s) have no logged variance: the Monte-Carlo estimate "
+                "leaves their rows out",
+                steps.variance_uncovered_jobs_);
           rep.jobs_total = rep.jobs_done + rep.jobs_reused;
         });
   }

@@ -20,6 +20,11 @@ inline constexpr const char* kCheckpointsDirName = "checkpoints";
 inline constexpr const char* kManifestFileName = "manifest.json";  // in checkpoints/
 inline constexpr const char* kJournalFileName = "journal.txt";     // in checkpoints/
 inline constexpr const char* kSparseDirName = "sparse";            // the sparse method's side files
+// The rows' per-texel Monte-Carlo variance summed per mesh (formats/transport_variance.h), and
+// the sampling jobs' pieces of it while they run (in checkpoints/).
+inline constexpr const char* kVarianceFileName = "transport.variance";
+inline constexpr const char* kVarianceLogFileName = "variance.log";  // in checkpoints/
+inline constexpr const char* kAccuracyFileName = "accuracy.json";    // the error estimates
 
 // The paths of a run folder's files.
 struct RunFolder {
@@ -37,6 +42,9 @@ struct RunFolder {
     sparse = (p / kSparseDirName).string();
     visibility = (p / kVisibilityFileName).string();
     visibility_chunks = (p / kVisibilityChunksFileName).string();
+    variance = (p / kVarianceFileName).string();
+    variance_log = (p / kCheckpointsDirName / kVarianceLogFileName).string();
+    accuracy = (p / kAccuracyFileName).string();
   }
   std::string dir;
   std::string transport;          // transport.prtt (final, complete)
@@ -51,6 +59,9 @@ struct RunFolder {
   std::string sparse;             // sparse/
   std::string visibility;         // visibility.prtv
   std::string visibility_chunks;  // visibility.chunks
+  std::string variance;           // transport.variance
+  std::string variance_log;       // checkpoints/variance.log
+  std::string accuracy;           // accuracy.json
 };
 
 }  // namespace prt

@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 #include <xxhash.h>
+#include <zstd.h>
 
 #include <algorithm>
 #include <bit>
@@ -28,7 +29,14 @@ namespace {
 
 constexpr char kTransportMagic[8] = {'P', 'R', 'T', 'T', 'R', 'A', 'N', 'S'};
 constexpr uint32_t kFlagComplete = 1;
+constexpr uint32_t kFlagPacked = 2;
+constexpr uint64_t kCodecZstd = 1;
 constexpr std::size_t kHeaderChecksumOffset = 88;
+
+// Packed (version 2): the tables after the header, then the frames (no alignment).
+uint64_t PackedDataOffset(const TransportFileInfo& info) {
+  return kTransportHeaderBytes + 8 * info.block_count() + 8 * (info.block_count() + 1);
+}
 
 template <typename T>
 void Put(std::string& out, T value) {
@@ -78,10 +86,46 @@ std::vector<unsigned char> EncodeHeader(const TransportFileInfo& info, bool comp
   return h;
 }
 
+// The packed header (version 2): the same fixed fields with the packed data offset and the
+// codec, then the checksum table and the B + 1 frame offsets, all covered by the header checksum.
+std::vector<unsigned char> EncodePackedHeader(const TransportFileInfo& info,
+                                              std::span<const uint64_t> checksums,
+                                              std::span<const uint64_t> offsets) {
+  const std::size_t blocks = checksums.size();
+  std::vector<unsigned char> h(kTransportHeaderBytes + 8 * blocks + 8 * offsets.size(), 0);
+  std::memcpy(h.data(), kTransportMagic, 8);
+  PutAt<uint32_t>(h.data(), 8, kPackedTransportFileVersion);
+  PutAt<uint32_t>(h.data(), 12, static_cast<uint32_t>(kTransportHeaderBytes));
+  PutAt<uint64_t>(h.data(), 16, info.rows);
+  PutAt<uint64_t>(h.data(), 24, info.cols());
+  PutAt<uint32_t>(h.data(), 32, info.cubemap_n);
+  PutAt<uint32_t>(h.data(), 36, info.rows_per_block);
+  PutAt<uint64_t>(h.data(), 40, info.block_count());
+  PutAt<uint32_t>(h.data(), 48, info.rays_per_texel);
+  PutAt<uint32_t>(h.data(), 52, kFlagComplete | kFlagPacked);
+  PutAt<uint64_t>(h.data(), 56, info.seed);
+  PutAt<uint64_t>(h.data(), 64, PackedDataOffset(info));
+  PutAt<uint64_t>(h.data(), 72, kCodecZstd);
+  for (std::size_t b = 0; b < blocks; ++b) {
+    PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * b, checksums[b]);
+  }
+  for (std::size_t b = 0; b < offsets.size(); ++b) {
+    PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * blocks + 8 * b, offsets[b]);
+  }
+  XXH64_state_t* state = XXH64_createState();
+  XXH64_reset(state, 0);
+  XXH64_update(state, h.data(), kHeaderChecksumOffset);
+  XXH64_update(state, h.data() + kTransportHeaderBytes, h.size() - kTransportHeaderBytes);
+  PutAt<uint64_t>(h.data(), kHeaderChecksumOffset, XXH64_digest(state));
+  XXH64_freeState(state);
+  return h;
+}
+
 struct DecodedHeader {
   TransportFileInfo info;
   bool complete = false;
   std::vector<uint64_t> checksums;
+  std::vector<uint64_t> offsets;  // packed only
 };
 
 DecodedHeader DecodeHeader(int fd, const std::string& path) {
@@ -94,11 +138,13 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
     throw InputError(path, "not a prtfarm transport file (bad magic)");
   }
   const auto version = GetAt<uint32_t>(h, 8);
-  if (version != kTransportFileVersion) {
+  if (version != kTransportFileVersion && version != kPackedTransportFileVersion) {
     throw InputError(path, "transport file version " + std::to_string(version) +
-                               " is not supported (this build reads version " +
-                               std::to_string(kTransportFileVersion) + ")");
+                               " is not supported (this build reads versions " +
+                               std::to_string(kTransportFileVersion) + " and " +
+                               std::to_string(kPackedTransportFileVersion) + ")");
   }
+  const bool packed = version == kPackedTransportFileVersion;
   DecodedHeader d;
   d.info.rows = GetAt<uint64_t>(h, 16);
   const auto cols = GetAt<uint64_t>(h, 24);
@@ -112,9 +158,44 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
   const auto stored_checksum = GetAt<uint64_t>(h, kHeaderChecksumOffset);
   if (GetAt<uint32_t>(h, 12) != kTransportHeaderBytes || d.info.cubemap_n == 0 ||
       d.info.cubemap_n > 4096 || cols != d.info.cols() || d.info.rows_per_block == 0 ||
-      blocks != d.info.block_count() || data_offset != d.info.data_offset() ||
-      d.info.rows > (std::numeric_limits<uint64_t>::max() / 2) / d.info.row_bytes()) {
+      blocks != d.info.block_count() ||
+      d.info.rows > (std::numeric_limits<uint64_t>::max() / 2) / d.info.row_bytes() ||
+      blocks > size / 16 ||
+      data_offset != (packed ? PackedDataOffset(d.info) : d.info.data_offset()) ||
+      (packed && (GetAt<uint32_t>(h, 52) != (kFlagComplete | kFlagPacked) ||
+                  GetAt<uint64_t>(h, 72) != kCodecZstd))) {
     throw InputError(path, "damaged transport header (inconsistent dimensions)");
+  }
+  if (packed) {
+    d.complete = true;
+    if (size < data_offset) throw InputError(path, "truncated packed transport file (tables)");
+    std::vector<unsigned char> tables(data_offset - kTransportHeaderBytes);
+    if (!PreadAll(fd, tables.data(), tables.size(), kTransportHeaderBytes, path)) {
+      throw InputError(path, "truncated packed transport file (tables)");
+    }
+    d.checksums.resize(blocks);
+    d.offsets.resize(blocks + 1);
+    for (uint64_t b = 0; b < blocks; ++b) d.checksums[b] = GetAt<uint64_t>(tables.data(), 8 * b);
+    for (uint64_t b = 0; b <= blocks; ++b) {
+      d.offsets[b] = GetAt<uint64_t>(tables.data(), 8 * blocks + 8 * b);
+    }
+    const auto expected = EncodePackedHeader(d.info, d.checksums, d.offsets);
+    if (GetAt<uint64_t>(expected.data(), kHeaderChecksumOffset) != stored_checksum) {
+      throw InputError(path, "damaged transport header (header checksum mismatch)");
+    }
+    if (d.offsets.front() != data_offset || d.offsets.back() != size) {
+      throw InputError(path, "packed transport file of " + std::to_string(size) +
+                                 " bytes, its frame table ends at " +
+                                 std::to_string(d.offsets.back()) + " (truncated or damaged)");
+    }
+    for (uint64_t b = 0; b < blocks; ++b) {
+      const uint64_t frame = d.offsets[b + 1] - d.offsets[b];
+      if (d.offsets[b + 1] < d.offsets[b] ||
+          frame > ZSTD_compressBound(d.info.RowsInBlock(b) * d.info.row_bytes())) {
+        throw InputError(path, "damaged frame table at block " + std::to_string(b));
+      }
+    }
+    return d;
   }
   if (size < d.info.file_bytes()) {
     throw InputError(path, "truncated transport file: " + std::to_string(size) + " bytes, " +
@@ -188,6 +269,7 @@ TransportFileWriter TransportFileWriter::Reopen(const std::string& path,
   if (fd < 0) throw FileIoError(path, SystemReason("cannot open"));
   TransportFileWriter writer(path, info, fd);
   const DecodedHeader d = DecodeHeader(fd, path);
+  if (!d.offsets.empty()) throw InputError(path, "a packed transport file cannot be written to");
   if (!(d.info == info)) {
     throw InputError(path, "transport file dimensions do not match this run");
   }
@@ -250,6 +332,7 @@ TransportFileReader::TransportFileReader(const std::string& path) : path_(path) 
     }
     info_ = d.info;
     checksums_ = std::move(d.checksums);
+    offsets_ = std::move(d.offsets);
   } catch (...) {
     ::close(fd_);
     fd_ = -1;
@@ -261,6 +344,7 @@ TransportFileReader::TransportFileReader(TransportFileReader&& other) noexcept
     : path_(std::move(other.path_)),
       info_(other.info_),
       checksums_(std::move(other.checksums_)),
+      offsets_(std::move(other.offsets_)),
       fd_(std::exchange(other.fd_, -1)) {}
 
 TransportFileReader& TransportFileReader::operator=(TransportFileReader&& other) noexcept {
@@ -269,6 +353,7 @@ TransportFileReader& TransportFileReader::operator=(TransportFileReader&& other)
     path_ = std::move(other.path_);
     info_ = other.info_;
     checksums_ = std::move(other.checksums_);
+    offsets_ = std::move(other.offsets_);
     fd_ = std::exchange(other.fd_, -1);
   }
   return *this;
@@ -285,8 +370,26 @@ void TransportFileReader::ReadBlock(uint64_t block, std::span<float> out) const 
   if (out.size() * sizeof(float) < bytes) {
     throw std::invalid_argument("TransportFileReader::ReadBlock: output too small");
   }
-  if (!PreadAll(fd_, out.data(), bytes,
-                info_.data_offset() + info_.FirstRowOfBlock(block) * info_.row_bytes(), path_)) {
+  if (packed()) {
+    thread_local std::string frame;
+    frame.resize(static_cast<std::size_t>(offsets_[block + 1] - offsets_[block]));
+    if (!PreadAll(fd_, frame.data(), frame.size(), offsets_[block], path_)) {
+      throw InputError(path_, "truncated transport file in block " + std::to_string(block));
+    }
+    const unsigned long long declared = ZSTD_getFrameContentSize(frame.data(), frame.size());
+    if (declared != bytes) {
+      throw InputError(path_, "block " + std::to_string(block) +
+                                  " is not a zstd frame of its rows' size: the file is damaged");
+    }
+    const std::size_t got = ZSTD_decompress(out.data(), bytes, frame.data(), frame.size());
+    if (ZSTD_isError(got) || got != bytes) {
+      throw InputError(path_, "block " + std::to_string(block) + " does not decompress (" +
+                                  (ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short") +
+                                  "): the file is damaged");
+    }
+  } else if (!PreadAll(fd_, out.data(), bytes,
+                       info_.data_offset() + info_.FirstRowOfBlock(block) * info_.row_bytes(),
+                       path_)) {
     throw InputError(path_, "truncated transport file in block " + std::to_string(block));
   }
   if (Checksum64(out.data(), bytes) != checksums_[block]) {
@@ -323,6 +426,12 @@ void TransportFileReader::ReadRows(uint64_t first_row, uint64_t count, float* ou
   }
 }
 
+uint64_t TransportFileReader::StoredBlockBytes(uint64_t block) const {
+  if (block >= info_.block_count()) throw std::out_of_range("TransportFileReader: no such block");
+  return packed() ? offsets_[block + 1] - offsets_[block]
+                  : info_.RowsInBlock(block) * info_.row_bytes();
+}
+
 int64_t TransportFileReader::FindCorruptBlock() const {
   std::vector<float> block;
   for (uint64_t b = 0; b < info_.block_count(); ++b) {
@@ -334,6 +443,65 @@ int64_t TransportFileReader::FindCorruptBlock() const {
     }
   }
   return -1;
+}
+
+// ----------------------------------------------------------------------------- packed writer
+
+std::string CompressTransportBlock(const float* rows, std::size_t floats, int level) {
+  const std::size_t bytes = floats * sizeof(float);
+  std::string frame(ZSTD_compressBound(bytes), '\0');
+  const std::size_t n = ZSTD_compress(frame.data(), frame.size(), rows, bytes, level);
+  if (ZSTD_isError(n)) {
+    throw std::runtime_error(std::string("CompressTransportBlock: ") + ZSTD_getErrorName(n));
+  }
+  frame.resize(n);
+  return frame;
+}
+
+PackedTransportWriter::PackedTransportWriter(std::string path, const TransportFileInfo& info)
+    : path_(std::move(path)), tmp_(path_ + ".tmp"), info_(info) {
+  if (info.cubemap_n == 0 || info.rows_per_block == 0) {
+    throw std::invalid_argument("PackedTransportWriter: cubemap_n and rows_per_block must be > 0");
+  }
+  fd_ = ::open(tmp_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw FileIoError(tmp_, SystemReason("cannot create"));
+  offsets_.push_back(PackedDataOffset(info));
+}
+
+PackedTransportWriter::~PackedTransportWriter() {
+  if (fd_ >= 0) {
+    ::close(fd_);
+    std::error_code ec;
+    std::filesystem::remove(tmp_, ec);  // not finished: nothing half-written stays
+  }
+}
+
+void PackedTransportWriter::Append(uint64_t block, std::string_view frame, uint64_t checksum) {
+  if (block != checksums_.size() || block >= info_.block_count()) {
+    throw std::logic_error("PackedTransportWriter: block " + std::to_string(block) +
+                           " out of order");
+  }
+  PwriteAll(fd_, frame.data(), frame.size(), offsets_.back(), tmp_);
+  checksums_.push_back(checksum);
+  offsets_.push_back(offsets_.back() + frame.size());
+}
+
+uint64_t PackedTransportWriter::Finish() {
+  if (checksums_.size() != info_.block_count()) {
+    throw std::logic_error("PackedTransportWriter: " + std::to_string(checksums_.size()) + " of " +
+                           std::to_string(info_.block_count()) + " blocks written");
+  }
+  const auto h = EncodePackedHeader(info_, checksums_, offsets_);
+  PwriteAll(fd_, h.data(), h.size(), 0, tmp_);
+  if (::fsync(fd_) != 0) throw FileIoError(tmp_, SystemReason("fsync failed"));
+  ::close(fd_);
+  fd_ = -1;
+  std::error_code ec;
+  std::filesystem::rename(tmp_, path_, ec);
+  if (ec) throw FileIoError(path_, "cannot rename " + tmp_ + " into place: " + ec.message());
+  const std::string dir = std::filesystem::path(path_).parent_path().string();
+  SyncDirectory(dir.empty() ? "." : dir);
+  return offsets_.back();
 }
 
 }  // namespace prt

@@ -232,6 +232,90 @@ SceneGeometry TwoMeshGeometry() {
   return g;
 }
 
+// Packs the plain file `from` into `to` block by block (what prt-farm's finalize does).
+uint64_t PackFile(const std::string& from, const std::string& to) {
+  const TransportFileReader plain(from);
+  PackedTransportWriter w(to, plain.info());
+  for (uint64_t b = 0; b < plain.info().block_count(); ++b) {
+    const std::vector<float> block = plain.ReadBlock(b);
+    w.Append(b, CompressTransportBlock(block.data(), block.size()), plain.BlockChecksum(b));
+  }
+  return w.Finish();
+}
+
+TEST_F(TransportFileTest, PackedFileReadsTheSameRowsAndIsSmaller) {
+  TransportFileInfo info = SmallInfo();
+  info.rows = 300;
+  info.cubemap_n = 8;
+  info.rows_per_block = 64;
+  std::vector<float> all(info.rows * info.cols(), 0.0f);
+  // Rows like T's: a smooth cosine-like lobe over half the texels, zeros elsewhere.
+  for (uint64_t r = 0; r < info.rows; ++r)
+    for (uint64_t c = 0; c < info.cols() / 2; ++c)
+      all[r * info.cols() + c] = 1e-3f * std::cos(0.01f * static_cast<float>(c + r));
+  auto w = TransportFileWriter::Create(Path("plain.prtt"), info);
+  w.WriteRows(0, info.rows, all.data());
+  w.Finalize();
+  const uint64_t bytes = PackFile(Path("plain.prtt"), Path("packed.prtt"));
+  EXPECT_EQ(bytes, fs::file_size(Path("packed.prtt")));
+  EXPECT_FALSE(fs::exists(Path("packed.prtt.tmp")));
+  EXPECT_LT(bytes * 3, fs::file_size(Path("plain.prtt")));
+
+  const TransportFileReader plain(Path("plain.prtt")), packed(Path("packed.prtt"));
+  EXPECT_FALSE(plain.packed());
+  EXPECT_TRUE(packed.packed());
+  EXPECT_EQ(packed.info(), info);
+  EXPECT_EQ(packed.FindCorruptBlock(), -1);
+  for (uint64_t b = 0; b < info.block_count(); ++b) {
+    EXPECT_EQ(packed.ReadBlock(b), plain.ReadBlock(b));
+    EXPECT_EQ(packed.BlockChecksum(b), plain.BlockChecksum(b));
+    EXPECT_LT(packed.StoredBlockBytes(b), plain.StoredBlockBytes(b));
+  }
+  std::vector<float> rows(100 * info.cols());
+  packed.ReadRows(50, 100, rows.data());
+  EXPECT_EQ(std::memcmp(rows.data(), all.data() + 50 * info.cols(), rows.size() * 4), 0);
+  // The same rows always pack to the same bytes.
+  PackFile(Path("plain.prtt"), Path("again.prtt"));
+  EXPECT_EQ(ReadWholeFile(Path("packed.prtt")), ReadWholeFile(Path("again.prtt")));
+  // A packed file is final: the farm's writer refuses to reopen it.
+  EXPECT_THROW(TransportFileWriter::Reopen(Path("packed.prtt"), info), InputError);
+}
+
+// Hostile or damaged packed files: every kind is an InputError naming the file, never a crash,
+// an allocation sized by the file, or rows that do not match their checksum.
+TEST_F(TransportFileTest, DamagedPackedFilesAreRejected) {
+  TransportFileInfo info = SmallInfo();
+  auto w = TransportFileWriter::Create(Path("plain.prtt"), info);
+  std::vector<float> all(info.rows * info.cols());
+  for (uint64_t i = 0; i < all.size(); ++i) all[i] = std::sin(static_cast<float>(i));
+  w.WriteRows(0, info.rows, all.data());
+  w.Finalize();
+  PackFile(Path("plain.prtt"), Path("good.prtt"));
+  const std::string good = ReadWholeFile(Path("good.prtt"));
+  const uint64_t tables = kTransportHeaderBytes + 8 * info.block_count();
+  auto expect_rejected = [&](const std::string& bytes, const std::string& what) {
+    const std::string path = Path("bad.prtt");
+    WriteFileDurably(path, bytes);
+    try {
+      const TransportFileReader r(path);
+      std::vector<float> out(info.rows * info.cols());
+      r.ReadRows(0, info.rows, out.data());
+      ADD_FAILURE() << what << ": accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("bad.prtt"), std::string::npos) << what;
+    }
+  };
+  expect_rejected(good.substr(0, good.size() - 1), "truncated by a byte");
+  expect_rejected(good + "x", "a byte appended");
+  expect_rejected(good.substr(0, 60), "truncated in the header");
+  for (uint64_t at : {uint64_t{20}, tables + 3, tables + 8 * info.block_count(),
+                      uint64_t{good.size() - 5}, uint64_t{good.size() / 2 + 40}}) {
+    std::string bad = good;
+    bad[at] = static_cast<char>(bad[at] ^ 0x44);
+    expect_rejected(bad, "byte " + std::to_string(at) + " flipped");
+  }
+}
+
 TEST_F(TransportFileTest, GeometryRoundTripIsExact) {
   const SceneGeometry g = TwoMeshGeometry();
   const std::string path = Path(kGeometryFileName);

@@ -3,11 +3,13 @@
 // to the in-process compressor (CompressTransport on the rows of transport.prtt, the scene's
 // [compression] settings, the domain of geometry.prtg) for 1, 2 and 3 ranks, with a budget that
 // forces every rank to spill and with the default budget; the scheme override is honoured; the
-// raw matrix is removed unless --keep-raw; an interrupted compression is redone by --resume
-// without redoing any job, and --resume on a finished, compressed run does nothing.
+// rows stay unless --discard-raw; an interrupted compression is redone by --resume without
+// tracing, --resume on a finished run does nothing, and every edit of a finished run re-runs
+// only the stages it touches.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -17,12 +19,13 @@
 #include <utility>
 #include <vector>
 
-#include "tests/run_prt_farm.h"
+#include "formats/column_coding.h"
 #include "formats/compressed_transport.h"
-#include "vocabulary/scene.h"
-#include "formats/transport_file.h"
 #include "formats/geometry_file.h"
+#include "formats/transport_file.h"
+#include "tests/run_prt_farm.h"
 #include "vocabulary/durable_file.h"
+#include "vocabulary/scene.h"
 #include "worker/column_order.h"
 #include "worker/transport_compressor.h"
 
@@ -97,7 +100,25 @@ TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
   EXPECT_NEAR(c["ratio_to_raw"].get<double>(), static_cast<double>(got.size()) / (72 * 384 * 4),
               1e-12);
   EXPECT_GT(c["transpose_mb_per_second"].get<double>(), 0);
-  EXPECT_EQ(Report(first)["phases"].back()["name"], "compress");
+  // The compression's exact error: ‖T − T̃‖_F / ‖T‖_F with T̃ what transport.prtc decodes to.
+  {
+    const CompressedTransport t = DecodeCompressedTransport(
+        std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(got.data()), got.size()), "prtc");
+    const std::vector<float> decoded = DecompressTransport(t);
+    const TransportFileReader raw(first + "/transport.prtt");
+    std::vector<float> rows(72 * 384);
+    raw.ReadRows(0, 72, rows.data());
+    double err = 0, total = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      err += (double(rows[i]) - decoded[i]) * (double(rows[i]) - decoded[i]);
+      total += double(rows[i]) * rows[i];
+    }
+    EXPECT_GT(c["relative_frobenius_error"].get<double>(), 0.0);
+    EXPECT_NEAR(c["relative_frobenius_error"].get<double>(), std::sqrt(err / total), 1e-5);
+  }
+  const nlohmann::json phases = Report(first)["phases"];
+  EXPECT_EQ(phases[phases.size() - 2]["name"], "compress");
+  EXPECT_EQ(phases.back()["name"], "estimate");
 
   for (const auto& [ranks, budget] :
        std::vector<std::pair<int, std::string>>{{1, "2k"}, {1, "1G"}, {2, "1G"}, {3, "3k"}}) {
@@ -108,10 +129,16 @@ TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
     EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected)
         << ranks << " rank(s), budget " << budget;
     EXPECT_EQ(Report(run)["compression"]["spill_bytes"] == 0, budget.back() == 'G') << budget;
-    // Without --keep-raw the raw matrix is gone once the compressed one is durable.
-    EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
-    EXPECT_FALSE(Report(run)["compression"]["raw_kept"].get<bool>());
+    // The rows stay (packed) by default; --discard-raw removes them once the compressed
+    // transport and the report are durable.
+    EXPECT_TRUE(fs::exists(run + "/transport.prtt"));
+    EXPECT_TRUE(Report(run)["compression"]["raw_kept"].get<bool>());
   }
+  const std::string discard = WorkDir("discard");
+  ASSERT_EQ(Farm(2, kScene + " --out " + discard + kArgs + " --discard-raw").exit_code, 0);
+  EXPECT_TRUE(ReadWholeFile(discard + "/transport.prtc") == expected);
+  EXPECT_FALSE(fs::exists(discard + "/transport.prtt"));
+  EXPECT_FALSE(Report(discard)["compression"]["raw_kept"].get<bool>());
 }
 
 // The global budget (one threshold from a histogram summed over the ranks, transformed columns
@@ -155,9 +182,10 @@ TEST(CompressionPhase, SchemeOverrideAndNoCompress) {
 }
 
 // A rank killed after sampling, at each point where finished work could be lost: rank 0 before
-// renaming the finalized transport.prtt, either rank inside the transpose (4 KiB budget: spill
-// files on disk), rank 0 halfway through writing transport.prtc. --resume re-uses every journaled
-// job (none redone) and writes the bytes of an uninterrupted run; nothing temporary is left.
+// renaming the packed transport.prtt into place, either rank inside the transpose (4 KiB budget:
+// spill files on disk), rank 0 halfway through writing transport.prtc. --resume traces nothing
+// (the journaled jobs, or the finished rows stage, are re-used) and writes the bytes of an
+// uninterrupted run; nothing temporary is left.
 TEST(CompressionPhase, KilledAfterSamplingThenResumeGivesTheUninterruptedBytes) {
   const std::string reference = WorkDir("kill_reference");
   ASSERT_EQ(Farm(2, kScene + " --out " + reference + kArgs + " --memory-budget 4k").exit_code, 0);
@@ -181,11 +209,18 @@ TEST(CompressionPhase, KilledAfterSamplingThenResumeGivesTheUninterruptedBytes) 
     EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
     const nlohmann::json rep = Report(run);
     EXPECT_EQ(rep["jobs"]["done"], 0) << rep.dump();
-    EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], journaled) << rep.dump();
     EXPECT_EQ(rep["rays_traced"], 0) << rep.dump();
+    if (point == "finalize") {
+      EXPECT_EQ(rep["stages"][0]["status"], "resumed") << rep.dump();
+      EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], journaled) << rep.dump();
+    } else {
+      EXPECT_EQ(rep["stages"][0]["status"], "reused") << rep.dump();
+    }
+    EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") ==
+                ReadWholeFile(reference + "/transport.prtt"));
     for (const fs::directory_entry& e : fs::directory_iterator(run)) {
       const std::string name = e.path().filename().string();
-      EXPECT_TRUE(name != "transport.prtt" && name.find(".tmp") == std::string::npos &&
+      EXPECT_TRUE(name.find(".tmp") == std::string::npos &&
                   name.find("spill") == std::string::npos &&
                   name.find(".partial") == std::string::npos)
           << "left behind: " << name;
@@ -193,81 +228,135 @@ TEST(CompressionPhase, KilledAfterSamplingThenResumeGivesTheUninterruptedBytes) 
   }
 }
 
-// The compression was interrupted (no transport.prtc, raw still there): --resume re-uses every
-// journaled job and redoes only the compression. On a compressed run without the raw matrix,
-// --resume has nothing to do.
+// The compression was interrupted (no transport.prtc, the rows there): --resume traces nothing
+// and redoes only the compression. A finished run resumed has nothing to do.
 TEST(CompressionPhase, ResumeRedoesOnlyTheCompression) {
   const std::string run = WorkDir("resume");
-  ASSERT_EQ(Farm(2, kScene + " --out " + run + kArgs + " --keep-raw").exit_code, 0);
+  ASSERT_EQ(Farm(2, kScene + " --out " + run + kArgs).exit_code, 0);
   const std::string expected = ReadWholeFile(run + "/transport.prtc");
   fs::remove(run + "/transport.prtc");
   const std::string args = " --rows-per-block 16 --max-job-rows 9 --quiet --resume";
   const RunResult r = Farm(2, kScene + " --out " + run + args);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const nlohmann::json rep = Report(run);
-  EXPECT_EQ(rep["jobs"]["done"], 0) << rep.dump();
-  EXPECT_GT(rep["jobs"]["reused_from_checkpoints"].get<int>(), 0);
+  EXPECT_EQ(rep["rays_traced"], 0) << rep.dump();
+  EXPECT_EQ(rep["stages"][0]["status"], "reused") << rep.dump();
+  EXPECT_EQ(rep["stages"][1]["status"], "ran") << rep.dump();
+  EXPECT_EQ(rep["stages"][1]["reason"], "transport.prtc missing") << rep.dump();
+  EXPECT_EQ(rep["stages"][2]["status"], "reused") << rep.dump();
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
-  EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
   const std::string report = ReadWholeFile(run + "/report.json");
   const RunResult again = Farm(1, kScene + " --out " + run + " --rows-per-block 16 --resume");
   EXPECT_EQ(again.exit_code, 0) << again.output;
   EXPECT_NE(again.output.find("nothing to do"), std::string::npos) << again.output;
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
   EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
-
-  // The finished run's inputs are checked before "nothing to do": another scene (here another
-  // seed) or other settings are refused, naming the manifest, and the finished asset stays.
-  const std::string changed = WorkDir("resume-changed") + "/changed.toml";
-  std::string text = ReadWholeFile(kScene);
-  std::string box_path = PRT_TESTS_DATA_DIR;
-  box_path.append("/box.off").insert(0, 1, '"').push_back('"');
-  for (const auto& [from, to] :
-       {std::pair<std::string, std::string>{"seed = 3", "seed = 4"}, {"\"box.off\"", box_path}}) {
-    const std::size_t at = text.find(from);
-    ASSERT_NE(at, std::string::npos) << text;
-    text.replace(at, from.size(), to);
-  }
-  WriteFileDurably(changed, text);
-  const RunResult other = Farm(1, changed + " --out " + run + " --rows-per-block 16 --resume");
-  EXPECT_EQ(other.exit_code, 2) << other.output;
-  EXPECT_NE(other.output.find("manifest.json"), std::string::npos) << other.output;
-  EXPECT_NE(other.output.find("different run"), std::string::npos) << other.output;
-  const RunResult rpb = Farm(1, kScene + " --out " + run + " --resume");
-  EXPECT_EQ(rpb.exit_code, 2) << rpb.output;
-  EXPECT_NE(rpb.output.find("rows_per_block"), std::string::npos) << rpb.output;
-  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
-  EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
 }
 
-// The stale-asset trap (issue 27): --resume of a finished run (transport.prtc written, the raw
-// matrix removed) with other compression settings used to print "nothing to do" and keep the old
-// asset. Now it is refused, naming the asset and what changed, and nothing is touched; the same
-// settings still have nothing to do; with the raw matrix kept, the new settings are applied.
-TEST(CompressionPhase, ResumeWithOtherCompressionSettingsIsNeverReportedDone) {
-  const std::string run = WorkDir("stale");
-  ASSERT_EQ(Farm(2, kScene + " --out " + run + kArgs).exit_code, 0);
-  const std::string asset = ReadWholeFile(run + "/transport.prtc");
-  const std::string report = ReadWholeFile(run + "/report.json");
-  const std::string resume = " --rows-per-block 16 --max-job-rows 9 --resume";
-  const RunResult other = Farm(1, kScene + " --out " + run + resume + " --compression-scheme 2d");
-  EXPECT_EQ(other.exit_code, 2) << other.output;
-  EXPECT_EQ(other.output.find("nothing to do"), std::string::npos) << other.output;
-  EXPECT_NE(other.output.find("transport.prtc"), std::string::npos) << other.output;
-  EXPECT_NE(other.output.find("scheme adaptive4d -> 2d"), std::string::npos) << other.output;
-  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == asset);
-  EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
-  const RunResult same = Farm(1, kScene + " --out " + run + resume);
-  EXPECT_EQ(same.exit_code, 0) << same.output;
-  EXPECT_NE(same.output.find("nothing to do"), std::string::npos) << same.output;
+// The edits of a finished run (issue 27's table, docs/farm.md "Stages and re-runs"): each
+// re-runs only the stages that depend on it, traces no ray unless the rows change, and leaves
+// the asset a fresh run of the edited scene writes (no stale transport.prtc, ever).
+TEST(CompressionPhase, EveryEditReRunsOnlyWhatItTouchesAndNeverLeavesAStaleAsset) {
+  const std::string dir = WorkDir("edits");
+  const std::string base_text = ReadWholeFile(kScene) +
+                                "\n[compression]\nkeep_fraction = 0.05\nbits = 9\n"
+                                "\n[camera]\nfov = 35.0\n"
+                                "\n[environments]\npaths = [\"" PRT_DATA_DIR
+                                "/envmaps/sunrise.exr\"]\n";
+  auto write_scene = [&](const std::string& name, const std::string& text) {
+    const std::string path = dir + "/" + name + ".toml";
+    fs::copy_file(std::string(PRT_TESTS_DATA_DIR) + "/box.off", dir + "/box.off",
+                  fs::copy_options::skip_existing);
+    WriteFileDurably(path, text);
+    return path;
+  };
+  auto edit = [&](std::string text, const std::string& from, const std::string& to) {
+    const std::size_t at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+    return text;
+  };
+  struct Edit {
+    std::string name, from, to;
+    std::vector<std::string> statuses;  // rows, compression, estimate, assets
+    std::string extra = "";
+  };
+  const std::vector<Edit> edits = {
+      {"comment",
+       "# A tiny scene",
+       "# An edited tiny scene",
+       {"reused", "reused", "reused", "updated"}},
+      {"camera", "fov = 35.0", "fov = 50.0", {"reused", "reused", "reused", "updated"}},
+      {"albedo",
+       "albedo = [0.5, 0.5, 0.5]",
+       "albedo = [0.9, 0.3, 0.3]",
+       {"reused", "reused", "ran", "updated"}},
+      {"keep",
+       "keep_fraction = 0.05",
+       "keep_fraction = 0.1",
+       {"reused", "ran", "reused", "updated"}},
+      {"bits", "bits = 9", "bits = 12", {"reused", "ran", "reused", "updated"}},
+      {"scheme", "", "", {"reused", "ran", "reused", "unchanged"}, " --compression-scheme 2d"},
+      {"rays", "rays_per_texel = 4", "rays_per_texel = 6", {"ran", "ran", "ran", "updated"}},
+      {"moved",
+       "albedo = [0.5, 0.5, 0.5]",
+       "albedo = [0.5, 0.5, 0.5]\ntranslate = [0.2, 0, 0]",
+       {"ran", "ran", "ran", "updated"}},
+  };
+  const std::string args = " --rows-per-block 16 --max-job-rows 9 --quiet";
+  for (const Edit& e : edits) {
+    SCOPED_TRACE(e.name);
+    const std::string run = dir + "/" + e.name;
+    ASSERT_EQ(Farm(2, write_scene("base", base_text) + " --out " + run + args).exit_code, 0);
+    const std::string text = e.from.empty() ? base_text : edit(base_text, e.from, e.to);
+    const std::string scene = write_scene(e.name, text);
+    const RunResult r = Farm(2, scene + " --out " + run + args + " --resume" + e.extra);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const nlohmann::json rep = Report(run);
+    ASSERT_EQ(rep["stages"].size(), 4u) << rep.dump();
+    for (std::size_t k = 0; k < 4; ++k)
+      EXPECT_EQ(rep["stages"][k]["status"], e.statuses[k]) << rep["stages"].dump();
+    EXPECT_EQ(rep["rays_traced"].get<uint64_t>() == 0, e.statuses[0] == "reused") << rep.dump();
+    // The same files as a fresh run of the edited scene.
+    const std::string fresh = dir + "/" + e.name + "-fresh";
+    ASSERT_EQ(Farm(1, scene + " --out " + fresh + args + e.extra).exit_code, 0);
+    for (const char* file : {"transport.prtt", "transport.prtc", "geometry.prtg", "scene.toml"})
+      EXPECT_TRUE(ReadWholeFile(run + "/" + file) == ReadWholeFile(fresh + "/" + file)) << file;
+    const nlohmann::json a = nlohmann::json::parse(ReadWholeFile(run + "/accuracy.json"));
+    const nlohmann::json b = nlohmann::json::parse(ReadWholeFile(fresh + "/accuracy.json"));
+    EXPECT_EQ(a["key"], b["key"]);
+    EXPECT_NEAR(a["monte_carlo"]["worst_relative_rms"].get<double>(),
+                b["monte_carlo"]["worst_relative_rms"].get<double>(), 1e-9);
+  }
+}
 
-  const std::string kept = WorkDir("stale-kept");
-  ASSERT_EQ(Farm(2, kScene + " --out " + kept + kArgs + " --keep-raw").exit_code, 0);
-  const RunResult again =
-      Farm(2, kScene + " --out " + kept + resume + " --keep-raw --compression-scheme 2d --quiet");
-  ASSERT_EQ(again.exit_code, 0) << again.output;
-  EXPECT_EQ(Report(kept)["compression"]["scheme"], "2d");
-  EXPECT_EQ(Report(kept)["jobs"]["done"], 0);
+// The stale-asset trap (issue 27): --resume of a finished run with other compression settings
+// used to print "nothing to do" and keep the old asset (at 647dc18). Now the compression runs
+// again from the kept rows without tracing; with the rows discarded (--discard-raw) it traces
+// them again. Either way the asset is what a fresh run with the new settings writes.
+TEST(CompressionPhase, ResumeWithOtherCompressionSettingsIsNeverReportedDone) {
+  const std::string fresh = WorkDir("stale-fresh");
+  ASSERT_EQ(Farm(1, kScene + " --out " + fresh + kArgs + " --compression-scheme 2d").exit_code, 0);
+  const std::string expected = ReadWholeFile(fresh + "/transport.prtc");
+  const std::string resume = " --rows-per-block 16 --max-job-rows 9 --resume";
+  for (const std::string raw : {"", " --discard-raw"}) {
+    SCOPED_TRACE(raw.empty() ? "rows kept" : "rows discarded");
+    const std::string run = WorkDir(raw.empty() ? "stale-kept" : "stale-discarded");
+    ASSERT_EQ(Farm(2, kScene + " --out " + run + kArgs + raw).exit_code, 0);
+    const RunResult other = Farm(2, kScene + " --out " + run + resume + " --compression-scheme 2d");
+    ASSERT_EQ(other.exit_code, 0) << other.output;
+    EXPECT_EQ(other.output.find("nothing to do"), std::string::npos) << other.output;
+    EXPECT_NE(other.output.find("scheme \"adaptive4d\" -> \"2d\""), std::string::npos)
+        << other.output;
+    EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == expected);
+    const nlohmann::json rep = Report(run);
+    EXPECT_EQ(rep["compression"]["scheme"], "2d");
+    EXPECT_EQ(rep["stages"][0]["status"], raw.empty() ? "reused" : "ran") << rep.dump();
+    EXPECT_EQ(rep["rays_traced"].get<uint64_t>() == 0, raw.empty()) << rep.dump();
+    const RunResult same = Farm(1, kScene + " --out " + run + resume + " --compression-scheme 2d");
+    EXPECT_EQ(same.exit_code, 0) << same.output;
+    EXPECT_NE(same.output.find("nothing to do"), std::string::npos) << same.output;
+  }
 }
 
 }  // namespace

@@ -17,12 +17,12 @@
 #include <vector>
 
 #include "farm/farm_options.h"
+#include "formats/geometry_file.h"
+#include "formats/transport_file.h"
 #include "tests/run_prt_farm.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "formats/transport_file.h"
-#include "formats/geometry_file.h"
-#include "vocabulary/durable_file.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
@@ -216,18 +216,30 @@ TEST(FarmMpiTest, SingleRankKilledMidwayThenResumeGivesTheSameFile) {
   KillAndResume("kill_np1", 1, " --fail-after-jobs 3 --fail-rank 0");
 }
 
-TEST(FarmMpiTest, ResumingAFinishedRunReusesEveryJobAndKeepsTheBytes) {
+// A finished run resumed with the same inputs has nothing to do: every file, the report
+// included, stays as it is. Without its rows file (as after --discard-raw) it still has nothing
+// to do while its compressed transport is there; without both it traces again, to the same
+// bytes.
+TEST(FarmMpiTest, ResumingAFinishedRunHasNothingToDoAndKeepsTheBytes) {
   const std::string run = WorkDir("finished") + "/run";
   ASSERT_EQ(Farm(1, kScene + " --out " + run + kSmallJobs).exit_code, 0);
   const std::string before = ReadWholeFile(run + "/transport.prtt");
-  const int jobs = JournalJobs(run);
+  const std::string report = ReadWholeFile(run + "/report.json");
   const RunResult r = Farm(1, kScene + " --out " + run + kSmallJobs + " --resume");
   ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("nothing to do"), std::string::npos) << r.output;
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == before);
-  const nlohmann::json rep = ReadReport(run);
-  EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], jobs);
-  EXPECT_EQ(rep["jobs"]["done"], 0);
-  EXPECT_EQ(rep["rays_traced"], 0);
+  EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
+  fs::remove(run + "/transport.prtt");
+  const RunResult discarded = Farm(1, kScene + " --out " + run + kSmallJobs + " --resume");
+  ASSERT_EQ(discarded.exit_code, 0) << discarded.output;
+  EXPECT_NE(discarded.output.find("nothing to do"), std::string::npos) << discarded.output;
+  EXPECT_FALSE(fs::exists(run + "/transport.prtt"));
+  fs::remove(run + "/transport.prtc");
+  const RunResult again = Farm(2, kScene + " --out " + run + kSmallJobs + " --resume");
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == before);
+  EXPECT_EQ(ReadReport(run)["stages"][0]["status"], "ran");
 }
 
 TEST(FarmMpiTest, HungWorkerEndsTheRunWithExitCode4AndAReport) {
@@ -378,19 +390,17 @@ TEST(FarmMpiSparseTest, OneTwoAndThreeRanksGiveTheInProcessDriversBytes) {
     ASSERT_EQ(rep["rank_details"].size(), static_cast<std::size_t>(ranks));
     EXPECT_GE(rep["load_imbalance"].get<double>(), 1.0);
   }
-  // Resuming the finished single-rank run re-uses every job and keeps the bytes.
+  // Resuming the finished single-rank run has nothing to do and keeps the bytes and report.
   {
     const std::string run = dir + "/np1";
     const std::string before = ReadWholeFile(run + "/transport.prtt");
-    const std::size_t jobs = JournalPhases(run).size();
+    const std::string report = ReadWholeFile(run + "/report.json");
     const RunResult r = Farm(1, kSparseScene + " --out " + run + kSparseJobs + " --resume");
     ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("nothing to do"), std::string::npos) << r.output;
     EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == before);
-    const nlohmann::json rep = ReadReport(run);
-    EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], jobs);
-    EXPECT_EQ(rep["jobs"]["done"], 0);
-    EXPECT_EQ(rep["rays_traced"], 0);
-    EXPECT_EQ(rep["sparse"]["sparse"], ref.report.sparse);
+    EXPECT_TRUE(ReadWholeFile(run + "/report.json") == report);
+    EXPECT_EQ(ReadReport(run)["sparse"]["sparse"], ref.report.sparse);
   }
   // --method brute overrides the scene's method.
   const std::string run = dir + "/brute";
@@ -474,22 +484,32 @@ TEST(FarmMpiTest, UsageErrorsHelpAndForeignCheckpoints) {
       {2, "--no-such-option", 1, "--no-such-option"},
       {1, "--help", 0, "Exit codes: 0 ok, 1 usage error"},
   });
-  // Checkpoints of another run are refused, not mixed.
+  // Checkpoints of a run with other sampling inputs are never mixed with new rows: --resume
+  // traces again from zero, says why, and writes what a fresh run with the new inputs writes.
+  // --seed overrides the scene's (another estimate of the same T) and is such an input.
   const std::string run = dir + "/mixed";
-  ASSERT_EQ(Farm(1, kScene + " --out " + run + kSmallJobs).exit_code, 0);
-  const RunResult r =
-      Farm(1, kScene + " --out " + run + kSmallJobs + " --rays-per-texel 9 --resume");
-  EXPECT_EQ(r.exit_code, 2) << r.output;
-  EXPECT_NE(r.output.find("rays_per_texel 4 -> 9"), std::string::npos) << r.output;
-  // --seed overrides the scene's: another estimate of the same T, which a resume must not mix.
-  const RunResult seeded = Farm(1, kScene + " --out " + run + kSmallJobs + " --seed 7 --resume");
-  EXPECT_EQ(seeded.exit_code, 2) << seeded.output;
-  EXPECT_NE(seeded.output.find("seed 3 -> 7"), std::string::npos) << seeded.output;
+  ASSERT_EQ(Farm(1, kScene + " --out " + run + kSmallJobs + " --no-compress").exit_code, 0);
+  const std::string seed3 = ReadWholeFile(run + "/transport.prtt");
+  const RunResult seeded =
+      Farm(2, kScene + " --out " + run + kSmallJobs + " --no-compress --seed 7 --resume");
+  ASSERT_EQ(seeded.exit_code, 0) << seeded.output;
+  EXPECT_NE(seeded.output.find("stage rows: ran (changed: seed 3 -> 7)"), std::string::npos)
+      << seeded.output;
+  const nlohmann::json rep = ReadReport(run);
+  EXPECT_EQ(rep["seed"], 7);
+  EXPECT_EQ(rep["stages"][0]["status"], "ran");
+  EXPECT_EQ(rep["jobs"]["reused_from_checkpoints"], 0);
   const std::string other = dir + "/seed7";
-  ASSERT_EQ(Farm(1, kScene + " --out " + other + kSmallJobs + " --seed 7").exit_code, 0);
+  ASSERT_EQ(Farm(1, kScene + " --out " + other + kSmallJobs + " --no-compress --seed 7").exit_code,
+            0);
   EXPECT_EQ(ReadReport(other)["seed"], 7);
-  EXPECT_EQ(ReadReport(run)["seed"], 3);
-  EXPECT_NE(ReadWholeFile(other + "/transport.prtt"), ReadWholeFile(run + "/transport.prtt"));
+  EXPECT_TRUE(ReadWholeFile(other + "/transport.prtt") == ReadWholeFile(run + "/transport.prtt"));
+  EXPECT_FALSE(ReadWholeFile(other + "/transport.prtt") == seed3);
+  const RunResult rays =
+      Farm(1, kScene + " --out " + run + kSmallJobs + " --no-compress --rays-per-texel 9 --resume");
+  ASSERT_EQ(rays.exit_code, 0) << rays.output;
+  EXPECT_NE(rays.output.find("rays_per_texel 4 -> 9"), std::string::npos) << rays.output;
+  EXPECT_EQ(ReadReport(run)["rays_per_texel"], 9);
 }
 
 }  // namespace

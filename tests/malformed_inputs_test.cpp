@@ -284,13 +284,14 @@ std::vector<Entry> Catalogue() {
       Cmd("farm_run_without_resume_or_force", Tool::kFarm,
           "{T}/tiny.toml --out {K}/partial --quiet", kFarmUsage,
           {"{K}/partial", "already holds a prt-farm run"}),
-      Cmd("farm_resume_other_settings", Tool::kFarm,
-          "{T}/tiny.toml --out {K}/partial --resume --quiet --rays-per-texel 8", kFarmInput,
-          {"{K}/partial/checkpoints/manifest.json", "rays_per_texel 4 -> 8"}),
-      // A finished (compressed) run is not "nothing to do" for other inputs.
-      Cmd("farm_resume_finished_other_settings", Tool::kFarm,
-          "{T}/tiny.toml --out {K}/run --resume --quiet --rays-per-texel 8", kFarmInput,
-          {"{K}/run/checkpoints/manifest.json", "rays_per_texel 4 -> 8"}),
+      // Other inputs are not an error any more: --resume re-runs the stages they touch
+      // (tests/compression_phase_mpi_test.cpp). A manifest that cannot be read is.
+      Cmd("farm_resume_damaged_manifest", Tool::kFarm,
+          "{T}/tiny.toml --out {D}/run_damaged_manifest --resume --quiet", kFarmInput,
+          {"{D}/run_damaged_manifest/checkpoints/manifest.json", "not a prt-farm"}),
+      Cmd("farm_resume_future_manifest", Tool::kFarm,
+          "{T}/tiny.toml --out {D}/run_future_manifest --resume --quiet", kFarmInput,
+          {"{D}/run_future_manifest/checkpoints/manifest.json", "newer than this prt-farm"}),
       Cmd("pack_columns_per_block_zero", Tool::kPack,
           "pack {K}/run --out {K}/scene.prtpack --columns-per-block 0", kPackUsage,
           {"--columns-per-block"}),
@@ -558,6 +559,12 @@ class MalformedInputsTest : public ::testing::Test {
     fs::copy(Keep() / "run", D / "run_truncated_prtc", fs::copy_options::recursive);
     fs::resize_file(D / "run_truncated_prtc/transport.prtc",
                     fs::file_size(D / "run_truncated_prtc/transport.prtc") / 2);
+    fs::copy(Keep() / "run", D / "run_damaged_manifest", fs::copy_options::recursive);
+    std::ofstream(D / "run_damaged_manifest/checkpoints/manifest.json")
+        << "{\"format_version\": 2,";
+    fs::copy(Keep() / "run", D / "run_future_manifest", fs::copy_options::recursive);
+    std::ofstream(D / "run_future_manifest/checkpoints/manifest.json")
+        << "{\"format_version\": 3, \"stages\": {}}";
     fs::copy(Keep() / "run", D / "run_corrupt_geometry", fs::copy_options::recursive);
     {
       std::fstream g(D / "run_corrupt_geometry/geometry.prtg",

@@ -65,6 +65,7 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   out.transport.assign(count, 0.0f);
   out.visibility.assign(count, 0.0f);
   out.feature.assign(count, 0);
+  out.variance.assign(count, 0.0f);
   AngularStats stats;
 
   std::vector<uint8_t> above(count), fully(count);
@@ -82,9 +83,11 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
         const std::size_t j = layout.Index(face, x, y);
         if (above[j]) grid.push_back(static_cast<uint32_t>(j));
       }
-  std::vector<float> values(grid.size()), unocc(grid.size());
-  stats.trace += sampler.ComputeTexels(sample, sample_index, grid, values.data(), unocc.data());
+  std::vector<float> values(grid.size()), unocc(grid.size()), var(grid.size());
+  stats.trace +=
+      sampler.ComputeTexels(sample, sample_index, grid, values.data(), unocc.data(), var.data());
   stats.grid_texels = grid.size();
+  for (std::size_t i = 0; i < grid.size(); ++i) out.variance[grid[i]] = var[i];
   auto record = [&](uint32_t j, float t, float u) {
     out.transport[j] = t;
     out.visibility[j] = u > 0 ? std::clamp(t / u, 0.0f, 1.0f) : 0.0f;
@@ -135,10 +138,13 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   }
   values.resize(features.size());
   unocc.resize(features.size());
-  stats.trace += sampler.ComputeTexels(sample, sample_index, features, values.data(), unocc.data());
+  var.resize(features.size());
+  stats.trace += sampler.ComputeTexels(sample, sample_index, features, values.data(), unocc.data(),
+                                       var.data());
   for (std::size_t i = 0; i < features.size(); ++i) {
     record(features[i], values[i], unocc[i]);
     out.feature[features[i]] = 1;
+    out.variance[features[i]] = var[i];
   }
   // Borrowed texels: the window's visibility under this texel's own cosine.
   std::vector<float> ub(borrowed.size());

@@ -24,6 +24,9 @@ struct DenseRow {
   std::vector<float> transport;   // T, texel_count floats (0 below the horizon)
   std::vector<float> visibility;  // v = T/U in [0, 1] above the horizon, 0 below
   std::vector<uint8_t> feature;   // 1 where the texel was traced in the second (feature) pass
+  // Each traced texel's Monte-Carlo variance (TransportSampler::ComputeTexels); 0 where the texel
+  // was borrowed or is below the horizon, and everywhere when !sampler.VarianceEstimable().
+  std::vector<float> variance;
 };
 
 struct AngularStats {

@@ -151,7 +151,7 @@ std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const
 SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
                                    uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
                                    const SparseOptions& options, L1Solver& solver, float* row,
-                                   SparseStats& stats) {
+                                   SparseStats& stats, float* variance) {
   std::vector<DenseNeighbor> same_side;
   if (options.min_normal_cos > -1) {
     const Vec3 nx = Normalize(sample.normal);
@@ -181,9 +181,15 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
       above.data(), total, var, featcount, options.features, options.min_features, sample_index);
   const int m = static_cast<int>(feats.size());
   const int k = static_cast<int>(neighbors.size());
-  std::vector<float> traced(feats.size()), traced_unocc(feats.size());
+  std::vector<float> traced(feats.size()), traced_unocc(feats.size()), traced_var;
+  if (variance != nullptr) traced_var.resize(feats.size());
   stats.trace +=
-      sampler.ComputeTexels(sample, sample_index, feats, traced.data(), traced_unocc.data());
+      sampler.ComputeTexels(sample, sample_index, feats, traced.data(), traced_unocc.data(),
+                            variance != nullptr ? traced_var.data() : nullptr);
+  if (variance != nullptr) {
+    std::fill(variance, variance + total, 0.0f);
+    for (std::size_t i = 0; i < feats.size(); ++i) variance[feats[i]] = traced_var[i];
+  }
   stats.features_traced += feats.size();
 
   // Unoccluded values U_x(j) of every texel above this vertex's horizon: exact where the texel

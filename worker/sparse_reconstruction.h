@@ -96,9 +96,12 @@ std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const
 
 // Reconstructs one sparse row into `row` (texel_count floats). On a fallback outcome `row` is
 // untouched and the caller must sample the vertex densely.
+// variance (optional, texel_count floats): the Monte-Carlo variance of the traced feature texels
+// (kept exactly in the row), 0 elsewhere: the reconstructed texels' error is the fit's, not the
+// rays'.
 SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
                                    uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
                                    const SparseOptions& options, L1Solver& solver, float* row,
-                                   SparseStats& stats);
+                                   SparseStats& stats, float* variance = nullptr);
 
 }  // namespace prt

@@ -1,7 +1,9 @@
 // The compression pipeline of Cheslack-Postava et al. 2008 §4.4 (steps 2–5), in memory.
 #include "worker/transport_compressor.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
@@ -178,6 +180,46 @@ std::vector<CompressedColumn> CompressColumnBlock(const CompressedTransportHeade
   std::vector<uint8_t> depths(count);
   TransformColumnBlock(h, count, c.data(), depths.data());
   return QuantiseColumnBlock(h, first_column, count, c.data(), depths.data(), 0.0f, stats);
+}
+
+SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first_column,
+                              uint32_t count, const float* columns, const uint8_t* depths,
+                              std::span<const CompressedColumn> compressed) {
+  const std::size_t S = h.sample_count;
+  std::vector<const CompressedColumn*> of(count, nullptr);
+  for (const CompressedColumn& c : compressed) {
+    if (c.column < first_column || c.column >= first_column + count)
+      throw std::invalid_argument("ColumnBlockError: compressed column outside the block");
+    of[c.column - first_column] = &c;
+  }
+  using Sums = std::pair<double, double>;
+  const Sums sums = tbb::parallel_reduce(
+      tbb::blocked_range<uint32_t>(0, count), Sums{0.0, 0.0},
+      [&](const tbb::blocked_range<uint32_t>& r, Sums acc) {
+        std::vector<float> x(S), y(S);
+        std::vector<uint8_t> scale(S);
+        for (uint32_t k = r.begin(); k != r.end(); ++k) {
+          std::copy(columns + k * S, columns + (k + 1) * S, x.begin());
+          if (depths != nullptr)
+            InverseColumnTransform(h.domain, h.column_wavelet, depths[k], x.data());
+          std::fill(y.begin(), y.end(), 0.0f);
+          if (const CompressedColumn* c = of[k]) {
+            ColumnScaleMap(h.domain, c->depth, scale.data());
+            DequantiseColumn(h, *c, scale.data(), y.data());
+            InverseColumnTransform(h.domain, h.column_wavelet, c->depth, y.data());
+          }
+          for (std::size_t i = 0; i < S; ++i) {
+            const double d = double(x[i]) - y[i];
+            acc.first += d * d;
+            acc.second += double(x[i]) * x[i];
+          }
+        }
+        return acc;
+      },
+      [](Sums a, const Sums& b) {
+        return Sums{a.first + b.first, a.second + b.second};
+      });
+  return {sums.first, sums.second};
 }
 
 float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep) {

@@ -9,6 +9,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -80,6 +81,20 @@ std::vector<CompressedColumn> QuantiseColumnBlock(const CompressedTransportHeade
                                                   const float* transformed, const uint8_t* depths,
                                                   float threshold,
                                                   std::vector<ColumnStats>* stats = nullptr);
+// The exact squared error of the column stage on a block of columns, in the T̂ basis (which
+// the orthonormal row transform makes the error in the texel basis): Σ ‖x − x̃‖² and Σ ‖x‖²,
+// with x each column entering the column stage (sample order) and x̃ what its compressed column
+// decodes to (formats/column_coding.h: dequantised, inverse-transformed; 0 for a column not in
+// `compressed`). With `depths`, `columns` holds the transformed columns (TransformColumnBlock's
+// output) and x is recovered by the inverse transform. Parallel over columns (TBB).
+struct SquaredError {
+  double error = 0;
+  double total = 0;
+};
+SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first_column,
+                              uint32_t count, const float* columns, const uint8_t* depths,
+                              std::span<const CompressedColumn> compressed);
+
 // The keep-th largest non-zero |c| of n coefficients (exact; tests and diagnostics).
 float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep);
 

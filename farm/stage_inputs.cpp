@@ -1,0 +1,115 @@
+// Stage inputs of a run (see stage_inputs.h).
+#include "farm/stage_inputs.h"
+
+#include <cstdio>
+#include <filesystem>
+
+#include "farm/compression_phase.h"
+#include "formats/compressed_transport.h"
+#include "formats/geometry_file.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/hash.h"
+
+namespace prt {
+
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+std::string Hex(uint64_t v) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+Json SparseJson(const SparseSettings& s) {
+  return {{"initial_fraction", s.initial_fraction},
+          {"dense_budget", s.dense_budget},
+          {"iterations", s.iterations},
+          {"radius", s.radius},
+          {"max_neighbors", s.max_neighbors},
+          {"features", s.features},
+          {"lambda", s.lambda},
+          {"window", s.window},
+          {"unity_weight", s.unity_weight},
+          {"max_residual", s.max_residual},
+          {"min_normal_cos", s.min_normal_cos},
+          {"seed", s.seed}};
+}
+
+}  // namespace
+
+uint64_t TracedGeometryChecksum(const SceneGeometry& geometry) {
+  SceneGeometry traced = geometry;
+  for (SceneMesh& m : traced.meshes) {
+    m.name.clear();
+    m.albedo = Rgb{0, 0, 0};
+  }
+  const std::string bytes = SerializeSceneGeometry(traced);
+  return Checksum64(bytes.data(), bytes.size());
+}
+
+uint64_t EnvironmentFileChecksum(const std::string& path) {
+  try {
+    const std::string bytes = ReadWholeFile(path);
+    return Checksum64(bytes.data(), bytes.size());
+  } catch (const std::exception&) {
+    return 0;
+  }
+}
+
+RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& scene_text,
+                            const SceneGeometry& geometry, const std::string& geometry_bytes,
+                            const ResolvedSampling& s, const FarmOptions& options) {
+  RunManifest m;
+  const bool visibility = s.job == "visibility";
+  Json rows = {{"job", s.job},
+               {"geometry_xxh64", Hex(TracedGeometryChecksum(geometry))},
+               {"samples", s.rows},
+               {"cubemap_n", s.cubemap_n},
+               {"rays_per_texel", s.rays_per_texel},
+               {"seed", s.seed}};
+  if (visibility) {
+    rows["visibility_bits"] = scene.visibility.bits;
+  } else {
+    rows["method"] = s.method;
+    rows["rows_per_block"] = options.rows_per_block;
+    if (s.method == "sparse") rows["sparse"] = SparseJson(scene.sparse);
+  }
+  m.SetStage(kStageRows, std::move(rows));
+
+  if (!visibility) {
+    const CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options);
+    const CompressedTransportHeader& h = plan.header;
+    const std::vector<uint8_t> header = EncodeHeader(h);
+    m.SetStage(kStageCompression,
+               {{"scheme", ToString(h.scheme)},
+                {"row_wavelet", ToString(h.row_wavelet)},
+                {"column_wavelet", ToString(h.column_wavelet)},
+                {"bits", h.bits},
+                {"keep_fraction", h.keep_fraction},
+                {"budget", ToString(h.budget)},
+                {"light_weight", h.light_weight},
+                {"terms_per_column", h.terms_per_column},
+                {"dither_seed", h.dither_seed},
+                {"order_normal_weight", scene.compression.order_normal_weight},
+                {"header_xxh64", Hex(Checksum64(header.data(), header.size()))}});
+
+    Json envs = Json::array();
+    for (const std::string& path : scene.environments) {
+      envs.push_back({{"path", std::filesystem::path(path).filename().string()},
+                      {"xxh64", Hex(EnvironmentFileChecksum(path))}});
+    }
+    Json albedo = Json::array();
+    for (const SceneMesh& mesh : geometry.meshes)
+      albedo.push_back({mesh.albedo[0], mesh.albedo[1], mesh.albedo[2]});
+    m.SetStage(kStageEstimate, {{"environments", envs}, {"albedo", albedo}});
+  }
+
+  m.SetStage(kStageAssets, {{"scene_xxh64", Hex(Checksum64(scene_text.data(), scene_text.size()))},
+                            {"geometry_file_xxh64",
+                             Hex(Checksum64(geometry_bytes.data(), geometry_bytes.size()))}});
+  return m;
+}
+
+}  // namespace prt

@@ -1,0 +1,37 @@
+// The manifest of stage inputs (farm/run_manifest.h) for a scene and a command line: what each
+// stage's output depends on, and nothing else (docs/farm.md, "Stages and re-runs").
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "farm/farm_options.h"
+#include "farm/run_manifest.h"
+#include "vocabulary/scene.h"
+
+namespace prt {
+
+// What setup resolved from the scene and the command line (the overrides applied).
+struct ResolvedSampling {
+  std::string job = "transport";  // transport | visibility
+  std::string method = "brute";   // brute | sparse (transport only)
+  int cubemap_n = 32;
+  int rays_per_texel = 4;
+  uint64_t seed = 1;
+  uint64_t rows = 0;
+};
+
+// XXH64 of what the rays see of the geometry: every mesh's positions, normals and triangles,
+// the ground flag and grid, the bounds; not names or albedos.
+uint64_t TracedGeometryChecksum(const SceneGeometry& geometry);
+
+// XXH64 of an environment file's bytes, or 0 when it cannot be read.
+uint64_t EnvironmentFileChecksum(const std::string& path);
+
+// The manifest for `scene` (as parsed from `scene_text`), its `geometry`, the resolved sampling
+// and the command line. Throws InputError naming the scene file on bad compression settings.
+RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& scene_text,
+                            const SceneGeometry& geometry, const std::string& geometry_bytes,
+                            const ResolvedSampling& sampling, const FarmOptions& options);
+
+}  // namespace prt

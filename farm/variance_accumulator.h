@@ -1,0 +1,49 @@
+// Rank 0's sum of the sampling jobs' Monte-Carlo variance (formats/transport_variance.h): each
+// new job's record is appended to checkpoints/variance.log (made durable with the rows, before
+// the job's journal line); a resumed run adds the logged records of the jobs it re-uses; the
+// finalize phase writes the total as run/transport.variance.
+#pragma once
+
+#include <map>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "formats/run_folder.h"
+#include "formats/transport_variance.h"
+#include "vocabulary/scene_geometry.h"
+
+namespace prt {
+
+class VarianceAccumulator {
+ public:
+  // `fresh`: the log starts empty; else the records already in it are kept for Reuse().
+  VarianceAccumulator(const RunFolder& folder, const SceneGeometry& geometry, int cubemap_n,
+                      int rays_per_texel, bool fresh);
+  ~VarianceAccumulator();
+  VarianceAccumulator(const VarianceAccumulator&) = delete;
+  VarianceAccumulator& operator=(const VarianceAccumulator&) = delete;
+
+  // Empty sums of this run's shape (a job fills them with AddRow).
+  TransportVariance Empty() const;
+  // A new job's sums: added, and appended to the log (durable after Sync()).
+  void Record(const std::string& phase, uint64_t first, uint64_t count,
+              const TransportVariance& sums);
+  // A re-used job: its logged sums are added. False when the log does not hold them (a run of
+  // an older prt-farm, a torn log): the rows stay uncovered (TransportVariance::rows_covered).
+  bool Reuse(const std::string& phase, uint64_t first, uint64_t count);
+  void Sync();
+  // run/transport.variance, durably.
+  void WriteFile() const;
+  const TransportVariance& total() const { return total_; }
+
+ private:
+  std::string log_path_, file_path_;
+  TransportVariance total_;
+  std::map<std::tuple<std::string, uint64_t, uint64_t>, TransportVariance> logged_;
+  int fd_ = -1;
+  uint64_t end_ = 0;
+  bool dirty_ = false;
+};
+
+}  // namespace prt
