@@ -220,10 +220,8 @@ void Compress(FarmContext& ctx) {
     const uint64_t chunk =
         ChunkRows(uint64_t{cols} * sizeof(float), static_cast<uint32_t>(setup[1]),
                   options.memory_budget_bytes, rows);
-    ProgressOptions po;
-    po.unit = "rows";
-    po.log_interval_s = options.log_interval_s;
-    po.log = rank == 0 && !options.quiet;
+    ProgressOptions po = FarmProgressOptions(ctx, "rows", false);
+    if (rank == 0) ctx.run_eta.StepStarted("compress");
     Progress progress("transpose", rows, po);
     if (rank == 0 && !options.quiet)
       spdlog::info(
@@ -438,6 +436,7 @@ void Compress(FarmContext& ctx) {
         rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
       }
       rep.wall_seconds = FarmNow() - start;
+      ctx.run_eta.StepFinished("compress");
       // RunFarm writes the report, then (the compressed file being durable) removes the raw
       // matrix unless --keep-raw.
       rep.enabled = true;

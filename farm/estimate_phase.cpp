@@ -72,6 +72,7 @@ class EstimatePhase final : public FarmPhase {
 
   void Run(FarmContext& ctx) override {
     if (ctx.rank != 0) return;
+    ctx.run_eta.StepStarted("estimate");
     const RunFolder& f = ctx.folder;
     const int n = ctx.params.cubemap_n;
     Json out;
@@ -100,11 +101,7 @@ class EstimatePhase final : public FarmPhase {
     } else {
       const TransportFileReader reader(f.transport);
       const TransportFileInfo& info = reader.info();
-      ProgressOptions po;
-      po.unit = "blocks";
-      po.log_interval_s = ctx.options.log_interval_s;
-      po.log = !ctx.options.quiet;
-      Progress progress("estimate", info.block_count(), po);
+      Progress progress("estimate", info.block_count(), FarmProgressOptions(ctx, "blocks"));
       std::vector<float> block;
       for (uint64_t b = 0; b < info.block_count(); ++b) {
         block.resize(static_cast<std::size_t>(info.RowsInBlock(b) * info.cols()));
@@ -168,6 +165,7 @@ class EstimatePhase final : public FarmPhase {
     if (!skipped.empty()) mc["environments_left_out"] = skipped;
     out["monte_carlo"] = mc;
     WriteFileDurably(f.accuracy, out.dump(2) + "\n");
+    ctx.run_eta.StepFinished("estimate");
     if (!ctx.options.quiet) {
       if (estimable) {
         std::string line;

@@ -20,6 +20,8 @@
 #include "farm/checkpoint_journal.h"
 #include "farm/farm_options.h"
 #include "farm/farm_report.h"
+#include "farm/progress.h"
+#include "farm/run_eta.h"
 #include "farm/stage_plan.h"
 #include "farm/variance_accumulator.h"
 #include "farm/visibility_jobs.h"
@@ -106,6 +108,7 @@ struct FarmContext {
   std::string previous_report;  // report.json of the run being continued ("" if none)
   std::string estimate_key;     // the estimate stage's key (accuracy.json "key")
   EstimateLights estimate;
+  RunEta run_eta;                             // the whole run's ETA on every progress line (rank 0)
   std::optional<TransportFileWriter> writer;  // transport.prtt.partial while sampling
   std::unique_ptr<CheckpointJournal> journal;
   // The sampling jobs' Monte-Carlo variance sums (transport runs while the rows are sampled).
@@ -148,6 +151,15 @@ std::unique_ptr<FarmPhase> MakeVisibilityPhase();
 std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
 std::unique_ptr<FarmPhase> MakeCompressionPhase();
 std::unique_ptr<FarmPhase> MakeEstimatePhase();
+
+// Progress options of a farm loop on rank 0: --log-interval, --quiet, and the whole run's ETA
+// appended to every line. `whole_step`: the loop is its run step's whole work (its ETA is the
+// step's); else the step's prediction counts (a loop that is one part of its step).
+ProgressOptions FarmProgressOptions(FarmContext& ctx, const std::string& unit,
+                                    bool whole_step = true);
+// Rank 0, once setup has decided the stages: the steps left in the run and their predicted
+// durations (farm/run_eta.h), for the whole-run ETA.
+std::vector<RunStep> PredictRunSteps(const FarmContext& ctx);
 
 // Max-reduces every rank's status; if any is non-zero, every rank stops with it.
 void AgreeOrStop(FarmContext& ctx, int local_status);

@@ -52,6 +52,12 @@ std::string FarmReport::ToJsonText() const {
                            {"reason", st.reason},
                            {"wall_seconds", st.wall_seconds}});
   }
+  Json eta_json = Json::array();
+  for (const EtaReport& e : eta) {
+    eta_json.push_back({{"elapsed_seconds", e.elapsed_seconds},
+                        {"step", e.step},
+                        {"predicted_total_seconds", e.predicted_total_seconds}});
+  }
   Json j = {
       {"tool", "prt-farm"},
       {"version", version},
@@ -71,6 +77,7 @@ std::string FarmReport::ToJsonText() const {
       {"transport_bytes", transport_bytes},
       {"wall_seconds", wall_seconds},
       {"stages", stages_json},
+      {"eta", eta_json},
       {"phases", phases_json},
       {"rays_traced", rays_traced},
       {"rays_per_second",

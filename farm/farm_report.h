@@ -99,6 +99,13 @@ struct CompressionFarmReport {
   double Ratio() const;                 // compressed_bytes / raw_bytes
 };
 
+// The whole run's ETA as it was predicted when each step started (farm/run_eta.h).
+struct EtaReport {
+  double elapsed_seconds = 0;
+  std::string step;
+  double predicted_total_seconds = 0;
+};
+
 struct FarmReport {
   std::string status = "running";  // ok | failed | running
   int exit_code = 0;
@@ -118,6 +125,7 @@ struct FarmReport {
       0;  // transport.prtt as kept (packed); 0 when this run did not write it
   std::vector<PhaseReport> phases;
   std::vector<StageReport> stages;
+  std::vector<EtaReport> eta;
   double wall_seconds = 0;
   double sampling_seconds = 0;  // wall time of the sampling phase (for rays/s)
 

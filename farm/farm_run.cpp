@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -48,6 +49,63 @@ void ExitAbruptly(int rank, const std::string& where) {
   spdlog::warn("debug: rank {} exits abruptly {} (--fail-in)", rank, where);
   spdlog::default_logger()->flush();
   std::_Exit(kExitRankFailed);
+}
+
+ProgressOptions FarmProgressOptions(FarmContext& ctx, const std::string& unit, bool whole_step) {
+  ProgressOptions po;
+  po.unit = unit;
+  po.log_interval_s = ctx.options.log_interval_s;
+  po.log = ctx.rank == 0 && !ctx.options.quiet;
+  RunEta* eta = &ctx.run_eta;
+  po.suffix = [eta, whole_step](double step_eta) {
+    return eta->Suffix(whole_step ? step_eta : -1.0);
+  };
+  return po;
+}
+
+std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
+  // Priors measured on the 2-core VM (docs/farm.md, "Progress"): ~10 M occlusion rays/s per
+  // thread, rays over about half the sphere; the sparse method's steps as a fraction of a brute
+  // row (dense 0.75, rank 0.08, reconstruct 0.6: docs/sparse-precomputation.md); packing ~1 GB/s
+  // on rank 0; the compression phase ~100 MB/s per rank.
+  std::vector<RunStep> steps;
+  const double rows = static_cast<double>(ctx.params.rows);
+  const double cols = 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n;
+  const double raw_bytes = rows * cols * 4.0;
+  const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
+  const double row = cols * ctx.params.rays_per_texel * 0.5 / (1e7 * threads);
+  if (ctx.params.run_rows && ctx.params.visibility) {
+    steps.push_back({kVisibilityPhaseName, "visibility", rows, cols * 0.5 / (1e7 * threads)});
+  } else if (ctx.params.run_rows && ctx.params.sparse) {
+    const std::size_t N = ctx.params.rows;
+    const SparsePlan& plan = ctx.plan;
+    const std::size_t budget = SparseDenseBudget(N, plan);
+    std::size_t dense = SparseInitialDenseCount(N, plan);
+    steps.push_back({"dense-initial", "dense", double(dense), 0.75 * row});
+    const int rounds = SparseRounds(plan);
+    for (int it = 0; it < rounds && dense < budget; ++it) {
+      const std::size_t picks = SparsePicksForRound(budget, dense, rounds, it);
+      const std::string k = std::to_string(it + 1);
+      const double cand = std::min<double>(double(N - dense),
+                                           double(picks) * std::max(1, plan.candidates_per_pick));
+      steps.push_back({"rank-" + k, "rank", cand, 0.08 * row});
+      steps.push_back({"dense-rank-" + k, "dense", double(picks), 0.75 * row});
+      dense += picks;
+    }
+    const double sparse = double(N - std::min(N, dense));
+    steps.push_back({"sparse-reconstruct", "sparse", sparse, 0.6 * row});
+    steps.push_back({"dense-fallback", "dense", 0.04 * sparse, 0.75 * row});
+  } else if (ctx.params.run_rows) {
+    steps.push_back({"brute", "row", rows, row});
+  }
+  if (ctx.params.run_rows && !ctx.params.visibility)
+    steps.push_back({"pack", "pack", raw_bytes, 1e-9});
+  if (ctx.params.run_compression)
+    steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
+  if (ctx.params.run_estimate)
+    steps.push_back(
+        {"estimate", "estimate", raw_bytes, ctx.params.run_compression ? 1e-11 : 2.5e-9});
+  return steps;
 }
 
 namespace {
@@ -107,6 +165,12 @@ const char* StageOfPhase(const std::string& phase) {
 // for the stages it re-used (their figures describe the files this run keeps).
 void ReportStages(FarmContext& ctx) {
   FarmReport& rep = ctx.report;
+  rep.eta.clear();
+  for (const RunEtaSample& e : ctx.run_eta.History())
+    rep.eta.push_back({e.elapsed_s, e.step, e.predicted_total_s});
+  std::error_code size_ec;
+  const auto bytes = std::filesystem::file_size(ctx.folder.transport, size_ec);
+  rep.transport_bytes = size_ec ? 0 : static_cast<uint64_t>(bytes);
   rep.stages.clear();
   for (const StageDecision& d : ctx.stage_plan.stages) {
     StageReport st{d.name, ToString(d.action), d.reason, 0};
@@ -144,6 +208,68 @@ void ReportStages(FarmContext& ctx) {
     } catch (const std::exception&) {
     }
   }
+}
+
+std::string Megabytes(const std::string& path) {
+  std::error_code ec;
+  const auto bytes = std::filesystem::file_size(path, ec);
+  if (ec) return "-";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.1f MB", static_cast<double>(bytes) / 1e6);
+  return buf;
+}
+
+// The lines a person reads at the end of a run (stdout): each stage, what it did, how long it
+// took, what it left, and where everything is. report.json has the details.
+std::string RunSummary(const FarmContext& ctx) {
+  const FarmReport& rep = ctx.report;
+  const RunFolder& f = ctx.folder;
+  std::string out = "\nprt-farm: " + rep.scene_name + " (" + rep.scene + "), " +
+                    std::to_string(rep.rows) + " samples, n = " + std::to_string(rep.cubemap_n) +
+                    ", " + rep.method + ", " + std::to_string(rep.ranks) + " rank(s), " +
+                    Progress::FormatDuration(rep.wall_seconds) + "\n";
+  char line[512];
+  for (const StageReport& st : rep.stages) {
+    std::string what;
+    if (st.name == kStageRows) {
+      what = ctx.params.visibility
+                 ? "visibility.prtv " + Megabytes(f.visibility)
+                 : "transport.prtt " + Megabytes(f.transport) + " (packed rows), " +
+                       Progress::FormatCount(static_cast<double>(rep.rays_traced)) + " rays traced";
+    } else if (st.name == kStageCompression) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf, "transport.prtc %s, %.2f%% Frobenius error of T",
+                    Megabytes(f.compressed).c_str(),
+                    100 * rep.compression.relative_frobenius_error);
+      what = st.status == "reused" ? "transport.prtc " + Megabytes(f.compressed) : buf;
+    } else if (st.name == kStageEstimate) {
+      what = "accuracy.json";
+      const nlohmann::json a = nlohmann::json::parse(
+          rep.accuracy_json.empty() ? "{}" : rep.accuracy_json, nullptr, false);
+      if (a.is_object() && a.contains("monte_carlo") &&
+          a["monte_carlo"].value("estimable", false)) {
+        what += ": Monte-Carlo error of B";
+        for (const auto& e : a["monte_carlo"]["environments"]) {
+          char buf[96];
+          std::snprintf(buf, sizeof buf, " %.2f%% %s", 100 * e.value("relative_rms", 0.0),
+                        e.value("name", std::string()).c_str());
+          what += buf;
+        }
+      }
+    } else {
+      what = "scene.toml, geometry.prtg";
+    }
+    std::snprintf(line, sizeof line, "  %-12s %-9s %8s  %s\n", st.name.c_str(), st.status.c_str(),
+                  st.wall_seconds > 0 ? Progress::FormatDuration(st.wall_seconds).c_str() : "",
+                  what.c_str());
+    out += line;
+    // Why it ran, where that is news: not for a new run, nor for "the rows ran".
+    if (!st.reason.empty() && st.status != "reused" && st.reason != "new run" &&
+        st.reason.rfind("the rows ", 0) != 0)
+      out += "               why: " + st.reason + "\n";
+  }
+  out += "  run folder: " + f.dir + "   report: " + f.report + "\n";
+  return out;
 }
 
 }  // namespace
@@ -223,6 +349,7 @@ int RunFarm(const FarmOptions& options) {
       if (ctx.params.complete == 2) return kExitOk;
       if (ctx.params.complete) break;
       for (auto& p : PhasesAfterSetup(ctx)) phases.push_back(std::move(p));
+      if (ctx.rank == 0) ctx.run_eta.SetSteps(PredictRunSteps(ctx));
     }
   }
   rep.wall_seconds = FarmNow() - start;
@@ -243,6 +370,8 @@ int RunFarm(const FarmOptions& options) {
         "{:.2f}; report in {}",
         Progress::FormatDuration(rep.wall_seconds), rep.jobs_total, rep.jobs_reused,
         rep.rays_traced, rep.LoadImbalance(), ctx.folder.report);
+    spdlog::default_logger()->flush();
+    if (!options.quiet) std::fputs(RunSummary(ctx).c_str(), stdout);
   }
   spdlog::default_logger()->flush();
   return exit_code;

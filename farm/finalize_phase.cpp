@@ -41,10 +41,8 @@ class FinalizePhase final : public FarmPhase {
     const uint64_t group = std::min<uint64_t>(by_memory, 2 * static_cast<uint64_t>(ctx.threads));
     const uint64_t blocks = info.block_count();
     PackedTransportWriter packed(ctx.folder.transport, info);
-    ProgressOptions po;
-    po.unit = "blocks";
-    po.log_interval_s = ctx.options.log_interval_s;
-    po.log = !ctx.options.quiet;
+    ProgressOptions po = FarmProgressOptions(ctx, "blocks");
+    ctx.run_eta.StepStarted("pack");
     Progress progress("pack", blocks, po);
     std::vector<std::vector<float>> rows(static_cast<std::size_t>(group));
     std::vector<std::string> frames(static_cast<std::size_t>(group));
@@ -67,6 +65,7 @@ class FinalizePhase final : public FarmPhase {
       ExitAbruptly(0, "before renaming " + ctx.folder.transport);
     const uint64_t bytes = packed.Finish();
     progress.Finish();
+    ctx.run_eta.StepFinished("pack");
     ctx.writer.reset();
     std::filesystem::remove(ctx.folder.partial);
     SyncDirectory(ctx.folder.dir);

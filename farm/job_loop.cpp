@@ -330,12 +330,10 @@ void JobLoop::Run(JobBatch& batch) {
   FarmReport& rep = ctx.report;
   JobPlanner planner(batch.items, batch.done, BatchSizing(ctx, batch.max_items));
 
-  ProgressOptions po;
-  po.unit = batch.unit;
+  ProgressOptions po = FarmProgressOptions(ctx, batch.unit);
   po.rate_unit = batch.rate_unit;
-  po.log_interval_s = ctx.options.log_interval_s;
-  po.log = !ctx.options.quiet;
   po.already_done = planner.done_before_rows();
+  ctx.run_eta.StepStarted(batch.name);
   Progress progress(batch.name, batch.items, po);
 
   const double timeout = ctx.rank_timeout();
@@ -486,6 +484,7 @@ void JobLoop::Run(JobBatch& batch) {
     }
   }
   progress.Finish();
+  ctx.run_eta.StepFinished(batch.name);
   ++st.batch_number;
 }
 

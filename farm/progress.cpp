@@ -61,6 +61,7 @@ void Progress::Finish() {
       line += fmt::format(" ({} {} done before)", std::min(options_.already_done, total_),
                           options_.unit);
     }
+    if (options_.suffix) line += options_.suffix(0.0);
   }
   spdlog::info("{}", line);
 }
@@ -105,6 +106,7 @@ std::string Progress::LineLocked() const {
   line += fmt::format(" {} {}/s, elapsed {}, ETA {}", FormatCount(s.units_per_s), options_.unit,
                       FormatDuration(s.elapsed_s),
                       s.eta_s < 0 ? std::string("unknown") : FormatDuration(s.eta_s));
+  if (options_.suffix) line += options_.suffix(s.eta_s);
   return line;
 }
 

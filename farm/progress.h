@@ -20,6 +20,9 @@ struct ProgressOptions {
   uint64_t already_done = 0;      // units done before this run (e.g. re-used checkpoints):
                                   // they count towards the percentage, not towards the rate
   std::function<double()> clock;  // seconds; defaults to a steady clock (tests inject one)
+  // Appended to every line, given this loop's ETA (−1 unknown): the whole run's ETA
+  // (farm/run_eta.h).
+  std::function<std::string(double eta_s)> suffix;
 };
 
 struct ProgressSnapshot {

@@ -59,7 +59,9 @@ int Pack(const std::string& run_dir, const std::vector<std::string>& meshes,
   }
   prt::pack::WritePackFile(out, input, options);
   const prt::pack::PackReader reader = prt::pack::PackReader::OpenFile(out);
-  std::cout << prt::pack::VerifyPack(reader) << "\n" << prt::pack::InspectPack(reader);
+  // One line: what was written and that it reads back (`prt-pack inspect` for the details).
+  std::cout << "wrote " << out << " (" << reader.file_size()
+            << " bytes): " << prt::pack::VerifyPack(reader) << "\n";
   return 0;
 }
 
@@ -119,6 +121,8 @@ int main(int argc, char** argv) {
   std::string file;
   CLI::App* inspect = app.add_subcommand("inspect", "Print sections, sizes and a scene summary");
   inspect->add_option("file", file, ".prtpack file")->required();
+  bool meta = false;
+  inspect->add_flag("--meta", meta, "Print the META section's JSON as well (the run's report)");
   CLI::App* verify = app.add_subcommand("verify", "Check every checksum and structural rule");
   verify->add_option("file", file, ".prtpack file")->required();
 
@@ -132,6 +136,7 @@ int main(int argc, char** argv) {
     if (*pack) return Pack(run_dir, meshes, metadata, out, run_options, options);
     const prt::pack::PackReader reader = prt::pack::PackReader::OpenFile(file);
     if (*inspect) std::cout << prt::pack::InspectPack(reader);
+    if (*inspect && meta) std::cout << "META: " << reader.ReadMetadata() << "\n";
     if (*verify) std::cout << prt::pack::VerifyPack(reader) << "\n";
     return 0;
   } catch (const std::exception& e) {

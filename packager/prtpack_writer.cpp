@@ -13,10 +13,10 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 
+#include "formats/visibility_blocks.h"
 #include "packager/draco_mesh_codec.h"
 #include "packager/prtpack_format.h"
 #include "vocabulary/errors.h"
-#include "formats/visibility_blocks.h"
 
 namespace prt::pack {
 namespace {

@@ -8,13 +8,13 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "formats/compressed_transport.h"
+#include "formats/geometry_file.h"
+#include "formats/transport_file.h"
 #include "packager/prtpack_test_util.h"
 #include "packager/prtpack_transport.h"
-#include "formats/compressed_transport.h"
-#include "vocabulary/errors.h"
-#include "formats/transport_file.h"
-#include "formats/geometry_file.h"
 #include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
 
 namespace prt::pack {
 namespace {
@@ -46,7 +46,12 @@ RunFolderFixture MakeRunFolder(const std::string& name) {
   f.geometry.bounds_max = {2, 2, 2};
   WriteSceneGeometryFile((f.dir / kGeometryFileName).string(), f.geometry);
   WriteFileDurably((f.dir / kSceneCopyFileName).string(), "name = \"octa-scene\"\ncubemap_n = 2\n");
-  WriteFileDurably((f.dir / kReportFileName).string(), R"({"wall_seconds": 1.5})");
+  WriteFileDurably((f.dir / kReportFileName).string(),
+                   R"({"wall_seconds": 1.5, "method": "brute", "cubemap_n": 2,
+                       "compression": {"relative_frobenius_error": 0.0125, "scheme": "2d"},
+                       "accuracy": {"monte_carlo": {"estimable": true, "environments": [
+                         {"name": "uniform", "relative_rms": 0.0012},
+                         {"name": "sunrise.exr", "relative_rms": 0.0085}]}}})");
   f.transport.header.cubemap_n = 2;
   f.transport.header.sample_count = 12;
   f.transport.header.terms_per_column = 2;
@@ -98,7 +103,17 @@ TEST(RunFolderPack, RunFolderRoundTrip) {
   EXPECT_EQ(meta["parameters"]["sample_count"], 12);
   EXPECT_EQ(meta["parameters"]["columns_per_block"], 5);
 
+  // The run's error estimates (docs/prtpack-format.md, META "error_estimates").
+  EXPECT_EQ(meta["error_estimates"]["compression"]["relative_frobenius_error"], 0.0125);
+  EXPECT_EQ(meta["error_estimates"]["monte_carlo"]["environments"][1]["relative_rms"], 0.0085);
+
   const std::string inspect = InspectPack(r);
+  EXPECT_NE(inspect.find("error estimates: compression 1.250% of T (relative Frobenius); "
+                         "Monte-Carlo, relative RMS of B: 0.120% uniform, 0.850% sunrise.exr"),
+            std::string::npos)
+      << inspect;
+  EXPECT_NE(inspect.find("run: brute, n = 2"), std::string::npos) << inspect;
+  EXPECT_EQ(inspect.find("wall_seconds"), std::string::npos) << inspect;  // no JSON dump
   EXPECT_NE(inspect.find("scene: \"octa-scene\""), std::string::npos) << inspect;
   EXPECT_NE(inspect.find("12 samples x 24 columns in 5 blocks"), std::string::npos) << inspect;
   EXPECT_NE(inspect.find("mesh 1 \"ground\": 6 vertices, 8 triangles"), std::string::npos)

@@ -59,6 +59,28 @@ nlohmann::json Report(const std::string& run) {
 }
 
 // The in-process compressor on the farmed rows (the reference the farm must equal).
+// report.json's compression error is exact: ‖T − T̃‖_F / ‖T‖_F with T the rows of
+// transport.prtt and T̃ what transport.prtc decodes to.
+void ExpectExactFrobeniusError(const std::string& run) {
+  const std::string bytes = ReadWholeFile(run + "/transport.prtc");
+  const CompressedTransport t = DecodeCompressedTransport(
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
+      "prtc");
+  const std::vector<float> decoded = DecompressTransport(t);
+  const TransportFileReader raw(run + "/transport.prtt");
+  std::vector<float> rows(raw.info().rows * raw.info().cols());
+  raw.ReadRows(0, raw.info().rows, rows.data());
+  ASSERT_EQ(rows.size(), decoded.size());
+  double err = 0, total = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    err += (double(rows[i]) - decoded[i]) * (double(rows[i]) - decoded[i]);
+    total += double(rows[i]) * rows[i];
+  }
+  const double reported = Report(run)["compression"]["relative_frobenius_error"].get<double>();
+  EXPECT_GT(reported, 0.0) << run;
+  EXPECT_NEAR(reported, std::sqrt(err / total), 1e-5 * std::sqrt(err / total) + 1e-7) << run;
+}
+
 std::string InProcess(const std::string& run, const std::string& scheme = "",
                       const std::string& scene_file = kScene) {
   TransportFileReader reader(run + "/transport.prtt");
@@ -100,22 +122,7 @@ TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
   EXPECT_NEAR(c["ratio_to_raw"].get<double>(), static_cast<double>(got.size()) / (72 * 384 * 4),
               1e-12);
   EXPECT_GT(c["transpose_mb_per_second"].get<double>(), 0);
-  // The compression's exact error: ‖T − T̃‖_F / ‖T‖_F with T̃ what transport.prtc decodes to.
-  {
-    const CompressedTransport t = DecodeCompressedTransport(
-        std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(got.data()), got.size()), "prtc");
-    const std::vector<float> decoded = DecompressTransport(t);
-    const TransportFileReader raw(first + "/transport.prtt");
-    std::vector<float> rows(72 * 384);
-    raw.ReadRows(0, 72, rows.data());
-    double err = 0, total = 0;
-    for (std::size_t i = 0; i < rows.size(); ++i) {
-      err += (double(rows[i]) - decoded[i]) * (double(rows[i]) - decoded[i]);
-      total += double(rows[i]) * rows[i];
-    }
-    EXPECT_GT(c["relative_frobenius_error"].get<double>(), 0.0);
-    EXPECT_NEAR(c["relative_frobenius_error"].get<double>(), std::sqrt(err / total), 1e-5);
-  }
+  ExpectExactFrobeniusError(first);
   const nlohmann::json phases = Report(first)["phases"];
   EXPECT_EQ(phases[phases.size() - 2]["name"], "compress");
   EXPECT_EQ(phases.back()["name"], "estimate");
@@ -173,6 +180,19 @@ TEST(CompressionPhase, SchemeOverrideAndNoCompress) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtc") == InProcess(run, "2d"));
   EXPECT_EQ(Report(run)["compression"]["scheme"], "2d");
+  ExpectExactFrobeniusError(run);
+  // The per-column budget (2D: the rows truncated before the column stage; 4D: per column).
+  const std::string column_scene = WorkDir("column-budget") + "/tiny_column.toml";
+  fs::copy_file(std::string(PRT_TESTS_DATA_DIR) + "/box.off",
+                fs::path(column_scene).parent_path() / "box.off", fs::copy_options::skip_existing);
+  WriteFileDurably(column_scene, ReadWholeFile(kScene) + "\n[compression]\nbudget = \"column\"\n");
+  for (const std::string scheme : {"2d", "adaptive4d"}) {
+    const std::string col = WorkDir("column-" + scheme);
+    ASSERT_EQ(Farm(2, column_scene + " --out " + col + kArgs + " --compression-scheme " + scheme)
+                  .exit_code,
+              0);
+    ExpectExactFrobeniusError(col);
+  }
   const std::string none = WorkDir("none");
   ASSERT_EQ(Farm(1, kScene + " --out " + none + kArgs + " --no-compress").exit_code, 0);
   EXPECT_TRUE(fs::exists(none + "/transport.prtt"));

@@ -134,7 +134,7 @@ TEST(GlossyPipeline, FarmPackAndViewAGlossyImage) {
       << out;
   ASSERT_EQ(RunCommand(std::string(PRT_PACK_EXE) + " inspect " + pack, &out), 0) << out;
   EXPECT_NE(out.find("visibility: 2 VISB sections"), std::string::npos) << out;
-  EXPECT_NE(out.find("\"brdf\":\"phong\""), std::string::npos) << out;
+  EXPECT_NE(out.find("materials: box phong"), std::string::npos) << out;
   ASSERT_EQ(RunCommand(std::string(PRT_PACK_EXE) + " verify " + pack, &out), 0) << out;
   EXPECT_NE(out.find("72 visibility maps decoded"), std::string::npos) << out;
 

@@ -13,8 +13,8 @@
 #include <stdexcept>
 #include <vector>
 
-#include "vocabulary/envmap.h"
 #include "vocabulary/environment_io.h"
+#include "vocabulary/envmap.h"
 
 namespace prt::testing {
 namespace {

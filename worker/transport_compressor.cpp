@@ -196,22 +196,31 @@ SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first
   const Sums sums = tbb::parallel_reduce(
       tbb::blocked_range<uint32_t>(0, count), Sums{0.0, 0.0},
       [&](const tbb::blocked_range<uint32_t>& r, Sums acc) {
-        std::vector<float> x(S), y(S);
+        std::vector<float> y(S);
         std::vector<uint8_t> scale(S);
         for (uint32_t k = r.begin(); k != r.end(); ++k) {
-          std::copy(columns + k * S, columns + (k + 1) * S, x.begin());
-          if (depths != nullptr)
-            InverseColumnTransform(h.domain, h.column_wavelet, depths[k], x.data());
+          const float* x = columns + static_cast<std::size_t>(k) * S;
+          const CompressedColumn* c = of[k];
           std::fill(y.begin(), y.end(), 0.0f);
-          if (const CompressedColumn* c = of[k]) {
+          if (c != nullptr) {
             ColumnScaleMap(h.domain, c->depth, scale.data());
             DequantiseColumn(h, *c, scale.data(), y.data());
-            InverseColumnTransform(h.domain, h.column_wavelet, c->depth, y.data());
           }
-          for (std::size_t i = 0; i < S; ++i) {
-            const double d = double(x[i]) - y[i];
-            acc.first += d * d;
-            acc.second += double(x[i]) * x[i];
+          if (depths != nullptr) {
+            // The transform is linear: x − x̃ = W⁻¹(c − ĉ), one inverse transform per column.
+            if (c != nullptr && c->depth != depths[k])
+              throw std::logic_error("ColumnBlockError: compressed at another depth");
+            for (std::size_t i = 0; i < S; ++i) y[i] = x[i] - y[i];
+            InverseColumnTransform(h.domain, h.column_wavelet, depths[k], y.data());
+            for (std::size_t i = 0; i < S; ++i) acc.first += double(y[i]) * y[i];
+          } else {
+            if (c != nullptr)
+              InverseColumnTransform(h.domain, h.column_wavelet, c->depth, y.data());
+            for (std::size_t i = 0; i < S; ++i) {
+              const double d = double(x[i]) - y[i];
+              acc.first += d * d;
+              acc.second += double(x[i]) * x[i];
+            }
           }
         }
         return acc;

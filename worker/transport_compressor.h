@@ -82,11 +82,12 @@ std::vector<CompressedColumn> QuantiseColumnBlock(const CompressedTransportHeade
                                                   float threshold,
                                                   std::vector<ColumnStats>* stats = nullptr);
 // The exact squared error of the column stage on a block of columns, in the T̂ basis (which
-// the orthonormal row transform makes the error in the texel basis): Σ ‖x − x̃‖² and Σ ‖x‖²,
-// with x each column entering the column stage (sample order) and x̃ what its compressed column
-// decodes to (formats/column_coding.h: dequantised, inverse-transformed; 0 for a column not in
-// `compressed`). With `depths`, `columns` holds the transformed columns (TransformColumnBlock's
-// output) and x is recovered by the inverse transform. Parallel over columns (TBB).
+// the orthonormal row transform makes the error in the texel basis): Σ ‖x − x̃‖², with x each
+// column entering the column stage (sample order) and x̃ what its compressed column decodes to
+// (formats/column_coding.h: dequantised, inverse-transformed; 0 for a column not in
+// `compressed`), and Σ ‖x‖². With `depths`, `columns` holds the transformed columns c
+// (TransformColumnBlock's output) and the error is W⁻¹(c − ĉ) by linearity (total not computed:
+// 0). Parallel over columns (TBB).
 struct SquaredError {
   double error = 0;
   double total = 0;
