@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -96,10 +96,33 @@ run_stress() {
   PRT_STRESS_FRAMES="${PRT_STRESS_FRAMES:-100000}" "$BUILD_DIR/viewer/viewer_tests" \
     --gtest_filter='PerBandIncrementalTest.*Drift*'
 }
+# Issue 27's table: each kind of scene edit of a finished default-scene run, what --resume re-ran,
+# the rays it traced and its wall time against the fresh run (scripts/rebake_bench.py).
+run_rebake() { python3 "$ROOT/scripts/rebake_bench.py" "$BUILD_DIR" "$OUT/rebake" --np 2; }
+# The farm's Monte-Carlo error estimate (accuracy.json) against the measured difference of two
+# independent seeds, on the default scene and the dragon, brute force and the sparse method.
+run_mc_error() {
+  local dir="$OUT/mc-error" scenes=(default dragon) methods=(brute sparse)
+  mkdir -p "$dir"
+  sed 's|"meshes/bunny00.off"|"meshes/ChineseDragon-10kv.off"|; s|name = "bunny"|name = "dragon"|'     "$ROOT/scenes/default.toml" > "$dir/dragon.toml"
+  for scene in "${scenes[@]}"; do
+    local file="$ROOT/scenes/default.toml"
+    [ "$scene" = dragon ] && file="$dir/dragon.toml"
+    for method in "${methods[@]}"; do
+      for seed in 1 2; do
+        local run="$dir/$scene-$method-s$seed"
+        [ -f "$run/accuracy.json" ] || mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm"           "$file" --out "$run" --force --method "$method" --seed "$seed" --no-compress -q
+      done
+      echo "== $scene, $method: estimate (accuracy.json) against two seeds =="
+      "$BUILD_DIR/bench/prt-mc-check" "$dir/$scene-$method-s1" "$dir/$scene-$method-s2"
+    done
+  done
+}
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_figure9; run_viewer; run_relight; run_glossy ;;
-  transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress) "run_$WHAT" ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress] [--quick]" >&2; exit 1 ;;
+  transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
+  mc-error) run_mc_error ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error] [--quick]" >&2; exit 1 ;;
 esac

@@ -116,55 +116,87 @@ struct TransportSampler::Impl {
   // per texel afterwards, in stratum order, so that a texel's value does not depend on which
   // rays shared its packet (rays from one point in neighbouring directions: 2.3× the throughput
   // of one rtcOccluded1 call per ray, bench/transport_bench.cpp).
+  static constexpr int kMaxBlocksPerBand = 32;
   struct Batch {
     static constexpr int kRays = static_cast<int>(EmbreeScene::kPacket);
     struct Open {  // a texel whose value is not written yet
       double sum = 0, unocc = 0;
       float* value = nullptr;
       float* unoccluded = nullptr;
-      float* variance = nullptr;  // the collapsed-strata variance estimate (VarianceGroups)
-      // The stratum group being summed (Σx, Σx² of its strata) and the finished groups' total.
+      float* variance = nullptr;  // the collapsed-strata variance estimate (see AddToVariance)
+      // The group being summed and the finished groups' total. Pairs: Σx and Σx² of the pair's
+      // strata. 2×2 blocks: the signed sums of the blocks of the current band of two stratum
+      // rows (one per block along u).
       int group = -1;
       double gx = 0, gxx = 0, var = 0;
+      double block[kMaxBlocksPerBand] = {};
       bool complete = false;
     };
     OcclusionRay rays[kRays];
     double weight[kRays];  // Ω_s·cos of each ray
     int slot[kRays];       // the open texel it belongs to
-    int group[kRays];      // its stratum's variance group (with variance only)
+    int stratum[kRays];    // its stratum (with variance only)
     int count = 0;
     Open open[kRays + 1];
     int opened = 0;
   };
 
   // The Monte-Carlo variance of a texel's estimate, from its own rays (docs/transport-sampling.md,
-  // "Monte-Carlo error"). One ray per stratum gives no variance per stratum, so the strata are
-  // collapsed into groups of two neighbours along u (the last group takes a third when k is
-  // odd), the classic collapsed-strata estimator (Cochran, Sampling Techniques, §5A.12): for a
-  // group G of g strata with values x_s = Ω_s·V(ω_s)·cos(ω_s) (0 for a stratum below the
-  // horizon),  Var(Σ_{s∈G} x_s) ≈ g/(g−1) · Σ_{s∈G} (x_s − x̄_G)²,  unbiased when the strata of
-  // a group have equal means and conservative otherwise. The texel's variance is the sum over
-  // its groups, divided by π². k = 1 has no group of two: the variance is reported as 0
-  // (VarianceEstimable() is false).
-  int VarianceGroup(int stratum) const {
+  // "Monte-Carlo error"). One ray per stratum gives no variance per stratum, so neighbouring
+  // strata are compared (collapsed strata, Cochran, Sampling Techniques §5A.12). The strata
+  // values are x_s = Ω_s·V(ω_s)·cos(ω_s) (0 for a stratum below the horizon); their means differ
+  // across a texel (the cosine, a visibility edge), and a plain difference of neighbours counts
+  // that trend as noise. So where the stratum grid allows (a and b even, a/2 ≤ 32), strata go in
+  // 2×2 blocks and each block's second difference d = x₀₀ − x₁₀ − x₀₁ + x₁₁ is used:
+  // E[d²] = Σ Var(x) + (the trend's second difference)², unbiased for any trend linear across
+  // the block (a straight visibility edge, the cosine's gradient). Otherwise strata go in pairs
+  // along u (the last pair takes a third when k is odd), with g/(g−1)·Σ(x − x̄)². The texel's
+  // variance is the sum over its blocks or pairs, divided by π². k = 1 has nothing to compare:
+  // the variance is reported as 0 (VarianceEstimable() is false).
+  bool UseBlocks() const {
+    return strata_u % 2 == 0 && strata_v % 2 == 0 && strata_u / 2 <= kMaxBlocksPerBand;
+  }
+  int PairOf(int stratum) const {
     const int k = options.rays_per_texel;
     return std::min(stratum / 2, std::max(0, k / 2 - 1));
   }
-  int VarianceGroupSize(int group) const {
+  int PairSize(int pair) const {
     const int k = options.rays_per_texel;
     if (k < 2) return 1;
-    return group == k / 2 - 1 ? 2 + k % 2 : 2;
+    return pair == k / 2 - 1 ? 2 + k % 2 : 2;
   }
   void FoldVarianceGroup(Batch::Open& t) const {
     if (t.group >= 0) {
-      const int g = VarianceGroupSize(t.group);
-      if (g >= 2) {
-        const double ss = std::max(0.0, t.gxx - t.gx * t.gx / g);
-        t.var += ss * g / (g - 1);
+      if (UseBlocks()) {
+        for (int i = 0; i < strata_u / 2; ++i) {
+          t.var += t.block[i] * t.block[i];
+          t.block[i] = 0;
+        }
+      } else {
+        const int g = PairSize(t.group);
+        if (g >= 2) t.var += std::max(0.0, t.gxx - t.gx * t.gx / g) * g / (g - 1);
       }
     }
     t.group = -1;
     t.gx = t.gxx = 0;
+  }
+  // Adds the value x of stratum s of texel t (strata arrive in increasing order).
+  void AddToVariance(Batch::Open& t, int s, double x) const {
+    if (UseBlocks()) {
+      const int su = s % strata_u, sv = s / strata_u;
+      if (sv / 2 != t.group) {
+        FoldVarianceGroup(t);
+        t.group = sv / 2;
+      }
+      t.block[su / 2] += ((su ^ sv) & 1) ? -x : x;
+      return;
+    }
+    if (PairOf(s) != t.group) {
+      FoldVarianceGroup(t);
+      t.group = PairOf(s);
+    }
+    t.gx += x;
+    t.gxx += x * x;
   }
 
   // Traces the batch's rays, adds each one's weight to its texel in order (the unoccluded sum
@@ -189,15 +221,7 @@ struct TransportSampler::Impl {
       Batch::Open& t = b.open[b.slot[i]];
       t.unocc += b.weight[i];
       if (!blocked[i]) t.sum += b.weight[i];
-      if (t.variance != nullptr) {
-        if (b.group[i] != t.group) {
-          FoldVarianceGroup(t);
-          t.group = b.group[i];
-        }
-        const double x = blocked[i] ? 0.0 : b.weight[i];
-        t.gx += x;
-        t.gxx += x * x;
-      }
+      if (t.variance != nullptr) AddToVariance(t, b.stratum[i], blocked[i] ? 0.0 : b.weight[i]);
     }
     int kept = 0;
     for (int o = 0; o < b.opened; ++o) {
@@ -284,7 +308,7 @@ struct TransportSampler::Impl {
         ray.direction[2] = dir[i][2];
         b.weight[b.count] = omega[s0 + i] * c;
         b.slot[b.count] = slot;
-        b.group[b.count] = VarianceGroup(s0 + i);
+        b.stratum[b.count] = s0 + i;
         if (++b.count == Batch::kRays) {
           Flush(b, trace);
           slot = b.opened - 1;  // this texel, the one left open, moved to the front

@@ -294,15 +294,15 @@ TEST(TransportSampler, OpenBoxFloorCentreSeesTheFormFactorOfTheOpening) {
 // The per-texel variance from a row's own rays (collapsed strata) against the variance measured
 // over many independent seeds: the floor centre of an open box whose opening's edges cut texels
 // (a/h = 0.37, the test above), so partly visible texels carry real Monte-Carlo noise. Summed
-// over the row, the estimate must be conservative and within 1.5× of the measured variance (1.18×
-// and 1.16× measured) for a 2×2 and a 4×4 stratification; the rows must be the same bytes with and
-// without the estimate.
+// over the row, the estimate must be within 10 % of the measured variance for a 2×2 and a 4×4
+// stratification (2×2 blocks: 0.998 and 1.012 measured), and conservative within 1.5× for the
+// pairs of a 3×2 one (1.21 measured); the rows must be the same bytes with and without it.
 TEST(TransportSampler, VarianceEstimateMatchesTheSpreadOfIndependentSeeds) {
   SceneGeometry g;
   g.meshes = {Box(1.0, 2.7, false)};
   const EmbreeScene scene(g);
   const SpatialSample s = SpatialSamplesOf(g)[8];
-  for (int k : {4, 16}) {
+  for (int k : {4, 16, 6}) {
     constexpr int kSeeds = 300;
     const int n = 16;
     const std::size_t texels = 6u * n * n;
@@ -329,8 +329,11 @@ TEST(TransportSampler, VarianceEstimateMatchesTheSpreadOfIndependentSeeds) {
     }
     ASSERT_GT(measured, 0.0);
     std::printf("k = %d: estimated / measured variance %.3f\n", k, estimated / measured);
-    EXPECT_GE(estimated / measured, 0.95) << "k = " << k;
-    EXPECT_LE(estimated / measured, 1.5) << "k = " << k;
+    // 2×2 blocks (k = 4, 16): unbiased for trends linear across a block; pairs (k = 6, a 3×2
+    // grid): conservative.
+    const bool blocks = k != 6;
+    EXPECT_GE(estimated / measured, blocks ? 0.9 : 0.95) << "k = " << k;
+    EXPECT_LE(estimated / measured, blocks ? 1.1 : 1.5) << "k = " << k;
   }
   // One ray per texel: nothing to compare a stratum with.
   const TransportSampler single(scene, 8, {1, 1});
