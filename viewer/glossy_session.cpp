@@ -153,8 +153,14 @@ void GlossySession::RelightReference(const BlockLighting& light, const Vec3& eye
 
 ImageRgb GlossySession::Render(const Camera& camera, std::span<const float> vertex_rgb,
                                const CubemapRgb* background) const {
+  return Render(camera, vertex_rgb,
+                background != nullptr ? CubemapBackground(*background) : BackgroundFunction{});
+}
+
+ImageRgb GlossySession::Render(const Camera& camera, std::span<const float> vertex_rgb,
+                               const BackgroundFunction& background) const {
   RasterOptions options;
-  if (background != nullptr) options.background = CubemapBackground(*background);
+  options.background = background;
   const RasterImage r = RasterizeTriangles(camera, positions_, triangles_, vertex_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = r.rgb;

@@ -16,6 +16,7 @@
 #include "formats/visibility_blocks.h"
 #include "viewer/block_lighting.h"
 #include "viewer/brdf.h"
+#include "viewer/rasterizer.h"
 #include "viewer/triple_product.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
@@ -74,7 +75,11 @@ class GlossySession {
   TripleProductStats Relight(const BlockLighting& light, const Vec3& eye, std::span<float> rgb,
                              const TripleProductOptions& options = {}) const;
   void RelightReference(const BlockLighting& light, const Vec3& eye, std::span<float> rgb) const;
-  // Rasterises the meshes with per-vertex colours from `camera`, over `background` if non-null.
+  // Rasterises the meshes with per-vertex colours from `camera`, over `background` (an empty
+  // function: black; prt-view's is EnvironmentBackground, environment_background.h).
+  ImageRgb Render(const Camera& camera, std::span<const float> vertex_rgb,
+                  const BackgroundFunction& background) const;
+  // The same over the lighting cubemap (nearest texel: blocky) if non-null, else black.
   ImageRgb Render(const Camera& camera, std::span<const float> vertex_rgb,
                   const CubemapRgb* background) const;
 

@@ -15,18 +15,20 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "packager/prtpack_writer.h"
+#include "viewer/environment_background.h"
 #include "viewer/rasterizer.h"
 #include "viewer/window_test_support.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/sky.h"
 #include "worker/embree_scene.h"
 #include "worker/visibility_sampler.h"
-#include "vocabulary/environment_io.h"
-#include "vocabulary/cubemap_resample.h"
-#include "vocabulary/sky.h"
 
 namespace prt {
 namespace {
@@ -305,7 +307,10 @@ TEST(GlossySession, WindowScreenshotMatchesHeadlessRender) {
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(t.env), s->cubemap_n());
   std::vector<float> rgb(3 * s->sample_count());
   s->Relight(s->Lighting(cube), s->camera().eye, rgb, {.exact_cosine = true});
-  const ImageRgb image = s->Render(s->camera(), rgb, &cube);
+  // The window's background is the environment image itself, as prt-view's.
+  const ImageRgb image = s->Render(
+      s->camera(), rgb,
+      EnvironmentBackground(std::make_shared<const EnvironmentLookup>(ReadEnvironment(t.env))));
   ASSERT_EQ(codes.size(), image.pixels.size());
   EXPECT_LE(testing::LargestCodeDifference(codes, image), 1.0);
 #endif

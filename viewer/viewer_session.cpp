@@ -16,8 +16,8 @@
 #include "viewer/camera_metadata.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/rasterizer.h"
-#include "vocabulary/errors.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 
@@ -144,8 +144,14 @@ std::vector<float> ViewerSession::Shade(const SampleRadiance& radiance) const {
 
 ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
                                const CubemapRgb* background) const {
+  return Render(camera, sample_rgb,
+                background != nullptr ? CubemapBackground(*background) : BackgroundFunction{});
+}
+
+ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
+                               const BackgroundFunction& background) const {
   RasterOptions options;
-  if (background != nullptr) options.background = CubemapBackground(*background);
+  options.background = background;
   RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = std::move(r.rgb);
@@ -203,8 +209,9 @@ std::vector<RotationFrame> RunRotation(
   const int total = options.rotate_frames + options.hold_frames;
   for (int f = 0; f <= total; ++f) {
     const double angle_deg = std::min(f, options.rotate_frames) * options.degrees_per_frame;
+    const double rotation_y = angle_deg * 3.14159265358979323846 / 180.0;
     if (!(angle_deg == last_angle)) {
-      cube = ResampleToCubemap(env, n, angle_deg * 3.14159265358979323846 / 180.0);
+      cube = ResampleToCubemap(env, n, rotation_y);
       lighting = ProjectLighting(cube);
       last_angle = angle_deg;
     }
@@ -230,7 +237,8 @@ std::vector<RotationFrame> RunRotation(
     r.image_error = {RelativeRmsError(nwa, exact), RelativeRmsError(bi_rgb, exact),
                      RelativeRmsError(pbi_rgb, exact)};
     frames.push_back(r);
-    if (on_frame) on_frame(RotationFrameView{frames.back(), cube, exact, {nwa, bi_rgb, pbi_rgb}});
+    if (on_frame)
+      on_frame(RotationFrameView{frames.back(), cube, rotation_y, exact, {nwa, bi_rgb, pbi_rgb}});
   }
   return frames;
 }

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <numbers>
 #include <sstream>
 #include <string>
@@ -24,16 +25,18 @@
 #include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
 #include "viewer/camera_metadata.h"
+#include "viewer/environment_background.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/window_test_support.h"
+#include "vocabulary/cubemap.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_sampler.h"
-#include "vocabulary/environment_io.h"
-#include "vocabulary/cubemap_resample.h"
 
 namespace prt {
 namespace {
@@ -301,10 +304,21 @@ TEST(ViewerSessionTest, RotationThenHoldConverges) {
   o.hold_frames = 16;
   o.terms = 30;
   int calls = 0;
+  // SunSky's sun: 3×3 pixels of 40.3 (red) around pixel (40, 10) of the 64×32 map.
+  const auto lookup = std::make_shared<const EnvironmentLookup>(SunSky(0.3f, 40.f));
+  const Vec3 sun = LatLongDirection(64, 32, 40, 10);
+  const CubemapLayout layout(tiny.n);
   const std::vector<RotationFrame> f =
       RunRotation(*s, SunSky(0.3f, 40.f), o, [&](const RotationFrameView& v) {
         ++calls;
         EXPECT_EQ(v.exact_rgb.size(), 3 * s->sample_count());
+        // The frame's rotation is its lighting's, and the background made with it shows the sun
+        // where that lighting has it (prt-view's rotation frames, environment_background.h).
+        const double angle = std::min(v.errors.frame, o.rotate_frames) * o.degrees_per_frame;
+        EXPECT_DOUBLE_EQ(v.rotation_y, angle * std::numbers::pi / 180);
+        const Vec3 lit_from = RotateAboutY(sun, v.rotation_y);
+        EXPECT_GT(v.cube.r[layout.TexelOf(lit_from)], 10.0f) << v.errors.frame;
+        EXPECT_EQ(EnvironmentBackground(lookup, v.rotation_y)(lit_from)[0], 40.3f);
       });
   ASSERT_EQ(f.size(), 23u);
   EXPECT_EQ(calls, 23);
@@ -448,8 +462,10 @@ TEST(PrtViewCliTest, WindowScreenshotMatchesHeadlessRender) {
   const std::vector<float> codes = ReadFile(shot);
   const auto s = ViewerSession::Open(tiny.pack);
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(env), tiny.n);
-  const ImageRgb image =
-      s->Render(s->camera(), s->Shade(s->RelightExact(ProjectLighting(cube))), &cube);
+  // The window's background is the environment image itself, as prt-view's.
+  const ImageRgb image = s->Render(
+      s->camera(), s->Shade(s->RelightExact(ProjectLighting(cube))),
+      EnvironmentBackground(std::make_shared<const EnvironmentLookup>(ReadEnvironment(env))));
   ASSERT_EQ(codes.size(), image.pixels.size());
   EXPECT_LE(testing::LargestCodeDifference(codes, image), 1.0);
 #endif
