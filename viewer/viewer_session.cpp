@@ -78,7 +78,7 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
                                     ToString(h.row_wavelet) +
                                     "; the viewer's lighting basis is Haar");
   s->transport_terms_ = s->compressed_->term_count();
-  s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_);
+  s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_, pack_path);
   s->operator_ =
       std::make_unique<CompressedTransportOperator>(*s->relighter_, SampleOrder::kCoefficients);
   // The session's order (viewer_session.h): position p holds the pack sample whose coefficient
@@ -124,22 +124,24 @@ SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) cons
                                 " coefficients, the transport " + std::to_string(cols));
   std::vector<float> l(3 * cols);
   for (int c = 0; c < 3; ++c)
-    for (std::size_t j = 0; j < cols; ++j)
-      l[c * cols + j] = static_cast<float>(lighting.coefficient[c][j]);
+    for (std::size_t j = 0; j < cols; ++j) {
+      const double v = lighting.coefficient[c][j];
+      CheckFloatLighting(v, j, c, path_);  // the relighter's lighting is float
+      l[c * cols + j] = static_cast<float>(v);
+    }
   const std::size_t ns = sample_count();
   std::vector<float> b(3 * ns);
+  // Finite: the relighter throws NumericalError naming the pack and the sample when its float
+  // accumulation overflows (compressed_relight.h), and its inputs are finite floats.
   relighter_->Relight(l, 3, b, SampleOrder::kCoefficients);
   SampleRadiance out(ns);
   for (int c = 0; c < 3; ++c)
-    for (std::size_t s = 0; s < ns; ++s) {
-      const double v = b[c * ns + s];
-      out.channel[c][s] = std::isfinite(v) ? v : 0.0;
-    }
+    for (std::size_t s = 0; s < ns; ++s) out.channel[c][s] = b[c * ns + s];
   return out;
 }
 
 std::vector<float> ViewerSession::Shade(const SampleRadiance& radiance) const {
-  return ShadeSamples(radiance, albedo_);
+  return ShadeSamples(radiance, albedo_, path_, pack_sample_);
 }
 
 ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,

@@ -86,9 +86,12 @@ class ViewerSession {
   std::vector<float> ToPackOrder(std::span<const float> values, std::size_t k = 3) const;
 
   // T·L with every coefficient of L (Eq. 8 with dense lighting: one inverse column transform),
-  // in the session's order.
+  // in the session's order. Throws NumericalError naming the pack when a coefficient of L is
+  // outside the float range or T·L overflows the relighter (docs/viewer.md, "NaN and Inf").
   SampleRadiance RelightExact(const WaveletLighting& lighting) const;
   // albedo ⊙ radiance, interleaved RGB per sample (ShadeSamples), in the session's order.
+  // Throws NumericalError naming the pack and the pack's sample number when a colour is not a
+  // finite float.
   std::vector<float> Shade(const SampleRadiance& radiance) const;
   // Rasterises the meshes with per-sample colours (3 floats per sample, the session's order)
   // from `camera`, over `background` (an empty function: black). prt-view's background is the

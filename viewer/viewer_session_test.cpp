@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <sstream>
@@ -58,6 +59,34 @@ struct TinyScene {
   std::string pack;
 };
 
+// Compresses `rows` (the tiny scene's samples × 6n² texels) with every coefficient kept at 16
+// bits and packs them with the tiny scene's meshes into WorkDir()/file.
+std::string PackRows(const TinyScene& t, const std::vector<float>& rows, const std::string& file) {
+  CompressionOptions o;
+  o.bits = 16;
+  o.keep_fraction = 1.0;
+  const CompressedTransport ct =
+      CompressTransport(rows.data(), t.n, SpatialDomainOf(t.geometry), o);
+  pack::PackInput in;
+  in.metadata_json =
+      R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],
+           "target": [0.0, 0.3, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64,
+           "height": 48}}})";
+  for (const SceneMesh& m : t.geometry.meshes) {
+    pack::PackMeshInput pm;
+    pm.name = m.name;
+    pm.mesh = m.mesh;
+    pm.albedo = m.albedo;
+    pm.is_ground = m.is_ground;
+    pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
+    in.meshes.push_back(std::move(pm));
+  }
+  in.transport = pack::MakeTransportInput(ct, 64);
+  const std::string path = (WorkDir() / file).string();
+  pack::WritePackFile(path, in);
+  return path;
+}
+
 // Traces, compresses and packs the tiny scene once per test process.
 const TinyScene& Tiny() {
   static const TinyScene scene = [] {
@@ -70,28 +99,7 @@ const TinyScene& Tiny() {
     const std::vector<SpatialSample> samples = SpatialSamplesOf(t.geometry);
     t.rows.resize(samples.size() * sampler.layout().texel_count());
     sampler.ComputeRows(samples, 0, t.rows.data());
-    CompressionOptions o;
-    o.bits = 16;
-    o.keep_fraction = 1.0;
-    const CompressedTransport ct =
-        CompressTransport(t.rows.data(), t.n, SpatialDomainOf(t.geometry), o);
-    pack::PackInput in;
-    in.metadata_json =
-        R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],
-           "target": [0.0, 0.3, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64,
-           "height": 48}}})";
-    for (const SceneMesh& m : t.geometry.meshes) {
-      pack::PackMeshInput pm;
-      pm.name = m.name;
-      pm.mesh = m.mesh;
-      pm.albedo = m.albedo;
-      pm.is_ground = m.is_ground;
-      pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
-      in.meshes.push_back(std::move(pm));
-    }
-    in.transport = pack::MakeTransportInput(ct, 64);
-    t.pack = (WorkDir() / "tiny.prtpack").string();
-    pack::WritePackFile(t.pack, in);
+    t.pack = PackRows(t, t.rows, "tiny.prtpack");
     return t;
   }();
   return scene;
@@ -346,6 +354,93 @@ TEST(ViewerSessionTest, RotationThenHoldConverges) {
   int lines = 0;
   while (std::getline(in, line)) ++lines;
   EXPECT_EQ(lines, 2 + 23);
+}
+
+// No NaN or Inf is turned into a black pixel (docs/viewer.md, "NaN and Inf"): an environment
+// with an Inf pixel is refused by its reader, lighting past the relighter's float range and finite
+// T and L whose product overflows float are errors naming the pack (and the sample), in the
+// library and as prt-view's one-line message with exit code 2.
+TEST(ViewerSessionTest, NonFiniteRadianceIsAnErrorNamingThePack) {
+  const TinyScene& tiny = Tiny();
+  const fs::path dir = WorkDir() / "nonfinite";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::string out;
+  // 1. An Inf pixel: the EXR reader refuses it (vocabulary/environment_io.h) before anything is
+  //    resampled, naming the file and the pixel; in memory, the resampler refuses it too.
+  EnvironmentImage inf_sky = SunSky(0.3f, 40.f);
+  inf_sky.r[inf_sky.Index(5, 3)] = std::numeric_limits<float>::infinity();
+  const std::string inf_env = (dir / "inf_sky.exr").string();
+  WriteEnvironmentExr(inf_sky, inf_env);
+  EXPECT_THROW(ReadEnvironment(inf_env), InputError);
+  EXPECT_THROW(ResampleToCubemap(inf_sky, tiny.n), NumericalError);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + inf_env + "' --exact --quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_NE(out.find("inf_sky.exr: Inf at pixel (x=5, y=3, channel R)"), std::string::npos) << out;
+
+  // 2. Finite T and finite L whose product overflows float: T scaled by 1e15 (still a finite,
+  //    valid pack), a uniform sky of 1e30: T·L ≈ 1e45.
+  std::vector<float> bright_rows = tiny.rows;
+  for (float& v : bright_rows) v *= 1e15f;
+  const std::string bright = PackRows(tiny, bright_rows, "bright.prtpack");
+  const auto s = ViewerSession::Open(bright);
+  const WaveletLighting l = ProjectLighting(ResampleToCubemap(SunSky(1e30f, 0.f), tiny.n));
+  const auto message = [](const auto& f) {
+    try {
+      f();
+    } catch (const NumericalError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string exact = message([&] { s->RelightExact(l); });
+  EXPECT_EQ(exact.rfind(bright + ": the relit radiance of sample ", 0), 0u) << exact;
+  EXPECT_NE(exact.find("overflows the relighter's float range"), std::string::npos) << exact;
+  const std::string nwa =
+      message([&] { RelightApproximate(s->transport(), l, LightingMode::kNwa, 10); });
+  EXPECT_EQ(nwa.rfind(bright + ": the relit radiance of sample ", 0), 0u) << nwa;
+  // A radiance that is a finite double but not a float (1e39, e.g. from an operator that sums in
+  // double) is named by the pack's own sample number at shading.
+  SampleRadiance r(s->sample_count());
+  r.channel[1][5] = 1e39;
+  const std::string shade = message([&] { s->Shade(r); });
+  EXPECT_EQ(shade.rfind(bright + ": the shaded radiance of sample " +
+                            std::to_string(s->pack_sample()[5]) + " (channel 1), albedo ",
+                        0),
+            0u)
+      << shade;
+  EXPECT_NE(shade.find(" × T·L 1e+39, is outside the float range (3.4e38)"), std::string::npos)
+      << shade;
+  const std::string bright_env = (dir / "bright_sky.exr").string();
+  WriteEnvironmentExr(SunSky(1e30f, 0.f), bright_env);
+  EXPECT_EQ(RunViewer("'" + bright + "' --env '" + bright_env + "' --exact --quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  // One line, naming the pack.
+  EXPECT_EQ(out.rfind("prt-view: " + bright + ": the relit radiance of sample ", 0), 0u) << out;
+  EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+  EXPECT_EQ(RunViewer("'" + bright + "' --env '" + bright_env +
+                          "' --lighting pbi --terms 20 "
+                          "--quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_EQ(out.rfind("prt-view: " + bright + ": ", 0), 0u) << out;
+  EXPECT_FALSE(fs::exists(dir / "x.png"));
+
+  // 3. Lighting past the float range of the relighter (a uniform 3e38 sky: each face's scaling
+  //    coefficient is n·3e38 = 2.4e39) on the ordinary pack.
+  const std::string max_env = (dir / "max_sky.exr").string();
+  WriteEnvironmentExr(SunSky(3e38f, 0.f), max_env);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + max_env + "' --exact --quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_EQ(out.rfind("prt-view: " + tiny.pack + ": lighting coefficient ", 0), 0u) << out;
+  EXPECT_NE(out.find("outside the float range of the relighter"), std::string::npos) << out;
 }
 
 // prt-view end to end: exit codes, PNG/EXR/npy outputs, --exact radiance equal to the library's,
