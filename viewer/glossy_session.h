@@ -71,7 +71,8 @@ class GlossySession {
   // The lighting of `cube` (resolution cubemap_n()) in the block representations.
   BlockLighting Lighting(const CubemapRgb& cube) const;
   // Outgoing radiance of every vertex towards `eye` (3 floats per vertex) by Algorithm 1, or by
-  // the pixel-basis reference over all 6n² texels (RelightPixelBasisReference).
+  // the pixel-basis reference over all 6n² texels (RelightPixelBasisReference). Throws
+  // NumericalError naming the pack and the vertex when the radiance overflows float.
   TripleProductStats Relight(const BlockLighting& light, const Vec3& eye, std::span<float> rgb,
                              const TripleProductOptions& options = {}) const;
   void RelightReference(const BlockLighting& light, const Vec3& eye, std::span<float> rgb) const;
