@@ -23,21 +23,16 @@
 #include <vector>
 
 #include "formats/column_coding.h"
-#include "packager/prtpack_transport.h"
-#include "packager/prtpack_writer.h"
 #include "viewer/camera_metadata.h"
 #include "viewer/environment_background.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
+#include "viewer/tiny_scene_test_support.h"
 #include "viewer/window_test_support.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
-#include "worker/column_order.h"
-#include "worker/embree_scene.h"
-#include "worker/transport_compressor.h"
-#include "worker/transport_sampler.h"
 
 namespace prt {
 namespace {
@@ -52,53 +47,17 @@ fs::path WorkDir() {
   return d;
 }
 
-struct TinyScene {
-  SceneGeometry geometry;
-  std::vector<float> rows;  // samples × 6n², texel basis, albedo-free
-  int n = 8;
-  std::string pack;
-};
+using testing::TinyScene;
 
-// Compresses `rows` (the tiny scene's samples × 6n² texels) with every coefficient kept at 16
-// bits and packs them with the tiny scene's meshes into WorkDir()/file.
+// Packs `rows` of the tiny scene (every coefficient at 16 bits) into WorkDir()/file.
 std::string PackRows(const TinyScene& t, const std::vector<float>& rows, const std::string& file) {
-  CompressionOptions o;
-  o.bits = 16;
-  o.keep_fraction = 1.0;
-  const CompressedTransport ct =
-      CompressTransport(rows.data(), t.n, SpatialDomainOf(t.geometry), o);
-  pack::PackInput in;
-  in.metadata_json =
-      R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],
-           "target": [0.0, 0.3, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64,
-           "height": 48}}})";
-  for (const SceneMesh& m : t.geometry.meshes) {
-    pack::PackMeshInput pm;
-    pm.name = m.name;
-    pm.mesh = m.mesh;
-    pm.albedo = m.albedo;
-    pm.is_ground = m.is_ground;
-    pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
-    in.meshes.push_back(std::move(pm));
-  }
-  in.transport = pack::MakeTransportInput(ct, 64);
-  const std::string path = (WorkDir() / file).string();
-  pack::WritePackFile(path, in);
-  return path;
+  return testing::PackTinyRows(t, rows, (WorkDir() / file).string());
 }
 
 // Traces, compresses and packs the tiny scene once per test process.
 const TinyScene& Tiny() {
   static const TinyScene scene = [] {
-    TinyScene t;
-    const SceneDescription d = LoadSceneFile(std::string(PRT_SOURCE_DIR) + "/tests/data/tiny.toml");
-    t.n = d.cubemap_n;
-    t.geometry = BuildSceneGeometry(d);
-    const EmbreeScene embree(t.geometry);
-    const TransportSampler sampler(embree, t.n, {16, 1});
-    const std::vector<SpatialSample> samples = SpatialSamplesOf(t.geometry);
-    t.rows.resize(samples.size() * sampler.layout().texel_count());
-    sampler.ComputeRows(samples, 0, t.rows.data());
+    TinyScene t = testing::TraceTinyScene();
     t.pack = PackRows(t, t.rows, "tiny.prtpack");
     return t;
   }();
