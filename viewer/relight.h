@@ -112,7 +112,8 @@ class SparseTransport final : public TransportOperator {
 // Eq. 8) through viewer/compressed_relight.h. The relighter must outlive the operator and
 // its row wavelet must be Haar (the lighting basis here; std::invalid_argument otherwise).
 // Lighting values pass to the compressed path in float, and its radiance comes back in float:
-// expect ~1e-7 relative rounding per Accumulate (the incremental state stays in double). A term
+// expect 1–2e-7 relative rounding per Accumulate of tens of terms, ~2e-6 for all 6,144 of n = 32
+// (the incremental state stays in double; docs/viewer.md, "High dynamic range"). A term
 // whose value is outside the float range, or a relight that overflows the relighter's float
 // accumulation, throws NumericalError naming the relighter's name() (the pack); after that
 // exception `out` may hold non-finite values and must be discarded.
