@@ -156,22 +156,26 @@ struct IdentityIndex {
 // (its coefficient; the identity in coefficient order) and writes, or adds, its C channels.
 namespace {
 
-// 1 when a float is NaN or Inf (all exponent bits set), else 0: integer operations, so that the
-// copy loops OR it into a flag without a branch or a floating-point dependency chain.
-inline uint32_t NonFinite(float v) {
-  uint32_t u;
-  std::memcpy(&u, &v, sizeof u);
-  return static_cast<uint32_t>((~u & 0x7f800000u) == 0);
+// Whether any of x[0, count) is NaN or Inf (all exponent bits set): integer operations OR-ed
+// into a flag, a loop the compiler vectorises (16-byte vectors without AVX), so a finite frame
+// pays one streaming read of X.
+bool AnyNonFinite(const float* x, std::size_t count) {
+  uint32_t bad = 0;
+  for (std::size_t i = 0; i != count; ++i) {
+    uint32_t u;
+    std::memcpy(&u, x + i, sizeof u);
+    bad |= static_cast<uint32_t>((~u & 0x7f800000u) == 0);
+  }
+  return bad != 0;
 }
 
 }  // namespace
 
 template <class Index>
-bool CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base,
+void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base,
                                const Index& index, std::size_t C, std::size_t K, std::size_t S,
                                const Output& out) {
   const float* __restrict xs = base;
-  uint32_t bad = 0;
   if (out.add != nullptr && C == 3 && K == 4) {
     double* __restrict o0 = out.add[0];
     double* __restrict o1 = out.add[1];
@@ -179,7 +183,6 @@ bool CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
     if (out.assign) {
       for (std::size_t i = lo; i != hi; ++i) {
         const float* xi = xs + 4 * static_cast<std::size_t>(index[i]);
-        bad |= NonFinite(xi[0]) | NonFinite(xi[1]) | NonFinite(xi[2]);
         o0[i] = static_cast<double>(xi[0]);
         o1[i] = static_cast<double>(xi[1]);
         o2[i] = static_cast<double>(xi[2]);
@@ -187,7 +190,6 @@ bool CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
     } else {
       for (std::size_t i = lo; i != hi; ++i) {
         const float* xi = xs + 4 * static_cast<std::size_t>(index[i]);
-        bad |= NonFinite(xi[0]) | NonFinite(xi[1]) | NonFinite(xi[2]);
         o0[i] += static_cast<double>(xi[0]);
         o1[i] += static_cast<double>(xi[1]);
         o2[i] += static_cast<double>(xi[2]);
@@ -199,7 +201,6 @@ bool CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
     float* __restrict o2 = o1 + S;
     for (std::size_t i = lo; i != hi; ++i) {
       const float* xi = xs + 4 * static_cast<std::size_t>(index[i]);
-      bad |= NonFinite(xi[0]) | NonFinite(xi[1]) | NonFinite(xi[2]);
       o0[i] = xi[0];
       o1[i] = xi[1];
       o2[i] = xi[2];
@@ -208,7 +209,6 @@ bool CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
     for (std::size_t i = lo; i != hi; ++i) {
       const float* xi = xs + K * static_cast<std::size_t>(index[i]);
       for (std::size_t c = 0; c < C; ++c) {
-        bad |= NonFinite(xi[c]);
         if (out.add == nullptr) {
           out.radiance[c * S + i] = xi[c];
         } else if (out.assign) {
@@ -219,7 +219,6 @@ bool CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
       }
     }
   }
-  return bad == 0;
 }
 
 void CompressedRelighter::ThrowNonFinite(int channels, const Output& out) const {
@@ -448,13 +447,16 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   }
   // Back to sample order: sequential writes, each sample's channels gathered from its one
   // element of X in one read; in coefficient order a sequential copy (no permutation).
-  // Set when a copied value is NaN or Inf (finite inputs only reach them by overflowing X).
+  // Set when an element of X is NaN or Inf (finite inputs only reach them by overflowing X).
   std::atomic<bool> non_finite{false};
   const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi, const float* base) {
-    const bool finite = out.order == SampleOrder::kCoefficients
-                            ? Copy(lo, hi, base, IdentityIndex{}, C, K, S, out)
-                            : Copy(lo, hi, base, coefficient_of_sample_.data(), C, K, S, out);
-    if (!finite) non_finite.store(true, std::memory_order_relaxed);
+    if (AnyNonFinite(base + lo * K, (hi - lo) * K))
+      non_finite.store(true, std::memory_order_relaxed);
+    if (out.order == SampleOrder::kCoefficients) {
+      Copy(lo, hi, base, IdentityIndex{}, C, K, S, out);
+    } else {
+      Copy(lo, hi, base, coefficient_of_sample_.data(), C, K, S, out);
+    }
   };
   // On the calling thread while X fits in its caches (the inverse steps just left it there; a
   // second thread would fetch its half from the other core), in parallel beyond.

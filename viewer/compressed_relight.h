@@ -41,7 +41,7 @@ enum class SampleOrder : uint8_t { kSamples, kCoefficients };
 // |q| ≤ A, leave only a scale within 0.4 % of FLT_MAX to fail here). X accumulates in float, so
 // finite lights of finite terms can still overflow it; a relight whose output would hold a NaN or
 // Inf throws NumericalError naming `name` and the sample instead (found at no cost in frames that
-// are finite: the gather back to sample order flags non-finite values as it copies them).
+// are finite: X is scanned for NaN/Inf as the gather copies it back to sample order).
 class CompressedRelighter {
  public:
   // `name` names the transport (the pack's path) in errors.
@@ -96,9 +96,8 @@ class CompressedRelighter {
     bool assign = false;  // with `add`: write instead of adding
   };
   void RelightLights(std::vector<Light>& lights, int channels, Output out) const;
-  // Returns false when a value it copied is NaN or Inf.
   template <class Index>
-  static bool Copy(std::size_t lo, std::size_t hi, const float* base, const Index& index,
+  static void Copy(std::size_t lo, std::size_t hi, const float* base, const Index& index,
                    std::size_t C, std::size_t K, std::size_t S, const Output& out);
   // Throws the NumericalError for the first non-finite output value.
   [[noreturn]] void ThrowNonFinite(int channels, const Output& out) const;

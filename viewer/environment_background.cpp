@@ -77,10 +77,14 @@ BackgroundFunction EnvironmentBackground(std::shared_ptr<const EnvironmentLookup
   if (lookup == nullptr) throw std::invalid_argument("EnvironmentBackground: no environment");
   if (!std::isfinite(rotation_y))
     throw std::invalid_argument("EnvironmentBackground: rotation must be finite");
+  if (rotation_y == 0.0)
+    return [lookup = std::move(lookup)](const Vec3& d) { return lookup->Radiance(d); };
   // The lighting of the rotated environment is L'(d) = L(R⁻¹d) (envmap.h RotateAboutY,
-  // cubemap_resample.cpp): the same inverse rotation here.
-  return [lookup = std::move(lookup), rotation_y](const Vec3& d) {
-    return lookup->Radiance(rotation_y == 0.0 ? d : RotateAboutY(d, -rotation_y));
+  // cubemap_resample.cpp): the same inverse rotation here, RotateAboutY(d, −θ) with its cosine
+  // and sine computed once instead of per pixel.
+  const double c = std::cos(-rotation_y), s = std::sin(-rotation_y);
+  return [lookup = std::move(lookup), c, s](const Vec3& d) {
+    return lookup->Radiance({c * d.x + s * d.z, d.y, -s * d.x + c * d.z});
   };
 }
 
