@@ -150,12 +150,6 @@ struct IdentityIndex {
   std::size_t operator[](std::size_t i) const { return i; }
 };
 
-}  // namespace
-
-// X's elements [lo, hi) of a segment to the frame's output: sample i reads element index[i]
-// (its coefficient; the identity in coefficient order) and writes, or adds, its C channels.
-namespace {
-
 // Whether any of x[0, count) is NaN or Inf (all exponent bits set): integer operations OR-ed
 // into a flag, a loop the compiler vectorises (16-byte vectors without AVX), so a finite frame
 // pays one streaming read of X.
@@ -171,6 +165,8 @@ bool AnyNonFinite(const float* x, std::size_t count) {
 
 }  // namespace
 
+// X's elements [lo, hi) of a segment to the frame's output: sample i reads element index[i]
+// (its coefficient; the identity in coefficient order) and writes, or adds, its C channels.
 template <class Index>
 void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base,
                                const Index& index, std::size_t C, std::size_t K, std::size_t S,
