@@ -8,11 +8,15 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
@@ -26,11 +30,18 @@ using Float4 = float __attribute__((vector_size(16)));
 // The most tiles X is scattered in (see the constructor).
 constexpr std::size_t kMaxTiles = 64;
 
+// A value for an error message: 7 significant digits (std::to_string writes 1e39 in full).
+std::string Number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.7g", v);
+  return b;
+}
+
 }  // namespace
 
-CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
-    : header_(t.header), max_depth_(MaxColumnDepth(t.header.domain)) {
-  ValidateHeader(header_, "CompressedRelighter");
+CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::string name)
+    : name_(std::move(name)), header_(t.header), max_depth_(MaxColumnDepth(t.header.domain)) {
+  ValidateHeader(header_, name_);
   const std::size_t S = header_.sample_count;
   slot_.assign(header_.column_count(), -1);
   coefficient_of_sample_.resize(S);
@@ -58,8 +69,8 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
     }
   }
   for (const auto& c : t.columns) {
-    ValidateColumn(header_, c, "CompressedRelighter");
-    if (slot_[c.column] >= 0) throw InputError("CompressedRelighter", "duplicate column");
+    ValidateColumn(header_, c, name_);
+    if (slot_[c.column] >= 0) throw InputError(name_, "duplicate column");
     auto& lv = levels[c.depth];
     if (lv.empty()) {
       lv.resize(S);
@@ -71,9 +82,15 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t)
     std::size_t si = 0;  // segment of index i (indices increase)
     for (std::size_t k = 0; k < c.index.size(); ++k) {
       const uint32_t i = c.index[k];
-      const Term term{i, static_cast<float>(
-                             DequantiseTerm(c.q[k], DitherOffset(header_.dither_seed, c.column, i),
-                                            c.scale, header_.bits, lv[i]))};
+      const double value = DequantiseTerm(c.q[k], DitherOffset(header_.dither_seed, c.column, i),
+                                          c.scale, header_.bits, lv[i]);
+      // |value| ≤ (A + ½)/A · scale with a finite float scale (ValidateColumn): only a scale
+      // within 0.4 % of FLT_MAX reaches past the float range.
+      if (!(std::abs(value) <= static_cast<double>(std::numeric_limits<float>::max())))
+        throw InputError(name_, "column " + std::to_string(c.column) + ": the term of sample " +
+                                    std::to_string(i) + " dequantises to " + Number(value) +
+                                    ", outside the float range");
+      const Term term{i, static_cast<float>(value)};
       while (i >= segments_[si].hi) ++si;
       // Late: in the low band that the segment's inverse step c.depth + 1 writes. A segment
       // whose maximum depth is at most c.depth is not touched by any step before the column's
@@ -133,6 +150,19 @@ struct IdentityIndex {
   std::size_t operator[](std::size_t i) const { return i; }
 };
 
+// Whether any of x[0, count) is NaN or Inf (all exponent bits set): integer operations OR-ed
+// into a flag, a loop the compiler vectorises (16-byte vectors without AVX), so a finite frame
+// pays one streaming read of X.
+bool AnyNonFinite(const float* x, std::size_t count) {
+  uint32_t bad = 0;
+  for (std::size_t i = 0; i != count; ++i) {
+    uint32_t u;
+    std::memcpy(&u, x + i, sizeof u);
+    bad |= static_cast<uint32_t>((~u & 0x7f800000u) == 0);
+  }
+  return bad != 0;
+}
+
 }  // namespace
 
 // X's elements [lo, hi) of a segment to the frame's output: sample i reads element index[i]
@@ -185,6 +215,30 @@ void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
       }
     }
   }
+}
+
+void CompressedRelighter::ThrowNonFinite(int channels, const Output& out) const {
+  const std::size_t S = header_.sample_count;
+  for (int c = 0; c < channels; ++c) {
+    for (std::size_t i = 0; i < S; ++i) {
+      const double v =
+          out.add != nullptr ? out.add[c][i] : static_cast<double>(out.radiance[c * S + i]);
+      if (std::isfinite(v)) continue;
+      // Position i of the output is sample i, or in coefficient order the sample whose
+      // coefficient is i.
+      std::size_t sample = i;
+      if (out.order == SampleOrder::kCoefficients)
+        sample = static_cast<std::size_t>(
+            std::find(coefficient_of_sample_.begin(), coefficient_of_sample_.end(), i) -
+            coefficient_of_sample_.begin());
+      throw NumericalError(name_ + ": the relit radiance of sample " + std::to_string(sample) +
+                           " (channel " + std::to_string(c) + ") is " +
+                           (std::isnan(v) ? "NaN" : "Inf") +
+                           ": T·L overflows the relighter's float range (3.4e38); the lighting "
+                           "is too bright for this transport");
+    }
+  }
+  throw NumericalError(name_ + ": the relit radiance overflows the relighter's float range");
 }
 
 // Eq. 8 in its recursive form (Eq. 6–7): X ← S'_{t→t−1}(X) + Σ_{j∈N(t−1)} L̂_j C_j, from the
@@ -389,7 +443,11 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   }
   // Back to sample order: sequential writes, each sample's channels gathered from its one
   // element of X in one read; in coefficient order a sequential copy (no permutation).
+  // Set when an element of X is NaN or Inf (finite inputs only reach them by overflowing X).
+  std::atomic<bool> non_finite{false};
   const auto gather = [&, C, K, S](std::size_t lo, std::size_t hi, const float* base) {
+    if (AnyNonFinite(base + lo * K, (hi - lo) * K))
+      non_finite.store(true, std::memory_order_relaxed);
     if (out.order == SampleOrder::kCoefficients) {
       Copy(lo, hi, base, IdentityIndex{}, C, K, S, out);
     } else {
@@ -413,6 +471,7 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
     }
   }
   ReturnBuffers(std::move(buffers));
+  if (non_finite.load(std::memory_order_relaxed)) ThrowNonFinite(channels, out);
 }
 
 std::unique_ptr<CompressedRelighter::FrameBuffers> CompressedRelighter::TakeBuffers() const {

@@ -8,6 +8,7 @@
 #include <memory>
 #include <mutex>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "formats/column_coding.h"
@@ -34,10 +35,20 @@ enum class SampleOrder : uint8_t { kSamples, kCoefficients };
 // scatter over tiles of coefficients, from 2^15 terms; the inverse steps and, below 4 MB of X,
 // the gather back to sample order run on the calling thread, where X is cached). Thread-compatible
 // (const methods are safe to call from several threads with separate outputs).
+//
+// Non-finite values (docs/viewer.md, "NaN and Inf"): every dequantised term must be a finite float
+// (InputError naming `name` and the column otherwise; the pack reader's checks, a finite scale and
+// |q| ≤ A, leave only a scale within 0.4 % of FLT_MAX to fail here). X accumulates in float, so
+// finite lights of finite terms can still overflow it; a relight whose output would hold a NaN or
+// Inf throws NumericalError naming `name` and the sample instead (found at no cost in frames that
+// are finite: X is scanned for NaN/Inf as the gather copies it back to sample order).
 class CompressedRelighter {
  public:
-  explicit CompressedRelighter(const CompressedTransport& t);
+  // `name` names the transport (the pack's path) in errors.
+  explicit CompressedRelighter(const CompressedTransport& t,
+                               std::string name = "CompressedRelighter");
 
+  const std::string& name() const { return name_; }
   const CompressedTransportHeader& header() const { return header_; }
   std::size_t sample_count() const { return header_.sample_count; }
   std::size_t column_count() const { return header_.column_count(); }
@@ -88,6 +99,10 @@ class CompressedRelighter {
   template <class Index>
   static void Copy(std::size_t lo, std::size_t hi, const float* base, const Index& index,
                    std::size_t C, std::size_t K, std::size_t S, const Output& out);
+  // Throws the NumericalError for the first non-finite output value.
+  [[noreturn]] void ThrowNonFinite(int channels, const Output& out) const;
+
+  std::string name_;
   std::vector<Light> LightsOf(std::span<const uint32_t> columns, std::span<const float> weights,
                               int channels) const;
 

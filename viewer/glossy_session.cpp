@@ -134,27 +134,37 @@ BlockLighting GlossySession::Lighting(const CubemapRgb& cube) const {
   return ComputeBlockLighting(cube, *blocks_);
 }
 
+// The triple products' outputs are finite floats or a NumericalError naming the vertex
+// (triple_product.h); the session adds the pack's name to it.
 TripleProductStats GlossySession::Relight(const BlockLighting& light, const Vec3& eye,
                                           std::span<float> rgb,
                                           const TripleProductOptions& options) const {
-  const TripleProductStats stats =
-      RelightTripleProduct(Scene(), *blocks_, light, eye, rgb, options);
-  for (float& v : rgb)
-    if (!std::isfinite(v)) v = 0.0f;
-  return stats;
+  try {
+    return RelightTripleProduct(Scene(), *blocks_, light, eye, rgb, options);
+  } catch (const NumericalError& e) {
+    throw NumericalError(path_ + ": " + e.what());
+  }
 }
 
 void GlossySession::RelightReference(const BlockLighting& light, const Vec3& eye,
                                      std::span<float> rgb) const {
-  RelightPixelBasisReference(Scene(), *blocks_, light, eye, rgb);
-  for (float& v : rgb)
-    if (!std::isfinite(v)) v = 0.0f;
+  try {
+    RelightPixelBasisReference(Scene(), *blocks_, light, eye, rgb);
+  } catch (const NumericalError& e) {
+    throw NumericalError(path_ + ": " + e.what());
+  }
 }
 
 ImageRgb GlossySession::Render(const Camera& camera, std::span<const float> vertex_rgb,
                                const CubemapRgb* background) const {
+  return Render(camera, vertex_rgb,
+                background != nullptr ? CubemapBackground(*background) : BackgroundFunction{});
+}
+
+ImageRgb GlossySession::Render(const Camera& camera, std::span<const float> vertex_rgb,
+                               const BackgroundFunction& background) const {
   RasterOptions options;
-  if (background != nullptr) options.background = CubemapBackground(*background);
+  options.background = background;
   const RasterImage r = RasterizeTriangles(camera, positions_, triangles_, vertex_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = r.rgb;

@@ -16,6 +16,7 @@
 #include "formats/visibility_blocks.h"
 #include "viewer/block_lighting.h"
 #include "viewer/brdf.h"
+#include "viewer/rasterizer.h"
 #include "viewer/triple_product.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
@@ -70,11 +71,16 @@ class GlossySession {
   // The lighting of `cube` (resolution cubemap_n()) in the block representations.
   BlockLighting Lighting(const CubemapRgb& cube) const;
   // Outgoing radiance of every vertex towards `eye` (3 floats per vertex) by Algorithm 1, or by
-  // the pixel-basis reference over all 6n² texels (RelightPixelBasisReference).
+  // the pixel-basis reference over all 6n² texels (RelightPixelBasisReference). Throws
+  // NumericalError naming the pack and the vertex when the radiance overflows float.
   TripleProductStats Relight(const BlockLighting& light, const Vec3& eye, std::span<float> rgb,
                              const TripleProductOptions& options = {}) const;
   void RelightReference(const BlockLighting& light, const Vec3& eye, std::span<float> rgb) const;
-  // Rasterises the meshes with per-vertex colours from `camera`, over `background` if non-null.
+  // Rasterises the meshes with per-vertex colours from `camera`, over `background` (an empty
+  // function: black; prt-view's is EnvironmentBackground, environment_background.h).
+  ImageRgb Render(const Camera& camera, std::span<const float> vertex_rgb,
+                  const BackgroundFunction& background) const;
+  // The same over the lighting cubemap (nearest texel: blocky) if non-null, else black.
   ImageRgb Render(const Camera& camera, std::span<const float> vertex_rgb,
                   const CubemapRgb* background) const;
 

@@ -15,18 +15,20 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "packager/prtpack_writer.h"
+#include "viewer/environment_background.h"
 #include "viewer/rasterizer.h"
 #include "viewer/window_test_support.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/sky.h"
 #include "worker/embree_scene.h"
 #include "worker/visibility_sampler.h"
-#include "vocabulary/environment_io.h"
-#include "vocabulary/cubemap_resample.h"
-#include "vocabulary/sky.h"
 
 namespace prt {
 namespace {
@@ -207,6 +209,45 @@ TEST(GlossySession, AlgorithmOneMatchesThePixelBasisReferenceWithinAPsnrBound) {
   EXPECT_GT(diff, 1e-3);
 }
 
+// No silent zeroing in the glossy path (docs/viewer.md, "NaN and Inf"): under a uniform sky of
+// 3e38 (finite, and every block's lighting finite) the scene's own materials stay within float,
+// but a Phong lobe of exponent 10⁶ (peak (s + 2)/2π ≈ 1.6·10⁵) makes the per-block float
+// products overflow: Algorithm 1 and the reference both throw NumericalError naming the pack and
+// the vertex, instead of writing 0 for it.
+TEST(GlossySession, OverflowIsAnErrorNamingThePackAndVertex) {
+  const GlossyPack& t = TinyGlossyPack();
+  auto s = GlossySession::Open(t.pack);
+  CubemapRgb cube;
+  cube.n = s->cubemap_n();
+  for (int c = 0; c < 3; ++c) cube.Channel(c).assign(cube.TexelCount(), 3e38f);
+  const BlockLighting light = s->Lighting(cube);
+  std::vector<float> rgb(3 * s->sample_count());
+  s->Relight(light, s->camera().eye, rgb, {.exact_cosine = true});
+  for (float v : rgb) ASSERT_TRUE(std::isfinite(v));
+  for (Material& m : s->materials()) {
+    m.model = BrdfModel::kPhong;
+    m.specular = {1.0f, 1.0f, 1.0f};
+    m.exponent = m.exponent_v = 1e6;
+  }
+  const auto message = [](const auto& f) {
+    try {
+      f();
+    } catch (const NumericalError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  for (bool exact : {true, false}) {
+    const std::string alg =
+        message([&] { s->Relight(light, s->camera().eye, rgb, {.exact_cosine = exact}); });
+    EXPECT_EQ(alg.rfind(t.pack + ": triple product: the outgoing radiance of vertex ", 0), 0u)
+        << alg;
+  }
+  const std::string ref = message([&] { s->RelightReference(light, s->camera().eye, rgb); });
+  EXPECT_EQ(ref.rfind(t.pack + ": triple product: the outgoing radiance of vertex ", 0), 0u) << ref;
+  EXPECT_NE(ref.find("outside the float range"), std::string::npos) << ref;
+}
+
 TEST(GlossySession, MalformedMaterialsAndMissingVisibilityAreInputErrors) {
   const std::vector<Rgb> albedo = {{0.5f, 0.5f, 0.5f}};
   EXPECT_THROW(GlossyMaterialsFromMetadata(R"({"materials":[{"brdf":"ward"}]})", albedo, "x"),
@@ -305,7 +346,10 @@ TEST(GlossySession, WindowScreenshotMatchesHeadlessRender) {
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(t.env), s->cubemap_n());
   std::vector<float> rgb(3 * s->sample_count());
   s->Relight(s->Lighting(cube), s->camera().eye, rgb, {.exact_cosine = true});
-  const ImageRgb image = s->Render(s->camera(), rgb, &cube);
+  // The window's background is the environment image itself, as prt-view's.
+  const ImageRgb image = s->Render(
+      s->camera(), rgb,
+      EnvironmentBackground(std::make_shared<const EnvironmentLookup>(ReadEnvironment(t.env))));
   ASSERT_EQ(codes.size(), image.pixels.size());
   EXPECT_LE(testing::LargestCodeDifference(codes, image), 1.0);
 #endif

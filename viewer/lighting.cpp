@@ -5,9 +5,13 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstddef>
+#include <cstdio>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
+#include "vocabulary/errors.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {
@@ -20,6 +24,71 @@ int CheckFaceSize(int n) {
                                 " is not a power of two in [1, 256]");
   }
   return std::countr_zero(static_cast<unsigned>(n));  // full depth log2 n
+}
+
+// The orthonormal Haar transform of one n×n face to full depth, in double throughout: the
+// same steps as vocabulary/wavelets.h's ForwardHaarFace (its ForwardHaarStep2D: one pass over
+// 2×2 blocks, LL = (p+q+r+s)/2, HL = (p−q+r−s)/2, LH = (p+q−r−s)/2, HH = (p−q−r+s)/2, the next
+// step on LL), without its final rounding to float. A face's scaling coefficient is n × the
+// face's mean, which passes the float range once texels exceed FLT_MAX / n (a coefficient the
+// float transform would store as Inf); and the lighting is double from here on (WaveletLighting),
+// so keeping the float rounding would only add error. `tmp` holds n² doubles.
+void ForwardHaarFaceDouble(double* face, int n, double* tmp) {
+  for (int m = n; m >= 2; m /= 2) {
+    const int h = m / 2;
+    for (int j = 0; j < h; ++j) {
+      const double* r0 = face + static_cast<std::ptrdiff_t>(2 * j) * n;
+      const double* r1 = r0 + n;
+      double* ll = tmp + static_cast<std::ptrdiff_t>(j) * n;
+      double* lh = tmp + static_cast<std::ptrdiff_t>(h + j) * n;
+      for (int i = 0; i < h; ++i) {
+        const double p = r0[2 * i], q = r0[2 * i + 1], r = r1[2 * i], t = r1[2 * i + 1];
+        const double top = p + q, bottom = r + t, left = p + r, right = q + t;
+        ll[i] = 0.5 * (top + bottom);
+        ll[h + i] = 0.5 * (left - right);
+        lh[i] = 0.5 * (top - bottom);
+        lh[h + i] = 0.5 * ((p - q) - (r - t));
+      }
+    }
+    for (int y = 0; y < m; ++y)
+      std::copy_n(tmp + static_cast<std::ptrdiff_t>(y) * n, m,
+                  face + static_cast<std::ptrdiff_t>(y) * n);
+  }
+}
+
+// The inverse of ForwardHaarFaceDouble (wavelets.cpp's InverseHaarStep2D, in double).
+void InverseHaarFaceDouble(double* face, int n, double* tmp) {
+  for (int m = 2; m <= n; m *= 2) {
+    const int h = m / 2;
+    for (int j = 0; j < h; ++j) {
+      const double* ll = face + static_cast<std::ptrdiff_t>(j) * n;
+      const double* lh = face + static_cast<std::ptrdiff_t>(h + j) * n;
+      double* r0 = tmp + static_cast<std::ptrdiff_t>(2 * j) * n;
+      double* r1 = r0 + n;
+      for (int i = 0; i < h; ++i) {
+        const double sum_l = ll[i] + lh[i], dif_l = ll[i] - lh[i];
+        const double sum_h = ll[h + i] + lh[h + i], dif_h = ll[h + i] - lh[h + i];
+        r0[2 * i] = 0.5 * (sum_l + sum_h);
+        r0[2 * i + 1] = 0.5 * (sum_l - sum_h);
+        r1[2 * i] = 0.5 * (dif_l + dif_h);
+        r1[2 * i + 1] = 0.5 * (dif_l - dif_h);
+      }
+    }
+    for (int y = 0; y < m; ++y)
+      std::copy_n(tmp + static_cast<std::ptrdiff_t>(y) * n, m,
+                  face + static_cast<std::ptrdiff_t>(y) * n);
+  }
+}
+
+// A value for an error message: 7 significant digits (std::to_string writes 1e39 in full).
+std::string Number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.7g", v);
+  return b;
+}
+
+const char* ChannelName(int c) {
+  return c == 0 ? "R" : (c == 1 ? "G" : "B");
 }
 
 }  // namespace
@@ -54,11 +123,12 @@ HaarLightingBasis::HaarLightingBasis(int n) : n_(n) {
 }
 
 WaveletLighting ProjectLighting(const CubemapRgb& cube) {
-  const int depth = CheckFaceSize(cube.n);
+  CheckFaceSize(cube.n);
   const std::size_t texels = cube.TexelCount();
+  const std::size_t face = static_cast<std::size_t>(cube.n) * cube.n;
   WaveletLighting out;
   out.n = cube.n;
-  std::vector<float> work;
+  std::vector<double> tmp(face);
   for (int c = 0; c < 3; ++c) {
     const std::vector<float>& src = cube.Channel(c);
     if (src.size() != texels) {
@@ -66,30 +136,49 @@ WaveletLighting ProjectLighting(const CubemapRgb& cube) {
                                   std::to_string(src.size()) + " texels, expected " +
                                   std::to_string(texels));
     }
-    work.assign(src.begin(), src.end());
-    ForwardHaarCubemap(work.data(), cube.n, depth);
-    out.coefficient[c].resize(texels);
+    std::vector<double>& dst = out.coefficient[c];
+    dst.resize(texels);
     for (std::size_t j = 0; j < texels; ++j) {
-      out.coefficient[c][j] = std::isfinite(work[j]) ? static_cast<double>(work[j]) : 0.0;
+      // ResampleToCubemap's texels are finite (it refuses NaN/Inf pixels, and a texel is a
+      // weighted average of pixels); a cubemap made otherwise is checked here.
+      if (!std::isfinite(src[j]))
+        throw NumericalError("ProjectLighting: lighting texel " + std::to_string(j) + " (face " +
+                             std::to_string(j / face) + ") channel " + ChannelName(c) + " is " +
+                             (std::isnan(src[j]) ? "NaN" : "Inf"));
+      dst[j] = src[j];
     }
+    // Finite: each coefficient is a sum of at most n² finite floats times 2^−k, at most
+    // n·FLT_MAX ≤ 256·3.4e38 in magnitude, far inside the double range.
+    for (std::size_t f = 0; f < 6; ++f)
+      ForwardHaarFaceDouble(dst.data() + f * face, cube.n, tmp.data());
   }
   return out;
 }
 
 CubemapRgb ReconstructLighting(const WaveletLighting& lighting) {
-  const int depth = CheckFaceSize(lighting.n);
+  CheckFaceSize(lighting.n);
   CubemapRgb cube;
   cube.n = lighting.n;
+  const std::size_t face = static_cast<std::size_t>(cube.n) * cube.n;
+  std::vector<double> work, tmp(face);
   for (int c = 0; c < 3; ++c) {
     std::vector<float>& dst = cube.Channel(c);
     dst.resize(cube.TexelCount());
     if (lighting.coefficient[c].size() != dst.size()) {
       throw std::invalid_argument("ReconstructLighting: wrong coefficient count");
     }
+    work = lighting.coefficient[c];
+    for (std::size_t f = 0; f < 6; ++f)
+      InverseHaarFaceDouble(work.data() + f * face, cube.n, tmp.data());
     for (std::size_t j = 0; j < dst.size(); ++j) {
-      dst[j] = static_cast<float>(lighting.coefficient[c][j]);
+      // Texel radiance of a lighting vector (or of an approximation: sums of its terms) need not
+      // fit in float even when every coefficient is finite; that is an error, not an Inf texel.
+      if (!(std::abs(work[j]) <= std::numeric_limits<float>::max()))
+        throw NumericalError("ReconstructLighting: texel " + std::to_string(j) + " channel " +
+                             ChannelName(c) + " = " + Number(work[j]) +
+                             " is outside the float range");
+      dst[j] = static_cast<float>(work[j]);
     }
-    InverseHaarCubemap(dst.data(), cube.n, depth);
   }
   return cube;
 }

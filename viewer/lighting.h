@@ -59,11 +59,15 @@ class HaarLightingBasis {
   std::vector<std::vector<uint32_t>> members_;
 };
 
-// Forward Haar transform of a lighting cubemap (average radiance per texel).
+// Forward Haar transform of a lighting cubemap (average radiance per texel), computed in double
+// from the float texels (no rounding to float on the way: a face's scaling coefficient, n × its
+// mean, may exceed the float range, and a 10⁷ sun next to a sky of 1 keeps the sky's digits).
 // Throws std::invalid_argument if n is not a power of two in [1, 256] or the channels are not
-// 6·n² long.
+// 6·n² long, NumericalError naming the texel on a NaN/Inf texel. Every coefficient of a finite
+// cubemap is finite.
 WaveletLighting ProjectLighting(const CubemapRgb& cube);
-// Inverse: texel radiance of a lighting vector, or of a list of terms on an n×n cubemap.
+// Inverse (in double): texel radiance of a lighting vector, or of a list of terms on an n×n
+// cubemap. Throws NumericalError naming the texel when a texel is outside the float range.
 CubemapRgb ReconstructLighting(const WaveletLighting& lighting);
 CubemapRgb ReconstructLighting(int n, std::span<const LightingTerm> terms);
 

@@ -6,14 +6,18 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "viewer/relight.h"
 #include "vocabulary/cubemap.h"
-#include "vocabulary/envmap.h"
-#include "vocabulary/environment_io.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/envmap.h"
+#include "vocabulary/errors.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {
@@ -86,6 +90,53 @@ TEST(LightingTest, ProjectionRoundTripsAndPreservesEnergy) {
   double mean = 0.0;
   for (int j = 0; j < 64; ++j) mean += cube.r[j];
   EXPECT_NEAR(l.coefficient[0][0], mean / 64.0 * 8.0, 1e-4);
+}
+
+// ProjectLighting is the Haar transform of vocabulary/wavelets.h computed in double without its
+// final rounding to float: it equals ForwardHaarCubemap to float rounding, keeps coefficients the
+// float transform would overflow (a face's scaling coefficient is n × its mean), and refuses a
+// NaN/Inf texel by name instead of zeroing it.
+TEST(LightingTest, ProjectionIsDoubleHaarAndRefusesNonFiniteTexels) {
+  const int n = 8;
+  const CubemapRgb cube = RandomCubemap(n, 11);
+  const WaveletLighting l = ProjectLighting(cube);
+  for (int c = 0; c < 3; ++c) {
+    std::vector<float> f = cube.Channel(c);
+    ForwardHaarCubemap(f.data(), n, WaveletMaxDepth2D(WaveletFilter::kHaar, n, n));
+    for (std::size_t j = 0; j < f.size(); ++j) {
+      // The float transform is the same double arithmetic rounded once at the end.
+      EXPECT_EQ(f[j], static_cast<float>(l.coefficient[c][j])) << c << " " << j;
+    }
+  }
+  // Texels of 1e38: each face's scaling coefficient is 8 × 1e38, past FLT_MAX (3.4e38).
+  CubemapRgb huge = cube;
+  for (int c = 0; c < 3; ++c)
+    for (float& v : huge.Channel(c)) v *= 5e37f;
+  const WaveletLighting h = ProjectLighting(huge);
+  for (int c = 0; c < 3; ++c)
+    for (double v : h.coefficient[c]) ASSERT_TRUE(std::isfinite(v));
+  EXPECT_GT(std::abs(h.coefficient[0][0]), 3.4e38);
+  std::vector<float> overflowing = huge.r;
+  ForwardHaarCubemap(overflowing.data(), n, WaveletMaxDepth2D(WaveletFilter::kHaar, n, n));
+  EXPECT_TRUE(std::isinf(overflowing[0]));  // what the float transform would have stored
+  // The round trip comes back to the texels (double inverse), relative 1e-7.
+  const CubemapRgb back = ReconstructLighting(h);
+  for (std::size_t j = 0; j < huge.TexelCount(); ++j)
+    ASSERT_NEAR(back.g[j], huge.g[j], 1e-6 * huge.g[j]) << j;
+  // A term list whose texels leave the float range is an error, not an Inf texel.
+  EXPECT_THROW(ReconstructLighting(n, std::vector<LightingTerm>{{0, {1e40, 1.0, 1.0}}}),
+               NumericalError);
+  CubemapRgb bad = cube;
+  bad.b[6 * n * n - 1] = std::numeric_limits<float>::infinity();
+  try {
+    ProjectLighting(bad);
+    FAIL() << "an Inf texel was projected";
+  } catch (const NumericalError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "ProjectLighting: lighting texel 383 (face 5) channel B is Inf");
+  }
+  bad.b[6 * n * n - 1] = std::nanf("");
+  EXPECT_THROW(ProjectLighting(bad), NumericalError);
 }
 
 TEST(LightingTest, BasisBandsGroupByArea) {

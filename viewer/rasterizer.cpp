@@ -12,7 +12,13 @@
 #include <stdexcept>
 #include <string>
 
+#include "vocabulary/errors.h"
+
 namespace prt {
+
+namespace {
+constexpr double kFloatMax = static_cast<double>(std::numeric_limits<float>::max());
+}  // namespace
 
 CameraProjection::CameraProjection(const Camera& camera)
     : eye_(camera.eye), width_(camera.width), height_(camera.height) {
@@ -184,9 +190,13 @@ void DrawTriangle(const ScreenTriangle& t, int row0, int row1, int width, Raster
       img.depth[p] = static_cast<float>(z);
       img.triangle[p] = t.id;
       for (int c = 0; c < 3; ++c) {
+        // Perspective-correct interpolation is a convex combination of the three vertex colours
+        // (weights b_i·(1/z_i)·z ≥ 0 summing to 1), which are finite floats (checked on entry):
+        // v lies within their range up to double rounding (~1e-16 relative, far below half a
+        // float ulp), so it converts to a finite float; the clamp states that bound.
         const double v =
             (b[0] * t.rgb_over_z[0][c] + b[1] * t.rgb_over_z[1][c] + b[2] * t.rgb_over_z[2][c]) * z;
-        img.rgb[3 * p + c] = std::isfinite(v) ? static_cast<float>(v) : 0.0f;
+        img.rgb[3 * p + c] = static_cast<float>(std::clamp(v, -kFloatMax, kFloatMax));
       }
     }
   }
@@ -202,6 +212,12 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
     throw std::invalid_argument("RasterizeTriangles: " + std::to_string(vertex_rgb.size()) +
                                 " colour values for " + std::to_string(positions.size()) +
                                 " vertices");
+  }
+  for (std::size_t i = 0; i < vertex_rgb.size(); ++i) {
+    if (!std::isfinite(vertex_rgb[i]))
+      throw NumericalError("RasterizeTriangles: vertex " + std::to_string(i / 3) +
+                           " colour (channel " + std::to_string(i % 3) + ") is " +
+                           (std::isnan(vertex_rgb[i]) ? "NaN" : "Inf"));
   }
   for (std::size_t i = 0; i < triangles.size(); ++i) {
     for (uint32_t v : triangles[i]) {
@@ -285,7 +301,13 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
           const std::size_t p = static_cast<std::size_t>(y) * img.width + x;
           if (img.triangle[p] >= 0) continue;
           const Rgb c = options.background(cam.PixelDirection(x + 0.5, y + 0.5));
-          for (int k = 0; k < 3; ++k) img.rgb[3 * p + k] = std::isfinite(c[k]) ? c[k] : 0.0f;
+          // The library's backgrounds are finite (EnvironmentLookup and CubemapBackground check
+          // their data); any other function's NaN/Inf is an error, never a black pixel.
+          if (!std::isfinite(c[0]) || !std::isfinite(c[1]) || !std::isfinite(c[2]))
+            throw NumericalError(
+                "RasterizeTriangles: the background of pixel (x=" + std::to_string(x) +
+                ", y=" + std::to_string(y) + ") is not finite");
+          for (int k = 0; k < 3; ++k) img.rgb[3 * p + k] = c[k];
         }
       }
     }
@@ -301,6 +323,10 @@ BackgroundFunction CubemapBackground(const CubemapRgb& cube) {
                                   std::to_string(cube.Channel(c).size()) + " texels, expected " +
                                   std::to_string(layout.texel_count()));
     }
+    for (std::size_t j = 0; j < layout.texel_count(); ++j)
+      if (!std::isfinite(cube.Channel(c)[j]))
+        throw NumericalError("CubemapBackground: texel " + std::to_string(j) + " (channel " +
+                             std::to_string(c) + ") is not finite");
   }
   return [layout, cube](const Vec3& d) {
     const std::size_t t = layout.TexelOf(d);

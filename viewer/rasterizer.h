@@ -68,14 +68,18 @@ class CameraProjection {
 // Rasterises triangles with per-vertex colours (3 floats per position, interleaved). Triangles
 // are two-sided and clipped against the near plane; coverage follows the top-left rule, so a
 // pixel centre on an edge shared by two triangles is drawn once. Parallel over row bands (TBB).
-// Throws std::invalid_argument on a colour array of the wrong size or an out-of-range index.
+// Throws std::invalid_argument on a colour array of the wrong size or an out-of-range index,
+// NumericalError on a NaN/Inf vertex colour or background value (naming the vertex or pixel):
+// no pixel is blacked out silently.
 RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> positions,
                                std::span<const std::array<uint32_t, 3>> triangles,
                                std::span<const float> vertex_rgb,
                                const RasterOptions& options = {});
 
 // Background lookup into a lighting cubemap (average radiance per texel), nearest texel; the
-// returned function keeps its own copy. Throws std::invalid_argument on inconsistent sizes.
+// returned function keeps its own copy. Throws std::invalid_argument on inconsistent sizes,
+// NumericalError on a NaN/Inf texel. prt-view shows the environment image instead
+// (environment_background.h); this is for callers that have only the cubemap.
 BackgroundFunction CubemapBackground(const CubemapRgb& cube);
 
 }  // namespace prt

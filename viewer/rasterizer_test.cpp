@@ -8,9 +8,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
 
 #include "vocabulary/cubemap.h"
 #include "vocabulary/envmap.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 namespace {
@@ -180,6 +182,44 @@ TEST(RasterizerTest, BackgroundShowsTheEnvironmentThroughTheCamera) {
     }
   }
   EXPECT_EQ(img.rgb[3 * (4 * 8 + 4)], 5.0f);  // straight ahead is −Z
+}
+
+// No pixel is blacked out silently (docs/viewer.md, "NaN and Inf"): a NaN/Inf vertex colour or
+// background value is an error naming the vertex or pixel; vertex colours at the top of the float
+// range interpolate to finite pixels (the interpolation is a convex combination).
+TEST(RasterizerTest, NonFiniteColoursAreErrorsAndFloatMaxStaysFinite) {
+  const Camera cam = EightByEight();
+  const std::vector<Vec3> p = {AtPixel(0, 0, 1), AtPixel(8.5, 0, 1), AtPixel(0, 8.5, 4)};
+  const std::vector<std::array<uint32_t, 3>> one = {{0, 1, 2}};
+  const float big = std::numeric_limits<float>::max();
+  const std::vector<float> top = {big, -big, big, big, big, -big, big, big, big};
+  const RasterImage img = RasterizeTriangles(cam, p, one, top);
+  int drawn = 0;
+  for (std::size_t i = 0; i < img.triangle.size(); ++i) {
+    if (img.triangle[i] < 0) continue;
+    ++drawn;
+    for (int c = 0; c < 3; ++c) ASSERT_TRUE(std::isfinite(img.rgb[3 * i + c])) << i;
+    EXPECT_EQ(img.rgb[3 * i], big);
+  }
+  EXPECT_GT(drawn, 20);
+  std::vector<float> bad(9, 1.0f);
+  bad[4] = std::nanf("");
+  try {
+    RasterizeTriangles(cam, p, one, bad);
+    FAIL() << "a NaN colour was drawn";
+  } catch (const NumericalError& e) {
+    EXPECT_EQ(std::string(e.what()), "RasterizeTriangles: vertex 1 colour (channel 1) is NaN");
+  }
+  RasterOptions options;
+  options.background = [](const Vec3& d) {
+    return Rgb{1.0f, d.x > 0.5 ? std::numeric_limits<float>::infinity() : 0.5f, 1.0f};
+  };
+  EXPECT_THROW(RasterizeTriangles(cam, {}, {}, {}, options), NumericalError);
+  CubemapRgb cube;
+  cube.n = 1;
+  for (int c = 0; c < 3; ++c) cube.Channel(c).assign(6, 1.0f);
+  cube.g[3] = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(CubemapBackground(cube), NumericalError);
 }
 
 TEST(RasterizerTest, RejectsBadInput) {

@@ -7,10 +7,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
 #include "viewer/compressed_relight.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 
@@ -64,6 +67,13 @@ void CheckTerms(std::span<const LightingTerm> terms, std::size_t coefficients,
                               std::to_string(coefficients) + " coefficients)");
     }
   }
+}
+
+// A value for an error message: 7 significant digits (std::to_string writes 1e39 in full).
+std::string Number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.7g", v);
+  return b;
 }
 
 std::size_t BlockCount(std::size_t samples, std::size_t block) {
@@ -245,24 +255,62 @@ void CompressedTransportOperator::Relight(std::span<const LightingTerm> terms, S
   std::vector<float> weights(3 * terms.size());
   for (std::size_t k = 0; k < terms.size(); ++k) {
     columns[k] = terms[k].index;
-    for (int c = 0; c < 3; ++c) weights[3 * k + c] = static_cast<float>(terms[k].value[c]);
+    for (int c = 0; c < 3; ++c) {
+      const double v = terms[k].value[c];
+      CheckFloatLighting(v, terms[k].index, c, relighter_.name());
+      weights[3 * k + c] = static_cast<float>(v);
+    }
   }
   double* const channels[3] = {out.channel[0].data(), out.channel[1].data(), out.channel[2].data()};
   relighter_.RelightSparseAdd(columns, weights, 3, channels, order_, assign);
 }
 
-std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo) {
+void CheckFloatLighting(double value, std::size_t coefficient, int channel,
+                        const std::string& source) {
+  if (std::abs(value) <= static_cast<double>(std::numeric_limits<float>::max())) return;
+  throw NumericalError(source + ": lighting coefficient " + std::to_string(coefficient) +
+                       " (channel " + std::to_string(channel) + ") is " +
+                       (std::isnan(value)
+                            ? std::string("NaN")
+                            : Number(value) + ", outside the float range of the relighter") +
+                       "; the environment is too bright");
+}
+
+std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo,
+                                const std::string& source, std::span<const uint32_t> sample_name) {
   const std::size_t n = radiance.size();
   if (albedo.size() > 1 && albedo.size() != n) {
     throw std::invalid_argument("ShadeSamples: " + std::to_string(albedo.size()) + " albedos for " +
                                 std::to_string(n) + " samples");
   }
+  if (!sample_name.empty() && sample_name.size() != n)
+    throw std::invalid_argument("ShadeSamples: sample names for another sample count");
   std::vector<float> rgb(3 * n);
+  bool finite = true;
   for (std::size_t s = 0; s < n; ++s) {
     for (int c = 0; c < 3; ++c) {
       const double a = albedo.empty() ? 1.0 : albedo[albedo.size() == 1 ? 0 : s][c];
-      const double v = a * radiance.channel[c][s];
-      rgb[3 * s + c] = std::isfinite(v) ? static_cast<float>(v) : 0.0f;
+      const auto v = static_cast<float>(a * radiance.channel[c][s]);
+      finite = finite && std::isfinite(v);
+      rgb[3 * s + c] = v;
+    }
+  }
+  if (finite) return rgb;
+  // The first sample that does not fit: its radiance may itself be NaN/Inf (an operator that let
+  // one through) or a finite double beyond the float range (finite T and L whose product
+  // overflows float, e.g. 1e39).
+  for (std::size_t s = 0; s < n; ++s) {
+    for (int c = 0; c < 3; ++c) {
+      if (std::isfinite(rgb[3 * s + c])) continue;
+      const double a = albedo.empty() ? 1.0 : albedo[albedo.size() == 1 ? 0 : s][c];
+      const double r = radiance.channel[c][s];
+      const std::size_t name = sample_name.empty() ? s : sample_name[s];
+      const std::string where = source + ": the shaded radiance of sample " + std::to_string(name) +
+                                " (channel " + std::to_string(c) + ")";
+      if (!std::isfinite(r))
+        throw NumericalError(where + ": T·L is " + (std::isnan(r) ? "NaN" : "Inf"));
+      throw NumericalError(where + ", albedo " + Number(a) + " × T·L " + Number(r) +
+                           ", is outside the float range (3.4e38); the lighting is too bright");
     }
   }
   return rgb;

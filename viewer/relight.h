@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "viewer/compressed_relight.h"
@@ -111,7 +112,11 @@ class SparseTransport final : public TransportOperator {
 // Eq. 8) through viewer/compressed_relight.h. The relighter must outlive the operator and
 // its row wavelet must be Haar (the lighting basis here; std::invalid_argument otherwise).
 // Lighting values pass to the compressed path in float, and its radiance comes back in float:
-// expect ~1e-7 relative rounding per Accumulate (the incremental state stays in double).
+// expect 1–2e-7 relative rounding per Accumulate of tens of terms, ~2e-6 for all 6,144 of n = 32
+// (the incremental state stays in double; docs/viewer.md, "High dynamic range"). A term
+// whose value is outside the float range, or a relight that overflows the relighter's float
+// accumulation, throws NumericalError naming the relighter's name() (the pack); after that
+// exception `out` may hold non-finite values and must be discarded.
 // Its outputs are in the relighter's sample order `order` (viewer/compressed_relight.h):
 // kSamples, the pack's order, or kCoefficients, the depth-0 coefficient layout, which spares the
 // frame the gather through the Hilbert permutation (ViewerSession renders in that order).
@@ -132,7 +137,18 @@ class CompressedTransportOperator final : public TransportOperator {
 };
 
 // Final colours: albedo ⊙ radiance, interleaved RGB float per sample. albedo may be empty (white),
-// hold one colour (uniform) or one per sample (else std::invalid_argument). NaN/Inf become 0.
-std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo);
+// hold one colour (uniform) or one per sample (else std::invalid_argument). A colour that is not
+// a finite float (radiance NaN/Inf, or a finite double beyond 3.4e38: finite T and L whose product
+// overflows float) throws NumericalError naming `source` (the pack) and the sample, as
+// sample_name[s] when given (ViewerSession: the pack's sample number), else s; nothing is
+// replaced by 0 (docs/viewer.md, "NaN and Inf").
+std::vector<float> ShadeSamples(const SampleRadiance& radiance, std::span<const Rgb> albedo,
+                                const std::string& source = "ShadeSamples",
+                                std::span<const uint32_t> sample_name = {});
+
+// Throws NumericalError naming `source`, the coefficient and the channel unless |value| fits in
+// float: the compressed relighter takes its lighting in float (Eq. 8's weights).
+void CheckFloatLighting(double value, std::size_t coefficient, int channel,
+                        const std::string& source);
 
 }  // namespace prt

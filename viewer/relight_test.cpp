@@ -7,15 +7,20 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
+#include "formats/column_coding.h"
 #include "formats/compressed_transport.h"
 #include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
 #include "vocabulary/cubemap.h"
+#include "vocabulary/errors.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {
@@ -176,16 +181,59 @@ TEST(RelightTest, HaarBasisPreservesProductAndUniformEnvironmentGivesOne) {
 TEST(RelightTest, ShadeSamplesAppliesAlbedo) {
   SampleRadiance r(2);
   r.channel[0] = {1.0, 2.0};
-  r.channel[1] = {0.5, std::nan("")};
+  r.channel[1] = {0.5, 3.0};
   r.channel[2] = {4.0, 1.0};
   const std::vector<Rgb> albedo = {{0.5f, 1.0f, 0.25f}, {1.0f, 1.0f, 1.0f}};
   const auto rgb = ShadeSamples(r, albedo);
-  EXPECT_EQ(rgb, (std::vector<float>{0.5f, 0.5f, 1.0f, 2.0f, 0.0f, 1.0f}));
+  EXPECT_EQ(rgb, (std::vector<float>{0.5f, 0.5f, 1.0f, 2.0f, 3.0f, 1.0f}));
   const std::vector<Rgb> uniform = {{2.0f, 2.0f, 2.0f}};
   EXPECT_EQ(ShadeSamples(r, uniform)[0], 2.0f);
   EXPECT_EQ(ShadeSamples(r, {})[2], 4.0f);
   const std::vector<Rgb> three(3);
   EXPECT_THROW(ShadeSamples(r, three), std::invalid_argument);
+}
+
+// No silent zeroing (docs/viewer.md, "NaN and Inf"): a NaN radiance, and a finite radiance whose
+// shaded colour does not fit in float (finite T and L with T·L = 1e39, summed in double), are
+// errors naming the source and the sample (by its name when the caller gives names), never a
+// black sample.
+TEST(RelightTest, ShadeSamplesRefusesWhatIsNotAFiniteFloat) {
+  SampleRadiance r(3);
+  r.channel[0] = {1.0, 2.0, 3.0};
+  r.channel[1] = {0.5, std::nan(""), 1.0};
+  r.channel[2] = {4.0, 1.0, 1.0};
+  const auto message = [&](const std::vector<Rgb>& albedo, std::span<const uint32_t> names) {
+    try {
+      ShadeSamples(r, albedo, "scene.prtpack", names);
+    } catch (const NumericalError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(message({}, {}),
+            "scene.prtpack: the shaded radiance of sample 1 (channel 1): T·L is NaN");
+  const std::vector<uint32_t> names = {7, 8, 9};
+  EXPECT_NE(message({}, names).find("sample 8 (channel 1)"), std::string::npos);
+  // Finite T and L whose product overflows float: a dense operator sums T·L in double.
+  const std::vector<float> rows = {1e30f, 1e30f, 1e30f, 1e30f};  // 2 samples × 2 coefficients
+  const DenseTransport dense(rows, 2, 2);
+  const std::vector<LightingTerm> light = {{0, {1e9, 1.0, 1.0}}, {1, {1e9, 1.0, 1.0}}};
+  const SampleRadiance big = dense.Apply(light);
+  ASSERT_TRUE(std::isfinite(big.channel[0][0]));
+  EXPECT_NEAR(big.channel[0][0], 2e39, 1e33);
+  try {
+    ShadeSamples(big, {}, "scene.prtpack");
+    FAIL() << "2e39 became a float";
+  } catch (const NumericalError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "scene.prtpack: the shaded radiance of sample 0 (channel 0), albedo 1 × T·L 2e+39, "
+              "is outside the float range (3.4e38); the lighting is too bright");
+  }
+  // The albedo may bring it back into range (0.5 × 2e39 is still too bright; 1e-10 × 2e39 is
+  // not): the check is on the colour written.
+  EXPECT_THROW(ShadeSamples(big, std::vector<Rgb>{{0.5f, 0.5f, 0.5f}}), NumericalError);
+  const std::vector<float> dim = ShadeSamples(big, std::vector<Rgb>{{1e-10f, 1.0f, 1.0f}});
+  EXPECT_NEAR(dim[0], 2e29f, 1e23f);
 }
 
 // The compressed 4D path plugs in through CompressedTransportOperator: it relights like the
@@ -250,6 +298,77 @@ TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
   for (int c = 0; c < 3; ++c)
     for (std::size_t v = 0; v < 19; ++v)
       EXPECT_EQ(l.channel[c][relighter.coefficient_of_sample()[v]], a.channel[c][v]);
+}
+
+// The compressed path takes its lighting and accumulates in float (Eq. 8's X): a lighting value
+// past the float range, an X that overflows, and a term that dequantises past it are errors
+// naming the transport (the pack) and the coefficient or sample; nothing comes back as 0 or Inf.
+TEST(RelightTest, CompressedPathRefusesOverflowNamingTheTransport) {
+  CompressedTransport t;
+  t.header.cubemap_n = 2;
+  t.header.sample_count = 19;
+  t.header.bits = 9;
+  SpatialSegment seg;
+  seg.kind = SpatialSegment::Kind::kMesh1D;
+  seg.count = 19;
+  for (uint32_t k = 0; k < 19; ++k) seg.order.push_back((7 * k + 3) % 19);
+  t.header.domain.segments = {seg};
+  CompressedColumn c;  // T = 1e30 (within dither and 9 bits) at every sample, depth 0
+  c.column = 0;
+  c.depth = 0;
+  c.scale = 1e30f;
+  for (uint32_t i = 0; i < 19; ++i) {
+    c.index.push_back(i);
+    c.q.push_back(QuantiserMax(9));
+  }
+  t.columns.push_back(c);
+  const CompressedRelighter relighter(t, "scene.prtpack");
+  EXPECT_EQ(relighter.name(), "scene.prtpack");
+  const CompressedTransportOperator op(relighter);
+  const SampleRadiance fine = op.Apply(std::vector<LightingTerm>{{0, {1.0, 2.0, 0.5}}});
+  for (const auto& ch : fine.channel)
+    for (double v : ch) EXPECT_TRUE(std::isfinite(v) && v > 4e29 && v < 3e30) << v;
+  const auto message = [](const auto& f) {
+    try {
+      f();
+    } catch (const NumericalError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  // A lighting value past the float range (a double the float weights cannot hold).
+  const std::string past = message([&] {
+    op.Apply(std::vector<LightingTerm>{{0, {1.0, 1e39, 1.0}}});
+  });
+  EXPECT_EQ(past,
+            "scene.prtpack: lighting coefficient 0 (channel 1) is 1e+39, outside the float range "
+            "of the relighter; the environment is too bright");
+  // Finite T (1e30) and L (1e10) whose product overflows X: named by sample, in either order.
+  const std::vector<LightingTerm> bright = {{0, {1e10, 1.0, 1.0}}};
+  EXPECT_EQ(message([&] { op.Apply(bright); }),
+            "scene.prtpack: the relit radiance of sample 0 (channel 0) is Inf: T·L overflows the "
+            "relighter's float range (3.4e38); the lighting is too bright for this transport");
+  const CompressedTransportOperator lay(relighter, SampleOrder::kCoefficients);
+  // Position 0 of the coefficient order holds the segment's order[0] = sample 3.
+  EXPECT_NE(message([&] { lay.Apply(bright); }).find("of sample 3 (channel 0) is Inf"),
+            std::string::npos);
+  SampleRadiance acc = fine;
+  EXPECT_NE(message([&] { op.Accumulate(bright, acc); }).find("is Inf"), std::string::npos);
+  // The dense Eq. 8 path (float output) too.
+  std::vector<float> lighting(3 * 24, 0.0f), radiance(3 * 19);
+  lighting[0] = 1e10f;
+  EXPECT_NE(message([&] { relighter.Relight(lighting, 3, radiance); }).find("is Inf"),
+            std::string::npos);
+  // A scale within 0.4 % of FLT_MAX dequantises past the float range at a negative dither.
+  t.columns[0].scale = std::numeric_limits<float>::max();
+  try {
+    const CompressedRelighter too_big(t, "scene.prtpack");
+    FAIL() << "a term past the float range was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("scene.prtpack: column 0: the term of sample"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // Measurement, not an assertion on time: throughput of the dense and sparse operators on 4096

@@ -4,7 +4,12 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <stdexcept>
+#include <string>
+
+#include "vocabulary/errors.h"
 
 namespace prt {
 
@@ -224,6 +229,31 @@ void Algorithm1(const GlossyScene& scene, const CubemapBlocks& blocks, const Blo
   }
 }
 
+// A value for an error message: 7 significant digits (std::to_string writes 1e39 in full).
+std::string Number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.7g", v);
+  return b;
+}
+
+[[noreturn]] void ThrowNonFiniteVertex(std::size_t vertex, int c, double value) {
+  throw NumericalError("triple product: the outgoing radiance of vertex " + std::to_string(vertex) +
+                       " (channel " + std::to_string(c) + ") is " +
+                       (std::isnan(value) ? "NaN" : "Inf") +
+                       ": a block's float product overflowed; the lighting is too bright");
+}
+
+// A vertex's radiance (a finite double) as the float the output holds; past 3.4e38 an error.
+float ToFloatRadiance(double v, std::size_t vertex, int c) {
+  if (!(std::abs(v) <= static_cast<double>(std::numeric_limits<float>::max())))
+    throw NumericalError("triple product: the outgoing radiance of vertex " +
+                         std::to_string(vertex) + " (channel " + std::to_string(c) +
+                         ") = " + Number(v) +
+                         " is outside the float range; the lighting is too "
+                         "bright");
+  return static_cast<float>(v);
+}
+
 void Count(TripleProductStats& st, TripleProductCase line, int rate) {
   switch (line) {
     case TripleProductCase::kZero:
@@ -294,7 +324,15 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
              });
   if (stats != nullptr) *stats += st;
   std::array<double, 3> r{};
-  for (int c = 0; c < 3; ++c) r[c] = std::isfinite(total[c]) ? std::max(0.0, total[c]) : 0.0;
+  for (int c = 0; c < 3; ++c) {
+    // A double sum of at most 6·(n/16)² float block products cannot overflow; it is NaN/Inf only
+    // when a block's float product overflowed (finite lighting and BRDF values whose product
+    // passes 3.4e38), which is an error, not a black vertex.
+    if (!std::isfinite(total[c])) ThrowNonFiniteVertex(vertex, c, total[c]);
+    // Negative totals come from the DCT approximation of the lobes (Algorithm 1's lines 6–11):
+    // radiance is ≥ 0.
+    r[c] = std::max(0.0, total[c]);
+  }
   return r;
 }
 
@@ -310,7 +348,14 @@ void TripleProductVertexBlocks(const GlossyScene& scene, const CubemapBlocks& bl
              [&](int b, TripleProductCase line, int rate, const float* rgb) {
                out[b].line = line;
                out[b].rate = static_cast<uint16_t>(rate);
-               for (int c = 0; c < 3; ++c) out[b].rgb[c] = std::isfinite(rgb[c]) ? rgb[c] : 0.f;
+               for (int c = 0; c < 3; ++c) {
+                 if (!std::isfinite(rgb[c]))
+                   throw NumericalError("triple product: vertex " + std::to_string(vertex) +
+                                        ", block " + std::to_string(b) + ", channel " +
+                                        std::to_string(c) +
+                                        ": the block's product overflows float32");
+                 out[b].rgb[c] = rgb[c];
+               }
              });
 }
 
@@ -328,7 +373,8 @@ TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapB
                       for (std::size_t v = r.begin(); v != r.end(); ++v) {
                         const auto b =
                             TripleProductVertex(scene, blocks, light, v, eye, &st, options);
-                        for (int c = 0; c < 3; ++c) out_rgb[v * 3 + c] = static_cast<float>(b[c]);
+                        for (int c = 0; c < 3; ++c)
+                          out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
                       }
                     });
   TripleProductStats total;
@@ -370,7 +416,8 @@ void RelightPixelBasisReference(const GlossyScene& scene, const CubemapBlocks& b
                       for (std::size_t v = r.begin(); v != r.end(); ++v) {
                         const auto b =
                             PixelBasisReferenceVertex(scene, blocks, light, v, eye, skip_occluded);
-                        for (int c = 0; c < 3; ++c) out_rgb[v * 3 + c] = static_cast<float>(b[c]);
+                        for (int c = 0; c < 3; ++c)
+                          out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
                       }
                     });
 }

@@ -15,7 +15,9 @@
 //   line 11  visibility mixed, BRDF 4/16/256 samples      → pixel basis over the visible runs
 //            of V (§4.4), the BRDF reconstructed from its DCT coefficients or sampled per pixel.
 // Per-block products run in float; block sums accumulate in double. Vertices run in parallel
-// (TBB); results do not depend on the thread count.
+// (TBB); results do not depend on the thread count. A block product or a vertex's radiance that
+// is not a finite float (finite lighting and BRDF values whose product overflows float) throws
+// NumericalError naming the vertex (and the block where known); nothing is replaced by 0.
 #pragma once
 
 #include <array>

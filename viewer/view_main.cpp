@@ -8,27 +8,31 @@
 #include <exception>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
 #include "packager/prtpack_reader.h"
 #include "viewer/camera_metadata.h"
+#include "viewer/environment_background.h"
 #include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"
 #include "viewer/rotation_plot.h"
 #include "viewer/viewer_session.h"
-#include "vocabulary/envmap.h"
-#include "vocabulary/environment_io.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/envmap.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/image_io.h"
 
 #ifdef PRT_VIEW_HAS_SDL2
-int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentImage& env,
+int RunViewerWindow(const prt::ViewerSession& session,
+                    const std::shared_ptr<const prt::EnvironmentLookup>& env,
                     const prt::Camera& camera, std::size_t terms, prt::LightingMode mode,
                     double exposure, int max_frames, const std::string& screenshot,
                     bool exact);  // view_window_main.cpp
-int RunGlossyWindow(prt::GlossySession& session, const prt::EnvironmentImage& env,
+int RunGlossyWindow(prt::GlossySession& session,
+                    const std::shared_ptr<const prt::EnvironmentLookup>& env,
                     const prt::Camera& camera, double exposure, int max_frames,
                     const std::string& screenshot, bool exact_cosine);  // view_window_main.cpp
 #endif
@@ -40,6 +44,12 @@ constexpr int kExitInput = 2;
 
 double Seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The environment, read once: the lighting is resampled from it, and the frames' background
+// shows it at its own resolution (environment_background.h), shared rather than copied.
+std::shared_ptr<const prt::EnvironmentLookup> LoadEnvironment(const std::string& path) {
+  return std::make_shared<const prt::EnvironmentLookup>(prt::ReadEnvironment(path), path);
 }
 
 struct Options {
@@ -64,7 +74,8 @@ int RunGlossy(const Options& o, const prt::pack::PackReader& reader,
   if (!o.camera.empty()) camera = prt::ParseCameraSpec(o.camera, camera);
   if (o.width > 0) camera.width = o.width;
   if (o.height > 0) camera.height = o.height;
-  const prt::EnvironmentImage env = prt::ReadEnvironment(o.env);
+  const auto lookup = LoadEnvironment(o.env);
+  const prt::EnvironmentImage& env = lookup->image();
   const int n = session->cubemap_n();
   if (!o.quiet)
     std::printf(
@@ -74,7 +85,7 @@ int RunGlossy(const Options& o, const prt::pack::PackReader& reader,
         session->mesh_count(), Seconds(t_open));
   if (o.window) {
 #ifdef PRT_VIEW_HAS_SDL2
-    return RunGlossyWindow(*session, env, camera, o.exposure, o.window_frames, o.screenshot,
+    return RunGlossyWindow(*session, lookup, camera, o.exposure, o.window_frames, o.screenshot,
                            o.exact_cosine);
 #else
     throw std::invalid_argument("--window: prt-view was built without SDL2");
@@ -98,7 +109,7 @@ int RunGlossy(const Options& o, const prt::pack::PackReader& reader,
   if (!o.radiance_out.empty())
     prt::WriteNpyFloat32(o.radiance_out, rgb, session->sample_count(), 3);
   const auto t_raster = std::chrono::steady_clock::now();
-  const prt::ImageRgb image = session->Render(camera, rgb, &cube);
+  const prt::ImageRgb image = session->Render(camera, rgb, prt::EnvironmentBackground(lookup));
   const double raster_s = Seconds(t_raster);
   const prt::ToneMapOptions tone{o.exposure, prt::ToneMap::kClamp};
   if (!o.out.empty()) prt::WritePng(image, o.out, tone);
@@ -139,7 +150,8 @@ int Run(const Options& o) {
   if (!o.camera.empty()) camera = prt::ParseCameraSpec(o.camera, camera);
   if (o.width > 0) camera.width = o.width;
   if (o.height > 0) camera.height = o.height;
-  const prt::EnvironmentImage env = prt::ReadEnvironment(o.env);
+  const auto lookup = LoadEnvironment(o.env);
+  const prt::EnvironmentImage& env = lookup->image();
   const int n = session->cubemap_n();
   const prt::ToneMapOptions tone{o.exposure, prt::ToneMap::kClamp};
   const prt::LightingMode mode = prt::ParseLightingMode(o.lighting);
@@ -150,7 +162,7 @@ int Run(const Options& o) {
 
   if (o.window) {
 #ifdef PRT_VIEW_HAS_SDL2
-    return RunViewerWindow(*session, env, camera, o.terms, mode, o.exposure, o.window_frames,
+    return RunViewerWindow(*session, lookup, camera, o.terms, mode, o.exposure, o.window_frames,
                            o.screenshot, o.exact);
 #else
     throw std::invalid_argument("--window: prt-view was built without SDL2");
@@ -169,8 +181,10 @@ int Run(const Options& o) {
         mode == prt::LightingMode::kNwa ? 0 : (mode == prt::LightingMode::kBi ? 1 : 2);
     const auto t0 = std::chrono::steady_clock::now();
     const auto frames = prt::RunRotation(*session, env, ro, [&](const prt::RotationFrameView& v) {
+      // The background rotates with the lighting of the frame (v.rotation_y).
       const prt::ImageRgb img =
-          session->Render(camera, v.approx_rgb[static_cast<std::size_t>(index)], &v.cube);
+          session->Render(camera, v.approx_rgb[static_cast<std::size_t>(index)],
+                          prt::EnvironmentBackground(lookup, v.rotation_y));
       char name[64];
       std::snprintf(name, sizeof name, "frame_%04d.png", v.errors.frame);
       prt::WritePng(img, (std::filesystem::path(o.out_dir) / name).string(), tone);
@@ -209,7 +223,7 @@ int Run(const Options& o) {
   if (!o.radiance_out.empty())  // the session's order → the pack's (viewer_session.h)
     prt::WriteNpyFloat32(o.radiance_out, session->ToPackOrder(rgb), session->sample_count(), 3);
   const auto t_raster = std::chrono::steady_clock::now();
-  const prt::ImageRgb image = session->Render(camera, rgb, &cube);
+  const prt::ImageRgb image = session->Render(camera, rgb, prt::EnvironmentBackground(lookup));
   const double raster_s = Seconds(t_raster);
   if (!o.out.empty()) prt::WritePng(image, o.out, tone);
   if (!o.exr.empty()) prt::WriteExr(image, o.exr);

@@ -17,12 +17,13 @@
 #include <string>
 #include <vector>
 
+#include "viewer/environment_background.h"
 #include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/viewer_session.h"
-#include "vocabulary/image_io.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/image_io.h"
 
 namespace {
 
@@ -34,8 +35,13 @@ struct WindowState {
   bool exact = false;
 };
 
+// The drag angle in radians, as RunRotation converts its angles (viewer_session.cpp).
+double Radians(double deg) {
+  return deg * 3.14159265358979323846 / 180.0;
+}
+
 prt::Camera Orbit(const prt::Camera& c, double deg) {
-  const double a = deg * 3.14159265358979323846 / 180.0;
+  const double a = Radians(deg);
   const prt::Vec3 d = c.eye - c.target;
   prt::Camera out = c;
   out.eye = c.target + prt::Vec3{std::cos(a) * d.x + std::sin(a) * d.z, d.y,
@@ -64,7 +70,8 @@ void SaveScreenshot(SDL_Renderer* renderer, const prt::Camera& camera, std::size
 
 }  // namespace
 
-int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentImage& env,
+int RunViewerWindow(const prt::ViewerSession& session,
+                    const std::shared_ptr<const prt::EnvironmentLookup>& env,
                     const prt::Camera& camera, std::size_t terms, prt::LightingMode mode,
                     double exposure, int max_frames, const std::string& screenshot, bool exact) {
   if (SDL_Init(SDL_INIT_VIDEO) != 0)
@@ -93,6 +100,7 @@ int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentIma
   const prt::ToneMapOptions tone{exposure, prt::ToneMap::kClamp};
   prt::CubemapRgb cube;
   prt::WaveletLighting lighting;
+  prt::BackgroundFunction background;  // the environment image, rotated with the lighting
   double lit_deg = std::nan("");
   std::unique_ptr<prt::BasicIncrementalRelighter> bi;
   std::unique_ptr<prt::PerBandIncrementalRelighter> pbi;
@@ -146,8 +154,9 @@ int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentIma
       }
     }
     if (!(st.env_deg == lit_deg)) {
-      cube = prt::ResampleToCubemap(env, n, st.env_deg * 3.14159265358979323846 / 180.0);
+      cube = prt::ResampleToCubemap(env->image(), n, Radians(st.env_deg));
       lighting = prt::ProjectLighting(cube);
+      background = prt::EnvironmentBackground(env, Radians(st.env_deg));
       lit_deg = st.env_deg;
     }
     prt::SampleRadiance radiance;
@@ -173,7 +182,7 @@ int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentIma
       radiance = pbi->Radiance();
     }
     const prt::ImageRgb image =
-        session.Render(Orbit(camera, st.orbit_deg), session.Shade(radiance), &cube);
+        session.Render(Orbit(camera, st.orbit_deg), session.Shade(radiance), background);
     for (std::size_t i = 0; i < rgb8.size(); ++i) rgb8[i] = prt::ToSrgb8(image.pixels[i], tone);
     SDL_UpdateTexture(texture, nullptr, rgb8.data(), 3 * camera.width);
     SDL_RenderClear(renderer);
@@ -213,7 +222,8 @@ int RunViewerWindow(const prt::ViewerSession& session, const prt::EnvironmentIma
 // environment (block lighting recomputed), right drag orbits the camera (the view changes every
 // vertex's BRDF: Algorithm 1 runs every frame), [ and ] scale every specular exponent by 1/2 or
 // 2, r toggles the pixel-basis reference.
-int RunGlossyWindow(prt::GlossySession& session, const prt::EnvironmentImage& env,
+int RunGlossyWindow(prt::GlossySession& session,
+                    const std::shared_ptr<const prt::EnvironmentLookup>& env,
                     const prt::Camera& camera, double exposure, int max_frames,
                     const std::string& screenshot, bool exact_cosine) {
   if (SDL_Init(SDL_INIT_VIDEO) != 0)
@@ -239,6 +249,7 @@ int RunGlossyWindow(prt::GlossySession& session, const prt::EnvironmentImage& en
   bool reference = false;
   prt::CubemapRgb cube;
   prt::BlockLighting light;
+  prt::BackgroundFunction background;  // the environment image, rotated with the lighting
   std::vector<float> rgb(3 * session.sample_count());
   std::vector<unsigned char> rgb8(3 * static_cast<std::size_t>(camera.width) *
                                   static_cast<std::size_t>(camera.height));
@@ -267,8 +278,9 @@ int RunGlossyWindow(prt::GlossySession& session, const prt::EnvironmentImage& en
       }
     }
     if (!(env_deg == lit_deg)) {
-      cube = prt::ResampleToCubemap(env, n, env_deg * 3.14159265358979323846 / 180.0);
+      cube = prt::ResampleToCubemap(env->image(), n, Radians(env_deg));
       light = session.Lighting(cube);
+      background = prt::EnvironmentBackground(env, Radians(env_deg));
       lit_deg = env_deg;
     }
     const prt::Camera cam = Orbit(camera, orbit_deg);
@@ -277,7 +289,7 @@ int RunGlossyWindow(prt::GlossySession& session, const prt::EnvironmentImage& en
     } else {
       session.Relight(light, cam.eye, rgb, {.exact_cosine = exact_cosine});
     }
-    const prt::ImageRgb image = session.Render(cam, rgb, &cube);
+    const prt::ImageRgb image = session.Render(cam, rgb, background);
     for (std::size_t i = 0; i < rgb8.size(); ++i) rgb8[i] = prt::ToSrgb8(image.pixels[i], tone);
     SDL_UpdateTexture(texture, nullptr, rgb8.data(), 3 * camera.width);
     SDL_RenderClear(renderer);

@@ -16,8 +16,8 @@
 #include "viewer/camera_metadata.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/rasterizer.h"
-#include "vocabulary/errors.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 
@@ -78,7 +78,7 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
                                     ToString(h.row_wavelet) +
                                     "; the viewer's lighting basis is Haar");
   s->transport_terms_ = s->compressed_->term_count();
-  s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_);
+  s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_, pack_path);
   s->operator_ =
       std::make_unique<CompressedTransportOperator>(*s->relighter_, SampleOrder::kCoefficients);
   // The session's order (viewer_session.h): position p holds the pack sample whose coefficient
@@ -124,28 +124,36 @@ SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) cons
                                 " coefficients, the transport " + std::to_string(cols));
   std::vector<float> l(3 * cols);
   for (int c = 0; c < 3; ++c)
-    for (std::size_t j = 0; j < cols; ++j)
-      l[c * cols + j] = static_cast<float>(lighting.coefficient[c][j]);
+    for (std::size_t j = 0; j < cols; ++j) {
+      const double v = lighting.coefficient[c][j];
+      CheckFloatLighting(v, j, c, path_);  // the relighter's lighting is float
+      l[c * cols + j] = static_cast<float>(v);
+    }
   const std::size_t ns = sample_count();
   std::vector<float> b(3 * ns);
+  // Finite: the relighter throws NumericalError naming the pack and the sample when its float
+  // accumulation overflows (compressed_relight.h), and its inputs are finite floats.
   relighter_->Relight(l, 3, b, SampleOrder::kCoefficients);
   SampleRadiance out(ns);
   for (int c = 0; c < 3; ++c)
-    for (std::size_t s = 0; s < ns; ++s) {
-      const double v = b[c * ns + s];
-      out.channel[c][s] = std::isfinite(v) ? v : 0.0;
-    }
+    for (std::size_t s = 0; s < ns; ++s) out.channel[c][s] = b[c * ns + s];
   return out;
 }
 
 std::vector<float> ViewerSession::Shade(const SampleRadiance& radiance) const {
-  return ShadeSamples(radiance, albedo_);
+  return ShadeSamples(radiance, albedo_, path_, pack_sample_);
 }
 
 ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
                                const CubemapRgb* background) const {
+  return Render(camera, sample_rgb,
+                background != nullptr ? CubemapBackground(*background) : BackgroundFunction{});
+}
+
+ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
+                               const BackgroundFunction& background) const {
   RasterOptions options;
-  if (background != nullptr) options.background = CubemapBackground(*background);
+  options.background = background;
   RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = std::move(r.rgb);
@@ -203,8 +211,9 @@ std::vector<RotationFrame> RunRotation(
   const int total = options.rotate_frames + options.hold_frames;
   for (int f = 0; f <= total; ++f) {
     const double angle_deg = std::min(f, options.rotate_frames) * options.degrees_per_frame;
+    const double rotation_y = angle_deg * 3.14159265358979323846 / 180.0;
     if (!(angle_deg == last_angle)) {
-      cube = ResampleToCubemap(env, n, angle_deg * 3.14159265358979323846 / 180.0);
+      cube = ResampleToCubemap(env, n, rotation_y);
       lighting = ProjectLighting(cube);
       last_angle = angle_deg;
     }
@@ -230,7 +239,8 @@ std::vector<RotationFrame> RunRotation(
     r.image_error = {RelativeRmsError(nwa, exact), RelativeRmsError(bi_rgb, exact),
                      RelativeRmsError(pbi_rgb, exact)};
     frames.push_back(r);
-    if (on_frame) on_frame(RotationFrameView{frames.back(), cube, exact, {nwa, bi_rgb, pbi_rgb}});
+    if (on_frame)
+      on_frame(RotationFrameView{frames.back(), cube, rotation_y, exact, {nwa, bi_rgb, pbi_rgb}});
   }
   return frames;
 }

@@ -22,6 +22,7 @@
 
 #include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
+#include "viewer/rasterizer.h"
 #include "viewer/relight.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
@@ -85,12 +86,20 @@ class ViewerSession {
   std::vector<float> ToPackOrder(std::span<const float> values, std::size_t k = 3) const;
 
   // T·L with every coefficient of L (Eq. 8 with dense lighting: one inverse column transform),
-  // in the session's order.
+  // in the session's order. Throws NumericalError naming the pack when a coefficient of L is
+  // outside the float range or T·L overflows the relighter (docs/viewer.md, "NaN and Inf").
   SampleRadiance RelightExact(const WaveletLighting& lighting) const;
   // albedo ⊙ radiance, interleaved RGB per sample (ShadeSamples), in the session's order.
+  // Throws NumericalError naming the pack and the pack's sample number when a colour is not a
+  // finite float.
   std::vector<float> Shade(const SampleRadiance& radiance) const;
   // Rasterises the meshes with per-sample colours (3 floats per sample, the session's order)
-  // from `camera`, over the lighting cubemap as background when `background` is non-null.
+  // from `camera`, over `background` (an empty function: black). prt-view's background is the
+  // environment image at its own resolution (EnvironmentBackground, environment_background.h).
+  ImageRgb Render(const Camera& camera, std::span<const float> sample_rgb,
+                  const BackgroundFunction& background) const;
+  // The same over the lighting cubemap (nearest texel, 6·n² texels: blocky) when `background`
+  // is non-null, else black: for callers that have no environment image (tests, benchmarks).
   ImageRgb Render(const Camera& camera, std::span<const float> sample_rgb,
                   const CubemapRgb* background) const;
 
@@ -143,7 +152,8 @@ struct RotationFrame {
 // What the callback may look at for each frame (valid during the call only).
 struct RotationFrameView {
   const RotationFrame& errors;
-  const CubemapRgb& cube;                            // the rotated lighting
+  const CubemapRgb& cube;  // the rotated lighting
+  double rotation_y;  // its rotation about +Y in radians (ResampleToCubemap's, for backgrounds)
   std::span<const float> exact_rgb;                  // shaded samples, exact lighting
   std::array<std::span<const float>, 3> approx_rgb;  // NWA, BI, PBI
 };

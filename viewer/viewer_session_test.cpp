@@ -15,25 +15,24 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <memory>
 #include <numbers>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "formats/column_coding.h"
-#include "packager/prtpack_transport.h"
-#include "packager/prtpack_writer.h"
 #include "viewer/camera_metadata.h"
+#include "viewer/environment_background.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
+#include "viewer/tiny_scene_test_support.h"
 #include "viewer/window_test_support.h"
-#include "vocabulary/errors.h"
-#include "worker/column_order.h"
-#include "worker/embree_scene.h"
-#include "worker/transport_compressor.h"
-#include "worker/transport_sampler.h"
-#include "vocabulary/environment_io.h"
+#include "vocabulary/cubemap.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/errors.h"
 
 namespace prt {
 namespace {
@@ -48,47 +47,18 @@ fs::path WorkDir() {
   return d;
 }
 
-struct TinyScene {
-  SceneGeometry geometry;
-  std::vector<float> rows;  // samples × 6n², texel basis, albedo-free
-  int n = 8;
-  std::string pack;
-};
+using testing::TinyScene;
+
+// Packs `rows` of the tiny scene (every coefficient at 16 bits) into WorkDir()/file.
+std::string PackRows(const TinyScene& t, const std::vector<float>& rows, const std::string& file) {
+  return testing::PackTinyRows(t, rows, (WorkDir() / file).string());
+}
 
 // Traces, compresses and packs the tiny scene once per test process.
 const TinyScene& Tiny() {
   static const TinyScene scene = [] {
-    TinyScene t;
-    const SceneDescription d = LoadSceneFile(std::string(PRT_SOURCE_DIR) + "/tests/data/tiny.toml");
-    t.n = d.cubemap_n;
-    t.geometry = BuildSceneGeometry(d);
-    const EmbreeScene embree(t.geometry);
-    const TransportSampler sampler(embree, t.n, {16, 1});
-    const std::vector<SpatialSample> samples = SpatialSamplesOf(t.geometry);
-    t.rows.resize(samples.size() * sampler.layout().texel_count());
-    sampler.ComputeRows(samples, 0, t.rows.data());
-    CompressionOptions o;
-    o.bits = 16;
-    o.keep_fraction = 1.0;
-    const CompressedTransport ct =
-        CompressTransport(t.rows.data(), t.n, SpatialDomainOf(t.geometry), o);
-    pack::PackInput in;
-    in.metadata_json =
-        R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],
-           "target": [0.0, 0.3, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64,
-           "height": 48}}})";
-    for (const SceneMesh& m : t.geometry.meshes) {
-      pack::PackMeshInput pm;
-      pm.name = m.name;
-      pm.mesh = m.mesh;
-      pm.albedo = m.albedo;
-      pm.is_ground = m.is_ground;
-      pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
-      in.meshes.push_back(std::move(pm));
-    }
-    in.transport = pack::MakeTransportInput(ct, 64);
-    t.pack = (WorkDir() / "tiny.prtpack").string();
-    pack::WritePackFile(t.pack, in);
+    TinyScene t = testing::TraceTinyScene();
+    t.pack = PackRows(t, t.rows, "tiny.prtpack");
     return t;
   }();
   return scene;
@@ -301,10 +271,21 @@ TEST(ViewerSessionTest, RotationThenHoldConverges) {
   o.hold_frames = 16;
   o.terms = 30;
   int calls = 0;
+  // SunSky's sun: 3×3 pixels of 40.3 (red) around pixel (40, 10) of the 64×32 map.
+  const auto lookup = std::make_shared<const EnvironmentLookup>(SunSky(0.3f, 40.f));
+  const Vec3 sun = LatLongDirection(64, 32, 40, 10);
+  const CubemapLayout layout(tiny.n);
   const std::vector<RotationFrame> f =
       RunRotation(*s, SunSky(0.3f, 40.f), o, [&](const RotationFrameView& v) {
         ++calls;
         EXPECT_EQ(v.exact_rgb.size(), 3 * s->sample_count());
+        // The frame's rotation is its lighting's, and the background made with it shows the sun
+        // where that lighting has it (prt-view's rotation frames, environment_background.h).
+        const double angle = std::min(v.errors.frame, o.rotate_frames) * o.degrees_per_frame;
+        EXPECT_DOUBLE_EQ(v.rotation_y, angle * std::numbers::pi / 180);
+        const Vec3 lit_from = RotateAboutY(sun, v.rotation_y);
+        EXPECT_GT(v.cube.r[layout.TexelOf(lit_from)], 10.0f) << v.errors.frame;
+        EXPECT_EQ(EnvironmentBackground(lookup, v.rotation_y)(lit_from)[0], 40.3f);
       });
   ASSERT_EQ(f.size(), 23u);
   EXPECT_EQ(calls, 23);
@@ -332,6 +313,93 @@ TEST(ViewerSessionTest, RotationThenHoldConverges) {
   int lines = 0;
   while (std::getline(in, line)) ++lines;
   EXPECT_EQ(lines, 2 + 23);
+}
+
+// No NaN or Inf is turned into a black pixel (docs/viewer.md, "NaN and Inf"): an environment
+// with an Inf pixel is refused by its reader, lighting past the relighter's float range and finite
+// T and L whose product overflows float are errors naming the pack (and the sample), in the
+// library and as prt-view's one-line message with exit code 2.
+TEST(ViewerSessionTest, NonFiniteRadianceIsAnErrorNamingThePack) {
+  const TinyScene& tiny = Tiny();
+  const fs::path dir = WorkDir() / "nonfinite";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::string out;
+  // 1. An Inf pixel: the EXR reader refuses it (vocabulary/environment_io.h) before anything is
+  //    resampled, naming the file and the pixel; in memory, the resampler refuses it too.
+  EnvironmentImage inf_sky = SunSky(0.3f, 40.f);
+  inf_sky.r[inf_sky.Index(5, 3)] = std::numeric_limits<float>::infinity();
+  const std::string inf_env = (dir / "inf_sky.exr").string();
+  WriteEnvironmentExr(inf_sky, inf_env);
+  EXPECT_THROW(ReadEnvironment(inf_env), InputError);
+  EXPECT_THROW(ResampleToCubemap(inf_sky, tiny.n), NumericalError);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + inf_env + "' --exact --quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_NE(out.find("inf_sky.exr: Inf at pixel (x=5, y=3, channel R)"), std::string::npos) << out;
+
+  // 2. Finite T and finite L whose product overflows float: T scaled by 1e15 (still a finite,
+  //    valid pack), a uniform sky of 1e30: T·L ≈ 1e45.
+  std::vector<float> bright_rows = tiny.rows;
+  for (float& v : bright_rows) v *= 1e15f;
+  const std::string bright = PackRows(tiny, bright_rows, "bright.prtpack");
+  const auto s = ViewerSession::Open(bright);
+  const WaveletLighting l = ProjectLighting(ResampleToCubemap(SunSky(1e30f, 0.f), tiny.n));
+  const auto message = [](const auto& f) {
+    try {
+      f();
+    } catch (const NumericalError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string exact = message([&] { s->RelightExact(l); });
+  EXPECT_EQ(exact.rfind(bright + ": the relit radiance of sample ", 0), 0u) << exact;
+  EXPECT_NE(exact.find("overflows the relighter's float range"), std::string::npos) << exact;
+  const std::string nwa =
+      message([&] { RelightApproximate(s->transport(), l, LightingMode::kNwa, 10); });
+  EXPECT_EQ(nwa.rfind(bright + ": the relit radiance of sample ", 0), 0u) << nwa;
+  // A radiance that is a finite double but not a float (1e39, e.g. from an operator that sums in
+  // double) is named by the pack's own sample number at shading.
+  SampleRadiance r(s->sample_count());
+  r.channel[1][5] = 1e39;
+  const std::string shade = message([&] { s->Shade(r); });
+  EXPECT_EQ(shade.rfind(bright + ": the shaded radiance of sample " +
+                            std::to_string(s->pack_sample()[5]) + " (channel 1), albedo ",
+                        0),
+            0u)
+      << shade;
+  EXPECT_NE(shade.find(" × T·L 1e+39, is outside the float range (3.4e38)"), std::string::npos)
+      << shade;
+  const std::string bright_env = (dir / "bright_sky.exr").string();
+  WriteEnvironmentExr(SunSky(1e30f, 0.f), bright_env);
+  EXPECT_EQ(RunViewer("'" + bright + "' --env '" + bright_env + "' --exact --quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  // One line, naming the pack.
+  EXPECT_EQ(out.rfind("prt-view: " + bright + ": the relit radiance of sample ", 0), 0u) << out;
+  EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+  EXPECT_EQ(RunViewer("'" + bright + "' --env '" + bright_env +
+                          "' --lighting pbi --terms 20 "
+                          "--quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_EQ(out.rfind("prt-view: " + bright + ": ", 0), 0u) << out;
+  EXPECT_FALSE(fs::exists(dir / "x.png"));
+
+  // 3. Lighting past the float range of the relighter (a uniform 3e38 sky: each face's scaling
+  //    coefficient is n·3e38 = 2.4e39) on the ordinary pack.
+  const std::string max_env = (dir / "max_sky.exr").string();
+  WriteEnvironmentExr(SunSky(3e38f, 0.f), max_env);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + max_env + "' --exact --quiet --out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            2);
+  EXPECT_EQ(out.rfind("prt-view: " + tiny.pack + ": lighting coefficient ", 0), 0u) << out;
+  EXPECT_NE(out.find("outside the float range of the relighter"), std::string::npos) << out;
 }
 
 // prt-view end to end: exit codes, PNG/EXR/npy outputs, --exact radiance equal to the library's,
@@ -448,8 +516,10 @@ TEST(PrtViewCliTest, WindowScreenshotMatchesHeadlessRender) {
   const std::vector<float> codes = ReadFile(shot);
   const auto s = ViewerSession::Open(tiny.pack);
   const CubemapRgb cube = ResampleToCubemap(ReadEnvironment(env), tiny.n);
-  const ImageRgb image =
-      s->Render(s->camera(), s->Shade(s->RelightExact(ProjectLighting(cube))), &cube);
+  // The window's background is the environment image itself, as prt-view's.
+  const ImageRgb image = s->Render(
+      s->camera(), s->Shade(s->RelightExact(ProjectLighting(cube))),
+      EnvironmentBackground(std::make_shared<const EnvironmentLookup>(ReadEnvironment(env))));
   ASSERT_EQ(codes.size(), image.pixels.size());
   EXPECT_LE(testing::LargestCodeDifference(codes, image), 1.0);
 #endif
