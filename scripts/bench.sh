@@ -54,7 +54,7 @@ run_relight() {
     --benchmark_report_aggregates_only=true "$pack"
 }
 # Google Benchmark of the farm's per-column compression kernels on real columns: the raw T of a
-# demo-scene farm run kept with --keep-raw (made once in $OUT/compress-run; PRT_RAW_TRANSPORT
+# demo-scene farm run (made once in $OUT/compress-run; PRT_RAW_TRANSPORT
 # names another transport.prtt).
 run_compress() {
   local raw="${PRT_RAW_TRANSPORT:-$OUT/compress-run/transport.prtt}"
