@@ -57,22 +57,29 @@ T GetAt(const unsigned char* in, std::size_t offset) {
   return value;
 }
 
+// Bytes [0, 72) of the header, which both versions share (docs/transport-format.md).
+void PutFixedFields(unsigned char* h, const TransportFileInfo& info, uint32_t version,
+                    uint32_t flags, uint64_t data_offset) {
+  std::memcpy(h, kTransportMagic, 8);
+  PutAt<uint32_t>(h, 8, version);
+  PutAt<uint32_t>(h, 12, static_cast<uint32_t>(kTransportHeaderBytes));
+  PutAt<uint64_t>(h, 16, info.rows);
+  PutAt<uint64_t>(h, 24, info.cols());
+  PutAt<uint32_t>(h, 32, info.cubemap_n);
+  PutAt<uint32_t>(h, 36, info.rows_per_block);
+  PutAt<uint64_t>(h, 40, info.block_count());
+  PutAt<uint32_t>(h, 48, info.rays_per_texel);
+  PutAt<uint32_t>(h, 52, flags);
+  PutAt<uint64_t>(h, 56, info.seed);
+  PutAt<uint64_t>(h, 64, data_offset);
+}
+
 // Header layout (docs/transport-format.md): fixed 96 bytes, then the checksum table.
 std::vector<unsigned char> EncodeHeader(const TransportFileInfo& info, bool complete,
                                         std::span<const uint64_t> checksums) {
   std::vector<unsigned char> h(kTransportHeaderBytes + 8 * checksums.size(), 0);
-  std::memcpy(h.data(), kTransportMagic, 8);
-  PutAt<uint32_t>(h.data(), 8, kTransportFileVersion);
-  PutAt<uint32_t>(h.data(), 12, static_cast<uint32_t>(kTransportHeaderBytes));
-  PutAt<uint64_t>(h.data(), 16, info.rows);
-  PutAt<uint64_t>(h.data(), 24, info.cols());
-  PutAt<uint32_t>(h.data(), 32, info.cubemap_n);
-  PutAt<uint32_t>(h.data(), 36, info.rows_per_block);
-  PutAt<uint64_t>(h.data(), 40, info.block_count());
-  PutAt<uint32_t>(h.data(), 48, info.rays_per_texel);
-  PutAt<uint32_t>(h.data(), 52, complete ? kFlagComplete : 0u);
-  PutAt<uint64_t>(h.data(), 56, info.seed);
-  PutAt<uint64_t>(h.data(), 64, info.data_offset());
+  PutFixedFields(h.data(), info, kTransportFileVersion, complete ? kFlagComplete : 0u,
+                 info.data_offset());
   for (std::size_t b = 0; b < checksums.size(); ++b) {
     PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * b, checksums[b]);
   }
@@ -93,18 +100,8 @@ std::vector<unsigned char> EncodePackedHeader(const TransportFileInfo& info,
                                               std::span<const uint64_t> offsets) {
   const std::size_t blocks = checksums.size();
   std::vector<unsigned char> h(kTransportHeaderBytes + 8 * blocks + 8 * offsets.size(), 0);
-  std::memcpy(h.data(), kTransportMagic, 8);
-  PutAt<uint32_t>(h.data(), 8, kPackedTransportFileVersion);
-  PutAt<uint32_t>(h.data(), 12, static_cast<uint32_t>(kTransportHeaderBytes));
-  PutAt<uint64_t>(h.data(), 16, info.rows);
-  PutAt<uint64_t>(h.data(), 24, info.cols());
-  PutAt<uint32_t>(h.data(), 32, info.cubemap_n);
-  PutAt<uint32_t>(h.data(), 36, info.rows_per_block);
-  PutAt<uint64_t>(h.data(), 40, info.block_count());
-  PutAt<uint32_t>(h.data(), 48, info.rays_per_texel);
-  PutAt<uint32_t>(h.data(), 52, kFlagComplete | kFlagPacked);
-  PutAt<uint64_t>(h.data(), 56, info.seed);
-  PutAt<uint64_t>(h.data(), 64, PackedDataOffset(info));
+  PutFixedFields(h.data(), info, kPackedTransportFileVersion, kFlagComplete | kFlagPacked,
+                 PackedDataOffset(info));
   PutAt<uint64_t>(h.data(), 72, kCodecZstd);
   for (std::size_t b = 0; b < blocks; ++b) {
     PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * b, checksums[b]);

@@ -21,6 +21,7 @@
 
 #include "packager/prtpack_writer.h"
 #include "viewer/environment_background.h"
+#include "viewer/error_test_support.h"
 #include "viewer/rasterizer.h"
 #include "viewer/window_test_support.h"
 #include "vocabulary/cubemap_resample.h"
@@ -229,14 +230,7 @@ TEST(GlossySession, OverflowIsAnErrorNamingThePackAndVertex) {
     m.specular = {1.0f, 1.0f, 1.0f};
     m.exponent = m.exponent_v = 1e6;
   }
-  const auto message = [](const auto& f) {
-    try {
-      f();
-    } catch (const NumericalError& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  const auto message = [](const auto& f) { return testing::NumericalErrorOf(f); };
   for (bool exact : {true, false}) {
     const std::string alg =
         message([&] { s->Relight(light, s->camera().eye, rgb, {.exact_cosine = exact}); });

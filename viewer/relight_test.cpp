@@ -17,6 +17,7 @@
 #include "formats/column_coding.h"
 #include "formats/compressed_transport.h"
 #include "viewer/compressed_relight.h"
+#include "viewer/error_test_support.h"
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
 #include "vocabulary/cubemap.h"
@@ -236,10 +237,8 @@ TEST(RelightTest, ShadeSamplesRefusesWhatIsNotAFiniteFloat) {
   EXPECT_NEAR(dim[0], 2e29f, 1e23f);
 }
 
-// The compressed 4D path plugs in through CompressedTransportOperator: it relights like the
-// dense matrix its columns decompress to. Columns are built by hand (random depths, quantised
-// values, a permuted mesh order), so no compressor is needed here.
-TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
+// An empty compressed transport over n = 2 and one mesh of 19 samples in a permuted order.
+CompressedTransport NineteenSampleTransport() {
   CompressedTransport t;
   t.header.cubemap_n = 2;
   t.header.sample_count = 19;
@@ -249,6 +248,14 @@ TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
   seg.count = 19;
   for (uint32_t k = 0; k < 19; ++k) seg.order.push_back((7 * k + 3) % 19);
   t.header.domain.segments = {seg};
+  return t;
+}
+
+// The compressed 4D path plugs in through CompressedTransportOperator: it relights like the
+// dense matrix its columns decompress to. Columns are built by hand (random depths, quantised
+// values, a permuted mesh order), so no compressor is needed here.
+TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
+  CompressedTransport t = NineteenSampleTransport();
   std::mt19937 rng(9);
   std::uniform_int_distribution<int> q(-255, 255), depth(0, 5);
   std::bernoulli_distribution keep(0.4);
@@ -304,15 +311,7 @@ TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
 // past the float range, an X that overflows, and a term that dequantises past it are errors
 // naming the transport (the pack) and the coefficient or sample; nothing comes back as 0 or Inf.
 TEST(RelightTest, CompressedPathRefusesOverflowNamingTheTransport) {
-  CompressedTransport t;
-  t.header.cubemap_n = 2;
-  t.header.sample_count = 19;
-  t.header.bits = 9;
-  SpatialSegment seg;
-  seg.kind = SpatialSegment::Kind::kMesh1D;
-  seg.count = 19;
-  for (uint32_t k = 0; k < 19; ++k) seg.order.push_back((7 * k + 3) % 19);
-  t.header.domain.segments = {seg};
+  CompressedTransport t = NineteenSampleTransport();
   CompressedColumn c;  // T = 1e30 (within dither and 9 bits) at every sample, depth 0
   c.column = 0;
   c.depth = 0;
@@ -328,14 +327,7 @@ TEST(RelightTest, CompressedPathRefusesOverflowNamingTheTransport) {
   const SampleRadiance fine = op.Apply(std::vector<LightingTerm>{{0, {1.0, 2.0, 0.5}}});
   for (const auto& ch : fine.channel)
     for (double v : ch) EXPECT_TRUE(std::isfinite(v) && v > 4e29 && v < 3e30) << v;
-  const auto message = [](const auto& f) {
-    try {
-      f();
-    } catch (const NumericalError& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  const auto message = [](const auto& f) { return testing::NumericalErrorOf(f); };
   // A lighting value past the float range (a double the float weights cannot hold).
   const std::string past = message([&] {
     op.Apply(std::vector<LightingTerm>{{0, {1.0, 1e39, 1.0}}});

@@ -25,6 +25,7 @@
 #include "formats/column_coding.h"
 #include "viewer/camera_metadata.h"
 #include "viewer/environment_background.h"
+#include "viewer/error_test_support.h"
 #include "viewer/npy_writer.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/tiny_scene_test_support.h"
@@ -346,14 +347,7 @@ TEST(ViewerSessionTest, NonFiniteRadianceIsAnErrorNamingThePack) {
   const std::string bright = PackRows(tiny, bright_rows, "bright.prtpack");
   const auto s = ViewerSession::Open(bright);
   const WaveletLighting l = ProjectLighting(ResampleToCubemap(SunSky(1e30f, 0.f), tiny.n));
-  const auto message = [](const auto& f) {
-    try {
-      f();
-    } catch (const NumericalError& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  const auto message = [](const auto& f) { return testing::NumericalErrorOf(f); };
   const std::string exact = message([&] { s->RelightExact(l); });
   EXPECT_EQ(exact.rfind(bright + ": the relit radiance of sample ", 0), 0u) << exact;
   EXPECT_NE(exact.find("overflows the relighter's float range"), std::string::npos) << exact;
