@@ -7,7 +7,9 @@
 // report (and prt-pack's META) carries.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -20,6 +22,7 @@
 #include "vocabulary/durable_file.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
+#include "worker/sparse_reconstruction.h"
 #include "worker/transport_error_estimate.h"
 
 namespace prt {
@@ -40,6 +43,55 @@ CubemapRgb UniformLight(int n) {
 
 double Ratio(double num, double den) {
   return den > 0 ? std::sqrt(std::max(0.0, num) / den) : 0.0;
+}
+
+// run/sparse/cross_validation.{json,bin} of the sparse method (farm/sparse_phase.cpp).
+struct CrossValidation {
+  bool present = false;
+  uint64_t vertices = 0;                // cross-validated (fallbacks included)
+  std::vector<uint64_t> samples;        // per mesh: cross-validated vertices in it
+  std::vector<uint64_t> reconstructed;  // per mesh: vertices the pipeline reconstructed
+  std::vector<std::pair<std::size_t, std::vector<float>>> rows;  // (mesh, Δ row) reconstructed
+};
+
+CrossValidation ReadCrossValidation(const FarmContext& ctx, std::size_t meshes) {
+  CrossValidation cv;
+  const std::filesystem::path dir = ctx.folder.sparse;
+  const std::string json = (dir / "cross_validation.json").string();
+  const std::string bin = (dir / "cross_validation.bin").string();
+  if (ctx.report.method != "sparse" || !std::filesystem::exists(json)) return cv;
+  const Json j = Json::parse(ReadWholeFile(json), nullptr, false);
+  const std::size_t T = 6u * ctx.params.cubemap_n * ctx.params.cubemap_n;
+  if (!j.is_object() || j.value("texels", std::size_t{0}) != T ||
+      !j.contains("reconstructed_per_mesh") || j["reconstructed_per_mesh"].size() != meshes)
+    throw InputError(json, "does not describe this run's cross-validation");
+  const std::vector<uint32_t> ids = j.at("vertices").get<std::vector<uint32_t>>();
+  cv.reconstructed = j["reconstructed_per_mesh"].get<std::vector<uint64_t>>();
+  const std::string bytes = ReadWholeFile(bin);
+  const std::size_t record = 4 + 4 * T;
+  if (bytes.size() < ids.size() * record)
+    throw InputError(bin, "holds fewer records than cross_validation.json lists");
+  std::vector<uint64_t> first{0};
+  for (const SceneMesh& m : ctx.geometry.meshes)
+    first.push_back(first.back() + m.mesh.positions.size());
+  cv.samples.assign(meshes, 0);
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const auto at = std::upper_bound(first.begin(), first.end(), uint64_t{ids[i]});
+    const std::size_t m = static_cast<std::size_t>(at - first.begin()) - 1;
+    if (m >= meshes) throw InputError(json, "names a vertex beyond the meshes");
+    ++cv.samples[m];
+    const char* rec = bytes.data() + i * record;
+    if (static_cast<uint8_t>(rec[0]) != static_cast<uint8_t>(SparseOutcome::kReconstructed))
+      continue;  // fell back: the pipeline traces such a vertex, its error is the rays'
+    std::vector<float> diff(T);
+    std::memcpy(diff.data(), rec + 4, T * sizeof(float));
+    for (float d : diff)
+      if (!std::isfinite(d)) throw InputError(bin, "holds a non-finite difference");
+    cv.rows.emplace_back(m, std::move(diff));
+  }
+  cv.vertices = ids.size();
+  cv.present = true;
+  return cv;
 }
 
 }  // namespace
@@ -133,11 +185,15 @@ class EstimatePhase final : public FarmPhase {
                         {"rows_covered", have_variance ? variance.rows_covered[m] : 0}});
     }
     mc["meshes"] = meshes;
-    Json envs = Json::array();
-    double worst = 0;
+    // The sparse method's reconstruction error, from its cross-validation (farm/sparse_phase.cpp
+    // CrossValidate): per light, mesh and channel, Σ over the mesh's reconstructed vertices of
+    // E|ΔB|², as the mesh's cross-validated mean of |ΔB|² less a dense row's own Monte-Carlo
+    // variance (the reference it was compared with is itself an estimate), times the number of
+    // vertices the pipeline reconstructed.
+    const CrossValidation cv = ReadCrossValidation(ctx, mesh_rows.size());
+    std::vector<std::vector<double>> mc_var(lights.size()), rec_var(lights.size()),
+        norm(lights.size());
     for (std::size_t l = 0; l < lights.size(); ++l) {
-      Json per_mesh = Json::array();
-      double var_all = 0, norm_all = 0;
       for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
         const Rgb& rho = ctx.geometry.meshes[m].albedo;
         const std::array<double, 3> v =
@@ -148,35 +204,87 @@ class EstimatePhase final : public FarmPhase {
           var_m += r2 * v[c];
           norm_m += r2 * norms.norms()[l][m][c];
         }
-        var_all += var_m;
-        norm_all += norm_m;
-        per_mesh.push_back(
-            {{"name", ctx.geometry.meshes[m].name},
-             {"relative_rms", Ratio(var_m, norm_m)},
-             {"rms_radiance",
-              mesh_rows[m] ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m]))) : 0.0}});
+        mc_var[l].push_back(var_m);
+        norm[l].push_back(norm_m);
+        double rec = 0;
+        if (cv.present && cv.samples[m] > 0) {
+          double mean = 0;
+          for (const auto& [mesh, diff] : cv.rows) {
+            if (mesh != m) continue;
+            for (int c = 0; c < 3; ++c) {
+              double b = 0;
+              const float* L = lights[l].Channel(c).data();
+              for (std::size_t j = 0; j < diff.size(); ++j) b += double(diff[j]) * L[j];
+              mean += double(rho[c]) * rho[c] * b * b;
+            }
+          }
+          mean /= static_cast<double>(cv.samples[m]);
+          const double per_row_mc = variance.rows_covered.empty() || variance.rows_covered[m] == 0
+                                        ? 0.0
+                                        : var_m / static_cast<double>(variance.rows_covered[m]);
+          rec = static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
+        }
+        rec_var[l].push_back(rec);
       }
-      const double rel = Ratio(var_all, norm_all);
-      worst = std::max(worst, rel);
-      envs.push_back({{"name", names[l]}, {"relative_rms", rel}, {"meshes", per_mesh}});
     }
+    // One table per kind of error: Monte-Carlo, reconstruction (sparse), and both.
+    auto table = [&](auto&& var_of) {
+      Json envs = Json::array();
+      double worst = 0;
+      for (std::size_t l = 0; l < lights.size(); ++l) {
+        Json per_mesh = Json::array();
+        double var_all = 0, norm_all = 0;
+        for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
+          const double var_m = var_of(l, m);
+          var_all += var_m;
+          norm_all += norm[l][m];
+          per_mesh.push_back(
+              {{"name", ctx.geometry.meshes[m].name},
+               {"relative_rms", Ratio(var_m, norm[l][m])},
+               {"rms_radiance", mesh_rows[m]
+                                    ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m])))
+                                    : 0.0}});
+        }
+        const double rel = Ratio(var_all, norm_all);
+        worst = std::max(worst, rel);
+        envs.push_back({{"name", names[l]}, {"relative_rms", rel}, {"meshes", per_mesh}});
+      }
+      return std::make_pair(envs, worst);
+    };
+    const auto [envs, worst] = table([&](std::size_t l, std::size_t m) { return mc_var[l][m]; });
     mc["environments"] = envs;
     mc["worst_relative_rms"] = worst;
     if (!skipped.empty()) mc["environments_left_out"] = skipped;
     out["monte_carlo"] = mc;
+    if (cv.present) {
+      const auto [rec_envs, rec_worst] =
+          table([&](std::size_t l, std::size_t m) { return rec_var[l][m]; });
+      Json rec;
+      rec["cross_validated"] = cv.rows.size();
+      rec["vertices"] = cv.vertices;
+      rec["reconstructed_per_mesh"] = cv.reconstructed;
+      rec["environments"] = rec_envs;
+      rec["worst_relative_rms"] = rec_worst;
+      out["reconstruction"] = rec;
+      const auto [tot_envs, tot_worst] =
+          table([&](std::size_t l, std::size_t m) { return mc_var[l][m] + rec_var[l][m]; });
+      out["total"] = {{"environments", tot_envs}, {"worst_relative_rms", tot_worst}};
+    }
     WriteFileDurably(f.accuracy, out.dump(2) + "\n");
     ctx.run_eta.StepFinished("estimate");
     if (!ctx.options.quiet) {
       if (estimable) {
         std::string line;
-        for (const Json& e : envs) {
+        const Json& shown = out.contains("total") ? out["total"]["environments"] : envs;
+        for (const Json& e : shown) {
           char buf[96];
           std::snprintf(buf, sizeof buf, "%s%s %.3f%%", line.empty() ? "" : ", ",
                         e["name"].get<std::string>().c_str(),
                         100 * e["relative_rms"].get<double>());
           line += buf;
         }
-        spdlog::info("estimate: Monte-Carlo error of B (relative RMS): {}; in {}", line,
+        spdlog::info("estimate: {} error of B (relative RMS): {}; in {}",
+                     out.contains("total") ? "Monte-Carlo + reconstruction" : "Monte-Carlo", line,
                      f.accuracy);
       } else {
         spdlog::info("estimate: no Monte-Carlo error estimate ({}); in {}",

@@ -127,6 +127,12 @@ std::string FarmReport::ToJsonText() const {
           {"poor_fit", c.fallback_poor_fit}}},
         {"l1_solver", {{"lars", c.solved_lars}, {"admm", c.solved_admm}, {"zero", c.zero_systems}}},
         {"dense_rows_shipped", sparse.dense_rows_shipped},
+        {"cross_validation",
+         {{"reconstructed", sparse.cross_validation.reconstructed},
+          {"fallbacks", sparse.cross_validation.fallback_too_few_neighbors +
+                            sparse.cross_validation.fallback_solve_failed +
+                            sparse.cross_validation.fallback_poor_fit},
+          {"rays_traced", sparse.cross_validation.rays_traced}}},
         {"index_seconds", sparse.index_seconds},
     };
   }

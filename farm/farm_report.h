@@ -51,6 +51,9 @@ struct SparseFarmReport {
   uint64_t dense_rows_shipped = 0;  // dense neighbour rows sent with sparse jobs (this run)
   double index_seconds = 0;         // building the neighbour indices on rank 0
   SparseJobCounters counters;       // over the whole matrix, re-used jobs included
+  // The reconstruction's cross-validation (farm/sparse_phase.cpp CrossValidate): vertices
+  // reconstructed and rays traced, not part of T.
+  SparseJobCounters cross_validation;
   // Traced texels / texels above the horizon (what brute force would evaluate).
   double SampledFraction() const;
 };

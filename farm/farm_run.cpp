@@ -94,6 +94,8 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
     }
     const double sparse = double(N - std::min(N, dense));
     steps.push_back({"sparse-reconstruct", "sparse", sparse, 0.6 * row});
+    steps.push_back({"cross-validate", "sparse",
+                     std::min(400.0, double(SparseInitialDenseCount(N, plan))), 0.6 * row});
     steps.push_back({"dense-fallback", "dense", 0.04 * sparse, 0.75 * row});
   } else if (ctx.params.run_rows) {
     steps.push_back({"brute", "row", rows, row});
@@ -248,8 +250,10 @@ std::string RunSummary(const FarmContext& ctx) {
           rep.accuracy_json.empty() ? "{}" : rep.accuracy_json, nullptr, false);
       if (a.is_object() && a.contains("monte_carlo") &&
           a["monte_carlo"].value("estimable", false)) {
-        what += ": Monte-Carlo error of B";
-        for (const auto& e : a["monte_carlo"]["environments"]) {
+        const bool total = a.contains("total");
+        what += total ? ": error of B (rays + reconstruction)" : ": Monte-Carlo error of B";
+        for (const auto& e :
+             total ? a["total"]["environments"] : a["monte_carlo"]["environments"]) {
           char buf[96];
           std::snprintf(buf, sizeof buf, " %.2f%% %s", 100 * e.value("relative_rms", 0.0),
                         e.value("name", std::string()).c_str());

@@ -21,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -30,7 +31,9 @@
 #include "farm/side_file.h"
 #include "farm/sparse_jobs.h"
 #include "formats/transport_variance.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
 #include "worker/local_rank.h"
 #include "worker/neighbor_index.h"
 #include "worker/sparse_precomputation.h"
@@ -59,6 +62,9 @@ constexpr double kCommitIntervalSeconds = 0.5;
 struct StepJobs {
   std::string name;
   SparseJobKind kind = SparseJobKind::kDense;
+  // Cross-validation: its jobs trace rays but write no row of T and no variance; the sparse
+  // method's counters do not count them (report.json "sparse" "cross_validation" does).
+  bool cross_validation = false;
   uint64_t items = 0;
   std::string unit = "samples";
   // Verifies a journaled job against the files and applies it to rank 0's state.
@@ -238,48 +244,7 @@ class FarmSparseSteps final : public SparseSteps {
       return true;
     };
     p.make_job = [&](SparseJobHeader& h, std::string prefix) {
-      SparseJob job;
-      job.texels = static_cast<uint32_t>(T_);
-      std::unordered_map<uint32_t, uint32_t> local;
-      std::vector<uint32_t> union_ids;
-      job.offsets.push_back(0);
-      std::vector<uint32_t> nbs;
-      for (uint64_t i = h.first; i < h.first + h.count; ++i) {
-        nbs = index.RadiusSearch(ctx_.samples[order[i]].position, ctx_.plan.radius,
-                                 ctx_.plan.max_neighbors);
-        std::size_t added = 0;
-        for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
-        // A job's rows stay within the job byte limit (at least one vertex per job).
-        if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxSparseJobBytes) {
-          h.count = i - h.first;
-          break;
-        }
-        job.vertices.push_back(order[i]);
-        for (uint32_t d : nbs) {
-          auto [at, is_new] = local.emplace(d, static_cast<uint32_t>(union_ids.size()));
-          if (is_new) union_ids.push_back(d);
-          job.neighbors.push_back(at->second);
-        }
-        job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
-      }
-      // The dense neighbours' rows, read back from the run folder.
-      const std::size_t u = union_ids.size();
-      job.transport.resize(u * T_);
-      job.visibility.resize(u * T_);
-      job.feature.resize(u * T_);
-      std::vector<char> buf(5 * T_);
-      for (std::size_t k = 0; k < u; ++k) {
-        const uint32_t d = union_ids[k];
-        ctx_.writer->ReadRows(d, 1, job.transport.data() + k * T_);
-        if (!aux_->Read(buf.data(), buf.size(), d * 5 * T_))
-          throw FileIoError(ctx_.folder.sparse,
-                            "dense_aux.bin lacks dense sample " + std::to_string(d));
-        std::memcpy(job.visibility.data() + k * T_, buf.data(), T_ * sizeof(float));
-        std::memcpy(job.feature.data() + k * T_, buf.data() + T_ * sizeof(float), T_);
-      }
-      rows_shipped_ += u;
-      job.union_ids = std::move(union_ids);
-      return EncodeSparseJob(h, job, std::move(prefix));
+      return MakeSparseJob(h, std::move(prefix), index, order, false);
     };
     p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
@@ -305,6 +270,7 @@ class FarmSparseSteps final : public SparseSteps {
       file.Sync();
     };
     RunStep(p, t0);
+    CrossValidate(index, dense, order, outcome);
     ctx_.report.sparse.dense_rows_shipped = rows_shipped_;
     ctx_.report.sparse.index_seconds = index_seconds_;
     std::vector<uint32_t> fb;
@@ -314,7 +280,139 @@ class FarmSparseSteps final : public SparseSteps {
     return fb;
   }
 
+  // A sparse job for items h.first… of `order` (may lower h.count, see kMaxSparseJobBytes): each
+  // vertex with its dense neighbours within the radius (nearest first) and the union of their
+  // rows, read back from the run folder. `exclude_self`: the vertices are dense and their own
+  // row is left out (cross-validation).
+  std::string MakeSparseJob(SparseJobHeader& h, std::string prefix, const NeighborIndex& index,
+                            std::span<const uint32_t> order, bool exclude_self) {
+    SparseJob job;
+    job.texels = static_cast<uint32_t>(T_);
+    std::unordered_map<uint32_t, uint32_t> local;
+    std::vector<uint32_t> union_ids;
+    job.offsets.push_back(0);
+    std::vector<uint32_t> nbs;
+    for (uint64_t i = h.first; i < h.first + h.count; ++i) {
+      nbs = index.RadiusSearch(ctx_.samples[order[i]].position, ctx_.plan.radius,
+                               ctx_.plan.max_neighbors + (exclude_self ? 1 : 0));
+      if (exclude_self) {
+        // Cross-validation: the vertex is dense itself; its reconstruction uses the others.
+        nbs.erase(std::remove(nbs.begin(), nbs.end(), order[i]), nbs.end());
+        if (nbs.size() > static_cast<std::size_t>(ctx_.plan.max_neighbors))
+          nbs.resize(static_cast<std::size_t>(ctx_.plan.max_neighbors));
+      }
+      std::size_t added = 0;
+      for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
+      // A job's rows stay within the job byte limit (at least one vertex per job).
+      if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxSparseJobBytes) {
+        h.count = i - h.first;
+        break;
+      }
+      job.vertices.push_back(order[i]);
+      for (uint32_t d : nbs) {
+        auto [at, is_new] = local.emplace(d, static_cast<uint32_t>(union_ids.size()));
+        if (is_new) union_ids.push_back(d);
+        job.neighbors.push_back(at->second);
+      }
+      job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
+    }
+    // The dense neighbours' rows, read back from the run folder.
+    const std::size_t u = union_ids.size();
+    job.transport.resize(u * T_);
+    job.visibility.resize(u * T_);
+    job.feature.resize(u * T_);
+    std::vector<char> buf(5 * T_);
+    for (std::size_t k = 0; k < u; ++k) {
+      const uint32_t d = union_ids[k];
+      ctx_.writer->ReadRows(d, 1, job.transport.data() + k * T_);
+      if (!aux_->Read(buf.data(), buf.size(), d * 5 * T_))
+        throw FileIoError(ctx_.folder.sparse,
+                          "dense_aux.bin lacks dense sample " + std::to_string(d));
+      std::memcpy(job.visibility.data() + k * T_, buf.data(), T_ * sizeof(float));
+      std::memcpy(job.feature.data() + k * T_, buf.data() + T_ * sizeof(float), T_);
+    }
+    rows_shipped_ += u;
+    job.union_ids = std::move(union_ids);
+    return EncodeSparseJob(h, job, std::move(prefix));
+  }
+  // The reconstruction's own error, by cross-validation (docs/farm.md, "Accuracy estimates"):
+  // up to kCrossValidated vertices of the initial dense set (a uniform random sample of the
+  // scene, InitialDenseSet) are reconstructed from the other dense vertices exactly as a sparse
+  // vertex is, and their reconstruction minus their traced dense row is kept in
+  // run/sparse/cross_validation.bin (a record per vertex: the outcome byte, 3 zero bytes, then
+  // the texels' differences as float32; 0 where the reconstruction fell back, as the pipeline
+  // then traces the vertex). run/sparse/cross_validation.json lists the vertices and, per mesh,
+  // how many vertices were reconstructed. Nothing here changes a row of T.
+  void CrossValidate(const NeighborIndex& index, std::span<const uint32_t> dense,
+                     std::span<const uint32_t> order, std::span<const uint8_t> outcome) {
+    const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
+    const std::vector<uint32_t> initial =
+        InitialDenseSet(N_, SparseInitialDenseCount(N_, ctx_.plan), ctx_.plan.seed);
+    std::vector<uint32_t> cv;
+    const std::size_t K = std::min<std::size_t>(kCrossValidated, initial.size());
+    for (std::size_t i = 0; i < K; ++i) cv.push_back(initial[i * initial.size() / K]);
+    (void)dense;
+    const std::size_t record = 4 + 4 * T_;
+    SideFile file((fs::path(ctx_.folder.sparse) / "cross_validation.bin").string());
+    StepJobs p;
+    p.name = "cross-validate";
+    p.kind = SparseJobKind::kSparse;
+    p.items = cv.size();
+    p.cross_validation = true;
+    p.reuse = [&](const JournalEntry& e) {
+      std::vector<char> bytes(static_cast<std::size_t>(e.rows.count) * record);
+      return file.Read(bytes.data(), bytes.size(), e.rows.first * record) &&
+             Checksum64(bytes.data(), bytes.size()) == e.rows_checksum;
+    };
+    p.make_job = [&](SparseJobHeader& h, std::string prefix) {
+      return MakeSparseJob(h, std::move(prefix), index, cv, true);
+    };
+    p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
+      const std::size_t c = static_cast<std::size_t>(r.header.count);
+      if (r.outcomes.size() != c) throw RankFailure("a cross-validation job came back incomplete");
+      std::vector<char> bytes(c * record, 0);
+      std::vector<float> traced(T_);
+      std::size_t k = 0;
+      for (std::size_t i = 0; i < c; ++i) {
+        char* rec = bytes.data() + i * record;
+        rec[0] = static_cast<char>(r.outcomes[i]);
+        if (r.outcomes[i] != ok) continue;
+        if ((k + 1) * T_ > r.transport.size())
+          throw RankFailure("a cross-validation job came back with too few rows");
+        ctx_.writer->ReadRows(cv[r.header.first + i], 1, traced.data());
+        float* diff = reinterpret_cast<float*>(rec + 4);
+        for (std::size_t j = 0; j < T_; ++j) diff[j] = r.transport[k * T_ + j] - traced[j];
+        ++k;
+      }
+      if (k * T_ != r.transport.size())
+        throw RankFailure("a cross-validation job came back with too many rows");
+      file.Write(bytes.data(), bytes.size(), r.header.first * record);
+      rows_written = 0;
+      return Checksum64(bytes.data(), bytes.size());
+    };
+    p.sync = [&] { file.Sync(); };
+    RunStep(p);
+    // Which vertices, and how many vertices of each mesh the pipeline reconstructed.
+    std::vector<uint64_t> mesh_first{0};
+    for (const SceneMesh& m : ctx_.geometry.meshes)
+      mesh_first.push_back(mesh_first.back() + m.mesh.positions.size());
+    std::vector<uint64_t> reconstructed(ctx_.geometry.meshes.size(), 0);
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      if (outcome[i] != ok) continue;
+      const auto at = std::upper_bound(mesh_first.begin(), mesh_first.end(), order[i]);
+      ++reconstructed[static_cast<std::size_t>(at - mesh_first.begin()) - 1];
+    }
+    const nlohmann::json summary = {{"texels", T_},
+                                    {"record_bytes", record},
+                                    {"vertices", cv},
+                                    {"reconstructed_per_mesh", reconstructed}};
+    WriteFileDurably((fs::path(ctx_.folder.sparse) / "cross_validation.json").string(),
+                     summary.dump() + "\n");
+  }
+
  private:
+  static constexpr std::size_t kCrossValidated = 400;
+
   NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
     std::vector<Vec3> pts;
     pts.reserve(dense.size());
@@ -322,8 +420,12 @@ class FarmSparseSteps final : public SparseSteps {
     return NeighborIndex(pts, dense);
   }
 
-  void Count(const SparseJobCounters& c, bool this_run) {
+  void Count(const SparseJobCounters& c, bool this_run, bool cross_validation) {
     FarmReport& rep = ctx_.report;
+    if (cross_validation) {  // its rays are not T's: report.json "sparse" "cross_validation"
+      rep.sparse.cross_validation += c;
+      return;
+    }
     rep.sparse.counters += c;
     rep.rays_traced_all += c.rays_traced;
     rep.texels_below_horizon_all += c.texels_below_horizon;
@@ -351,18 +453,18 @@ class FarmSparseSteps final : public SparseSteps {
         ++rep.checkpoints_rejected;
         continue;
       }
-      if (p.kind != SparseJobKind::kRank &&
+      if (p.kind != SparseJobKind::kRank && !p.cross_validation &&
           !ctx_.variance->Reuse(p.name, e.rows.first, e.rows.count))
         ++variance_uncovered_jobs_;
       batch.done.push_back(e.rows);
       ++reused_jobs;
       ++rep.jobs_reused;
-      if (p.kind != SparseJobKind::kRank) {
+      if (p.kind != SparseJobKind::kRank && !p.cross_validation) {
         rep.rows_reused += p.kind == SparseJobKind::kDense
                                ? e.rows.count
                                : SparseJobCounters::FromVector(e.counters).reconstructed;
       }
-      Count(SparseJobCounters::FromVector(e.counters), false);
+      Count(SparseJobCounters::FromVector(e.counters), false, p.cross_validation);
     }
     if (reused_jobs > 0)
       spdlog::info("[{}] {} job(s) re-used from checkpoints", p.name, reused_jobs);
@@ -399,7 +501,7 @@ class FarmSparseSteps final : public SparseSteps {
       e.phase = p.name;
       e.rows = range;
       e.rows_checksum = p.accept(r, rows_written);
-      if (p.kind != SparseJobKind::kRank) {
+      if (p.kind != SparseJobKind::kRank && !p.cross_validation) {
         try {
           ctx_.variance->Record(p.name, range.first, range.count,
                                 DecodeTransportVariance(
@@ -420,7 +522,7 @@ class FarmSparseSteps final : public SparseSteps {
     };
     batch.committed = [&](const JournalEntry& e) {
       rep.rows_done += e.texels_below_horizon;
-      Count(SparseJobCounters::FromVector(e.counters), true);
+      Count(SparseJobCounters::FromVector(e.counters), true, p.cross_validation);
     };
     loop_.Run(batch);
     ++step_number_;

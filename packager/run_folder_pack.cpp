@@ -142,12 +142,16 @@ std::string ErrorEstimatesLine(const nlohmann::json& meta) {
   }
   if (e.contains("monte_carlo") && e["monte_carlo"].is_object()) {
     const nlohmann::json& mc = e["monte_carlo"];
+    // The sparse method's total (rays and reconstruction) where there is one.
+    const bool total = e.contains("total") && e["total"].is_object();
+    const nlohmann::json& shown = total ? e["total"] : mc;
     if (!mc.value("estimable", false)) {
       out += "; Monte-Carlo: not estimated (" + mc.value("why_not", std::string("?")) + ")";
-    } else if (mc.contains("environments") && mc["environments"].is_array()) {
-      out += "; Monte-Carlo, relative RMS of B:";
+    } else if (shown.contains("environments") && shown["environments"].is_array()) {
+      out += total ? "; Monte-Carlo and reconstruction, relative RMS of B:"
+                   : "; Monte-Carlo, relative RMS of B:";
       bool first = true;
-      for (const nlohmann::json& env : mc["environments"]) {
+      for (const nlohmann::json& env : shown["environments"]) {
         if (!env.is_object()) continue;
         std::snprintf(buf, sizeof buf, "%s %.3f%% %s", first ? "" : ",",
                       100 * env.value("relative_rms", 0.0),
@@ -233,9 +237,9 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
           {"scheme", rep["compression"].value("scheme", std::string())},
           {"keep_fraction", rep["compression"].value("keep_fraction", 0.0)}};
     }
-    if (rep.contains("accuracy") && rep["accuracy"].is_object() &&
-        rep["accuracy"].contains("monte_carlo")) {
-      e["monte_carlo"] = rep["accuracy"]["monte_carlo"];
+    if (rep.contains("accuracy") && rep["accuracy"].is_object()) {
+      for (const char* key : {"monte_carlo", "reconstruction", "total"})
+        if (rep["accuracy"].contains(key)) e[key] = rep["accuracy"][key];
     }
     if (!e.empty()) meta["error_estimates"] = std::move(e);
   }

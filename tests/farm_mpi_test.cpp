@@ -377,9 +377,27 @@ TEST(FarmMpiSparseTest, OneTwoAndThreeRanksGiveTheInProcessDriversBytes) {
                                       ref.report.sparse_stats.trace.rays_traced);
     std::vector<std::string> phases;
     for (const auto& p : sp["phases"]) phases.push_back(p["name"]);
-    EXPECT_EQ(phases, (std::vector<std::string>{"dense-initial", "rank-1", "dense-rank-1", "rank-2",
-                                                "dense-rank-2", "rank-3", "dense-rank-3",
-                                                "sparse-reconstruct", "dense-fallback"}));
+    EXPECT_EQ(phases,
+              (std::vector<std::string>{"dense-initial", "rank-1", "dense-rank-1", "rank-2",
+                                        "dense-rank-2", "rank-3", "dense-rank-3",
+                                        "sparse-reconstruct", "cross-validate", "dense-fallback"}));
+    // The reconstruction's cross-validation: every vertex of the initial dense set (fewer than
+    // 400 here), reconstructed or fallen back; its rays are not T's; accuracy.json adds its
+    // error to the rays' (the total is at least either).
+    const nlohmann::json& cv = sp["cross_validation"];
+    EXPECT_EQ(cv["reconstructed"].get<uint64_t>() + cv["fallbacks"].get<uint64_t>(),
+              ref.report.dense_initial);
+    EXPECT_GT(cv["reconstructed"].get<uint64_t>(), 0u);
+    const nlohmann::json acc = nlohmann::json::parse(ReadWholeFile(run + "/accuracy.json"));
+    ASSERT_TRUE(acc.contains("reconstruction") && acc.contains("total")) << acc.dump();
+    EXPECT_EQ(acc["reconstruction"]["cross_validated"], cv["reconstructed"]);
+    for (std::size_t l = 0; l < acc["total"]["environments"].size(); ++l) {
+      const double mc = acc["monte_carlo"]["environments"][l]["relative_rms"].get<double>();
+      const double re = acc["reconstruction"]["environments"][l]["relative_rms"].get<double>();
+      const double total = acc["total"]["environments"][l]["relative_rms"].get<double>();
+      EXPECT_NEAR(total * total, mc * mc + re * re, 1e-12);
+      EXPECT_GT(re, 0.0);
+    }
     std::vector<std::string> top;
     for (const auto& p : rep["phases"]) top.push_back(p["name"]);
     ASSERT_GE(top.size(), 3u);  // later phases (compression) may follow
