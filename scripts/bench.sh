@@ -99,8 +99,9 @@ run_stress() {
 # Issue 27's table: each kind of scene edit of a finished default-scene run, what --resume re-ran,
 # the rays it traced and its wall time against the fresh run (scripts/rebake_bench.py).
 run_rebake() { python3 "$ROOT/scripts/rebake_bench.py" "$BUILD_DIR" "$OUT/rebake" --np 2; }
-# The farm's Monte-Carlo error estimate (accuracy.json) against the measured difference of two
-# independent seeds, on the default scene and the dragon, brute force and the sparse method.
+# The farm's error estimates (accuracy.json) against measured differences (prt-mc-check), on the
+# default scene and the dragon: two brute-force seeds (the Monte-Carlo estimate), the sparse
+# method against brute force (its total: rays and reconstruction), two sparse seeds.
 run_mc_error() {
   local dir="$OUT/mc-error" scenes=(default dragon) methods=(brute sparse)
   mkdir -p "$dir"
@@ -113,9 +114,11 @@ run_mc_error() {
         local run="$dir/$scene-$method-s$seed"
         [ -f "$run/accuracy.json" ] || mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm"           "$file" --out "$run" --force --method "$method" --seed "$seed" --no-compress -q
       done
-      echo "== $scene, $method: estimate (accuracy.json) against two seeds =="
+      echo "== $scene, $method seed 1 against $method seed 2 =="
       "$BUILD_DIR/bench/prt-mc-check" "$dir/$scene-$method-s1" "$dir/$scene-$method-s2"
     done
+    echo "== $scene, sparse seed 1 against brute force seed 2 =="
+    "$BUILD_DIR/bench/prt-mc-check" "$dir/$scene-sparse-s1" "$dir/$scene-brute-s2"
   done
 }
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
