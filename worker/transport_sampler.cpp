@@ -125,11 +125,11 @@ struct TransportSampler::Impl {
       float* unoccluded = nullptr;
       float* variance = nullptr;  // the collapsed-strata variance estimate (see AddToVariance)
       // The group being summed and the finished groups' total. Pairs: Σx and Σx² of the pair's
-      // strata. 2×2 blocks: the signed sums of the blocks of the current band of two stratum
-      // rows (one per block along u).
+      // strata. 2×2 blocks: the signed sums of the current band of two stratum rows are in
+      // Batch::block, row = the texel's slot (only touched when the variance is asked for, so
+      // that opening a texel stays a few words).
       int group = -1;
       double gx = 0, gxx = 0, var = 0;
-      double block[kMaxBlocksPerBand] = {};
       bool complete = false;
     };
     OcclusionRay rays[kRays];
@@ -138,6 +138,7 @@ struct TransportSampler::Impl {
     int stratum[kRays];    // its stratum (with variance only)
     int count = 0;
     Open open[kRays + 1];
+    double block[kRays + 1][kMaxBlocksPerBand];  // per slot, see Open
     int opened = 0;
   };
 
@@ -165,12 +166,12 @@ struct TransportSampler::Impl {
     if (k < 2) return 1;
     return pair == k / 2 - 1 ? 2 + k % 2 : 2;
   }
-  void FoldVarianceGroup(Batch::Open& t) const {
+  void FoldVarianceGroup(Batch::Open& t, double* block) const {
     if (t.group >= 0) {
       if (UseBlocks()) {
         for (int i = 0; i < strata_u / 2; ++i) {
-          t.var += t.block[i] * t.block[i];
-          t.block[i] = 0;
+          t.var += block[i] * block[i];
+          block[i] = 0;
         }
       } else {
         const int g = PairSize(t.group);
@@ -180,19 +181,20 @@ struct TransportSampler::Impl {
     t.group = -1;
     t.gx = t.gxx = 0;
   }
-  // Adds the value x of stratum s of texel t (strata arrive in increasing order).
-  void AddToVariance(Batch::Open& t, int s, double x) const {
+  // Adds the value x of stratum s of texel t, whose block sums are `block` (strata arrive in
+  // increasing order).
+  void AddToVariance(Batch::Open& t, double* block, int s, double x) const {
     if (UseBlocks()) {
       const int su = s % strata_u, sv = s / strata_u;
       if (sv / 2 != t.group) {
-        FoldVarianceGroup(t);
+        FoldVarianceGroup(t, block);
         t.group = sv / 2;
       }
-      t.block[su / 2] += ((su ^ sv) & 1) ? -x : x;
+      block[su / 2] += ((su ^ sv) & 1) ? -x : x;
       return;
     }
     if (PairOf(s) != t.group) {
-      FoldVarianceGroup(t);
+      FoldVarianceGroup(t, block);
       t.group = PairOf(s);
     }
     t.gx += x;
@@ -221,12 +223,16 @@ struct TransportSampler::Impl {
       Batch::Open& t = b.open[b.slot[i]];
       t.unocc += b.weight[i];
       if (!blocked[i]) t.sum += b.weight[i];
-      if (t.variance != nullptr) AddToVariance(t, b.stratum[i], blocked[i] ? 0.0 : b.weight[i]);
+      if (t.variance != nullptr) {
+        AddToVariance(t, b.block[b.slot[i]], b.stratum[i], blocked[i] ? 0.0 : b.weight[i]);
+      }
     }
     int kept = 0;
     for (int o = 0; o < b.opened; ++o) {
       Batch::Open& t = b.open[o];
       if (!t.complete) {
+        if (t.variance != nullptr && kept != o)
+          std::copy_n(b.block[o], kMaxBlocksPerBand, b.block[kept]);
         b.open[kept++] = t;
         continue;
       }
@@ -235,7 +241,7 @@ struct TransportSampler::Impl {
         *t.unoccluded = static_cast<float>(t.unocc * std::numbers::inv_pi);
       }
       if (t.variance != nullptr) {
-        FoldVarianceGroup(t);
+        FoldVarianceGroup(t, b.block[o]);
         *t.variance = static_cast<float>(t.var * (std::numbers::inv_pi * std::numbers::inv_pi));
       }
     }
@@ -266,6 +272,7 @@ struct TransportSampler::Impl {
     b.open[slot].value = value;
     b.open[slot].unoccluded = unoccluded;
     b.open[slot].variance = variance;
+    if (variance != nullptr) std::fill_n(b.block[slot], kMaxBlocksPerBand, 0.0);
     // Directions are computed a chunk of strata at a time before any joins the batch: the
     // chunk's computations (a square root and a division each) are independent, so they overlap
     // instead of each waiting on the bookkeeping of the one before. Each ray's arithmetic and the
