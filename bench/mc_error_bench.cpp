@@ -67,9 +67,6 @@ int main(int argc, char** argv) {
           prt::ResampleToCubemap(prt::ReadEnvironment(prt::ResolveScenePath(scene, p)), n));
       names.push_back(std::filesystem::path(p).filename().string());
     }
-    std::vector<std::size_t> mesh_of;
-    for (std::size_t m = 0; m < geometry.meshes.size(); ++m)
-      mesh_of.insert(mesh_of.end(), geometry.meshes[m].mesh.positions.size(), m);
     const std::size_t M = geometry.meshes.size(), T = ta.info().cols();
     std::vector<std::vector<Sums>> sums(lights.size(), std::vector<Sums>(M));
     std::vector<float> ra, rb;
@@ -78,7 +75,7 @@ int main(int argc, char** argv) {
       rb = tb.ReadBlock(blk);
       const uint64_t first = ta.info().FirstRowOfBlock(blk);
       for (uint64_t r = 0; r < ta.info().RowsInBlock(blk); ++r) {
-        const std::size_t m = mesh_of[first + r];
+        const std::size_t m = geometry.MeshOfVertex(first + r);
         const prt::Rgb& rho = geometry.meshes[m].albedo;
         for (std::size_t l = 0; l < lights.size(); ++l) {
           for (int c = 0; c < 3; ++c) {

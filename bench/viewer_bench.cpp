@@ -36,20 +36,20 @@
 #include <vector>
 
 #include "bench/bench_scenes.h"
+#include "formats/transport_file.h"
 #include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
+#include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/per_band_incremental.h"
 #include "viewer/rotation_plot.h"
 #include "viewer/viewer_session.h"
-#include "viewer/compressed_relight.h"
+#include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
-#include "formats/transport_file.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_sampler.h"
-#include "vocabulary/environment_io.h"
 
 namespace {
 
@@ -161,15 +161,7 @@ void WritePackOf(const Traced& t, const prt::CompressedTransport& ct, const std:
   prt::pack::PackInput in;
   in.metadata_json = R"({"scene": {"scene": {"name": ")" + t.scene.name + R"("}, "camera": )" +
                      CameraJson(t.scene.camera) + "}}";
-  for (const prt::SceneMesh& m : t.geometry.meshes) {
-    prt::pack::PackMeshInput pm;
-    pm.name = m.name;
-    pm.mesh = m.mesh;
-    pm.albedo = m.albedo;
-    pm.is_ground = m.is_ground;
-    pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
-    in.meshes.push_back(std::move(pm));
-  }
+  in.meshes = prt::pack::PackMeshesOf(t.geometry);
   in.transport = prt::pack::MakeTransportInput(ct, 256);
   prt::pack::WriterOptions wo;
   wo.zstd_level = 3;

@@ -29,10 +29,9 @@ struct BruteResultHeader {
 
 // Zero variance sums over the scene's meshes (every rank has the geometry).
 TransportVariance VarianceSumsShape(const FarmContext& ctx) {
-  std::vector<uint64_t> rows;
-  for (const SceneMesh& m : ctx.geometry.meshes) rows.push_back(m.mesh.positions.size());
   return MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
-                               static_cast<uint32_t>(ctx.params.rays_per_texel), std::move(rows));
+                               static_cast<uint32_t>(ctx.params.rays_per_texel),
+                               ctx.geometry.MeshVertexCounts());
 }
 
 // Traces samples `range` into the result payload: the header, the rows, then their variance

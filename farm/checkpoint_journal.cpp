@@ -19,12 +19,6 @@ namespace {
 
 constexpr const char* kJournalMagic = "prt-farm-journal";
 
-std::string Hex16(uint64_t v) {
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016" PRIx64, v);
-  return buf;
-}
-
 bool ParseHex16(const std::string& s, uint64_t& v) {
   if (s.size() != 16) return false;
   v = 0;

@@ -142,9 +142,13 @@ void Compress(FarmContext& ctx) {
   if (rank == 0) {
     try {
       reader = std::make_unique<TransportFileReader>(folder.transport);
-      // The scene and geometry setup parsed and decoded (nothing is read again but the rows).
-      CompressionPlan plan = PlanCompression(ctx.scene, ctx.geometry,
-                                             static_cast<int>(reader->info().cubemap_n), options);
+      // The plan setup keyed the compression stage with (nothing is read again but the rows).
+      if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
+      CompressionPlan plan = *ctx.compression_plan;
+      if (plan.header.cubemap_n != reader->info().cubemap_n)
+        throw InputError(folder.transport, "cubemap n " + std::to_string(reader->info().cubemap_n) +
+                                               ", but the run's is " +
+                                               std::to_string(plan.header.cubemap_n));
       if (plan.header.sample_count != reader->info().rows)
         throw InputError(folder.transport, std::to_string(reader->info().rows) + " rows, but " +
                                                folder.geometry + " has " +
@@ -248,12 +252,11 @@ void Compress(FarmContext& ctx) {
                    "MPI_Bcast lights");
         }
       }
-      std::vector<uint64_t> mesh_rows;
-      for (const SceneMesh& m : ctx.geometry.meshes) mesh_rows.push_back(m.mesh.positions.size());
-      norms = std::make_unique<RadianceNormAccumulator>(std::move(lights), std::move(mesh_rows));
+      norms = std::make_unique<RadianceNormAccumulator>(std::move(lights),
+                                                        ctx.geometry.MeshVertexCounts());
     }
     double row_energy = 0, row_dropped = 0;  // this rank's rows
-    SquaredError column_error;               // this rank's columns
+    double column_error = 0;                 // this rank's columns
     const bool truncates_rows =
         header.scheme == CompressionScheme::k2D && header.budget == CompressionBudget::kColumn;
     const auto owned = OwnedColumns(cols, rank, size);
@@ -296,10 +299,7 @@ void Compress(FarmContext& ctx) {
           } else {
             std::vector<CompressedColumn> block =
                 CompressColumnBlock(header, first, count, columns.data());
-            const SquaredError e =
-                ColumnBlockError(header, first, count, columns.data(), nullptr, block);
-            column_error.error += e.error;
-            column_error.total += e.total;
+            column_error += ColumnBlockError(header, first, count, columns.data(), nullptr, block);
             for (CompressedColumn& c : block) {
               terms += c.index.size();
               mine.push_back(std::move(c));
@@ -322,9 +322,7 @@ void Compress(FarmContext& ctx) {
           [&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
             std::vector<CompressedColumn> block =
                 QuantiseColumnBlock(header, first, count, columns, depths, threshold);
-            const SquaredError e = ColumnBlockError(header, first, count, columns, depths, block);
-            column_error.error += e.error;
-            column_error.total += e.total;
+            column_error += ColumnBlockError(header, first, count, columns, depths, block);
             for (CompressedColumn& c : block) {
               terms += c.index.size();
               mine.push_back(std::move(c));
@@ -372,7 +370,7 @@ void Compress(FarmContext& ctx) {
                       st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
     double maxs[7] = {};
     CheckMpi(MPI_Reduce(secs, maxs, 7, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
-    double energy[3] = {row_energy, row_dropped, column_error.error}, energy_all[3] = {};
+    double energy[3] = {row_energy, row_dropped, column_error}, energy_all[3] = {};
     CheckMpi(MPI_Reduce(energy, energy_all, 3, MPI_DOUBLE, MPI_SUM, 0, comm), "MPI_Reduce");
     constexpr uint64_t kPiece = 1ull << 30;
     if (rank != 0) {
@@ -437,8 +435,8 @@ void Compress(FarmContext& ctx) {
       }
       rep.wall_seconds = FarmNow() - start;
       ctx.run_eta.StepFinished("compress");
-      // RunFarm writes the report, then (the compressed file being durable) removes the raw
-      // matrix unless --keep-raw.
+      // RunFarm writes the report, then (the compressed file being durable) removes
+      // transport.prtt if --discard-raw.
       rep.enabled = true;
       if (!options.quiet) {
         spdlog::info(
@@ -516,46 +514,6 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   fs::remove(path, ec);
   if (failed) throw FileIoError(path, std::strerror(err));
   return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
-}
-
-CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
-                                int cubemap_n, const FarmOptions& options) {
-  CompressionPlan plan;
-  plan.options = CompressionOptionsFrom(scene.compression, scene.file);
-  if (!options.compression_scheme.empty())
-    plan.options.scheme =
-        ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
-  const SpatialDomain domain = SpatialDomainOf(geometry, scene.compression.order_normal_weight);
-  plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain);
-  return plan;
-}
-
-std::string CompressedHeaderDifferences(const CompressedTransportHeader& was,
-                                        const CompressedTransportHeader& now) {
-  if (EncodeHeader(was) == EncodeHeader(now)) return "";
-  std::string d;
-  auto add = [&d](const std::string& what, const std::string& a, const std::string& b) {
-    if (a == b) return;
-    d += (d.empty() ? "" : ", ") + what + " " + a + " -> " + b;
-  };
-  auto num = [](double v) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%.6g", v);
-    return std::string(buf);
-  };
-  add("scheme", ToString(was.scheme), ToString(now.scheme));
-  add("row_wavelet", ToString(was.row_wavelet), ToString(now.row_wavelet));
-  add("column_wavelet", ToString(was.column_wavelet), ToString(now.column_wavelet));
-  add("bits", std::to_string(was.bits), std::to_string(now.bits));
-  add("keep_fraction", num(was.keep_fraction), num(now.keep_fraction));
-  add("budget", ToString(was.budget), ToString(now.budget));
-  add("light_weight", std::to_string(was.light_weight), std::to_string(now.light_weight));
-  add("dither_seed", std::to_string(was.dither_seed), std::to_string(now.dither_seed));
-  add("terms_per_column", std::to_string(was.terms_per_column),
-      std::to_string(now.terms_per_column));
-  add("samples", std::to_string(was.sample_count), std::to_string(now.sample_count));
-  add("cubemap_n", std::to_string(was.cubemap_n), std::to_string(now.cubemap_n));
-  return d.empty() ? "the spatial order of the samples (order_normal_weight)" : d;
 }
 
 std::unique_ptr<FarmPhase> MakeCompressionPhase() {

@@ -25,20 +25,6 @@
 
 namespace prt {
 
-// What the compression phase will use for this scene, geometry and command line: the options
-// (the scene's [compression], --compression-scheme over it) and the header transport.prtc gets.
-// Throws InputError naming the scene file on bad settings.
-struct CompressionPlan {
-  CompressionOptions options;
-  CompressedTransportHeader header;
-};
-CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
-                                int cubemap_n, const FarmOptions& options);
-// "scheme adaptive4d -> 2d, bits 9 -> 12, …" for what makes `now` differ from the header a
-// finished transport.prtc was written with (`was`); "" when a run would write the same header.
-std::string CompressedHeaderDifferences(const CompressedTransportHeader& was,
-                                        const CompressedTransportHeader& now);
-
 // memcpy bandwidth over a `bytes` buffer (best of a few passes), MB/s (10^6 bytes/s).
 double MeasureMemoryBandwidth(std::size_t bytes);
 // Writes `bytes` into a temporary file in `dir`, fsyncs it, removes it: MB/s.

@@ -71,13 +71,9 @@ CrossValidation ReadCrossValidation(const FarmContext& ctx, std::size_t meshes) 
   const std::size_t record = 4 + 4 * T;
   if (bytes.size() < ids.size() * record)
     throw InputError(bin, "holds fewer records than cross_validation.json lists");
-  std::vector<uint64_t> first{0};
-  for (const SceneMesh& m : ctx.geometry.meshes)
-    first.push_back(first.back() + m.mesh.positions.size());
   cv.samples.assign(meshes, 0);
   for (std::size_t i = 0; i < ids.size(); ++i) {
-    const auto at = std::upper_bound(first.begin(), first.end(), uint64_t{ids[i]});
-    const std::size_t m = static_cast<std::size_t>(at - first.begin()) - 1;
+    const std::size_t m = ctx.geometry.MeshOfVertex(ids[i]);
     if (m >= meshes) throw InputError(json, "names a vertex beyond the meshes");
     ++cv.samples[m];
     const char* rec = bytes.data() + i * record;
@@ -95,6 +91,22 @@ CrossValidation ReadCrossValidation(const FarmContext& ctx, std::size_t meshes) 
 }
 
 }  // namespace
+
+std::string AccuracyLine(const nlohmann::ordered_json& accuracy) {
+  if (!accuracy.is_object() || !accuracy.contains("monte_carlo")) return "no error estimate";
+  const Json& mc = accuracy["monte_carlo"];
+  if (!mc.value("estimable", false))
+    return "no Monte-Carlo error estimate (" + mc.value("why_not", std::string("?")) + ")";
+  const bool total = accuracy.contains("total");
+  std::string line = total ? "error of B (rays + reconstruction)" : "Monte-Carlo error of B";
+  for (const Json& e : total ? accuracy["total"]["environments"] : mc["environments"]) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, " %.2f%% %s", 100 * e.value("relative_rms", 0.0),
+                  e.value("name", std::string()).c_str());
+    line += buf;
+  }
+  return line;
+}
 
 void LoadEstimateLights(FarmContext& ctx) {
   EstimateLights& e = ctx.estimate;
@@ -145,8 +157,7 @@ class EstimatePhase final : public FarmPhase {
 
     // Σ B² per light, mesh and channel: accumulated by the compression phase as the rows passed
     // through it, else read here from the rows.
-    std::vector<uint64_t> mesh_rows;
-    for (const SceneMesh& m : ctx.geometry.meshes) mesh_rows.push_back(m.mesh.positions.size());
+    const std::vector<uint64_t> mesh_rows = ctx.geometry.MeshVertexCounts();
     RadianceNormAccumulator norms(lights, mesh_rows);
     if (ctx.estimate.have_norms) {
       norms.Set(ctx.estimate.norms);
@@ -206,25 +217,28 @@ class EstimatePhase final : public FarmPhase {
         }
         mc_var[l].push_back(var_m);
         norm[l].push_back(norm_m);
-        double rec = 0;
-        if (cv.present && cv.samples[m] > 0) {
-          double mean = 0;
-          for (const auto& [mesh, diff] : cv.rows) {
-            if (mesh != m) continue;
-            for (int c = 0; c < 3; ++c) {
-              double b = 0;
-              const float* L = lights[l].Channel(c).data();
-              for (std::size_t j = 0; j < diff.size(); ++j) b += double(diff[j]) * L[j];
-              mean += double(rho[c]) * rho[c] * b * b;
-            }
-          }
-          mean /= static_cast<double>(cv.samples[m]);
-          const double per_row_mc = variance.rows_covered.empty() || variance.rows_covered[m] == 0
-                                        ? 0.0
-                                        : var_m / static_cast<double>(variance.rows_covered[m]);
-          rec = static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
+        rec_var[l].push_back(0.0);
+      }
+      if (!cv.present) continue;
+      // Σ |ΔB|² of each mesh's cross-validated vertices under this light.
+      std::vector<double> sum(mesh_rows.size(), 0.0);
+      for (const auto& [m, diff] : cv.rows) {
+        const Rgb& rho = ctx.geometry.meshes[m].albedo;
+        for (int c = 0; c < 3; ++c) {
+          double b = 0;
+          const float* L = lights[l].Channel(c).data();
+          for (std::size_t j = 0; j < diff.size(); ++j) b += double(diff[j]) * L[j];
+          sum[m] += double(rho[c]) * rho[c] * b * b;
         }
-        rec_var[l].push_back(rec);
+      }
+      for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
+        if (cv.samples[m] == 0) continue;
+        const double mean = sum[m] / static_cast<double>(cv.samples[m]);
+        const double per_row_mc =
+            variance.rows_covered.empty() || variance.rows_covered[m] == 0
+                ? 0.0
+                : mc_var[l][m] / static_cast<double>(variance.rows_covered[m]);
+        rec_var[l][m] = static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
       }
     }
     // One table per kind of error: Monte-Carlo, reconstruction (sparse), and both.
@@ -272,25 +286,7 @@ class EstimatePhase final : public FarmPhase {
     }
     WriteFileDurably(f.accuracy, out.dump(2) + "\n");
     ctx.run_eta.StepFinished("estimate");
-    if (!ctx.options.quiet) {
-      if (estimable) {
-        std::string line;
-        const Json& shown = out.contains("total") ? out["total"]["environments"] : envs;
-        for (const Json& e : shown) {
-          char buf[96];
-          std::snprintf(buf, sizeof buf, "%s%s %.3f%%", line.empty() ? "" : ", ",
-                        e["name"].get<std::string>().c_str(),
-                        100 * e["relative_rms"].get<double>());
-          line += buf;
-        }
-        spdlog::info("estimate: {} error of B (relative RMS): {}; in {}",
-                     out.contains("total") ? "Monte-Carlo + reconstruction" : "Monte-Carlo", line,
-                     f.accuracy);
-      } else {
-        spdlog::info("estimate: no Monte-Carlo error estimate ({}); in {}",
-                     mc["why_not"].get<std::string>(), f.accuracy);
-      }
-    }
+    if (!ctx.options.quiet) spdlog::info("estimate: {}; in {}", AccuracyLine(out), f.accuracy);
   }
 };
 

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +23,7 @@
 #include "farm/farm_report.h"
 #include "farm/progress.h"
 #include "farm/run_eta.h"
+#include "farm/stage_inputs.h"
 #include "farm/stage_plan.h"
 #include "farm/variance_accumulator.h"
 #include "farm/visibility_jobs.h"
@@ -79,6 +81,9 @@ struct EstimateLights {
   bool have_norms = false;
   std::vector<double> norms;  // [light][mesh][channel], flattened
 };
+// "error of B (rays + reconstruction) 0.38% uniform 1.41% sunrise.exr …" from accuracy.json
+// (the run summary and the estimate's log line).
+std::string AccuracyLine(const nlohmann::ordered_json& accuracy);
 // Rank 0: loads the lights once (every environment that cannot be read is left out, with why).
 void LoadEstimateLights(struct FarmContext& ctx);
 
@@ -102,8 +107,11 @@ struct FarmContext {
   SparsePlan plan;  // method sparse: every rank has rank 0's plan
 
   // ---- rank 0 only
-  bool folder_ready = false;    // the run folder is this run's (a report can be written)
-  SceneDescription scene;       // as parsed by setup (the compression phase reads its settings)
+  bool folder_ready = false;  // the run folder is this run's (a report can be written)
+  SceneDescription scene;     // as parsed by setup (the estimate reads its environments)
+  // The compression the manifest's compression stage is keyed with (transport runs): what the
+  // compression phase writes transport.prtc with.
+  std::optional<CompressionPlan> compression_plan;
   StagePlan stage_plan;         // what setup decided for each stage (report.json "stages")
   std::string previous_report;  // report.json of the run being continued ("" if none)
   std::string estimate_key;     // the estimate stage's key (accuracy.json "key")
@@ -151,6 +159,10 @@ std::unique_ptr<FarmPhase> MakeVisibilityPhase();
 std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
 std::unique_ptr<FarmPhase> MakeCompressionPhase();
 std::unique_ptr<FarmPhase> MakeEstimatePhase();
+
+// Vertices of the sparse method's initial dense set that its cross-validation reconstructs
+// (farm/sparse_phase.cpp, CrossValidate; docs/farm.md "Accuracy estimates").
+inline constexpr std::size_t kSparseCrossValidated = 400;
 
 // Progress options of a farm loop on rank 0: --log-interval, --quiet, and the whole run's ETA
 // appended to every line. `whole_step`: the loop is its run step's whole work (its ETA is the

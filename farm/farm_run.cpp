@@ -95,7 +95,8 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
     const double sparse = double(N - std::min(N, dense));
     steps.push_back({"sparse-reconstruct", "sparse", sparse, 0.6 * row});
     steps.push_back({"cross-validate", "sparse",
-                     std::min(400.0, double(SparseInitialDenseCount(N, plan))), 0.6 * row});
+                     double(std::min(kSparseCrossValidated, SparseInitialDenseCount(N, plan))),
+                     0.6 * row});
     steps.push_back({"dense-fallback", "dense", 0.04 * sparse, 0.75 * row});
   } else if (ctx.params.run_rows) {
     steps.push_back({"brute", "row", rows, row});
@@ -191,7 +192,7 @@ void ReportStages(FarmContext& ctx) {
     };
     if (ctx.stage_plan.Has(kStageRows) &&
         ctx.stage_plan.Get(kStageRows).action == StageAction::kReuse) {
-      for (const char* key : {"sparse", "visibility", "monte_carlo"}) carry(key);
+      for (const char* key : {"sparse", "visibility"}) carry(key);
       if (old.is_object()) {
         rep.rays_traced_all = old.value("rays_traced_including_reused", uint64_t{0});
         rep.texels_below_horizon_all =
@@ -245,21 +246,9 @@ std::string RunSummary(const FarmContext& ctx) {
                     100 * rep.compression.relative_frobenius_error);
       what = st.status == "reused" ? "transport.prtc " + Megabytes(f.compressed) : buf;
     } else if (st.name == kStageEstimate) {
-      what = "accuracy.json";
-      const nlohmann::json a = nlohmann::json::parse(
-          rep.accuracy_json.empty() ? "{}" : rep.accuracy_json, nullptr, false);
-      if (a.is_object() && a.contains("monte_carlo") &&
-          a["monte_carlo"].value("estimable", false)) {
-        const bool total = a.contains("total");
-        what += total ? ": error of B (rays + reconstruction)" : ": Monte-Carlo error of B";
-        for (const auto& e :
-             total ? a["total"]["environments"] : a["monte_carlo"]["environments"]) {
-          char buf[96];
-          std::snprintf(buf, sizeof buf, " %.2f%% %s", 100 * e.value("relative_rms", 0.0),
-                        e.value("name", std::string()).c_str());
-          what += buf;
-        }
-      }
+      what = "accuracy.json: " +
+             AccuracyLine(nlohmann::ordered_json::parse(
+                 rep.accuracy_json.empty() ? "{}" : rep.accuracy_json, nullptr, false));
     } else {
       what = "scene.toml, geometry.prtg";
     }

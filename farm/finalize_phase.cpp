@@ -69,7 +69,6 @@ class FinalizePhase final : public FarmPhase {
     ctx.writer.reset();
     std::filesystem::remove(ctx.folder.partial);
     SyncDirectory(ctx.folder.dir);
-    ctx.report.transport_bytes = bytes;
     spdlog::info(
         "wrote {} ({} rows x {} texels, {} blocks of {} rows; {:.1f} MB packed, {:.1f}% "
         "of the {:.1f} MB of float32 rows)",

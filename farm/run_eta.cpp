@@ -104,8 +104,4 @@ std::vector<RunEtaSample> RunEta::History() const {
   return history_;
 }
 
-double RunEta::Elapsed() const {
-  return clock_() - start_s_;
-}
-
 }  // namespace prt

@@ -41,7 +41,6 @@ class RunEta {
   // " | run 42% ETA 1m05s" for a progress line ("" when nothing is planned).
   std::string Suffix(double current_step_eta_s) const;
   std::vector<RunEtaSample> History() const;
-  double Elapsed() const;
 
  private:
   double CostLocked(const RunStep& s) const;

@@ -63,9 +63,7 @@ uint64_t RunManifest::StageKey(const std::string& name) const {
 }
 
 std::string RunManifest::StageKeyHex(const std::string& name) const {
-  char key[17];
-  std::snprintf(key, sizeof key, "%016llx", static_cast<unsigned long long>(StageKey(name)));
-  return key;
+  return Hex16(StageKey(name));
 }
 
 std::string RunManifest::ToJsonText() const {

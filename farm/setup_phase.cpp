@@ -186,7 +186,8 @@ class SetupPhase final : public FarmPhase {
     resolved.seed = seed;
     resolved.rows = rows;
     const RunManifest manifest =
-        MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, o);
+        MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, o,
+                        visibility ? nullptr : &ctx.compression_plan.emplace());
 
     FarmReport& rep = ctx.report;
     rep.scene_name = scene.name;
@@ -223,12 +224,10 @@ class SetupPhase final : public FarmPhase {
   }
 
   // What the run folder holds for the inputs of `manifest` (RunFolderState).
-  static RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest,
-                                     const SceneGeometry& geometry) {
+  static RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest) {
     const RunFolder& f = ctx.folder;
     std::error_code ec;
     RunFolderState state;
-    state.manifest = fs::exists(f.manifest, ec);
     if (ctx.params.visibility) {
       state.rows_complete = fs::exists(f.visibility, ec);
       state.rows_unfinished = fs::exists(f.journal, ec) || fs::exists(f.visibility_chunks, ec);
@@ -236,15 +235,13 @@ class SetupPhase final : public FarmPhase {
     }
     state.rows_complete = TransportComplete(f.transport);
     state.rows_unfinished = !state.rows_complete && fs::exists(f.partial, ec);
+    // transport.prtc is current when its header is the one the manifest's compression stage
+    // was keyed with.
     if (!ctx.options.no_compress && fs::exists(f.compressed, ec)) {
       try {
         state.compressed_current =
-            CompressedHeaderDifferences(
-                ReadCompressedTransportHeader(f.compressed),
-                PlanCompression(ctx.scene, geometry,
-                                manifest.Stage(kStageRows)->at("cubemap_n").get<int>(), ctx.options)
-                    .header)
-                .empty();
+            CompressedHeaderKey(ReadCompressedTransportHeader(f.compressed)) ==
+            manifest.Stage(kStageCompression)->at("header_xxh64").get<std::string>();
       } catch (const InputError&) {
         state.compressed_current = false;  // damaged: written again
       }
@@ -298,7 +295,7 @@ class SetupPhase final : public FarmPhase {
     po.force = o.force;
     po.compress = !o.no_compress && !ctx.params.visibility;
     po.visibility = ctx.params.visibility != 0;
-    const RunFolderState state = LookAtFolder(ctx, manifest, geometry);
+    const RunFolderState state = LookAtFolder(ctx, manifest);
     ctx.stage_plan = PlanStages(older ? &*older : nullptr, manifest, state, po);
     const StagePlan& plan = ctx.stage_plan;
     ctx.estimate_key = manifest.StageKeyHex(kStageEstimate);

@@ -270,7 +270,7 @@ class FarmSparseSteps final : public SparseSteps {
       file.Sync();
     };
     RunStep(p, t0);
-    CrossValidate(index, dense, order, outcome);
+    CrossValidate(index, order, outcome);
     ctx_.report.sparse.dense_rows_shipped = rows_shipped_;
     ctx_.report.sparse.index_seconds = index_seconds_;
     std::vector<uint32_t> fb;
@@ -343,15 +343,14 @@ class FarmSparseSteps final : public SparseSteps {
   // the texels' differences as float32; 0 where the reconstruction fell back, as the pipeline
   // then traces the vertex). run/sparse/cross_validation.json lists the vertices and, per mesh,
   // how many vertices were reconstructed. Nothing here changes a row of T.
-  void CrossValidate(const NeighborIndex& index, std::span<const uint32_t> dense,
-                     std::span<const uint32_t> order, std::span<const uint8_t> outcome) {
+  void CrossValidate(const NeighborIndex& index, std::span<const uint32_t> order,
+                     std::span<const uint8_t> outcome) {
     const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
     const std::vector<uint32_t> initial =
         InitialDenseSet(N_, SparseInitialDenseCount(N_, ctx_.plan), ctx_.plan.seed);
     std::vector<uint32_t> cv;
-    const std::size_t K = std::min<std::size_t>(kCrossValidated, initial.size());
+    const std::size_t K = std::min<std::size_t>(kSparseCrossValidated, initial.size());
     for (std::size_t i = 0; i < K; ++i) cv.push_back(initial[i * initial.size() / K]);
-    (void)dense;
     const std::size_t record = 4 + 4 * T_;
     SideFile file((fs::path(ctx_.folder.sparse) / "cross_validation.bin").string());
     StepJobs p;
@@ -393,15 +392,9 @@ class FarmSparseSteps final : public SparseSteps {
     p.sync = [&] { file.Sync(); };
     RunStep(p);
     // Which vertices, and how many vertices of each mesh the pipeline reconstructed.
-    std::vector<uint64_t> mesh_first{0};
-    for (const SceneMesh& m : ctx_.geometry.meshes)
-      mesh_first.push_back(mesh_first.back() + m.mesh.positions.size());
     std::vector<uint64_t> reconstructed(ctx_.geometry.meshes.size(), 0);
-    for (std::size_t i = 0; i < order.size(); ++i) {
-      if (outcome[i] != ok) continue;
-      const auto at = std::upper_bound(mesh_first.begin(), mesh_first.end(), order[i]);
-      ++reconstructed[static_cast<std::size_t>(at - mesh_first.begin()) - 1];
-    }
+    for (std::size_t i = 0; i < order.size(); ++i)
+      if (outcome[i] == ok) ++reconstructed[ctx_.geometry.MeshOfVertex(order[i])];
     const nlohmann::json summary = {{"texels", T_},
                                     {"record_bytes", record},
                                     {"vertices", cv},
@@ -411,8 +404,6 @@ class FarmSparseSteps final : public SparseSteps {
   }
 
  private:
-  static constexpr std::size_t kCrossValidated = 400;
-
   NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
     std::vector<Vec3> pts;
     pts.reserve(dense.size());
@@ -546,12 +537,6 @@ class FarmSparseSteps final : public SparseSteps {
   uint64_t variance_uncovered_jobs_ = 0;  // re-used jobs without a logged variance record
 };
 
-std::vector<uint64_t> MeshRows(const FarmContext& ctx) {
-  std::vector<uint64_t> rows;
-  for (const SceneMesh& m : ctx.geometry.meshes) rows.push_back(m.mesh.positions.size());
-  return rows;
-}
-
 class SparsePhase final : public FarmPhase {
  public:
   const char* name() const override { return "sparse"; }
@@ -559,8 +544,8 @@ class SparsePhase final : public FarmPhase {
   void Run(FarmContext& ctx) override {
     RunJobPhase(
         ctx,
-        [&ctx, mesh_rows = MeshRows(ctx)](const RowRange&, std::string_view payload,
-                                          std::string& out) {
+        [&ctx, mesh_rows = ctx.geometry.MeshVertexCounts()](
+            const RowRange&, std::string_view payload, std::string& out) {
           out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out),
                                  &mesh_rows);
         },

@@ -4,23 +4,17 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "farm/compression_phase.h"
 #include "formats/compressed_transport.h"
 #include "formats/geometry_file.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/hash.h"
+#include "worker/column_order.h"
 
 namespace prt {
 
 namespace {
 
 using Json = nlohmann::ordered_json;
-
-std::string Hex(uint64_t v) {
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
-  return buf;
-}
 
 Json SparseJson(const SparseSettings& s) {
   return {{"initial_fraction", s.initial_fraction},
@@ -38,6 +32,23 @@ Json SparseJson(const SparseSettings& s) {
 }
 
 }  // namespace
+
+std::string CompressedHeaderKey(const CompressedTransportHeader& header) {
+  const std::vector<uint8_t> bytes = EncodeHeader(header);
+  return Hex16(Checksum64(bytes.data(), bytes.size()));
+}
+
+CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
+                                int cubemap_n, const FarmOptions& options) {
+  CompressionPlan plan;
+  plan.options = CompressionOptionsFrom(scene.compression, scene.file);
+  if (!options.compression_scheme.empty())
+    plan.options.scheme =
+        ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
+  const SpatialDomain domain = SpatialDomainOf(geometry, scene.compression.order_normal_weight);
+  plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain);
+  return plan;
+}
 
 uint64_t TracedGeometryChecksum(const SceneGeometry& geometry) {
   SceneGeometry traced = geometry;
@@ -60,11 +71,12 @@ uint64_t EnvironmentFileChecksum(const std::string& path) {
 
 RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& scene_text,
                             const SceneGeometry& geometry, const std::string& geometry_bytes,
-                            const ResolvedSampling& s, const FarmOptions& options) {
+                            const ResolvedSampling& s, const FarmOptions& options,
+                            CompressionPlan* compression) {
   RunManifest m;
   const bool visibility = s.job == "visibility";
   Json rows = {{"job", s.job},
-               {"geometry_xxh64", Hex(TracedGeometryChecksum(geometry))},
+               {"geometry_xxh64", Hex16(TracedGeometryChecksum(geometry))},
                {"samples", s.rows},
                {"cubemap_n", s.cubemap_n},
                {"rays_per_texel", s.rays_per_texel},
@@ -79,36 +91,36 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
   m.SetStage(kStageRows, std::move(rows));
 
   if (!visibility) {
-    const CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options);
+    CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options);
     const CompressedTransportHeader& h = plan.header;
-    const std::vector<uint8_t> header = EncodeHeader(h);
-    m.SetStage(kStageCompression,
-               {{"scheme", ToString(h.scheme)},
-                {"row_wavelet", ToString(h.row_wavelet)},
-                {"column_wavelet", ToString(h.column_wavelet)},
-                {"bits", h.bits},
-                {"keep_fraction", h.keep_fraction},
-                {"budget", ToString(h.budget)},
-                {"light_weight", h.light_weight},
-                {"terms_per_column", h.terms_per_column},
-                {"dither_seed", h.dither_seed},
-                {"order_normal_weight", scene.compression.order_normal_weight},
-                {"header_xxh64", Hex(Checksum64(header.data(), header.size()))}});
+    m.SetStage(kStageCompression, {{"scheme", ToString(h.scheme)},
+                                   {"row_wavelet", ToString(h.row_wavelet)},
+                                   {"column_wavelet", ToString(h.column_wavelet)},
+                                   {"bits", h.bits},
+                                   {"keep_fraction", h.keep_fraction},
+                                   {"budget", ToString(h.budget)},
+                                   {"light_weight", h.light_weight},
+                                   {"terms_per_column", h.terms_per_column},
+                                   {"dither_seed", h.dither_seed},
+                                   {"order_normal_weight", scene.compression.order_normal_weight},
+                                   {"header_xxh64", CompressedHeaderKey(h)}});
 
     Json envs = Json::array();
     for (const std::string& path : scene.environments) {
       envs.push_back({{"path", std::filesystem::path(path).filename().string()},
-                      {"xxh64", Hex(EnvironmentFileChecksum(path))}});
+                      {"xxh64", Hex16(EnvironmentFileChecksum(path))}});
     }
     Json albedo = Json::array();
     for (const SceneMesh& mesh : geometry.meshes)
       albedo.push_back({mesh.albedo[0], mesh.albedo[1], mesh.albedo[2]});
     m.SetStage(kStageEstimate, {{"environments", envs}, {"albedo", albedo}});
+    if (compression != nullptr) *compression = std::move(plan);
   }
 
-  m.SetStage(kStageAssets, {{"scene_xxh64", Hex(Checksum64(scene_text.data(), scene_text.size()))},
-                            {"geometry_file_xxh64",
-                             Hex(Checksum64(geometry_bytes.data(), geometry_bytes.size()))}});
+  m.SetStage(
+      kStageAssets,
+      {{"scene_xxh64", Hex16(Checksum64(scene_text.data(), scene_text.size()))},
+       {"geometry_file_xxh64", Hex16(Checksum64(geometry_bytes.data(), geometry_bytes.size()))}});
   return m;
 }
 

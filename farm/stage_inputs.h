@@ -7,9 +7,21 @@
 
 #include "farm/farm_options.h"
 #include "farm/run_manifest.h"
+#include "formats/compressed_transport.h"
 #include "vocabulary/scene.h"
+#include "worker/transport_compressor.h"
 
 namespace prt {
+
+// What the compression stage is keyed with and the compression phase writes with: the options
+// (the scene's [compression], --compression-scheme over it) and the header transport.prtc gets.
+// Throws InputError naming the scene file on bad settings.
+struct CompressionPlan {
+  CompressionOptions options;
+  CompressedTransportHeader header;
+};
+CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
+                                int cubemap_n, const FarmOptions& options);
 
 // What setup resolved from the scene and the command line (the overrides applied).
 struct ResolvedSampling {
@@ -25,13 +37,20 @@ struct ResolvedSampling {
 // the ground flag and grid, the bounds; not names or albedos.
 uint64_t TracedGeometryChecksum(const SceneGeometry& geometry);
 
+// The compression stage's "header_xxh64": XXH64 of the encoded header, 16 hex digits (what a
+// transport.prtc in the folder is checked against).
+std::string CompressedHeaderKey(const CompressedTransportHeader& header);
+
 // XXH64 of an environment file's bytes, or 0 when it cannot be read.
 uint64_t EnvironmentFileChecksum(const std::string& path);
 
 // The manifest for `scene` (as parsed from `scene_text`), its `geometry`, the resolved sampling
 // and the command line. Throws InputError naming the scene file on bad compression settings.
+// `compression` (optional) receives the plan the compression stage is keyed with (transport
+// runs), for the compression phase to use as it is.
 RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& scene_text,
                             const SceneGeometry& geometry, const std::string& geometry_bytes,
-                            const ResolvedSampling& sampling, const FarmOptions& options);
+                            const ResolvedSampling& sampling, const FarmOptions& options,
+                            CompressionPlan* compression = nullptr);
 
 }  // namespace prt

@@ -26,7 +26,6 @@ struct StageDecision {
 
 // What the run folder holds, looked at by setup before it changes anything.
 struct RunFolderState {
-  bool manifest = false;            // checkpoints/manifest.json exists (and was read)
   bool rows_complete = false;       // transport.prtt (or visibility.prtv) complete
   bool rows_unfinished = false;     // transport.prtt.partial or journaled jobs
   bool compressed_current = false;  // transport.prtc exists with the header planned now

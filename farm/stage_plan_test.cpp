@@ -75,7 +75,7 @@ RunManifest ManifestOf(const std::string& text, const FarmOptions& options = {})
 
 RunFolderState Complete() {
   RunFolderState f;
-  f.manifest = f.rows_complete = f.compressed_current = f.estimate_current = true;
+  f.rows_complete = f.compressed_current = f.estimate_current = true;
   return f;
 }
 
@@ -211,7 +211,7 @@ TEST(StagePlanTest, MissingOutputsDiscardedRowsResumeForceAndNoCompress) {
   const StagePlan no_rows = PlanStages(&base, env, discarded, {});
   EXPECT_EQ(Actions(no_rows), "rows:reused compression:reused estimate:skipped assets:ran");
   RunFolderState unfinished;
-  unfinished.manifest = unfinished.rows_unfinished = true;
+  unfinished.rows_unfinished = true;
   EXPECT_EQ(Actions(PlanStages(&base, base, unfinished, {})),
             "rows:resumed compression:ran estimate:ran assets:reused");
   StagePlanOptions force;

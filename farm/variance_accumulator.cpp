@@ -14,10 +14,9 @@ namespace prt {
 VarianceAccumulator::VarianceAccumulator(const RunFolder& folder, const SceneGeometry& geometry,
                                          int cubemap_n, int rays_per_texel, bool fresh)
     : log_path_(folder.variance_log), file_path_(folder.variance) {
-  std::vector<uint64_t> rows;
-  for (const SceneMesh& m : geometry.meshes) rows.push_back(m.mesh.positions.size());
-  total_ = MakeTransportVariance(static_cast<uint32_t>(cubemap_n),
-                                 static_cast<uint32_t>(rays_per_texel), std::move(rows));
+  total_ =
+      MakeTransportVariance(static_cast<uint32_t>(cubemap_n), static_cast<uint32_t>(rays_per_texel),
+                            geometry.MeshVertexCounts());
   std::string kept;
   if (!fresh && std::filesystem::exists(log_path_)) {
     const std::string bytes = ReadWholeFile(log_path_);

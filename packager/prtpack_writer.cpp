@@ -19,6 +19,15 @@
 #include "vocabulary/errors.h"
 
 namespace prt::pack {
+
+std::vector<PackMeshInput> PackMeshesOf(const SceneGeometry& geometry) {
+  std::vector<PackMeshInput> out;
+  for (const SceneMesh& m : geometry.meshes) {
+    out.push_back({m.name, m.mesh, m.albedo, m.is_ground,
+                   static_cast<uint32_t>(std::max(0, m.grid_resolution))});
+  }
+  return out;
+}
 namespace {
 
 struct PendingSection {

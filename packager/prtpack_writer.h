@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "vocabulary/mesh.h"
+#include "vocabulary/scene_geometry.h"
 
 namespace prt::pack {
 
@@ -19,6 +20,9 @@ struct PackMeshInput {
   bool is_ground = false;
   uint32_t grid_resolution = 0;
 };
+
+// A scene's world-space meshes as pack meshes, in order (names, albedos, the ground's grid).
+std::vector<PackMeshInput> PackMeshesOf(const SceneGeometry& geometry);
 
 // One block of compressed transport columns: opaque bytes from the transport encoder, which
 // must decode on their own. The packager zstd-compresses each block separately.

@@ -175,10 +175,7 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
   if (!fs::is_directory(dir)) throw InputError(run_dir, "not a run folder (no such directory)");
   PackInput in;
   const SceneGeometry geometry = ReadSceneGeometryFile((dir / kGeometryFileName).string());
-  for (const SceneMesh& m : geometry.meshes) {
-    in.meshes.push_back({m.name, m.mesh, m.albedo, m.is_ground,
-                         static_cast<uint32_t>(std::max(0, m.grid_resolution))});
-  }
+  in.meshes = PackMeshesOf(geometry);
   nlohmann::json meta = nlohmann::json::object();
   const fs::path scene = dir / kSceneCopyFileName;
   std::string scene_text;

@@ -63,15 +63,7 @@ inline std::string PackTinyRows(const TinyScene& t, const std::vector<float>& ro
       R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],
          "target": [0.0, 0.3, 0.0], "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64,
          "height": 48}}})";
-  for (const SceneMesh& m : t.geometry.meshes) {
-    pack::PackMeshInput pm;
-    pm.name = m.name;
-    pm.mesh = m.mesh;
-    pm.albedo = m.albedo;
-    pm.is_ground = m.is_ground;
-    pm.grid_resolution = static_cast<uint32_t>(m.grid_resolution);
-    in.meshes.push_back(std::move(pm));
-  }
+  in.meshes = pack::PackMeshesOf(t.geometry);
   in.transport = pack::MakeTransportInput(ct, 64);
   pack::WritePackFile(path, in);
   return path;

@@ -4,11 +4,14 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 
 namespace prt {
 
 // XXH64 (seed 0) of a byte range: the checksum of every prtfarm file format and farm message.
 uint64_t Checksum64(const void* data, std::size_t bytes);
+// A 64-bit hash as 16 lower-case hex digits (journal lines, manifest keys).
+std::string Hex16(uint64_t value);
 
 // SplitMix64 (Steele, Lea & Flood 2014): a bijective 64-bit mixer, used as a counter-based hash
 // so that a random number is a pure function of its key (no generator state to carry or share).

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,10 @@ struct SceneGeometry {
   Vec3 bounds_min{0, 0, 0};
   Vec3 bounds_max{0, 0, 0};
   std::size_t vertex_count() const;
+  // Each mesh's vertex count, in order (the spatial samples of each mesh, scene.h's order).
+  std::vector<uint64_t> MeshVertexCounts() const;
+  // The mesh holding global vertex (spatial sample) `vertex`; meshes.size() beyond the last.
+  std::size_t MeshOfVertex(uint64_t vertex) const;
   double diagonal() const { return Length(bounds_max - bounds_min); }
 };
 

@@ -182,9 +182,9 @@ std::vector<CompressedColumn> CompressColumnBlock(const CompressedTransportHeade
   return QuantiseColumnBlock(h, first_column, count, c.data(), depths.data(), 0.0f, stats);
 }
 
-SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first_column,
-                              uint32_t count, const float* columns, const uint8_t* depths,
-                              std::span<const CompressedColumn> compressed) {
+double ColumnBlockError(const CompressedTransportHeader& h, uint32_t first_column, uint32_t count,
+                        const float* columns, const uint8_t* depths,
+                        std::span<const CompressedColumn> compressed) {
   const std::size_t S = h.sample_count;
   std::vector<const CompressedColumn*> of(count, nullptr);
   for (const CompressedColumn& c : compressed) {
@@ -192,10 +192,9 @@ SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first
       throw std::invalid_argument("ColumnBlockError: compressed column outside the block");
     of[c.column - first_column] = &c;
   }
-  using Sums = std::pair<double, double>;
-  const Sums sums = tbb::parallel_reduce(
-      tbb::blocked_range<uint32_t>(0, count), Sums{0.0, 0.0},
-      [&](const tbb::blocked_range<uint32_t>& r, Sums acc) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<uint32_t>(0, count), 0.0,
+      [&](const tbb::blocked_range<uint32_t>& r, double acc) {
         std::vector<float> y(S);
         std::vector<uint8_t> scale(S);
         for (uint32_t k = r.begin(); k != r.end(); ++k) {
@@ -212,23 +211,19 @@ SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first
               throw std::logic_error("ColumnBlockError: compressed at another depth");
             for (std::size_t i = 0; i < S; ++i) y[i] = x[i] - y[i];
             InverseColumnTransform(h.domain, h.column_wavelet, depths[k], y.data());
-            for (std::size_t i = 0; i < S; ++i) acc.first += double(y[i]) * y[i];
+            for (std::size_t i = 0; i < S; ++i) acc += double(y[i]) * y[i];
           } else {
             if (c != nullptr)
               InverseColumnTransform(h.domain, h.column_wavelet, c->depth, y.data());
             for (std::size_t i = 0; i < S; ++i) {
               const double d = double(x[i]) - y[i];
-              acc.first += d * d;
-              acc.second += double(x[i]) * x[i];
+              acc += d * d;
             }
           }
         }
         return acc;
       },
-      [](Sums a, const Sums& b) {
-        return Sums{a.first + b.first, a.second + b.second};
-      });
-  return {sums.first, sums.second};
+      [](double a, double b) { return a + b; });
 }
 
 float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep) {

@@ -82,19 +82,15 @@ std::vector<CompressedColumn> QuantiseColumnBlock(const CompressedTransportHeade
                                                   float threshold,
                                                   std::vector<ColumnStats>* stats = nullptr);
 // The exact squared error of the column stage on a block of columns, in the T̂ basis (which
-// the orthonormal row transform makes the error in the texel basis): Σ ‖x − x̃‖², with x each
-// column entering the column stage (sample order) and x̃ what its compressed column decodes to
-// (formats/column_coding.h: dequantised, inverse-transformed; 0 for a column not in
-// `compressed`), and Σ ‖x‖². With `depths`, `columns` holds the transformed columns c
-// (TransformColumnBlock's output) and the error is W⁻¹(c − ĉ) by linearity (total not computed:
-// 0). Parallel over columns (TBB).
-struct SquaredError {
-  double error = 0;
-  double total = 0;
-};
-SquaredError ColumnBlockError(const CompressedTransportHeader& h, uint32_t first_column,
-                              uint32_t count, const float* columns, const uint8_t* depths,
-                              std::span<const CompressedColumn> compressed);
+// the orthonormal row transform of Cheslack-Postava et al. 2008 §4.1 makes the error in the
+// texel basis): Σ ‖x − x̃‖², with x each column entering the column stage (sample order) and x̃
+// what its compressed column decodes to (formats/column_coding.h: dequantised (§4.3),
+// inverse-transformed (§4.2); 0 for a column not in `compressed`). With `depths`, `columns`
+// holds the transformed columns c (TransformColumnBlock's output) and the error is ‖W⁻¹(c − ĉ)‖²
+// by linearity. Parallel over columns (TBB).
+double ColumnBlockError(const CompressedTransportHeader& h, uint32_t first_column, uint32_t count,
+                        const float* columns, const uint8_t* depths,
+                        std::span<const CompressedColumn> compressed);
 
 // The keep-th largest non-zero |c| of n coefficients (exact; tests and diagnostics).
 float GlobalThreshold(const float* coefficients, std::size_t n, std::size_t keep);
