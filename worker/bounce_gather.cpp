@@ -1,0 +1,193 @@
+// Bounce gathering (see bounce_gather.h).
+#include "worker/bounce_gather.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
+
+namespace prt {
+
+namespace {
+
+// Uniform double in [0, 1) from 53 bits of a hash.
+double Unit(uint64_t bits) {
+  return static_cast<double>(bits >> 11) * 0x1p-53;
+}
+
+bool Finite(const Vec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+}  // namespace
+
+BounceGatherer::BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& surfaces,
+                               BounceGatherOptions options)
+    : scene_(scene), surfaces_(surfaces), options_(options) {
+  if (options.paths < 1 || options.paths > 65536)
+    throw std::invalid_argument("bounce gathering: paths " + std::to_string(options.paths) +
+                                " outside [1, 65536]");
+  // The strata grid: sv the largest divisor of P not above √P (as the direct sampler's).
+  sv_ = 1;
+  for (int d = 1; d * d <= options.paths; ++d)
+    if (options.paths % d == 0) sv_ = d;
+  su_ = options.paths / sv_;
+}
+
+GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
+                                  std::vector<GatherTerm>& out) const {
+  out.clear();
+  GatherStats st;
+  const double ln = Length(x.normal);
+  if (!Finite(x.position) || !Finite(x.normal) || !(ln > 0))
+    throw NumericalError("bounce gathering: sample " + std::to_string(index) +
+                         " has a non-finite position or a zero normal");
+  const Vec3 n = x.normal / ln;
+  Vec3 t, b;
+  OrthonormalFrame(n, t, b);
+  OcclusionRay ray{};
+  scene_.RobustOrigin(x.position, x.geometric_normal, ray.origin);
+  ray.tnear = 0;
+  ray.tfar = std::numeric_limits<float>::infinity();
+  const uint64_t key = SplitMix64(SplitMix64(options_.seed ^ 0x5052544245434E31ull) ^ index) ^
+                       SplitMix64(static_cast<uint64_t>(bounce));
+  const double inv_p = 1.0 / options_.paths;
+  std::vector<GatherTerm> raw;
+  raw.reserve(3 * static_cast<std::size_t>(options_.paths));
+  for (int p = 0; p < options_.paths; ++p) {
+    const uint64_t bits = SplitMix64(key + 2 * static_cast<uint64_t>(p));
+    const uint64_t bits2 = SplitMix64(key + 2 * static_cast<uint64_t>(p) + 1);
+    const double u1 = (p % su_ + Unit(bits)) / su_;
+    const double u2 = (p / su_ + Unit(bits2)) / sv_;
+    const Vec3 d = CosineDirection(n, t, b, u1, u2);
+    ray.direction[0] = static_cast<float>(d.x);
+    ray.direction[1] = static_cast<float>(d.y);
+    ray.direction[2] = static_cast<float>(d.z);
+    ++st.rays_traced;
+    RayHit hit;
+    if (!scene_.Intersect(ray, hit)) {
+      ++st.rays_escaped;
+      continue;
+    }
+    const SurfaceHit h = surfaces_.Resolve(ray, hit);
+    if (!h.front) {
+      ++st.back_face_hits;
+      continue;
+    }
+    const Rgb& rho = surfaces_.albedo(h.mesh);
+    for (int i = 0; i < 3; ++i) {
+      GatherTerm g;
+      g.vertex = h.vertices[i];
+      for (int c = 0; c < channels; ++c)
+        g.weight[c] = static_cast<float>(rho[c] * h.weights[i] * inv_p);
+      raw.push_back(g);
+    }
+  }
+  std::sort(raw.begin(), raw.end(),
+            [](const GatherTerm& l, const GatherTerm& r) { return l.vertex < r.vertex; });
+  for (const GatherTerm& g : raw) {
+    if (!out.empty() && out.back().vertex == g.vertex) {
+      for (int c = 0; c < 3; ++c) out.back().weight[c] += g.weight[c];
+    } else {
+      out.push_back(g);
+    }
+  }
+  return st;
+}
+
+void ApplyGather(std::span<const GatherTerm> terms, const float* previous, uint64_t vertex_count,
+                 int prev_channels, int channels, std::size_t cols, float* out) {
+  std::fill(out, out + static_cast<std::size_t>(channels) * cols, 0.0f);
+  for (const GatherTerm& g : terms) {
+    for (int c = 0; c < channels; ++c) {
+      const float w = g.weight[c];
+      if (w == 0) continue;
+      const uint64_t row =
+          static_cast<uint64_t>(prev_channels == 1 ? 0 : c) * vertex_count + g.vertex;
+      const float* src = previous + row * cols;
+      float* dst = out + static_cast<std::size_t>(c) * cols;
+      for (std::size_t j = 0; j < cols; ++j) dst[j] += w * src[j];
+    }
+  }
+}
+
+void CoarsenRow(const CubemapLayout& fine, const CubemapLayout& coarse, const float* in,
+                float* out) {
+  const int n = fine.n(), m = coarse.n(), f = n / m;
+  std::fill(out, out + coarse.texel_count(), 0.0f);
+  for (int face = 0; face < 6; ++face)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x)
+        out[coarse.Index(face, x / f, y / f)] += in[fine.Index(face, x, y)];
+}
+
+void AddRefinedRow(const CubemapLayout& coarse, const CubemapLayout& fine, const float* in,
+                   float* out) {
+  const int n = fine.n(), m = coarse.n(), f = n / m;
+  for (int face = 0; face < 6; ++face)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const std::size_t J = coarse.Index(face, x / f, y / f), j = fine.Index(face, x, y);
+        out[j] += static_cast<float>(in[J] * (fine.TexelSolidAngle(j) / coarse.TexelSolidAngle(J)));
+      }
+}
+
+bool HasColouredAlbedo(const SceneGeometry& geometry) {
+  for (const SceneMesh& m : geometry.meshes)
+    if (m.albedo[0] != m.albedo[1] || m.albedo[1] != m.albedo[2]) return true;
+  return false;
+}
+
+}  // namespace prt
+
+namespace prt {
+
+std::vector<std::vector<float>> GatherBounces(const BounceGatherer& gatherer,
+                                              std::span<const SpatialSample> samples,
+                                              const CubemapLayout& fine,
+                                              const CubemapLayout& coarse,
+                                              std::span<const float> direct, int bounces,
+                                              int channels, std::vector<GatherStats>* stats) {
+  const std::size_t V = samples.size(), cols = coarse.texel_count();
+  std::vector<float> coarse_direct(V * cols);
+  tbb::parallel_for(std::size_t{0}, V, [&](std::size_t v) {
+    CoarsenRow(fine, coarse, direct.data() + v * fine.texel_count(),
+               coarse_direct.data() + v * cols);
+  });
+  std::vector<std::vector<float>> out;
+  if (stats) stats->clear();
+  for (int k = 1; k <= bounces; ++k) {
+    const std::vector<float>& previous = k == 1 ? coarse_direct : out.back();
+    const int prev_channels = k == 1 ? 1 : channels;
+    std::vector<float> next(static_cast<std::size_t>(channels) * V * cols);
+    tbb::enumerable_thread_specific<GatherStats> local;
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, V, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+          std::vector<GatherTerm> terms;
+          std::vector<float> row(static_cast<std::size_t>(channels) * cols);
+          for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            local.local() += gatherer.Terms(samples[v], v, k, channels, terms);
+            ApplyGather(terms, previous.data(), V, prev_channels, channels, cols, row.data());
+            for (int c = 0; c < channels; ++c)
+              std::copy_n(row.data() + c * cols, cols, next.data() + (c * V + v) * cols);
+          }
+        });
+    if (stats) {
+      GatherStats s;
+      for (const GatherStats& l : local) s += l;
+      stats->push_back(s);
+    }
+    out.push_back(std::move(next));
+  }
+  return out;
+}
+
+}  // namespace prt

@@ -1,0 +1,106 @@
+// Interreflection by bounce gathering (docs/interreflection.md), the production estimator of
+// the indirect transport (no MPI here). With T⁰ the direct rows (worker/transport_sampler.h),
+//   Tᵏ⁺¹(x)[J] = (1/π) ∫_H(x) ρ(y) · Tᵏ(y)[J] · max(0, n_x·ω) dω,   y = first hit from x along ω,
+// estimated with P cosine-distributed directions ω_p (pdf cos θ/π cancels (1/π)·cos θ),
+// stratified on a √P-ish grid of the unit square and jittered per (seed, vertex, bounce):
+//   Tᵏ⁺¹(x) ≈ (1/P) Σ_p ρ(y_p) · Tᵏ(y_p),   Tᵏ(y_p) = Σ_i b_i Tᵏ(v_i)   (barycentric interpolation
+// of the hit triangle's vertex rows). A ray that escapes, or reaches a back face, brings 0
+// (worker/surface_hit.h). So each vertex's gather is a short list of (vertex, weight per colour
+// channel) terms, traced once per bounce and applied to the previous bounce's rows of the whole
+// scene. The indirect part is smooth (Huang & Ramamoorthi 2010 §7: indirect light "is generally
+// much smoother and low-frequency"; §4.2 samples it on the low-resolution grid), so the bounce
+// rows live on a coarse cubemap of m < n texels per face edge: CoarsenRow sums each coarse
+// texel's fine texels (exact for light that is constant over the coarse texel), and
+// AddRefinedRow spreads a coarse value over its fine texels in proportion to their solid angles,
+// so that relighting the refined row with the fine light equals relighting the coarse row with
+// the light averaged over each coarse texel.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "vocabulary/cubemap.h"
+#include "worker/embree_scene.h"
+#include "worker/surface_hit.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+
+struct BounceGatherOptions {
+  int paths = 256;  // cosine-distributed directions per vertex and bounce, in [1, 65536]
+  uint64_t seed = 1;
+};
+
+// One term of a vertex's gather: Tᵏ⁺¹(x)[c] += weight[c] · Tᵏ(vertex)[c].
+struct GatherTerm {
+  uint64_t vertex = 0;
+  float weight[3] = {0, 0, 0};
+};
+
+struct GatherStats {
+  uint64_t rays_traced = 0;     // closest-hit rays
+  uint64_t rays_escaped = 0;    // reached the environment
+  uint64_t back_face_hits = 0;  // absorbed at a back face
+  GatherStats& operator+=(const GatherStats& o) {
+    rays_traced += o.rays_traced;
+    rays_escaped += o.rays_escaped;
+    back_face_hits += o.back_face_hits;
+    return *this;
+  }
+};
+
+// Thread-safe after construction; the scene and surfaces must outlive it.
+class BounceGatherer {
+ public:
+  // Throws std::invalid_argument on paths outside [1, 65536].
+  BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& surfaces,
+                 BounceGatherOptions options);
+  const BounceGatherOptions& options() const { return options_; }
+  int strata_u() const { return su_; }
+  int strata_v() const { return sv_; }
+
+  // The gather terms of sample `x` (global index `index`) for bounce `bounce` (1 …): merged per
+  // vertex, sorted by vertex, weights ρ_c · b_i / P (channel 0 only when `channels` is 1).
+  // A pure function of (seed, index, bounce). Throws NumericalError on a non-finite sample.
+  GatherStats Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
+                    std::vector<GatherTerm>& out) const;
+
+ private:
+  const EmbreeScene& scene_;
+  const SceneSurfaces& surfaces_;
+  BounceGatherOptions options_;
+  int su_ = 1, sv_ = 1;
+};
+
+// Applies terms to the previous bounce's rows: `previous` holds prev_channels × vertex_count rows
+// of `cols` floats, channel-major (row c·vertex_count + v); out receives `channels` rows of
+// `cols` floats (channel c from the previous bounce's channel c, or its only channel).
+void ApplyGather(std::span<const GatherTerm> terms, const float* previous, uint64_t vertex_count,
+                 int prev_channels, int channels, std::size_t cols, float* out);
+
+// coarse[J] = Σ_{j ∈ J} fine[j] (fine.n() a multiple of coarse.n()).
+void CoarsenRow(const CubemapLayout& fine, const CubemapLayout& coarse, const float* in,
+                float* out);
+// fine[j] += coarse[J] · Ω_j / Ω_J for every fine texel j of coarse texel J.
+void AddRefinedRow(const CubemapLayout& coarse, const CubemapLayout& fine, const float* in,
+                   float* out);
+
+// Whether a scene needs one transport row per colour channel: some albedo is not grey.
+bool HasColouredAlbedo(const SceneGeometry& geometry);
+
+}  // namespace prt
+
+namespace prt {
+
+// Every bounce in one process, in parallel over vertices with TBB (tests, benchmarks; the farm
+// runs the same kernels as jobs, farm/bounce_phase.cpp). `direct` holds the samples' T⁰ rows at
+// `fine` (samples.size() rows); returns bounces 1 … K, each channels × samples.size() rows of
+// coarse.texel_count() floats, channel-major. stats (optional) receives one entry per bounce.
+std::vector<std::vector<float>> GatherBounces(
+    const BounceGatherer& gatherer, std::span<const SpatialSample> samples,
+    const CubemapLayout& fine, const CubemapLayout& coarse, std::span<const float> direct,
+    int bounces, int channels, std::vector<GatherStats>* stats = nullptr);
+
+}  // namespace prt

@@ -1,0 +1,289 @@
+#include "worker/bounce_gather.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+#include <string>
+#include <vector>
+
+namespace prt {
+namespace {
+
+// A res×res grid over the parallelogram corner + s·e1 + t·e2, every vertex with normal `normal`.
+SceneMesh Grid(const std::string& name, Vec3 corner, Vec3 e1, Vec3 e2, Vec3 normal, int res,
+               Rgb albedo) {
+  SceneMesh m;
+  m.name = name;
+  m.mesh.source = name;
+  m.albedo = albedo;
+  for (int j = 0; j < res; ++j)
+    for (int i = 0; i < res; ++i) {
+      m.mesh.positions.push_back(corner + e1 * (double(i) / (res - 1)) +
+                                 e2 * (double(j) / (res - 1)));
+      m.mesh.normals.push_back(Normalize(normal));
+    }
+  for (int j = 0; j + 1 < res; ++j)
+    for (int i = 0; i + 1 < res; ++i) {
+      const uint32_t a = j * res + i, b = a + 1, c = a + res, d = c + 1;
+      m.mesh.triangles.push_back({a, b, d});
+      m.mesh.triangles.push_back({a, d, c});
+    }
+  return m;
+}
+
+SceneGeometry Scene(std::vector<SceneMesh> meshes) {
+  SceneGeometry g;
+  g.meshes = std::move(meshes);
+  g.bounds_min = {1e30, 1e30, 1e30};
+  g.bounds_max = {-1e30, -1e30, -1e30};
+  for (const SceneMesh& m : g.meshes)
+    for (const Vec3& p : m.mesh.positions) {
+      g.bounds_min = {std::min(g.bounds_min.x, p.x), std::min(g.bounds_min.y, p.y),
+                      std::min(g.bounds_min.z, p.z)};
+      g.bounds_max = {std::max(g.bounds_max.x, p.x), std::max(g.bounds_max.y, p.y),
+                      std::max(g.bounds_max.z, p.z)};
+    }
+  return g;
+}
+
+// The transport of a scene with K bounces gathered: direct rows at n, bounces at m.
+struct Gathered {
+  std::vector<SpatialSample> samples;
+  std::vector<float> direct;                // V rows at n
+  std::vector<std::vector<float>> bounces;  // K × (C·V rows at m)
+  std::size_t cols_n = 0, cols_m = 0;
+  std::vector<GatherStats> stats;
+  // Σ_j of the row (the relit value under a uniform sky of radiance 1).
+  double Direct(std::size_t v) const {
+    return std::accumulate(direct.begin() + v * cols_n, direct.begin() + (v + 1) * cols_n, 0.0);
+  }
+  double Bounce(int k, std::size_t v, int c = 0) const {
+    const std::size_t V = samples.size();
+    const auto& b = bounces[k - 1];
+    return std::accumulate(b.begin() + (c * V + v) * cols_m, b.begin() + (c * V + v + 1) * cols_m,
+                           0.0);
+  }
+};
+
+Gathered Gather(const SceneGeometry& g, int bounces, int paths, int channels, int n = 8, int m = 4,
+                uint64_t seed = 1) {
+  Gathered out;
+  const EmbreeScene scene(g);
+  const SceneSurfaces surfaces(g);
+  out.samples = SpatialSamplesOf(g);
+  TransportSamplerOptions to;
+  to.rays_per_texel = 16;
+  const TransportSampler sampler(scene, n, to);
+  out.cols_n = sampler.layout().texel_count();
+  out.direct.resize(out.samples.size() * out.cols_n);
+  sampler.ComputeRows(out.samples, 0, out.direct.data());
+  BounceGatherOptions go;
+  go.paths = paths;
+  go.seed = seed;
+  const BounceGatherer gatherer(scene, surfaces, go);
+  const CubemapLayout coarse(m);
+  out.cols_m = coarse.texel_count();
+  out.bounces = GatherBounces(gatherer, out.samples, sampler.layout(), coarse, out.direct, bounces,
+                              channels, &out.stats);
+  return out;
+}
+
+constexpr double kHalf = 1000;  // the ground's half width: a patch at height ~1 sees it all
+
+SceneMesh Ground(Rgb albedo, Vec3 normal = {0, 1, 0}) {
+  return Grid("ground", {-kHalf, 0, -kHalf}, {2 * kHalf, 0, 0}, {0, 0, 2 * kHalf}, normal, 2,
+              albedo);
+}
+
+// Issue 22's closed forms: a small patch above a large ground of albedo ρ_g under a uniform sky
+// of radiance 1. Vertical: 0.5 direct, 0.5 + 0.5·ρ_g with one bounce. Facing down: ρ_g, no
+// direct.
+TEST(BounceGather, PatchAboveGroundMatchesClosedForms) {
+  const float rho = 0.6f;
+  const SceneGeometry g = Scene(
+      {Grid("vertical", {0, 0.99, -0.01}, {0, 0.02, 0}, {0, 0, 0.02}, {1, 0, 0}, 2,
+            {0.5f, 0.5f, 0.5f}),
+       Grid("down", {2, 1, -0.01}, {0.02, 0, 0}, {0, 0, 0.02}, {0, -1, 0}, 2, {0.5f, 0.5f, 0.5f}),
+       Ground({rho, rho, rho})});
+  const Gathered t = Gather(g, 1, 1024, 1);
+  for (std::size_t v = 0; v < 4; ++v) {
+    EXPECT_NEAR(t.Direct(v), 0.5, 0.005) << v;
+    EXPECT_NEAR(t.Direct(v) + t.Bounce(1, v), 0.5 + 0.5 * rho, 0.005) << v;
+  }
+  for (std::size_t v = 4; v < 8; ++v) {
+    EXPECT_NEAR(t.Direct(v), 0.0, 1e-3) << v;
+    EXPECT_NEAR(t.Bounce(1, v), rho, 0.005) << v;
+  }
+  // Every ray of the facing-down patch hits the ground's front; half of the vertical's escape.
+  EXPECT_EQ(t.stats[0].back_face_hits, 0u);
+  // Half of the vertical patch's rays and all the ground's escape, none of the other patch's.
+  EXPECT_NEAR(double(t.stats[0].rays_escaped) / double(t.stats[0].rays_traced), 0.5, 0.01);
+}
+
+// docs/interreflection.md "Back faces": a ground whose normals face down still occludes the
+// lower half, but its back reflects nothing.
+TEST(BounceGather, BackFacesOccludeAndAbsorb) {
+  const SceneGeometry g = Scene({Grid("vertical", {0, 0.99, -0.01}, {0, 0.02, 0}, {0, 0, 0.02},
+                                      {1, 0, 0}, 2, {0.5f, 0.5f, 0.5f}),
+                                 Ground({0.6f, 0.6f, 0.6f}, {0, -1, 0})});
+  const Gathered t = Gather(g, 1, 256, 1);
+  for (std::size_t v = 0; v < 4; ++v) {
+    EXPECT_NEAR(t.Direct(v), 0.5, 0.005);
+    EXPECT_EQ(t.Bounce(1, v), 0.0);
+  }
+  // Half of the patch's rays (4 of the 8 vertices).
+  EXPECT_NEAR(double(t.stats[0].back_face_hits) / double(t.stats[0].rays_traced), 0.25, 0.01);
+}
+
+// A red ground tints the patch: the indirect part's channels are in the albedo's ratios.
+TEST(BounceGather, ColouredAlbedoTintsTheBounceLight) {
+  const Rgb red{0.8f, 0.1f, 0.2f};
+  const SceneGeometry g = Scene({Grid("vertical", {0, 0.99, -0.01}, {0, 0.02, 0}, {0, 0, 0.02},
+                                      {1, 0, 0}, 2, {0.5f, 0.5f, 0.5f}),
+                                 Ground(red)});
+  const Gathered t = Gather(g, 2, 256, 3);
+  for (std::size_t v = 0; v < 4; ++v)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(t.Bounce(1, v, c), 0.5 * red[c], 0.004) << c;
+}
+
+// An open box (five inward faces) of albedo ρ under a uniform sky. Per vertex, a bounce's
+// uniform-sky value is at most ρ × the previous bounce's largest (the gather averages ρ·Tᵏ over
+// the hemisphere); the area-weighted energy falls by ρ at least (reciprocity: the form factors
+// from a surface to the rest sum to ≤ 1). With ρ = 1 (the furnace) B rises monotonically with
+// K towards 1 and never passes it.
+SceneGeometry OpenBox(Rgb albedo, int res = 7) {
+  const double s = 1;
+  return Scene({Grid("floor", {0, 0, 0}, {s, 0, 0}, {0, 0, s}, {0, 1, 0}, res, albedo),
+                Grid("x0", {0, 0, 0}, {0, s, 0}, {0, 0, s}, {1, 0, 0}, res, albedo),
+                Grid("x1", {s, 0, 0}, {0, s, 0}, {0, 0, s}, {-1, 0, 0}, res, albedo),
+                Grid("z0", {0, 0, 0}, {s, 0, 0}, {0, s, 0}, {0, 0, 1}, res, albedo),
+                Grid("z1", {0, 0, s}, {s, 0, 0}, {0, s, 0}, {0, 0, -1}, res, albedo)});
+}
+
+TEST(BounceGather, EachBounceHasAtMostAlbedoTimesThePreviousEnergy) {
+  const float rho = 0.7f;
+  const Gathered t = Gather(OpenBox({rho, rho, rho}), 4, 256, 1, 4, 2);
+  const std::size_t V = t.samples.size();
+  double prev_max = 0, prev_sum = 0;
+  for (std::size_t v = 0; v < V; ++v) {
+    prev_max = std::max(prev_max, t.Direct(v));
+    prev_sum += t.Direct(v);
+  }
+  for (int k = 1; k <= 4; ++k) {
+    double mx = 0, sum = 0;
+    for (std::size_t v = 0; v < V; ++v) {
+      mx = std::max(mx, t.Bounce(k, v));
+      sum += t.Bounce(k, v);
+    }
+    EXPECT_LE(mx, rho * prev_max * 1.02) << "bounce " << k;
+    EXPECT_LE(sum, rho * prev_sum * 1.02) << "bounce " << k;
+    EXPECT_GT(sum, 0.05 * prev_sum) << "bounce " << k;
+    prev_max = mx;
+    prev_sum = sum;
+  }
+}
+
+// A spherical cavity of radius 1 with its cap above polar angle α cut away, seen from inside:
+// from any point of a sphere's inside, every surface element subtends the same form factor
+// dA / (4πR²), so under a uniform sky of radiance 1 every point gets F = (1 − cos α)/2 direct
+// and, with albedo ρ, bounce k adds F·(ρ(1 − F))^k. The furnace (ρ = 1): B(K) = 1 − (1 − F)^(K+1),
+// rising monotonically to 1. (A box would do as well but for its creases: a vertex on a crease
+// sees half of its hemisphere through the other face's back.)
+SceneGeometry SphereCavity(double alpha, int rings, int segments, Rgb albedo) {
+  SceneMesh m;
+  m.name = "cavity";
+  m.mesh.source = "cavity";
+  m.albedo = albedo;
+  for (int r = 0; r < rings; ++r) {
+    const double theta = alpha + (std::numbers::pi - alpha) * r / rings;
+    for (int s = 0; s < segments; ++s) {
+      const double phi = 2 * std::numbers::pi * s / segments;
+      const Vec3 p{std::sin(theta) * std::cos(phi), std::cos(theta),
+                   std::sin(theta) * std::sin(phi)};
+      m.mesh.positions.push_back(p);
+      m.mesh.normals.push_back(-p);
+    }
+  }
+  const uint32_t pole = static_cast<uint32_t>(m.mesh.positions.size());
+  m.mesh.positions.push_back({0, -1, 0});
+  m.mesh.normals.push_back({0, 1, 0});
+  for (int r = 0; r < rings; ++r)
+    for (int s = 0; s < segments; ++s) {
+      const uint32_t a = r * segments + s, b = r * segments + (s + 1) % segments;
+      if (r + 1 < rings) {
+        const uint32_t c = a + segments, d = b + segments;
+        m.mesh.triangles.push_back({a, b, d});
+        m.mesh.triangles.push_back({a, d, c});
+      } else {
+        m.mesh.triangles.push_back({a, b, pole});
+      }
+    }
+  return Scene({m});
+}
+
+TEST(BounceGather, FurnaceRisesMonotonicallyTowardsOne) {
+  const double alpha = std::numbers::pi / 3, F = (1 - std::cos(alpha)) / 2;  // F = 1/4
+  const Gathered t = Gather(SphereCavity(alpha, 24, 48, {1, 1, 1}), 12, 256, 1, 8, 4);
+  const std::size_t V = t.samples.size();
+  std::vector<double> total(V);
+  double mean = 0;
+  for (std::size_t v = 0; v < V; ++v) {
+    total[v] = t.Direct(v);
+    mean += total[v] / double(V);
+  }
+  EXPECT_NEAR(mean, F, 0.02);
+  for (int k = 1; k <= 12; ++k) {
+    const double before = mean;
+    mean = 0;
+    for (std::size_t v = 0; v < V; ++v) {
+      total[v] += t.Bounce(k, v);
+      mean += total[v] / double(V);
+      EXPECT_LE(total[v], 1.03) << "vertex " << v << " after " << k << " bounces";
+    }
+    EXPECT_GT(mean, before) << k;
+    EXPECT_NEAR(mean, 1 - std::pow(1 - F, k + 1), 0.03) << k;
+  }
+}
+
+TEST(BounceGather, TermsAreAPureFunctionOfSeedVertexAndBounce) {
+  const SceneGeometry g = OpenBox({0.5f, 0.5f, 0.5f}, 4);
+  const EmbreeScene scene(g);
+  const SceneSurfaces surfaces(g);
+  const auto samples = SpatialSamplesOf(g);
+  const BounceGatherer gatherer(scene, surfaces, {64, 7});
+  std::vector<GatherTerm> a, b, c;
+  gatherer.Terms(samples[5], 5, 1, 1, a);
+  gatherer.Terms(samples[5], 5, 1, 1, b);
+  gatherer.Terms(samples[5], 5, 2, 1, c);
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].vertex, b[i].vertex);
+    EXPECT_EQ(a[i].weight[0], b[i].weight[0]);
+  }
+  bool differs = a.size() != c.size();
+  for (std::size_t i = 0; !differs && i < a.size(); ++i)
+    differs = a[i].vertex != c[i].vertex || a[i].weight[0] != c[i].weight[0];
+  EXPECT_TRUE(differs) << "bounce 2 must draw fresh directions";
+}
+
+// Refining a coarse row keeps its relit value under any light that is constant over the coarse
+// texels, and coarsening a refined row gives the coarse row back.
+TEST(BounceGather, CoarsenAndRefineAreExactOnTheCoarseGrid) {
+  const CubemapLayout fine(8), coarse(2);
+  std::vector<float> c(coarse.texel_count()), f(fine.texel_count(), 0.0f),
+      back(coarse.texel_count());
+  for (std::size_t J = 0; J < c.size(); ++J) c[J] = float(1 + (J * 7) % 5);
+  AddRefinedRow(coarse, fine, c.data(), f.data());
+  CoarsenRow(fine, coarse, f.data(), back.data());
+  for (std::size_t J = 0; J < c.size(); ++J) EXPECT_NEAR(back[J], c[J], 1e-5 * c[J]);
+  // Fine texels of one coarse texel share its value per solid angle.
+  const std::size_t j0 = fine.Index(2, 0, 0), j1 = fine.Index(2, 3, 3);
+  EXPECT_NEAR(f[j0] / fine.TexelSolidAngle(j0), f[j1] / fine.TexelSolidAngle(j1), 1e-6);
+}
+
+}  // namespace
+}  // namespace prt
