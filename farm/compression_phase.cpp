@@ -27,6 +27,7 @@
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
 #include "vocabulary/scene.h"
+#include "worker/composed_transport.h"
 #include "worker/column_order.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_error_estimate.h"
@@ -133,7 +134,7 @@ void Compress(FarmContext& ctx) {
   const RunFolder& folder = ctx.folder;
 
   // Setup on rank 0: the rows' file, the scene's [compression] settings, the spatial domain.
-  std::unique_ptr<TransportFileReader> reader;
+  std::unique_ptr<ComposedTransport> reader;  // T⁰ + the bounces (docs/interreflection.md)
   CompressedTransportHeader header;
   CompressionOptions copt;
   OptionsPod pod{};
@@ -141,16 +142,19 @@ void Compress(FarmContext& ctx) {
   uint64_t setup[3] = {0, 0, 0};  // exit code, rows per file block, header bytes
   if (rank == 0) {
     try {
-      reader = std::make_unique<TransportFileReader>(folder.transport);
+      std::vector<std::string> bounces;
+      for (int k = 1; k <= ctx.params.bounces; ++k) bounces.push_back(folder.BounceFile(k));
+      reader = std::make_unique<ComposedTransport>(folder.transport, bounces, ctx.params.channels);
       // The plan setup keyed the compression stage with (nothing is read again but the rows).
       if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
       CompressionPlan plan = *ctx.compression_plan;
-      if (plan.header.cubemap_n != reader->info().cubemap_n)
-        throw InputError(folder.transport, "cubemap n " + std::to_string(reader->info().cubemap_n) +
+      if (plan.header.cubemap_n != reader->direct_info().cubemap_n)
+        throw InputError(folder.transport, "cubemap n " +
+                                               std::to_string(reader->direct_info().cubemap_n) +
                                                ", but the run's is " +
                                                std::to_string(plan.header.cubemap_n));
-      if (plan.header.sample_count != reader->info().rows)
-        throw InputError(folder.transport, std::to_string(reader->info().rows) + " rows, but " +
+      if (plan.header.sample_count != reader->rows())
+        throw InputError(folder.transport, std::to_string(reader->rows()) + " rows, but " +
                                                folder.geometry + " has " +
                                                std::to_string(plan.header.sample_count) +
                                                " spatial samples");
@@ -164,7 +168,7 @@ void Compress(FarmContext& ctx) {
              copt.terms_per_column,
              copt.keep_fraction,
              copt.dither_seed};
-      setup[1] = reader->info().rows_per_block;
+      setup[1] = reader->direct_info().rows_per_block;
       setup[2] = header_bytes.size();
     } catch (...) {
       std::string message;
@@ -252,8 +256,8 @@ void Compress(FarmContext& ctx) {
                    "MPI_Bcast lights");
         }
       }
-      norms = std::make_unique<RadianceNormAccumulator>(std::move(lights),
-                                                        ctx.geometry.MeshVertexCounts());
+      norms = std::make_unique<RadianceNormAccumulator>(
+          std::move(lights), ctx.geometry.MeshVertexCounts(), ctx.params.channels);
     }
     double row_energy = 0, row_dropped = 0;  // this rank's rows
     double column_error = 0;                 // this rank's columns

@@ -60,6 +60,14 @@ struct SetupParams {
   int32_t run_rows = 1;
   int32_t run_compression = 1;
   int32_t run_estimate = 1;
+  // Interreflection (docs/interreflection.md): bounces after the direct term, the bounce rows'
+  // cubemap n, gather directions per vertex, rows of T per sample (3: bounces with coloured
+  // albedos), and whether the indirect stage runs.
+  int32_t bounces = 0;
+  int32_t indirect_n = 0;
+  int32_t gather_paths = 256;
+  int32_t channels = 1;
+  int32_t run_indirect = 0;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
@@ -119,6 +127,10 @@ struct FarmContext {
   RunEta run_eta;                             // the whole run's ETA on every progress line (rank 0)
   std::optional<TransportFileWriter> writer;  // transport.prtt.partial while sampling
   std::unique_ptr<CheckpointJournal> journal;
+  // The indirect stage's key (its journal, checkpoints/indirect-journal.txt, is keyed by it).
+  uint64_t indirect_key = 0;
+  // Bounce phases: every bounce's figures so far (report.json "interreflection").
+  nlohmann::ordered_json interreflection;
   // The sampling jobs' Monte-Carlo variance sums (transport runs while the rows are sampled).
   std::unique_ptr<VarianceAccumulator> variance;
   // The journal's lines of the method's phase, verified by that phase before it re-uses them
@@ -159,6 +171,8 @@ std::unique_ptr<FarmPhase> MakeVisibilityPhase();
 std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
 std::unique_ptr<FarmPhase> MakeCompressionPhase();
 std::unique_ptr<FarmPhase> MakeEstimatePhase();
+// Bounce k of the interreflection (farm/bounce_phase.cpp), 1 ≤ k ≤ bounces.
+std::unique_ptr<FarmPhase> MakeBouncePhase(int k);
 
 // Vertices of the sparse method's initial dense set that its cross-validation reconstructs
 // (farm/sparse_phase.cpp, CrossValidate; docs/farm.md "Accuracy estimates").

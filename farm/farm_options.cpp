@@ -51,6 +51,10 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_option("--seed", o.seed,
                  "Seed of the occlusion rays' random numbers (default: the scene's), e.g. for an "
                  "independent reference estimate of the same transport");
+  app.add_option("--bounces", o.bounces,
+                 "Interreflections after the direct light, 0 = direct only (default: the "
+                 "scene's [sampling] bounces; docs/interreflection.md)")
+      ->check(CLI::Range(0, 8));
   app.add_option("--job-seconds", o.job_seconds, "Target wall time of one job")
       ->check(CLI::Range(0.001, 86400.0))
       ->capture_default_str();

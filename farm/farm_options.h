@@ -42,6 +42,7 @@ struct FarmOptions {
   std::string job;                     // empty: the scene's [sampling] job (transport|visibility)
   int rays_per_texel = 0;              // 0: the scene's value
   std::optional<uint64_t> seed;        // unset: the scene's [sampling] seed
+  std::optional<int> bounces;          // unset: the scene's [sampling] bounces
   double job_seconds = 4.0;            // target wall time of one job
   uint32_t rows_per_block = 256;       // rows per checksummed block of transport.prtt
   double log_interval_s = 5.0;         // progress line interval on rank 0

@@ -193,6 +193,10 @@ std::string FarmReport::ToJsonText() const {
       }
     }
   }
+  if (!interreflection_json.empty()) {
+    const Json ir = Json::parse(interreflection_json, nullptr, false);
+    if (!ir.is_discarded()) j["interreflection"] = ir;
+  }
   if (!accuracy_json.empty()) {
     const Json accuracy = Json::parse(accuracy_json, nullptr, false);
     if (!accuracy.is_discarded()) j["accuracy"] = accuracy;

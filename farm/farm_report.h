@@ -128,6 +128,10 @@ struct FarmReport {
       0;  // transport.prtt as kept (packed); 0 when this run did not write it
   std::vector<PhaseReport> phases;
   std::vector<StageReport> stages;
+  // report.json "interreflection" (farm/bounce_phase.cpp, docs/interreflection.md): the
+  // settings, per bounce its energy, rays and wall time, and the indirect share of B under each
+  // scene environment; "" when the run has no bounces.
+  std::string interreflection_json;
   std::vector<EtaReport> eta;
   double wall_seconds = 0;
   double sampling_seconds = 0;  // wall time of the sampling phase (for rays/s)

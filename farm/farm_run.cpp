@@ -103,6 +103,16 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
   }
   if (ctx.params.run_rows && !ctx.params.visibility)
     steps.push_back({"pack", "pack", raw_bytes, 1e-9});
+  // A bounce: P closest-hit rays per vertex (~2 M/s per thread) and the gather's multiply-adds
+  // (~3·P·6m² per vertex and channel at ~1 G/s per thread).
+  if (ctx.params.run_indirect) {
+    const double m = ctx.params.indirect_n;
+    const double per_vertex = (ctx.params.gather_paths / 2e6 +
+                               3.0 * ctx.params.gather_paths * 6 * m * m * ctx.params.channels / 1e9) /
+                              threads;
+    for (int k = 1; k <= ctx.params.bounces; ++k)
+      steps.push_back({"bounce-" + std::to_string(k), "bounce", rows, per_vertex});
+  }
   if (ctx.params.run_compression)
     steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
   if (ctx.params.run_estimate)
@@ -151,6 +161,8 @@ std::vector<std::unique_ptr<FarmPhase>> PhasesAfterSetup(const FarmContext& ctx)
     phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
     phases.push_back(MakeFinalizePhase());
   }
+  if (ctx.params.run_indirect)
+    for (int k = 1; k <= ctx.params.bounces; ++k) phases.push_back(MakeBouncePhase(k));
   if (ctx.params.run_compression) phases.push_back(MakeCompressionPhase());
   if (ctx.params.run_estimate) phases.push_back(MakeEstimatePhase());
   return phases;
@@ -161,6 +173,7 @@ const char* StageOfPhase(const std::string& phase) {
   if (phase == "compress") return kStageCompression;
   if (phase == "estimate") return kStageEstimate;
   if (phase == "setup") return kStageAssets;
+  if (phase.rfind("bounce-", 0) == 0) return kStageIndirect;
   return kStageRows;
 }
 

@@ -56,9 +56,15 @@ uint64_t RunManifest::StageKey(const std::string& name) const {
   if (inputs == nullptr) return 0;
   // The compression and the estimate are computed from the rows; the rows and the assets
   // depend on nothing before them.
-  const bool reads_rows = name == kStageCompression || name == kStageEstimate;
-  const std::string text =
-      std::to_string(reads_rows ? StageKey(kStageRows) : 0) + name + inputs->dump();
+  // With interreflection, the compression reads the indirect stage's rows too (whose key
+  // chains the rows').
+  const bool reads_rows =
+      name == kStageCompression || name == kStageEstimate || name == kStageIndirect;
+  const bool reads_indirect = name == kStageCompression && Stage(kStageIndirect) != nullptr;
+  const std::string text = std::to_string(reads_indirect ? StageKey(kStageIndirect)
+                                          : reads_rows   ? StageKey(kStageRows)
+                                                         : 0) +
+                           name + inputs->dump();
   return Checksum64(text.data(), text.size());
 }
 

@@ -8,6 +8,8 @@
 //                variance sums: geometry as traced (positions, normals, triangles, ground; not
 //                names or albedos), samples, n, rays per texel, seed, method and its settings,
 //                rows per block
+//   indirect     indirect/bounce-<k>.prtt (runs with [sampling] bounces > 0 only): the estimator,
+//                bounces, the indirect grid's n, paths per vertex and the albedos
 //   compression  transport.prtc: the compressed-transport header it is written with (scheme,
 //                wavelets, bits, keep fraction, budget, dither seed, the samples' spatial order)
 //   estimate     accuracy.json (the Monte-Carlo error of T and of B under the scene's
@@ -27,6 +29,7 @@
 namespace prt {
 
 inline constexpr const char* kStageRows = "rows";
+inline constexpr const char* kStageIndirect = "indirect";
 inline constexpr const char* kStageCompression = "compression";
 inline constexpr const char* kStageEstimate = "estimate";
 inline constexpr const char* kStageAssets = "assets";

@@ -23,6 +23,7 @@
 #include "formats/transport_file.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "worker/bounce_gather.h"
 #include "vocabulary/scene.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
@@ -178,7 +179,42 @@ class SetupPhase final : public FarmPhase {
       ctx.plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
     }
 
+    // Interreflection (docs/interreflection.md).
+    const int bounces = o.bounces ? *o.bounces : scene.sampling.bounces;
+    if (bounces > 0 && visibility)
+      throw InputError(scene.file, "bounces = " + std::to_string(bounces) +
+                                       " needs job \"transport\" (visibility maps are direct)");
+    const int indirect_n =
+        scene.sampling.indirect_n > 0 ? scene.sampling.indirect_n : std::max(1, n / 4);
+    if (bounces > 0 && indirect_n > n)
+      throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
+                                       " is larger than the cubemap's n " + std::to_string(n));
+    if (bounces > 0 && scene.sampling.estimator == "path")
+      throw InputError(scene.file,
+                       "estimator = \"path\" is not supported by prt-farm yet (the path-traced "
+                       "reference runs in prt-gi-bench)");
+    ctx.params.bounces = bounces;
+    ctx.params.indirect_n = indirect_n;
+    ctx.params.gather_paths = scene.sampling.gather_paths;
+    ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
+    if (bounces > 0) {
+      ctx.interreflection = {{"bounces", bounces},
+                             {"estimator", scene.sampling.estimator},
+                             {"indirect_n", indirect_n},
+                             {"paths", scene.sampling.gather_paths},
+                             {"channels", ctx.params.channels},
+                             {"per_bounce", nlohmann::ordered_json::array()}};
+      spdlog::info("interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
+                   "vertex, {} channel(s)",
+                   bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
+    }
+
     ResolvedSampling resolved;
+    resolved.bounces = bounces;
+    resolved.estimator = scene.sampling.estimator;
+    resolved.indirect_n = indirect_n;
+    resolved.gather_paths = scene.sampling.gather_paths;
+    resolved.channels = ctx.params.channels;
     resolved.job = job;
     resolved.method = visibility ? std::string("brute") : ctx.method;
     resolved.cubemap_n = n;
@@ -245,6 +281,13 @@ class SetupPhase final : public FarmPhase {
       } catch (const InputError&) {
         state.compressed_current = false;  // damaged: written again
       }
+    }
+    if (const nlohmann::ordered_json* ind = manifest.Stage(kStageIndirect)) {
+      const int bounces = ind->at("bounces").get<int>();
+      state.indirect_complete = true;
+      for (int k = 1; k <= bounces; ++k)
+        state.indirect_complete = state.indirect_complete && TransportComplete(f.BounceFile(k));
+      state.indirect_unfinished = !state.indirect_complete && fs::exists(f.indirect, ec);
     }
     if (fs::exists(f.accuracy, ec)) {
       try {
@@ -340,6 +383,15 @@ class SetupPhase final : public FarmPhase {
       fs::remove_all(f.sparse, ec);
     }
     if (fresh || plan.Runs(kStageCompression) || o.no_compress) fs::remove(f.compressed, ec);
+    // The indirect stage from scratch: its bounce files and journal go (a resumed one keeps
+    // them; its journal is keyed by the stage's inputs).
+    ctx.params.run_indirect = plan.Runs(kStageIndirect) ? 1 : 0;
+    ctx.indirect_key = manifest.StageKey(kStageIndirect);
+    if (!plan.Has(kStageIndirect) ||
+        (plan.Has(kStageIndirect) && plan.Get(kStageIndirect).action == StageAction::kRun)) {
+      fs::remove_all(f.indirect, ec);
+      fs::remove(f.indirect_journal, ec);
+    }
     if (fresh || plan.Runs(kStageEstimate)) fs::remove(f.accuracy, ec);
     // From here on the folder is this run's: a failure report may replace an older report.
     ctx.folder_ready = true;

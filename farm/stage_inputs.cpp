@@ -31,6 +31,14 @@ Json SparseJson(const SparseSettings& s) {
           {"seed", s.seed}};
 }
 
+// Every mesh's albedo, in order (what the bounce light and the estimate's B depend on).
+Json AlbedoJson(const SceneGeometry& geometry) {
+  Json albedo = Json::array();
+  for (const SceneMesh& mesh : geometry.meshes)
+    albedo.push_back({mesh.albedo[0], mesh.albedo[1], mesh.albedo[2]});
+  return albedo;
+}
+
 }  // namespace
 
 std::string CompressedHeaderKey(const CompressedTransportHeader& header) {
@@ -90,6 +98,15 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
   }
   m.SetStage(kStageRows, std::move(rows));
 
+  if (!visibility && s.bounces > 0) {
+    m.SetStage(kStageIndirect, {{"estimator", s.estimator},
+                                {"bounces", s.bounces},
+                                {"indirect_n", s.indirect_n},
+                                {"paths", s.gather_paths},
+                                {"channels", s.channels},
+                                {"albedo", AlbedoJson(geometry)}});
+  }
+
   if (!visibility) {
     CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options);
     const CompressedTransportHeader& h = plan.header;
@@ -110,10 +127,7 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
       envs.push_back({{"path", std::filesystem::path(path).filename().string()},
                       {"xxh64", Hex16(EnvironmentFileChecksum(path))}});
     }
-    Json albedo = Json::array();
-    for (const SceneMesh& mesh : geometry.meshes)
-      albedo.push_back({mesh.albedo[0], mesh.albedo[1], mesh.albedo[2]});
-    m.SetStage(kStageEstimate, {{"environments", envs}, {"albedo", albedo}});
+    m.SetStage(kStageEstimate, {{"environments", envs}, {"albedo", AlbedoJson(geometry)}});
     if (compression != nullptr) *compression = std::move(plan);
   }
 

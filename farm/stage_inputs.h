@@ -31,6 +31,12 @@ struct ResolvedSampling {
   int rays_per_texel = 4;
   uint64_t seed = 1;
   uint64_t rows = 0;
+  // Interreflection (docs/interreflection.md); bounces 0: no indirect stage.
+  int bounces = 0;
+  std::string estimator = "gather";
+  int indirect_n = 0;
+  int gather_paths = 256;
+  int channels = 1;
 };
 
 // XXH64 of what the rays see of the geometry: every mesh's positions, normals and triangles,

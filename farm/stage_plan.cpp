@@ -71,7 +71,13 @@ StagePlan PlanStages(const RunManifest* older, const RunManifest& now, const Run
   bool rows_run = !why.empty();
   StageDecision comp{kStageCompression, StageAction::kReuse, ""};
   StageDecision est{kStageEstimate, StageAction::kReuse, ""};
-  std::string comp_why, est_why;
+  std::string comp_why, est_why, ind_why;
+  const bool indirect = !options.visibility && now.Stage(kStageIndirect) != nullptr;
+  if (indirect) {
+    ind_why = ChangedInputs(old, now, kStageIndirect);
+    if (ind_why.empty() && !folder.indirect_complete && !folder.indirect_unfinished)
+      ind_why = "indirect/ missing";
+  }
   if (!options.visibility && options.compress) {
     comp_why = ChangedInputs(old, now, kStageCompression);
     if (comp_why.empty() && !folder.compressed_current) comp_why = "transport.prtc missing";
@@ -87,12 +93,11 @@ StagePlan PlanStages(const RunManifest* older, const RunManifest& now, const Run
     } else if (folder.rows_unfinished) {
       rows.action = StageAction::kResume;
       rows.reason = "unfinished: journaled jobs are re-used";
-    } else if (!comp_why.empty()) {
+    } else if (!comp_why.empty() || !ind_why.empty()) {
       rows_run = true;
-      why =
-          "transport.prtt is not in the run folder (discarded with --discard-raw) and the "
-          "compression must run (" +
-          comp_why + ")";
+      why = "transport.prtt is not in the run folder (discarded with --discard-raw) and the " +
+            std::string(ind_why.empty() ? "compression" : "indirect stage") + " must run (" +
+            (ind_why.empty() ? comp_why : ind_why) + ")";
     } else {
       rows.action = StageAction::kReuse;
       rows.reason = "transport.prtt discarded (--discard-raw); nothing needs it";
@@ -106,6 +111,23 @@ StagePlan PlanStages(const RunManifest* older, const RunManifest& now, const Run
   const bool rows_changed = rows.action != StageAction::kReuse;
   const bool rows_available = rows_changed || folder.rows_complete;
 
+  bool indirect_changed = false;
+  if (indirect) {
+    StageDecision ind{kStageIndirect, StageAction::kReuse, ""};
+    if (rows_changed) {
+      ind.action = StageAction::kRun;
+      ind.reason = std::string("the rows ") + (rows.action == StageAction::kRun ? "ran" : "resumed");
+    } else if (!ind_why.empty()) {
+      ind.action = StageAction::kRun;
+      ind.reason = ind_why;
+    } else if (!folder.indirect_complete) {
+      ind.action = StageAction::kResume;
+      ind.reason = "unfinished: journaled jobs are re-used";
+    }
+    indirect_changed = ind.action != StageAction::kReuse;
+    plan.stages.push_back(ind);
+  }
+
   if (!options.visibility) {
     if (!options.compress) {
       comp.action = StageAction::kSkip;
@@ -114,6 +136,9 @@ StagePlan PlanStages(const RunManifest* older, const RunManifest& now, const Run
       comp.action = StageAction::kRun;
       comp.reason =
           std::string("the rows ") + (rows.action == StageAction::kRun ? "ran" : "resumed");
+    } else if (indirect_changed) {
+      comp.action = StageAction::kRun;
+      comp.reason = "the indirect stage ran";
     } else if (!comp_why.empty()) {
       comp.action = StageAction::kRun;
       comp.reason = comp_why;

@@ -30,6 +30,8 @@ struct RunFolderState {
   bool rows_unfinished = false;     // transport.prtt.partial or journaled jobs
   bool compressed_current = false;  // transport.prtc exists with the header planned now
   bool estimate_current = false;    // accuracy.json exists for the estimate inputs given now
+  bool indirect_complete = false;   // every indirect/bounce-<k>.prtt of the bounces asked for
+  bool indirect_unfinished = false;  // bounce files or journal lines of an unfinished stage
 };
 
 struct StagePlanOptions {
@@ -39,7 +41,8 @@ struct StagePlanOptions {
 };
 
 struct StagePlan {
-  std::vector<StageDecision> stages;  // rows, compression, estimate, assets (as they apply)
+  std::vector<StageDecision> stages;  // rows, indirect, compression, estimate, assets (as they
+                                      // apply)
   const StageDecision& Get(const std::string& name) const;
   bool Has(const std::string& name) const;
   bool Runs(const std::string& name) const;  // kRun or kResume

@@ -25,6 +25,10 @@ inline constexpr const char* kSparseDirName = "sparse";            // the sparse
 inline constexpr const char* kVarianceFileName = "transport.variance";
 inline constexpr const char* kVarianceLogFileName = "variance.log";  // in checkpoints/
 inline constexpr const char* kAccuracyFileName = "accuracy.json";    // the error estimates
+// Interreflection (docs/interreflection.md): indirect/bounce-<k>.prtt, bounce k's rows on the
+// indirect grid, channels × samples rows (channel-major), written in place while the bounce
+// runs (".partial" until complete).
+inline constexpr const char* kIndirectDirName = "indirect";
 
 // The paths of a run folder's files.
 struct RunFolder {
@@ -45,6 +49,12 @@ struct RunFolder {
     variance = (p / kVarianceFileName).string();
     variance_log = (p / kCheckpointsDirName / kVarianceLogFileName).string();
     accuracy = (p / kAccuracyFileName).string();
+    indirect = (p / kIndirectDirName).string();
+    indirect_journal = (p / kCheckpointsDirName / "indirect-journal.txt").string();
+  }
+  // indirect/bounce-<k>.prtt
+  std::string BounceFile(int k) const {
+    return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + ".prtt")).string();
   }
   std::string dir;
   std::string transport;          // transport.prtt (final, complete)
@@ -62,6 +72,8 @@ struct RunFolder {
   std::string variance;           // transport.variance
   std::string variance_log;       // checkpoints/variance.log
   std::string accuracy;           // accuracy.json
+  std::string indirect;           // indirect/
+  std::string indirect_journal;   // checkpoints/indirect-journal.txt (keyed by the stage)
 };
 
 }  // namespace prt

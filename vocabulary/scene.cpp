@@ -374,6 +374,14 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.seed = static_cast<uint64_t>(s.Integer("seed", 1, 0, INT64_MAX));
     p.method = s.Choice("method", p.method, {"brute", "sparse"});
     p.job = s.Choice("job", p.job, {"transport", "visibility"});
+    p.bounces = static_cast<int>(s.Integer("bounces", p.bounces, 0, 8));
+    p.estimator = s.Choice("estimator", p.estimator, {"gather", "path"});
+    const toml::node* in = t ? t->get("indirect_n") : nullptr;
+    const int64_t indirect_n = s.Integer("indirect_n", p.indirect_n, 0, 256);
+    if (indirect_n != 0 && !IsPowerOfTwo(indirect_n))
+      s.Fail(in, "indirect_n", std::to_string(indirect_n) + " is not 0 or a power of two");
+    p.indirect_n = static_cast<int>(indirect_n);
+    p.gather_paths = static_cast<int>(s.Integer("gather_paths", p.gather_paths, 1, 65536));
     s.RejectUnknown();
   }
   {

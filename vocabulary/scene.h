@@ -81,6 +81,15 @@ struct SamplingSettings {
   // What prt-farm computes: the transport matrix, or per-vertex visibility cubemaps for glossy
   // triple-product relighting ([visibility] settings, docs/farm.md "Visibility job").
   std::string job = "transport";  // transport | visibility
+  // Interreflection (docs/interreflection.md): diffuse bounces of light after the direct term,
+  // T = T⁰ + T¹ + … + Tᴷ. 0: direct light only (the transport of prt-farm before bounces).
+  // PRTCmdLine's NumBounces = 1 means direct only; prtfarm's `bounces` counts interreflections.
+  int bounces = 0;
+  // How the bounces are computed: "gather" (bounce gathering from the vertices' rows, one farm
+  // phase per bounce) or "path" (per-element Monte-Carlo path tracing, the reference).
+  std::string estimator = "gather";
+  int indirect_n = 0;       // cubemap n of the bounce rows (power of two ≤ n); 0: n/4, at least 1
+  int gather_paths = 256;   // directions per vertex and bounce (gather), paths per vertex (path)
 };
 
 // Per-vertex binary (or anti-aliased) visibility cubemaps, Inger et al. 2013 §4.2

@@ -22,8 +22,8 @@
 namespace prt {
 
 struct SurfaceHit {
-  SpatialSample sample;               // the hit point, its shading and geometric normals
-  uint32_t mesh = 0;                  // index into SceneGeometry::meshes
+  SpatialSample sample;                // the hit point, its shading and geometric normals
+  uint32_t mesh = 0;                   // index into SceneGeometry::meshes
   std::array<uint64_t, 3> vertices{};  // global sample indices of the triangle's vertices
   std::array<double, 3> weights{};     // barycentric weights (1 − u − v, u, v), sum 1
   bool front = false;                  // the ray arrived on the reflecting side

@@ -44,8 +44,8 @@ std::array<double, 3> MeshRadianceVariance(const TransportVariance& variance, st
 }
 
 RadianceNormAccumulator::RadianceNormAccumulator(std::vector<CubemapRgb> lights,
-                                                 std::vector<uint64_t> mesh_rows)
-    : lights_(std::move(lights)) {
+                                                 std::vector<uint64_t> mesh_rows, int channels)
+    : lights_(std::move(lights)), channels_(channels) {
   mesh_first_.push_back(0);
   for (uint64_t r : mesh_rows) mesh_first_.push_back(mesh_first_.back() + r);
   for (const CubemapRgb& l : lights_) grey_.push_back(l.r == l.g && l.r == l.b);
@@ -63,15 +63,19 @@ void RadianceNormAccumulator::AddRows(uint64_t first, uint64_t count, const floa
       tbb::blocked_range<uint64_t>(0, count, 16), Sums(size, 0.0),
       [&](const tbb::blocked_range<uint64_t>& r, Sums acc) {
         for (uint64_t i = r.begin(); i != r.end(); ++i) {
-          const uint64_t row = first + i;
+          const uint64_t V = mesh_first_.back();
+          const uint64_t row = channels_ == 1 ? first + i : (first + i) % V;
+          const int only = channels_ == 1 ? -1 : static_cast<int>((first + i) / V);
           std::size_t m = 0;
           while (m + 1 < mesh_first_.size() && row >= mesh_first_[m + 1]) ++m;
           if (m >= meshes) throw std::out_of_range("RadianceNormAccumulator: row beyond meshes");
           for (std::size_t l = 0; l < lights_.size(); ++l) {
             double b = 0;
             for (int c = 0; c < 3; ++c) {
+              if (only >= 0 && c != only) continue;
               // A grey light (the uniform sky) needs one product for its three channels.
-              if (c == 0 || !grey_[l]) b = Dot(rows + i * T, lights_[l].Channel(c).data(), T);
+              if (c == 0 || only >= 0 || !grey_[l])
+                b = Dot(rows + i * T, lights_[l].Channel(c).data(), T);
               acc[(l * meshes + m) * 3 + static_cast<std::size_t>(c)] += b * b;
             }
           }

@@ -27,7 +27,10 @@ std::array<double, 3> MeshRadianceVariance(const TransportVariance& variance, st
 // order and any chunks (the sums are over rows; their order changes only the last bits).
 class RadianceNormAccumulator {
  public:
-  RadianceNormAccumulator(std::vector<CubemapRgb> lights, std::vector<uint64_t> mesh_rows);
+  // channels 3: T has one row per colour channel (docs/interreflection.md), row c·V + v is
+  // channel c of sample v and is relit by the light's channel c only.
+  RadianceNormAccumulator(std::vector<CubemapRgb> lights, std::vector<uint64_t> mesh_rows,
+                          int channels = 1);
   // `count` rows of 6n² floats starting at global row `first` (parallel over rows, TBB).
   void AddRows(uint64_t first, uint64_t count, const float* rows);
   // [light][mesh][channel]
@@ -41,6 +44,7 @@ class RadianceNormAccumulator {
   std::vector<CubemapRgb> lights_;
   std::vector<bool> grey_;            // the light's three channels are equal
   std::vector<uint64_t> mesh_first_;  // first row of each mesh, and the total at the end
+  int channels_ = 1;
   std::vector<std::vector<std::array<double, 3>>> norms_;
 };
 

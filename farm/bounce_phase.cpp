@@ -1,0 +1,419 @@
+// prt-farm's interreflection: bounce k of the gather estimator (worker/bounce_gather.h;
+// docs/interreflection.md), one phase per bounce, k = 1 … K:
+//   Tᵏ(x) = (1/P) Σ_p ρ(y_p) · Tᵏ⁻¹(y_p)   on the indirect grid (m = indirect_n),
+// with T⁰ the direct rows coarsened to the grid. Every rank that gathers needs the previous
+// bounce's rows of the whole scene: rank 0 reads them (transport.prtt for k = 1, else
+// indirect/bounce-<k−1>.prtt) and broadcasts them, prev_channels × V × 6m² floats, which must
+// fit in --memory-budget. Jobs are ranges of vertices on the job loop; a worker returns
+// channels rows per vertex with their XXH64; rank 0 writes them in place into
+// indirect/bounce-<k>.prtt.partial (channel-major rows c·V + v) and journals them in
+// checkpoints/indirect-journal.txt, keyed by the indirect stage's inputs, so that a killed run
+// resumes bounce by bounce and an edit that changes the bounces starts them afresh.
+#include <mpi.h>
+#include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "farm/farm_context.h"
+#include "farm/job_loop.h"
+#include "farm/mpi_support.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
+#include "worker/bounce_gather.h"
+
+namespace prt {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct BounceResultHeader {
+  uint64_t rows_checksum = 0;
+  uint64_t rays_traced = 0;
+  uint64_t rays_escaped = 0;
+  uint64_t back_face_hits = 0;
+};
+
+// Broadcasts rank 0's floats to every rank, in pieces an int count can address.
+void BroadcastFloats(MPI_Comm comm, std::vector<float>& v) {
+  uint64_t size = v.size();
+  CheckMpi(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast bounce rows");
+  v.resize(static_cast<std::size_t>(size));
+  constexpr uint64_t kPiece = uint64_t{1} << 28;
+  for (uint64_t at = 0; at < size; at += kPiece) {
+    const int count = static_cast<int>(std::min(kPiece, size - at));
+    CheckMpi(MPI_Bcast(v.data() + at, count, MPI_FLOAT, 0, comm), "MPI_Bcast bounce rows");
+  }
+}
+
+// The light averaged over each texel of the coarse grid (area-weighted), so that relighting a
+// coarse row with it equals relighting its refined row with the fine light.
+std::vector<float> CoarseLight(const std::vector<float>& fine_light, const CubemapLayout& fine,
+                               const CubemapLayout& coarse) {
+  std::vector<float> weighted(fine.texel_count()), out(coarse.texel_count());
+  for (std::size_t j = 0; j < weighted.size(); ++j)
+    weighted[j] = static_cast<float>(fine_light[j] * fine.TexelSolidAngle(j));
+  CoarsenRow(fine, coarse, weighted.data(), out.data());
+  for (std::size_t J = 0; J < out.size(); ++J)
+    out[J] = static_cast<float>(out[J] / coarse.TexelSolidAngle(J));
+  return out;
+}
+
+double Dot(const float* a, const float* b, std::size_t n) {
+  double s = 0;
+  for (std::size_t i = 0; i < n; ++i) s += double(a[i]) * b[i];
+  return s;
+}
+
+class BouncePhase final : public FarmPhase {
+ public:
+  explicit BouncePhase(int k) : k_(k), name_("bounce-" + std::to_string(k)) {}
+  const char* name() const override { return name_.c_str(); }
+
+  void Run(FarmContext& ctx) override {
+    const double start = FarmNow();
+    const uint64_t V = ctx.params.rows;
+    const int C = ctx.params.channels;
+    const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
+    const std::size_t cols = coarse.texel_count();
+    const int prev_channels = k_ == 1 ? 1 : C;
+
+    // 1. The previous bounce's rows of the whole scene on every rank.
+    std::vector<float> previous;
+    uint64_t status = kExitOk;
+    if (ctx.rank == 0) {
+      try {
+        const uint64_t bytes = uint64_t(prev_channels) * V * cols * sizeof(float);
+        if (bytes > ctx.options.memory_budget_bytes)
+          throw UsageError("bounce " + std::to_string(k_) + " needs the previous bounce's rows (" +
+                           std::to_string(bytes >> 20) + " MiB) on every rank, more than " +
+                           "--memory-budget (" +
+                           std::to_string(ctx.options.memory_budget_bytes >> 20) +
+                           " MiB): raise it or lower [sampling] indirect_n");
+        ctx.run_eta.StepStarted(name_);
+        previous = LoadPrevious(ctx, fine, coarse, prev_channels);
+      } catch (...) {
+        std::string message;
+        status = static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, name_));
+        spdlog::error("{}: {}", name_, message);
+        ctx.report.error = message;
+      }
+    }
+    CheckMpi(MPI_Bcast(&status, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast bounce status");
+    if (status != kExitOk) throw CollectiveStop{static_cast<int>(status)};
+    BroadcastFloats(ctx.comm, previous);
+
+    // 2. The gatherer on every rank that computes.
+    std::unique_ptr<SceneSurfaces> surfaces;
+    std::unique_ptr<BounceGatherer> gatherer;
+    if (ctx.computes_here()) {
+      surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
+      BounceGatherOptions go;
+      go.paths = ctx.params.gather_paths;
+      go.seed = ctx.params.seed;
+      gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, go);
+    }
+    RunJobPhase(
+        ctx,
+        [&](const RowRange& range, std::string_view, std::string& out) {
+          Compute(ctx, *gatherer, previous, prev_channels, cols, range, out);
+        },
+        [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
+  }
+
+ private:
+  // Rank 0: T⁰ coarsened to the indirect grid (k = 1) or bounce k − 1's rows.
+  std::vector<float> LoadPrevious(FarmContext& ctx, const CubemapLayout& fine,
+                                  const CubemapLayout& coarse, int prev_channels) const {
+    const std::size_t cols = coarse.texel_count();
+    const uint64_t V = ctx.params.rows;
+    std::vector<float> previous(static_cast<std::size_t>(prev_channels * V * cols));
+    if (k_ == 1) {
+      const TransportFileReader reader(ctx.folder.transport);
+      if (reader.info().rows != V || reader.info().cubemap_n != uint32_t(fine.n()))
+        throw InputError(ctx.folder.transport, "does not hold the run's direct rows");
+      std::vector<float> block;
+      for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
+        block.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * fine.texel_count()));
+        reader.ReadBlock(b, block);
+        const uint64_t first = reader.info().FirstRowOfBlock(b);
+        tbb::parallel_for(uint64_t{0}, reader.info().RowsInBlock(b), [&](uint64_t r) {
+          CoarsenRow(fine, coarse, block.data() + r * fine.texel_count(),
+                     previous.data() + (first + r) * cols);
+        });
+      }
+    } else {
+      const std::string path = ctx.folder.BounceFile(k_ - 1);
+      const TransportFileReader reader(path);
+      if (reader.info().rows != prev_channels * V || reader.info().cubemap_n != uint32_t(coarse.n()))
+        throw InputError(path, "does not hold bounce " + std::to_string(k_ - 1) + "'s rows");
+      reader.ReadRows(0, reader.info().rows, previous.data());
+    }
+    return previous;
+  }
+
+  // Vertices `range` into the payload: the header, then channels rows per vertex
+  // (vertex-major).
+  void Compute(const FarmContext& ctx, const BounceGatherer& gatherer,
+               const std::vector<float>& previous, int prev_channels, std::size_t cols,
+               const RowRange& range, std::string& out) const {
+    const int C = ctx.params.channels;
+    const uint64_t V = ctx.params.rows;
+    const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
+    const std::size_t at = out.size();
+    const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
+    out.resize(at + sizeof(BounceResultHeader) + floats * sizeof(float));
+    float* rows = reinterpret_cast<float*>(out.data() + at + sizeof(BounceResultHeader));
+    tbb::enumerable_thread_specific<GatherStats> stats;
+    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 8),
+                      [&](const tbb::blocked_range<uint64_t>& r) {
+                        std::vector<GatherTerm> terms;
+                        for (uint64_t i = r.begin(); i != r.end(); ++i) {
+                          const uint64_t v = range.first + i;
+                          stats.local() += gatherer.Terms(ctx.samples[v], v, k_, C, terms);
+                          ApplyGather(terms, previous.data(), V, prev_channels, C, cols,
+                                      rows + i * per_vertex);
+                        }
+                      });
+    for (std::size_t i = 0; i < floats; ++i)
+      if (!std::isfinite(rows[i]))
+        throw NumericalError(name_ + ": a non-finite value for sample " +
+                             std::to_string(range.first + i / per_vertex));
+    GatherStats s;
+    for (const GatherStats& l : stats) s += l;
+    BounceResultHeader h;
+    h.rows_checksum = Checksum64(rows, floats * sizeof(float));
+    h.rays_traced = s.rays_traced;
+    h.rays_escaped = s.rays_escaped;
+    h.back_face_hits = s.back_face_hits;
+    std::memcpy(out.data() + at, &h, sizeof h);
+  }
+
+  // Rows [first, first + count) of every channel from the file, vertex-major (as a job returns
+  // them).
+  static void ReadVertexMajor(const TransportFileWriter& w, uint64_t V, int C, std::size_t cols,
+                              const RowRange& range, std::vector<float>& out) {
+    out.resize(static_cast<std::size_t>(range.count * C * cols));
+    std::vector<float> channel(static_cast<std::size_t>(range.count * cols));
+    for (int c = 0; c < C; ++c) {
+      w.ReadRows(c * V + range.first, range.count, channel.data());
+      for (uint64_t i = 0; i < range.count; ++i)
+        std::copy_n(channel.data() + i * cols, cols, out.data() + (i * C + c) * cols);
+    }
+  }
+
+  void Coordinate(FarmContext& ctx, JobLoop& loop, std::size_t cols, double start) {
+    const uint64_t V = ctx.params.rows;
+    const int C = ctx.params.channels;
+    const RunFolder& f = ctx.folder;
+    const std::string final_path = f.BounceFile(k_);
+    const std::string partial = final_path + ".partial";
+    std::error_code ec;
+    fs::create_directories(f.indirect, ec);
+    const TransportFileInfo info{C * V, static_cast<uint32_t>(ctx.params.indirect_n),
+                                 ctx.options.rows_per_block,
+                                 static_cast<uint32_t>(ctx.params.gather_paths), ctx.params.seed};
+    nlohmann::ordered_json bounce = {{"bounce", k_}};
+    JobBatch batch;
+    uint64_t reused_jobs = 0;
+    std::optional<TransportFileWriter> writer;
+    // The indirect stage's journal: this stage's lines, if its key is the one of the inputs
+    // given now (the setup removed the folder and the journal when they changed).
+    const std::string journal_path = f.indirect_journal;
+    std::vector<JournalEntry> kept;
+    {
+      const JournalContents journal = ReadJournal(journal_path);
+      if (journal.has_header && journal.run_key == ctx.indirect_key) kept = journal.entries;
+    }
+    bool complete = false;
+    if (fs::exists(final_path, ec)) {
+      try {
+        const TransportFileReader r(final_path);
+        complete = r.info().rows == info.rows && r.info().cubemap_n == info.cubemap_n;
+      } catch (const InputError&) {
+      }
+    }
+    if (complete) {
+      batch.done.push_back({0, V});
+      spdlog::info("[{}] re-used: {} is complete", name_, final_path);
+    } else {
+      if (fs::exists(partial, ec)) {
+        try {
+          writer.emplace(TransportFileWriter::Reopen(partial, info));
+        } catch (const InputError& e) {
+          spdlog::warn("{}; its jobs are redone", e.what());
+        }
+      }
+      if (!writer) writer.emplace(TransportFileWriter::Create(partial, info));
+      std::vector<float> rows;
+      for (const JournalEntry& e : kept) {
+        if (e.phase != name_ || e.rows.end() > V || e.rows.count * C * cols * 4 > kMaxJobBytes)
+          continue;
+        const bool overlaps = std::any_of(batch.done.begin(), batch.done.end(), [&](const RowRange& d) {
+          return e.rows.first < d.end() && d.first < e.rows.end();
+        });
+        if (overlaps) continue;
+        ReadVertexMajor(*writer, V, C, cols, e.rows, rows);
+        if (Checksum64(rows.data(), rows.size() * sizeof(float)) != e.rows_checksum) {
+          ++ctx.report.checkpoints_rejected;
+          continue;
+        }
+        batch.done.push_back(e.rows);
+        ++reused_jobs;
+      }
+      if (reused_jobs > 0) spdlog::info("[{}] {} job(s) re-used from checkpoints", name_, reused_jobs);
+    }
+    ctx.report.jobs_reused += reused_jobs;
+    // The journal, rewritten with the lines still valid, takes this phase's lines.
+    std::unique_ptr<CheckpointJournal> journal =
+        std::make_unique<CheckpointJournal>(journal_path, ctx.indirect_key, kept);
+    std::swap(journal, ctx.journal);
+
+    uint64_t rays = 0, escaped = 0, back = 0;
+    batch.name = name_;
+    batch.items = V;
+    batch.unit = "samples";
+    batch.max_items = std::max<uint64_t>(1, kMaxJobBytes / (C * cols * sizeof(float)));
+    const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
+    batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
+      BounceResultHeader h;
+      const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
+      if (payload.size() != sizeof h + floats * sizeof(float))
+        throw RankFailure("rank " + std::to_string(rank) + " returned " +
+                          std::to_string(payload.size()) + " bytes for " +
+                          std::to_string(range.count) + " samples of " + name_);
+      std::memcpy(&h, payload.data(), sizeof h);
+      const float* rows = reinterpret_cast<const float*>(payload.data() + sizeof h);
+      if (Checksum64(rows, floats * sizeof(float)) != h.rows_checksum)
+        throw RankFailure("rows of " + name_ + " from rank " + std::to_string(rank) +
+                          " arrived damaged (checksum mismatch)");
+      std::vector<float> channel(static_cast<std::size_t>(range.count) * cols);
+      for (int c = 0; c < C; ++c) {
+        for (uint64_t i = 0; i < range.count; ++i)
+          std::copy_n(rows + (i * C + c) * cols, cols, channel.data() + i * cols);
+        writer->WriteRows(c * V + range.first, range.count, channel.data());
+      }
+      JournalEntry e;
+      e.phase = name_;
+      e.rows = range;
+      e.rows_checksum = h.rows_checksum;
+      e.rays_traced = h.rays_traced;
+      e.texels_traced = h.rays_escaped;
+      e.texels_below_horizon = h.back_face_hits;
+      return e;
+    };
+    batch.sync = [&] { writer->Sync(); };
+    batch.committed = [&](const JournalEntry& e) {
+      rays += e.rays_traced;
+      escaped += e.texels_traced;
+      back += e.texels_below_horizon;
+      ctx.report.rays_traced += e.rays_traced;
+      ctx.report.rays_traced_all += e.rays_traced;
+    };
+    try {
+      loop.Run(batch);
+    } catch (...) {
+      std::swap(journal, ctx.journal);
+      throw;
+    }
+    std::swap(journal, ctx.journal);
+    if (writer) {
+      writer->Finalize();
+      writer.reset();
+      fs::rename(partial, final_path);
+      SyncDirectory(f.indirect);
+    }
+
+    // This bounce's figures: energy Σ T per channel, rays, and (after the last bounce) the
+    // indirect share of B under each scene environment.
+    const TransportFileReader reader(final_path);
+    std::vector<float> all(static_cast<std::size_t>(info.rows * cols));
+    reader.ReadRows(0, info.rows, all.data());
+    nlohmann::ordered_json energy = nlohmann::ordered_json::array();
+    for (int c = 0; c < C; ++c) {
+      double s = 0;
+      for (std::size_t i = c * V * cols; i < (c + 1) * V * cols; ++i) s += all[i];
+      energy.push_back(s);
+    }
+    bounce["energy"] = energy;
+    bounce["rays_traced"] = rays;
+    bounce["rays_escaped"] = escaped;
+    bounce["back_face_hits"] = back;
+    bounce["jobs_reused"] = reused_jobs;
+    bounce["wall_seconds"] = FarmNow() - start;
+    ctx.interreflection["per_bounce"].push_back(bounce);
+    spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
+                 energy.dump(), rays, FarmNow() - start);
+    if (k_ == ctx.params.bounces) IndirectShare(ctx);
+    ctx.report.interreflection_json = ctx.interreflection.dump();
+  }
+
+  // Rank 0, after the last bounce: Σ_v ρ·(indirect · L) / Σ_v ρ·(T · L) under each scene
+  // environment and a uniform sky, on the indirect grid.
+  static void IndirectShare(FarmContext& ctx) {
+    LoadEstimateLights(ctx);
+    const uint64_t V = ctx.params.rows;
+    const int C = ctx.params.channels;
+    const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
+    const std::size_t cols = coarse.texel_count();
+    // T⁰ coarsened, and Σ_k Tᵏ.
+    std::vector<float> direct(static_cast<std::size_t>(V * cols));
+    {
+      const TransportFileReader reader(ctx.folder.transport);
+      std::vector<float> block;
+      for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
+        block.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * fine.texel_count()));
+        reader.ReadBlock(b, block);
+        const uint64_t first = reader.info().FirstRowOfBlock(b);
+        for (uint64_t r = 0; r < reader.info().RowsInBlock(b); ++r)
+          CoarsenRow(fine, coarse, block.data() + r * fine.texel_count(),
+                     direct.data() + (first + r) * cols);
+      }
+    }
+    std::vector<float> indirect(static_cast<std::size_t>(C * V * cols), 0.0f), rows;
+    for (int k = 1; k <= ctx.params.bounces; ++k) {
+      const TransportFileReader reader(ctx.folder.BounceFile(k));
+      rows.resize(indirect.size());
+      reader.ReadRows(0, reader.info().rows, rows.data());
+      for (std::size_t i = 0; i < rows.size(); ++i) indirect[i] += rows[i];
+    }
+    nlohmann::ordered_json share = nlohmann::ordered_json::array();
+    for (std::size_t l = 0; l < ctx.estimate.lights.size(); ++l) {
+      double d = 0, ind = 0;
+      for (int c = 0; c < 3; ++c) {
+        const std::vector<float> L = CoarseLight(ctx.estimate.lights[l].Channel(c), fine, coarse);
+        const int tc = C == 1 ? 0 : c;
+        for (uint64_t v = 0; v < V; ++v) {
+          const double rho = ctx.geometry.meshes[ctx.geometry.MeshOfVertex(v)].albedo[c];
+          d += rho * Dot(direct.data() + v * cols, L.data(), cols);
+          ind += rho * Dot(indirect.data() + (tc * V + v) * cols, L.data(), cols);
+        }
+      }
+      share.push_back({{"light", ctx.estimate.names[l]},
+                       {"indirect_share", d + ind > 0 ? ind / (d + ind) : 0.0}});
+      spdlog::info("interreflection: {:.1f}% of B is bounce light under {}",
+                   d + ind > 0 ? 100 * ind / (d + ind) : 0.0, ctx.estimate.names[l]);
+    }
+    ctx.interreflection["indirect_share"] = share;
+  }
+
+  int k_;
+  std::string name_;
+};
+
+}  // namespace
+
+std::unique_ptr<FarmPhase> MakeBouncePhase(int k) {
+  return std::make_unique<BouncePhase>(k);
+}
+
+}  // namespace prt
