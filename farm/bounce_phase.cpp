@@ -55,19 +55,6 @@ void BroadcastFloats(MPI_Comm comm, std::vector<float>& v) {
   }
 }
 
-// The light averaged over each texel of the coarse grid (area-weighted), so that relighting a
-// coarse row with it equals relighting its refined row with the fine light.
-std::vector<float> CoarseLight(const std::vector<float>& fine_light, const CubemapLayout& fine,
-                               const CubemapLayout& coarse) {
-  std::vector<float> weighted(fine.texel_count()), out(coarse.texel_count());
-  for (std::size_t j = 0; j < weighted.size(); ++j)
-    weighted[j] = static_cast<float>(fine_light[j] * fine.TexelSolidAngle(j));
-  CoarsenRow(fine, coarse, weighted.data(), out.data());
-  for (std::size_t J = 0; J < out.size(); ++J)
-    out[J] = static_cast<float>(out[J] / coarse.TexelSolidAngle(J));
-  return out;
-}
-
 double Dot(const float* a, const float* b, std::size_t n) {
   double s = 0;
   for (std::size_t i = 0; i < n; ++i) s += double(a[i]) * b[i];
@@ -154,7 +141,8 @@ class BouncePhase final : public FarmPhase {
     } else {
       const std::string path = ctx.folder.BounceFile(k_ - 1);
       const TransportFileReader reader(path);
-      if (reader.info().rows != prev_channels * V || reader.info().cubemap_n != uint32_t(coarse.n()))
+      if (reader.info().rows != prev_channels * V ||
+          reader.info().cubemap_n != uint32_t(coarse.n()))
         throw InputError(path, "does not hold bounce " + std::to_string(k_ - 1) + "'s rows");
       reader.ReadRows(0, reader.info().rows, previous.data());
     }
@@ -258,9 +246,9 @@ class BouncePhase final : public FarmPhase {
       for (const JournalEntry& e : kept) {
         if (e.phase != name_ || e.rows.end() > V || e.rows.count * C * cols * 4 > kMaxJobBytes)
           continue;
-        const bool overlaps = std::any_of(batch.done.begin(), batch.done.end(), [&](const RowRange& d) {
-          return e.rows.first < d.end() && d.first < e.rows.end();
-        });
+        const bool overlaps = std::any_of(
+            batch.done.begin(), batch.done.end(),
+            [&](const RowRange& d) { return e.rows.first < d.end() && d.first < e.rows.end(); });
         if (overlaps) continue;
         ReadVertexMajor(*writer, V, C, cols, e.rows, rows);
         if (Checksum64(rows.data(), rows.size() * sizeof(float)) != e.rows_checksum) {
@@ -270,7 +258,8 @@ class BouncePhase final : public FarmPhase {
         batch.done.push_back(e.rows);
         ++reused_jobs;
       }
-      if (reused_jobs > 0) spdlog::info("[{}] {} job(s) re-used from checkpoints", name_, reused_jobs);
+      if (reused_jobs > 0)
+        spdlog::info("[{}] {} job(s) re-used from checkpoints", name_, reused_jobs);
     }
     ctx.report.jobs_reused += reused_jobs;
     // The journal, rewritten with the lines still valid, takes this phase's lines.
@@ -316,8 +305,6 @@ class BouncePhase final : public FarmPhase {
       rays += e.rays_traced;
       escaped += e.texels_traced;
       back += e.texels_below_horizon;
-      ctx.report.rays_traced += e.rays_traced;
-      ctx.report.rays_traced_all += e.rays_traced;
     };
     try {
       loop.Run(batch);
@@ -390,7 +377,7 @@ class BouncePhase final : public FarmPhase {
     for (std::size_t l = 0; l < ctx.estimate.lights.size(); ++l) {
       double d = 0, ind = 0;
       for (int c = 0; c < 3; ++c) {
-        const std::vector<float> L = CoarseLight(ctx.estimate.lights[l].Channel(c), fine, coarse);
+        const std::vector<float> L = CoarsenLight(fine, coarse, ctx.estimate.lights[l].Channel(c));
         const int tc = C == 1 ? 0 : c;
         for (uint64_t v = 0; v < V; ++v) {
           const double rho = ctx.geometry.meshes[ctx.geometry.MeshOfVertex(v)].albedo[c];

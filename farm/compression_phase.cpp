@@ -27,8 +27,8 @@
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
 #include "vocabulary/scene.h"
-#include "worker/composed_transport.h"
 #include "worker/column_order.h"
+#include "worker/composed_transport.h"
 #include "worker/transport_compressor.h"
 #include "worker/transport_error_estimate.h"
 
@@ -149,10 +149,9 @@ void Compress(FarmContext& ctx) {
       if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
       CompressionPlan plan = *ctx.compression_plan;
       if (plan.header.cubemap_n != reader->direct_info().cubemap_n)
-        throw InputError(folder.transport, "cubemap n " +
-                                               std::to_string(reader->direct_info().cubemap_n) +
-                                               ", but the run's is " +
-                                               std::to_string(plan.header.cubemap_n));
+        throw InputError(folder.transport,
+                         "cubemap n " + std::to_string(reader->direct_info().cubemap_n) +
+                             ", but the run's is " + std::to_string(plan.header.cubemap_n));
       if (plan.header.sample_count != reader->rows())
         throw InputError(folder.transport, std::to_string(reader->rows()) + " rows, but " +
                                                folder.geometry + " has " +

@@ -107,9 +107,10 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
   // (~3·P·6m² per vertex and channel at ~1 G/s per thread).
   if (ctx.params.run_indirect) {
     const double m = ctx.params.indirect_n;
-    const double per_vertex = (ctx.params.gather_paths / 2e6 +
-                               3.0 * ctx.params.gather_paths * 6 * m * m * ctx.params.channels / 1e9) /
-                              threads;
+    const double per_vertex =
+        (ctx.params.gather_paths / 2e6 +
+         3.0 * ctx.params.gather_paths * 6 * m * m * ctx.params.channels / 1e9) /
+        threads;
     for (int k = 1; k <= ctx.params.bounces; ++k)
       steps.push_back({"bounce-" + std::to_string(k), "bounce", rows, per_vertex});
   }
@@ -215,6 +216,9 @@ void ReportStages(FarmContext& ctx) {
     if (ctx.stage_plan.Has(kStageCompression) &&
         ctx.stage_plan.Get(kStageCompression).action == StageAction::kReuse)
       carry("compression");
+    if (ctx.stage_plan.Has(kStageIndirect) &&
+        ctx.stage_plan.Get(kStageIndirect).action == StageAction::kReuse)
+      carry("interreflection");
     rep.carried_json = carried.dump();
   }
   std::error_code ec;
@@ -258,6 +262,20 @@ std::string RunSummary(const FarmContext& ctx) {
                     Megabytes(f.compressed).c_str(),
                     100 * rep.compression.relative_frobenius_error);
       what = st.status == "reused" ? "transport.prtc " + Megabytes(f.compressed) : buf;
+    } else if (st.name == kStageIndirect) {
+      const nlohmann::ordered_json ir = nlohmann::ordered_json::parse(
+          rep.interreflection_json.empty() ? "{}" : rep.interreflection_json, nullptr, false);
+      what = "indirect/ " + std::to_string(ctx.params.bounces) + " bounce(s)";
+      if (ir.is_object() && ir.contains("indirect_share")) {
+        what += ", bounce light";
+        for (const auto& s : ir["indirect_share"]) {
+          char buf[96];
+          std::snprintf(buf, sizeof buf, " %.1f%% %s", 100 * s.value("indirect_share", 0.0),
+                        s.value("light", std::string()).c_str());
+          what += buf;
+        }
+        what += " of B";
+      }
     } else if (st.name == kStageEstimate) {
       what = "accuracy.json: " +
              AccuracyLine(nlohmann::ordered_json::parse(

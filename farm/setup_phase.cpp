@@ -23,8 +23,8 @@
 #include "formats/transport_file.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
-#include "worker/bounce_gather.h"
 #include "vocabulary/scene.h"
+#include "worker/bounce_gather.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
 #define PRT_DEFAULT_DATA_DIR ""
@@ -204,9 +204,10 @@ class SetupPhase final : public FarmPhase {
                              {"paths", scene.sampling.gather_paths},
                              {"channels", ctx.params.channels},
                              {"per_bounce", nlohmann::ordered_json::array()}};
-      spdlog::info("interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
-                   "vertex, {} channel(s)",
-                   bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
+      spdlog::info(
+          "interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
+          "vertex, {} channel(s)",
+          bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
     }
 
     ResolvedSampling resolved;

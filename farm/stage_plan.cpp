@@ -116,7 +116,8 @@ StagePlan PlanStages(const RunManifest* older, const RunManifest& now, const Run
     StageDecision ind{kStageIndirect, StageAction::kReuse, ""};
     if (rows_changed) {
       ind.action = StageAction::kRun;
-      ind.reason = std::string("the rows ") + (rows.action == StageAction::kRun ? "ran" : "resumed");
+      ind.reason =
+          std::string("the rows ") + (rows.action == StageAction::kRun ? "ran" : "resumed");
     } else if (!ind_why.empty()) {
       ind.action = StageAction::kRun;
       ind.reason = ind_why;

@@ -88,8 +88,8 @@ struct SamplingSettings {
   // How the bounces are computed: "gather" (bounce gathering from the vertices' rows, one farm
   // phase per bounce) or "path" (per-element Monte-Carlo path tracing, the reference).
   std::string estimator = "gather";
-  int indirect_n = 0;       // cubemap n of the bounce rows (power of two ≤ n); 0: n/4, at least 1
-  int gather_paths = 256;   // directions per vertex and bounce (gather), paths per vertex (path)
+  int indirect_n = 0;      // cubemap n of the bounce rows (power of two ≤ n); 0: n/4, at least 1
+  int gather_paths = 256;  // directions per vertex and bounce (gather), paths per vertex (path)
 };
 
 // Per-vertex binary (or anti-aliased) visibility cubemaps, Inger et al. 2013 §4.2

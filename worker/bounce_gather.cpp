@@ -53,8 +53,13 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   const Vec3 n = x.normal / ln;
   Vec3 t, b;
   OrthonormalFrame(n, t, b);
+  // Origins on both sides of the surface: a cosine direction about the shading normal may dip
+  // below the geometric surface; it leaves from the side it goes to (as pbrt's SpawnRay), so it
+  // reaches the surface's own back or escapes instead of hitting its own front.
+  float above[3], below[3];
+  scene_.RobustOrigin(x.position, x.geometric_normal, above);
+  scene_.RobustOrigin(x.position, -x.geometric_normal, below);
   OcclusionRay ray{};
-  scene_.RobustOrigin(x.position, x.geometric_normal, ray.origin);
   ray.tnear = 0;
   ray.tfar = std::numeric_limits<float>::infinity();
   const uint64_t key = SplitMix64(SplitMix64(options_.seed ^ 0x5052544245434E31ull) ^ index) ^
@@ -71,6 +76,8 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     ray.direction[0] = static_cast<float>(d.x);
     ray.direction[1] = static_cast<float>(d.y);
     ray.direction[2] = static_cast<float>(d.z);
+    const float* origin = Dot(d, x.geometric_normal) >= 0 ? above : below;
+    std::copy_n(origin, 3, ray.origin);
     ++st.rays_traced;
     RayHit hit;
     if (!scene_.Intersect(ray, hit)) {
@@ -138,6 +145,17 @@ void AddRefinedRow(const CubemapLayout& coarse, const CubemapLayout& fine, const
         const std::size_t J = coarse.Index(face, x / f, y / f), j = fine.Index(face, x, y);
         out[j] += static_cast<float>(in[J] * (fine.TexelSolidAngle(j) / coarse.TexelSolidAngle(J)));
       }
+}
+
+std::vector<float> CoarsenLight(const CubemapLayout& fine, const CubemapLayout& coarse,
+                                std::span<const float> light) {
+  std::vector<float> weighted(fine.texel_count()), out(coarse.texel_count());
+  for (std::size_t j = 0; j < weighted.size(); ++j)
+    weighted[j] = static_cast<float>(light[j] * fine.TexelSolidAngle(j));
+  CoarsenRow(fine, coarse, weighted.data(), out.data());
+  for (std::size_t J = 0; J < out.size(); ++J)
+    out[J] = static_cast<float>(out[J] / coarse.TexelSolidAngle(J));
+  return out;
 }
 
 bool HasColouredAlbedo(const SceneGeometry& geometry) {

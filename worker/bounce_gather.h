@@ -87,6 +87,11 @@ void CoarsenRow(const CubemapLayout& fine, const CubemapLayout& coarse, const fl
 void AddRefinedRow(const CubemapLayout& coarse, const CubemapLayout& fine, const float* in,
                    float* out);
 
+// The light averaged over each coarse texel (weighted by the fine texels' solid angles), so that
+// Σ_J coarse_row[J]·L̄_J equals relighting the refined row (AddRefinedRow) with the fine light.
+std::vector<float> CoarsenLight(const CubemapLayout& fine, const CubemapLayout& coarse,
+                                std::span<const float> light);
+
 // Whether a scene needs one transport row per colour channel: some albedo is not grey.
 bool HasColouredAlbedo(const SceneGeometry& geometry);
 

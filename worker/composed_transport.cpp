@@ -21,11 +21,11 @@ ComposedTransport::ComposedTransport(const std::string& direct,
     if (r.info().rows != uint64_t(channels) * vertices_ ||
         r.info().cubemap_n > direct_->info().cubemap_n ||
         direct_->info().cubemap_n % r.info().cubemap_n != 0)
-      throw InputError(path, std::to_string(r.info().rows) + " rows at n = " +
-                                 std::to_string(r.info().cubemap_n) + " do not fit " +
-                                 std::to_string(channels) + " channel(s) of " +
-                                 std::to_string(vertices_) + " samples at n = " +
-                                 std::to_string(direct_->info().cubemap_n));
+      throw InputError(path, std::to_string(r.info().rows) +
+                                 " rows at n = " + std::to_string(r.info().cubemap_n) +
+                                 " do not fit " + std::to_string(channels) + " channel(s) of " +
+                                 std::to_string(vertices_) +
+                                 " samples at n = " + std::to_string(direct_->info().cubemap_n));
     if (indirect_.empty()) {
       coarse_ = CubemapLayout(static_cast<int>(r.info().cubemap_n));
       indirect_.assign(static_cast<std::size_t>(r.info().rows * coarse_.texel_count()), 0.0f);
