@@ -340,6 +340,7 @@ class BouncePhase final : public FarmPhase {
     ctx.interreflection["per_bounce"].push_back(bounce);
     spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
                  energy.dump(), rays, FarmNow() - start);
+    ctx.report.jobs_total = ctx.report.jobs_done + ctx.report.jobs_reused;
     if (k_ == ctx.params.bounces) IndirectShare(ctx);
     ctx.report.interreflection_json = ctx.interreflection.dump();
   }

@@ -1,0 +1,166 @@
+// Interreflection in prt-farm end to end under mpirun (docs/interreflection.md): the tiny scene
+// with bounces farmed with 1, 2 and 3 ranks gives byte-identical bounce files equal to the
+// worker kernels called directly (GatherBounces); bounces = 0 keeps the direct-only bytes; a
+// run killed in a bounce resumes to the same bytes; an albedo edit re-runs the indirect stage
+// and what follows it, not the rows.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "formats/transport_file.h"
+#include "tests/run_prt_farm.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/scene.h"
+#include "worker/bounce_gather.h"
+#include "worker/embree_scene.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kScene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
+const std::string kSmallJobs = " --max-job-rows 5 --rows-per-block 16 --log-interval 0.2";
+
+testing::RunResult Farm(int ranks, const std::string& args) {
+  return testing::RunPrtFarm(ranks, args);
+}
+
+std::string WorkDir(const std::string& name) {
+  const fs::path dir = fs::path(PRT_TEST_WORK_DIR) / ("gi_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+std::vector<float> Rows(const std::string& path) {
+  const TransportFileReader r(path);
+  std::vector<float> rows(static_cast<std::size_t>(r.info().rows * r.info().cols()));
+  r.ReadRows(0, r.info().rows, rows.data());
+  return rows;
+}
+
+nlohmann::json Report(const std::string& run) {
+  return nlohmann::json::parse(ReadWholeFile(run + "/report.json"));
+}
+
+// The kernels in one process: the tiny scene's direct rows and two gathered bounces on the
+// n = 2 grid (n/4 of the scene's 8), the farm's seed and directions.
+std::vector<std::vector<float>> KernelBounces() {
+  const SceneDescription scene = LoadSceneFile(kScene);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  TransportSamplerOptions to;
+  to.rays_per_texel = scene.sampling.rays_per_texel;
+  to.seed = scene.sampling.seed;
+  const TransportSampler sampler(embree, scene.cubemap_n, to);
+  std::vector<float> direct(samples.size() * sampler.layout().texel_count());
+  sampler.ComputeRows(samples, 0, direct.data());
+  BounceGatherOptions go;
+  go.paths = scene.sampling.gather_paths;
+  go.seed = scene.sampling.seed;
+  const BounceGatherer gatherer(embree, surfaces, go);
+  return GatherBounces(gatherer, samples, sampler.layout(), CubemapLayout(2), direct, 2, 1);
+}
+
+TEST(InterreflectionMpiTest, BouncesAreByteIdenticalForOneTwoAndThreeRanksAndEqualTheKernels) {
+  const std::string dir = WorkDir("ranks");
+  const std::vector<std::vector<float>> kernels = KernelBounces();
+  std::string compressed;
+  for (int ranks : {1, 2, 3}) {
+    const std::string run = dir + "/np" + std::to_string(ranks);
+    const auto r = Farm(ranks, kScene + " --out " + run + kSmallJobs + " --bounces 2");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    for (int k = 1; k <= 2; ++k) {
+      const std::vector<float> rows = Rows(run + "/indirect/bounce-" + std::to_string(k) + ".prtt");
+      ASSERT_EQ(rows.size(), kernels[k - 1].size());
+      EXPECT_EQ(std::memcmp(rows.data(), kernels[k - 1].data(), rows.size() * 4), 0)
+          << ranks << " rank(s), bounce " << k;
+    }
+    const std::string c = ReadWholeFile(run + "/transport.prtc");
+    if (compressed.empty()) compressed = c;
+    EXPECT_TRUE(c == compressed) << ranks << " rank(s): transport.prtc differs";
+    const nlohmann::json rep = Report(run);
+    ASSERT_EQ(rep["interreflection"]["per_bounce"].size(), 2u);
+    const double e1 = rep["interreflection"]["per_bounce"][0]["energy"][0].get<double>();
+    const double e2 = rep["interreflection"]["per_bounce"][1]["energy"][0].get<double>();
+    EXPECT_GT(e1, 0.0);
+    EXPECT_LT(e2, 0.6 * e1);  // albedo ≤ 0.8 and most bounce light escapes the open scene
+    EXPECT_GT(rep["interreflection"]["indirect_share"][0]["indirect_share"].get<double>(), 0.0);
+  }
+}
+
+TEST(InterreflectionMpiTest, ZeroBouncesKeepsTheDirectOnlyBytes) {
+  const std::string dir = WorkDir("zero");
+  ASSERT_EQ(Farm(2, kScene + " --out " + dir + "/a" + kSmallJobs).exit_code, 0);
+  ASSERT_EQ(Farm(2, kScene + " --out " + dir + "/b" + kSmallJobs + " --bounces 0").exit_code, 0);
+  ASSERT_EQ(Farm(2, kScene + " --out " + dir + "/c" + kSmallJobs + " --bounces 1").exit_code, 0);
+  for (const char* f : {"/transport.prtt", "/transport.prtc", "/checkpoints/manifest.json"})
+    EXPECT_TRUE(ReadWholeFile(dir + "/a" + f) == ReadWholeFile(dir + "/b" + f)) << f;
+  EXPECT_FALSE(fs::exists(dir + "/b/indirect"));
+  EXPECT_FALSE(Report(dir + "/b").contains("interreflection"));
+  // With a bounce the direct rows are the same, the compressed transport is not.
+  EXPECT_TRUE(ReadWholeFile(dir + "/a/transport.prtt") == ReadWholeFile(dir + "/c/transport.prtt"));
+  EXPECT_FALSE(ReadWholeFile(dir + "/a/transport.prtc") ==
+               ReadWholeFile(dir + "/c/transport.prtc"));
+}
+
+TEST(InterreflectionMpiTest, KilledInABounceThenResumeGivesTheSameBytes) {
+  const std::string dir = WorkDir("kill");
+  ASSERT_EQ(Farm(1, kScene + " --out " + dir + "/fresh" + kSmallJobs + " --bounces 2").exit_code,
+            0);
+  // The direct rows first (bounces are not their input), then the bounces, killed after 4 of
+  // bounce 1's jobs (--fail-after-jobs counts a phase's jobs).
+  const std::string run = dir + "/run";
+  ASSERT_EQ(Farm(1, kScene + " --out " + run + kSmallJobs).exit_code, 0);
+  const auto killed =
+      Farm(1, kScene + " --out " + run + kSmallJobs + " --bounces 2 --resume --fail-after-jobs 4");
+  EXPECT_NE(killed.exit_code, 0) << killed.output;
+  EXPECT_TRUE(fs::exists(run + "/transport.prtt"));
+  EXPECT_FALSE(fs::exists(run + "/indirect/bounce-1.prtt"));
+  const auto resumed = Farm(1, kScene + " --out " + run + kSmallJobs + " --bounces 2 --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  for (const char* f : {"/indirect/bounce-1.prtt", "/indirect/bounce-2.prtt", "/transport.prtc"})
+    EXPECT_TRUE(ReadWholeFile(dir + "/fresh" + f) == ReadWholeFile(run + f)) << f;
+  const nlohmann::json rep = Report(run);
+  EXPECT_EQ(rep["stages"][0]["status"], "reused");
+  EXPECT_EQ(rep["stages"][1]["name"], "indirect");
+  EXPECT_EQ(rep["stages"][1]["status"], "resumed");
+  EXPECT_GT(rep["interreflection"]["per_bounce"][0]["jobs_reused"].get<int>(), 0);
+}
+
+TEST(InterreflectionMpiTest, AnAlbedoEditReRunsTheBouncesNotTheRows) {
+  const std::string dir = WorkDir("albedo");
+  const std::string run = dir + "/run";
+  ASSERT_EQ(Farm(2, kScene + " --out " + run + kSmallJobs + " --bounces 1").exit_code, 0);
+  const std::string rows = ReadWholeFile(run + "/transport.prtt");
+  const std::string bounce = ReadWholeFile(run + "/indirect/bounce-1.prtt");
+  std::string text = ReadWholeFile(kScene);
+  const std::string from = "albedo = [0.5, 0.5, 0.5]";
+  ASSERT_NE(text.find(from), std::string::npos);
+  text.replace(text.find(from), from.size(), "albedo = [0.7, 0.7, 0.7]");
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  const std::string edited = dir + "/edited.toml";
+  std::ofstream(edited) << text;
+  const auto r = Farm(2, edited + " --out " + run + kSmallJobs + " --bounces 1 --resume");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json rep = Report(run);
+  EXPECT_EQ(rep["stages"][0]["status"], "reused");
+  EXPECT_EQ(rep["stages"][1]["status"], "ran");
+  EXPECT_EQ(rep["stages"][2]["status"], "ran");  // compression
+  EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == rows);
+  // The ground gathers from the box: brighter box, more bounce light.
+  EXPECT_FALSE(ReadWholeFile(run + "/indirect/bounce-1.prtt") == bounce);
+}
+
+}  // namespace
+}  // namespace prt
