@@ -16,6 +16,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -29,6 +30,7 @@
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 #include "worker/bounce_gather.h"
+#include "worker/path_trace_reference.h"
 
 namespace prt {
 
@@ -63,7 +65,9 @@ double Dot(const float* a, const float* b, std::size_t n) {
 
 class BouncePhase final : public FarmPhase {
  public:
-  explicit BouncePhase(int k) : k_(k), name_("bounce-" + std::to_string(k)) {}
+  // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing.
+  explicit BouncePhase(int k)
+      : k_(k), name_(k > 0 ? "bounce-" + std::to_string(k) : std::string("path-trace")) {}
   const char* name() const override { return name_.c_str(); }
 
   void Run(FarmContext& ctx) override {
@@ -71,8 +75,12 @@ class BouncePhase final : public FarmPhase {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
-    const std::size_t cols = coarse.texel_count();
+    const std::size_t cols = k_ > 0 ? coarse.texel_count() : fine.texel_count();
     const int prev_channels = k_ == 1 ? 1 : C;
+    if (k_ == 0) {
+      RunPathTracing(ctx, cols, start);
+      return;
+    }
 
     // 1. The previous bounce's rows of the whole scene on every rank.
     std::vector<float> previous;
@@ -118,6 +126,89 @@ class BouncePhase final : public FarmPhase {
   }
 
  private:
+  // The path-traced estimator: one phase, every bounce at once; a job's payload holds each
+  // vertex's Σ_k Tᵏ (channels rows at n) and then, per bounce and channel, the energy of its
+  // vertices.
+  void RunPathTracing(FarmContext& ctx, std::size_t cols, double start) {
+    if (ctx.rank == 0) ctx.run_eta.StepStarted(name_);
+    std::unique_ptr<SceneSurfaces> surfaces;
+    std::unique_ptr<PathTraceReference> reference;
+    if (ctx.computes_here()) {
+      surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
+      PathTraceOptions po;
+      po.bounces = ctx.params.bounces;
+      po.paths = ctx.params.gather_paths;
+      po.rays_per_texel = ctx.params.rays_per_texel;
+      po.path_rays_per_texel = 1;
+      po.seed = ctx.params.seed;
+      reference =
+          std::make_unique<PathTraceReference>(*ctx.embree, *surfaces, ctx.params.cubemap_n, po);
+    }
+    RunJobPhase(
+        ctx,
+        [&](const RowRange& range, std::string_view, std::string& out) {
+          ComputePaths(ctx, *reference, cols, range, out);
+        },
+        [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
+  }
+
+  void ComputePaths(const FarmContext& ctx, const PathTraceReference& reference, std::size_t cols,
+                    const RowRange& range, std::string& out) const {
+    const int C = ctx.params.channels, K = ctx.params.bounces;
+    const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
+    const std::size_t at = out.size();
+    const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
+    const std::size_t energies = static_cast<std::size_t>(K) * C;
+    out.resize(at + sizeof(BounceResultHeader) + floats * sizeof(float) +
+               energies * sizeof(double));
+    float* rows = reinterpret_cast<float*>(out.data() + at + sizeof(BounceResultHeader));
+    struct Local {
+      PathTraceStats stats;
+      std::vector<double> energy;
+    };
+    tbb::enumerable_thread_specific<Local> locals([&] {
+      return Local{{}, std::vector<double>(energies, 0.0)};
+    });
+    tbb::parallel_for(uint64_t{0}, range.count, [&](uint64_t i) {
+      thread_local std::vector<float> row, bounce_rows;
+      row.resize(per_vertex);
+      bounce_rows.resize((K + 1) * per_vertex);
+      PathTraceExtras ex;
+      ex.bounce_rows = bounce_rows.data();
+      Local& local = locals.local();
+      local.stats +=
+          reference.ComputeRow(ctx.samples[range.first + i], range.first + i, C, row.data(), ex);
+      float* dst = rows + i * per_vertex;
+      std::fill(dst, dst + per_vertex, 0.0f);
+      for (int k = 1; k <= K; ++k)
+        for (int c = 0; c < C; ++c) {
+          const float* src = bounce_rows.data() + (static_cast<std::size_t>(k) * C + c) * cols;
+          double e = 0;
+          for (std::size_t j = 0; j < cols; ++j) {
+            dst[c * cols + j] += src[j];
+            e += src[j];
+          }
+          local.energy[(k - 1) * C + c] += e;
+        }
+    });
+    for (std::size_t i = 0; i < floats; ++i)
+      if (!std::isfinite(rows[i]))
+        throw NumericalError(name_ + ": a non-finite value for sample " +
+                             std::to_string(range.first + i / per_vertex));
+    BounceResultHeader h;
+    std::vector<double> energy(energies, 0.0);
+    for (const Local& l : locals) {
+      h.rays_traced += l.stats.rays_traced();
+      h.rays_escaped += l.stats.escaped;
+      h.back_face_hits += l.stats.back_faces;
+      for (std::size_t e = 0; e < energies; ++e) energy[e] += l.energy[e];
+    }
+    h.rows_checksum = Checksum64(rows, floats * sizeof(float));
+    std::memcpy(out.data() + at, &h, sizeof h);
+    std::memcpy(out.data() + at + sizeof h + floats * sizeof(float), energy.data(),
+                energies * sizeof(double));
+  }
+
   // Rank 0: T⁰ coarsened to the indirect grid (k = 1) or bounce k − 1's rows.
   std::vector<float> LoadPrevious(FarmContext& ctx, const CubemapLayout& fine,
                                   const CubemapLayout& coarse, int prev_channels) const {
@@ -203,14 +294,24 @@ class BouncePhase final : public FarmPhase {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const RunFolder& f = ctx.folder;
-    const std::string final_path = f.BounceFile(k_);
+    const std::string final_path = k_ > 0 ? f.BounceFile(k_) : f.PathTracedFile();
+    const int K = ctx.params.bounces;
+    // Path tracing: each job's per-bounce energies (journaled as its counters, bit-cast).
+    const std::size_t energies = k_ > 0 ? 0 : static_cast<std::size_t>(K) * C;
+    std::vector<double> path_energy(energies, 0.0);
+    auto add_energy = [&](const std::vector<uint64_t>& counters) {
+      for (std::size_t e = 0; e < energies && e < counters.size(); ++e)
+        path_energy[e] += std::bit_cast<double>(counters[e]);
+    };
     const std::string partial = final_path + ".partial";
     std::error_code ec;
     fs::create_directories(f.indirect, ec);
-    const TransportFileInfo info{C * V, static_cast<uint32_t>(ctx.params.indirect_n),
-                                 ctx.options.rows_per_block,
-                                 static_cast<uint32_t>(ctx.params.gather_paths), ctx.params.seed};
-    nlohmann::ordered_json bounce = {{"bounce", k_}};
+    const TransportFileInfo info{
+        C * V, static_cast<uint32_t>(k_ > 0 ? ctx.params.indirect_n : ctx.params.cubemap_n),
+        ctx.options.rows_per_block, static_cast<uint32_t>(ctx.params.gather_paths),
+        ctx.params.seed};
+    nlohmann::ordered_json bounce = nlohmann::ordered_json::object();
+    if (k_ > 0) bounce["bounce"] = k_;
     JobBatch batch;
     uint64_t reused_jobs = 0;
     std::optional<TransportFileWriter> writer;
@@ -256,6 +357,7 @@ class BouncePhase final : public FarmPhase {
           continue;
         }
         batch.done.push_back(e.rows);
+        add_energy(e.counters);
         ++reused_jobs;
       }
       if (reused_jobs > 0)
@@ -276,7 +378,7 @@ class BouncePhase final : public FarmPhase {
     batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
       BounceResultHeader h;
       const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
-      if (payload.size() != sizeof h + floats * sizeof(float))
+      if (payload.size() != sizeof h + floats * sizeof(float) + energies * sizeof(double))
         throw RankFailure("rank " + std::to_string(rank) + " returned " +
                           std::to_string(payload.size()) + " bytes for " +
                           std::to_string(range.count) + " samples of " + name_);
@@ -295,6 +397,12 @@ class BouncePhase final : public FarmPhase {
       e.phase = name_;
       e.rows = range;
       e.rows_checksum = h.rows_checksum;
+      for (std::size_t i = 0; i < energies; ++i) {
+        double x = 0;
+        std::memcpy(&x, payload.data() + sizeof h + floats * sizeof(float) + i * sizeof x,
+                    sizeof x);
+        e.counters.push_back(std::bit_cast<uint64_t>(x));
+      }
       e.rays_traced = h.rays_traced;
       e.texels_traced = h.rays_escaped;
       e.texels_below_horizon = h.back_face_hits;
@@ -305,6 +413,7 @@ class BouncePhase final : public FarmPhase {
       rays += e.rays_traced;
       escaped += e.texels_traced;
       back += e.texels_below_horizon;
+      add_energy(e.counters);
     };
     try {
       loop.Run(batch);
@@ -337,11 +446,21 @@ class BouncePhase final : public FarmPhase {
     bounce["back_face_hits"] = back;
     bounce["jobs_reused"] = reused_jobs;
     bounce["wall_seconds"] = FarmNow() - start;
-    ctx.interreflection["per_bounce"].push_back(bounce);
+    if (k_ > 0) {
+      ctx.interreflection["per_bounce"].push_back(bounce);
+    } else {
+      // Path tracing: the whole indirect part in one phase; each bounce's energy from the jobs'.
+      for (int k = 1; k <= K; ++k) {
+        nlohmann::ordered_json e = nlohmann::ordered_json::array();
+        for (int c = 0; c < C; ++c) e.push_back(path_energy[(k - 1) * C + c]);
+        ctx.interreflection["per_bounce"].push_back({{"bounce", k}, {"energy", e}});
+      }
+      ctx.interreflection["path_trace"] = bounce;
+    }
     spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
                  energy.dump(), rays, FarmNow() - start);
     ctx.report.jobs_total = ctx.report.jobs_done + ctx.report.jobs_reused;
-    if (k_ == ctx.params.bounces) IndirectShare(ctx);
+    if (k_ == K || k_ == 0) IndirectShare(ctx);
     ctx.report.interreflection_json = ctx.interreflection.dump();
   }
 
@@ -351,6 +470,8 @@ class BouncePhase final : public FarmPhase {
     LoadEstimateLights(ctx);
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
+    const std::vector<std::string> files =
+        IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0);
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
     const std::size_t cols = coarse.texel_count();
     // T⁰ coarsened, and Σ_k Tᵏ.
@@ -368,11 +489,21 @@ class BouncePhase final : public FarmPhase {
       }
     }
     std::vector<float> indirect(static_cast<std::size_t>(C * V * cols), 0.0f), rows;
-    for (int k = 1; k <= ctx.params.bounces; ++k) {
-      const TransportFileReader reader(ctx.folder.BounceFile(k));
-      rows.resize(indirect.size());
-      reader.ReadRows(0, reader.info().rows, rows.data());
-      for (std::size_t i = 0; i < rows.size(); ++i) indirect[i] += rows[i];
+    std::vector<float> coarse_row(cols);
+    for (const std::string& file : files) {
+      // Bounce rows are on the indirect grid already; path-traced ones at n are coarsened.
+      const TransportFileReader reader(file);
+      const CubemapLayout grid(static_cast<int>(reader.info().cubemap_n));
+      for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
+        rows.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * grid.texel_count()));
+        reader.ReadBlock(b, rows);
+        const uint64_t first = reader.info().FirstRowOfBlock(b);
+        for (uint64_t r = 0; r < reader.info().RowsInBlock(b); ++r) {
+          CoarsenRow(grid, coarse, rows.data() + r * grid.texel_count(), coarse_row.data());
+          float* dst = indirect.data() + (first + r) * cols;
+          for (std::size_t J = 0; J < cols; ++J) dst[J] += coarse_row[J];
+        }
+      }
     }
     nlohmann::ordered_json share = nlohmann::ordered_json::array();
     for (std::size_t l = 0; l < ctx.estimate.lights.size(); ++l) {

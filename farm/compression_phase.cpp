@@ -142,9 +142,10 @@ void Compress(FarmContext& ctx) {
   uint64_t setup[3] = {0, 0, 0};  // exit code, rows per file block, header bytes
   if (rank == 0) {
     try {
-      std::vector<std::string> bounces;
-      for (int k = 1; k <= ctx.params.bounces; ++k) bounces.push_back(folder.BounceFile(k));
-      reader = std::make_unique<ComposedTransport>(folder.transport, bounces, ctx.params.channels);
+      reader = std::make_unique<ComposedTransport>(
+          folder.transport,
+          IndirectFiles(folder, ctx.params.bounces, ctx.params.path_estimator != 0),
+          ctx.params.channels);
       // The plan setup keyed the compression stage with (nothing is read again but the rows).
       if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
       CompressionPlan plan = *ctx.compression_plan;

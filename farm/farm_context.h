@@ -68,6 +68,7 @@ struct SetupParams {
   int32_t gather_paths = 256;
   int32_t channels = 1;
   int32_t run_indirect = 0;
+  int32_t path_estimator = 0;  // 1: the bounces by per-element path tracing (one phase)
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
@@ -171,8 +172,16 @@ std::unique_ptr<FarmPhase> MakeVisibilityPhase();
 std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
 std::unique_ptr<FarmPhase> MakeCompressionPhase();
 std::unique_ptr<FarmPhase> MakeEstimatePhase();
-// Bounce k of the interreflection (farm/bounce_phase.cpp), 1 ≤ k ≤ bounces.
+// Bounce k of the interreflection (farm/bounce_phase.cpp), 1 ≤ k ≤ bounces; k = 0: every
+// bounce at once by per-element path tracing (estimator "path").
 std::unique_ptr<FarmPhase> MakeBouncePhase(int k);
+// The indirect stage's files: indirect/bounce-1 … K.prtt, or indirect/path-traced.prtt.
+inline std::vector<std::string> IndirectFiles(const RunFolder& f, int bounces, bool path) {
+  std::vector<std::string> files;
+  if (path && bounces > 0) return {f.PathTracedFile()};
+  for (int k = 1; k <= bounces; ++k) files.push_back(f.BounceFile(k));
+  return files;
+}
 
 // Vertices of the sparse method's initial dense set that its cross-validation reconstructs
 // (farm/sparse_phase.cpp, CrossValidate; docs/farm.md "Accuracy estimates").

@@ -105,7 +105,12 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
     steps.push_back({"pack", "pack", raw_bytes, 1e-9});
   // A bounce: P closest-hit rays per vertex (~2 M/s per thread) and the gather's multiply-adds
   // (~3·P·6m² per vertex and channel at ~1 G/s per thread).
-  if (ctx.params.run_indirect) {
+  if (ctx.params.run_indirect && ctx.params.path_estimator) {
+    // A direct row (~3n² shadow rays) per path vertex, K per path, P paths per vertex.
+    steps.push_back({"path-trace", "path-trace", rows,
+                     ctx.params.bounces * ctx.params.gather_paths * cols * 0.5 *
+                         ctx.params.channels / (1e7 * threads)});
+  } else if (ctx.params.run_indirect) {
     const double m = ctx.params.indirect_n;
     const double per_vertex =
         (ctx.params.gather_paths / 2e6 +
@@ -162,7 +167,9 @@ std::vector<std::unique_ptr<FarmPhase>> PhasesAfterSetup(const FarmContext& ctx)
     phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
     phases.push_back(MakeFinalizePhase());
   }
-  if (ctx.params.run_indirect)
+  if (ctx.params.run_indirect && ctx.params.path_estimator)
+    phases.push_back(MakeBouncePhase(0));
+  else if (ctx.params.run_indirect)
     for (int k = 1; k <= ctx.params.bounces; ++k) phases.push_back(MakeBouncePhase(k));
   if (ctx.params.run_compression) phases.push_back(MakeCompressionPhase());
   if (ctx.params.run_estimate) phases.push_back(MakeEstimatePhase());
@@ -174,7 +181,7 @@ const char* StageOfPhase(const std::string& phase) {
   if (phase == "compress") return kStageCompression;
   if (phase == "estimate") return kStageEstimate;
   if (phase == "setup") return kStageAssets;
-  if (phase.rfind("bounce-", 0) == 0) return kStageIndirect;
+  if (phase.rfind("bounce-", 0) == 0 || phase == "path-trace") return kStageIndirect;
   return kStageRows;
 }
 

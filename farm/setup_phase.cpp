@@ -189,10 +189,7 @@ class SetupPhase final : public FarmPhase {
     if (bounces > 0 && indirect_n > n)
       throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
                                        " is larger than the cubemap's n " + std::to_string(n));
-    if (bounces > 0 && scene.sampling.estimator == "path")
-      throw InputError(scene.file,
-                       "estimator = \"path\" is not supported by prt-farm yet (the path-traced "
-                       "reference runs in prt-gi-bench)");
+    ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
     ctx.params.bounces = bounces;
     ctx.params.indirect_n = indirect_n;
     ctx.params.gather_paths = scene.sampling.gather_paths;
@@ -204,10 +201,16 @@ class SetupPhase final : public FarmPhase {
                              {"paths", scene.sampling.gather_paths},
                              {"channels", ctx.params.channels},
                              {"per_bounce", nlohmann::ordered_json::array()}};
-      spdlog::info(
-          "interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
-          "vertex, {} channel(s)",
-          bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
+      if (ctx.params.path_estimator)
+        spdlog::info(
+            "interreflection: {} bounce(s) by per-element path tracing, {} paths per "
+            "vertex, {} channel(s)",
+            bounces, scene.sampling.gather_paths, ctx.params.channels);
+      else
+        spdlog::info(
+            "interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
+            "vertex, {} channel(s)",
+            bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
     }
 
     ResolvedSampling resolved;
@@ -284,10 +287,10 @@ class SetupPhase final : public FarmPhase {
       }
     }
     if (const nlohmann::ordered_json* ind = manifest.Stage(kStageIndirect)) {
-      const int bounces = ind->at("bounces").get<int>();
       state.indirect_complete = true;
-      for (int k = 1; k <= bounces; ++k)
-        state.indirect_complete = state.indirect_complete && TransportComplete(f.BounceFile(k));
+      for (const std::string& file :
+           IndirectFiles(f, ind->at("bounces").get<int>(), ind->at("estimator") == "path"))
+        state.indirect_complete = state.indirect_complete && TransportComplete(file);
       state.indirect_unfinished = !state.indirect_complete && fs::exists(f.indirect, ec);
     }
     if (fs::exists(f.accuracy, ec)) {

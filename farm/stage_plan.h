@@ -26,11 +26,11 @@ struct StageDecision {
 
 // What the run folder holds, looked at by setup before it changes anything.
 struct RunFolderState {
-  bool rows_complete = false;       // transport.prtt (or visibility.prtv) complete
-  bool rows_unfinished = false;     // transport.prtt.partial or journaled jobs
-  bool compressed_current = false;  // transport.prtc exists with the header planned now
-  bool estimate_current = false;    // accuracy.json exists for the estimate inputs given now
-  bool indirect_complete = false;   // every indirect/bounce-<k>.prtt of the bounces asked for
+  bool rows_complete = false;        // transport.prtt (or visibility.prtv) complete
+  bool rows_unfinished = false;      // transport.prtt.partial or journaled jobs
+  bool compressed_current = false;   // transport.prtc exists with the header planned now
+  bool estimate_current = false;     // accuracy.json exists for the estimate inputs given now
+  bool indirect_complete = false;    // every indirect/bounce-<k>.prtt of the bounces asked for
   bool indirect_unfinished = false;  // bounce files or journal lines of an unfinished stage
 };
 

@@ -52,6 +52,11 @@ struct RunFolder {
     indirect = (p / kIndirectDirName).string();
     indirect_journal = (p / kCheckpointsDirName / "indirect-journal.txt").string();
   }
+  // indirect/path-traced.prtt: Σ_k Tᵏ by per-element path tracing ([sampling] estimator =
+  // "path"), channels × samples rows at the cubemap's n.
+  std::string PathTracedFile() const {
+    return (std::filesystem::path(indirect) / "path-traced.prtt").string();
+  }
   // indirect/bounce-<k>.prtt
   std::string BounceFile(int k) const {
     return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + ".prtt")).string();

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -121,11 +121,48 @@ run_mc_error() {
     "$BUILD_DIR/bench/prt-mc-check" "$dir/$scene-sparse-s1" "$dir/$scene-brute-s2"
   done
 }
+# Issue 22's figures (docs/interreflection.md "Measured"): bounce gathering against the
+# path-traced reference on the default scene and two more real meshes, K = 1 and 2, n = 32, four
+# lights, model and ground apart, with images and the per-bounce energy plot; the colour-bleeding
+# scene (a red ground); then prt-farm's wall time with K = 2 against K = 0 on the same 2 ranks.
+run_gi() {
+  local dir="$OUT/gi" args="--bounces 2 --ref-vertices ${PRT_GI_REF_VERTICES:-48} --ref-paths ${PRT_GI_REF_PATHS:-1024} --images"
+  mkdir -p "$dir"
+  for scene in default dragon armadillo; do
+    echo "== prt-gi-bench --scene $scene =="
+    # shellcheck disable=SC2086
+    "$BUILD_DIR/bench/prt-gi-bench" --scene "$scene" $args --out "$dir" 2>&1 | grep -v '\[info\]\|\[warning\]'
+  done
+  echo "== prt-gi-bench: colour bleeding (default scene, ground albedo 0.8, 0.25, 0.2) =="
+  # shellcheck disable=SC2086
+  "$BUILD_DIR/bench/prt-gi-bench" --scene default --ground-albedo 0.8,0.25,0.2 $args \
+    --out "$dir/colour" 2>&1 | grep -v '\[info\]\|\[warning\]'
+  echo "== prt-farm, default scene (brute), 2 ranks: K = 0 against K = 2 =="
+  for k in 0 2; do
+    mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$dir/farm-K$k" --force \
+      --method brute --bounces "$k" -q
+  done
+  python3 - "$dir" <<'PY'
+import json, sys
+d = sys.argv[1]
+r = {k: json.load(open(f"{d}/farm-K{k}/report.json")) for k in (0, 2)}
+def phases(rep):
+    return {p["name"]: p["wall_seconds"] for p in rep["phases"]}
+p0, p2 = phases(r[0]), phases(r[2])
+print(f"K = 0: wall {r[0]['wall_seconds']:.1f} s (brute {p0['brute']:.1f} s)")
+print(f"K = 2: wall {r[2]['wall_seconds']:.1f} s (brute {p2['brute']:.1f} s, bounce-1 {p2['bounce-1']:.1f} s, bounce-2 {p2['bounce-2']:.1f} s)")
+print(f"K = 2 / K = 0 wall time: {r[2]['wall_seconds'] / r[0]['wall_seconds']:.2f}x; "
+      f"(brute + bounces) / brute of the same run: {(p2['brute'] + p2['bounce-1'] + p2['bounce-2']) / p2['brute']:.2f}x")
+for s in r[2]["interreflection"]["indirect_share"]:
+    print(f"  indirect share of B under {s['light']}: {100 * s['indirect_share']:.1f}%")
+PY
+}
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_figure9; run_viewer; run_relight; run_glossy ;;
   transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
   mc-error) run_mc_error ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error] [--quick]" >&2; exit 1 ;;
+  gi) run_gi ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi] [--quick]" >&2; exit 1 ;;
 esac

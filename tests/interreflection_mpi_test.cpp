@@ -18,6 +18,7 @@
 #include "vocabulary/scene.h"
 #include "worker/bounce_gather.h"
 #include "worker/embree_scene.h"
+#include "worker/path_trace_reference.h"
 #include "worker/transport_sampler.h"
 
 namespace prt {
@@ -160,6 +161,49 @@ TEST(InterreflectionMpiTest, AnAlbedoEditReRunsTheBouncesNotTheRows) {
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == rows);
   // The ground gathers from the box: brighter box, more bounce light.
   EXPECT_FALSE(ReadWholeFile(run + "/indirect/bounce-1.prtt") == bounce);
+}
+
+// estimator = "path": the indirect stage is one phase of per-element path tracing, its file
+// (Σ_k Tᵏ at n) the same for 1 and 2 ranks and equal to the reference kernel's rows minus T⁰.
+TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCount) {
+  const std::string dir = WorkDir("path");
+  std::string text = ReadWholeFile(kScene);
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  text += "bounces = 2\nestimator = \"path\"\ngather_paths = 16\n";
+  const std::string scene_file = dir + "/path.toml";
+  std::ofstream(scene_file) << text;
+  for (int ranks : {1, 2}) {
+    const auto r =
+        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::vector<float> a = Rows(dir + "/np1/indirect/path-traced.prtt");
+  EXPECT_TRUE(a == Rows(dir + "/np2/indirect/path-traced.prtt"));
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  PathTraceOptions po;
+  po.bounces = 2;
+  po.paths = 16;
+  po.rays_per_texel = scene.sampling.rays_per_texel;
+  po.seed = scene.sampling.seed;
+  const PathTraceReference reference(embree, surfaces, scene.cubemap_n, po);
+  const std::size_t cols = reference.layout().texel_count();
+  std::vector<float> row(cols), bounces(3 * cols);
+  ASSERT_EQ(a.size(), samples.size() * cols);
+  for (std::size_t v = 0; v < samples.size(); ++v) {
+    PathTraceExtras ex;
+    ex.bounce_rows = bounces.data();
+    reference.ComputeRow(samples[v], v, 1, row.data(), ex);
+    for (std::size_t j = 0; j < cols; ++j)
+      ASSERT_EQ(a[v * cols + j], 0.0f + bounces[cols + j] + bounces[2 * cols + j]) << v << " " << j;
+  }
+  const nlohmann::json rep = Report(dir + "/np2");
+  EXPECT_EQ(rep["interreflection"]["per_bounce"].size(), 2u);
+  EXPECT_EQ(rep["stages"][1]["name"], "indirect");
 }
 
 }  // namespace

@@ -514,6 +514,8 @@ height = 480
 rays_per_texel = 4
 seed = 1
 method = "sparse"
+# Two diffuse interreflections after the direct light (docs/interreflection.md).
+bounces = 2
 
 [sparse]
 initial_fraction = 0.05
