@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -20,7 +21,10 @@ namespace {
 constexpr char kHeaderMagic[8] = {'P', 'R', 'T', 'C', 'T', 'H', 'D', '1'};
 constexpr char kBlockMagic[4] = {'P', 'C', 'B', '1'};
 constexpr char kFileMagic[8] = {'P', 'R', 'T', 'C', 'T', 'F', 'L', '1'};
-constexpr uint32_t kFormatVersion = 2;      // 1 is still read (varint indices, column budget)
+// Version 3 adds the channel count and is written only for channels ≠ 1, so a one-channel header
+// keeps version 2's bytes; 1 (varint indices, column budget) and 2 are still read, as 1 channel.
+constexpr uint32_t kFormatVersion = 2;
+constexpr uint32_t kChannelsVersion = 3;
 constexpr uint32_t kMaxSamples = 1u << 28;  // consumers allocate O(samples)
 
 class Writer {
@@ -343,6 +347,32 @@ std::size_t CompressedTransport::term_count() const {
   return n;
 }
 
+SpatialDomain PerChannelDomain(const SpatialDomain& spatial, uint32_t channels) {
+  if (channels != 1 && channels != 3)
+    throw InputError("PerChannelDomain",
+                     "channel count " + std::to_string(channels) + " is not 1 or 3");
+  SpatialDomain d;
+  d.segments.reserve(spatial.segments.size() * channels);
+  for (uint32_t c = 0; c < channels; ++c)
+    d.segments.insert(d.segments.end(), spatial.segments.begin(), spatial.segments.end());
+  return d;
+}
+
+SpatialDomain SpatialDomainOfChannel(const SpatialDomain& domain, uint32_t channels) {
+  SpatialDomain d;
+  const std::size_t per = channels == 0 ? 0 : domain.segments.size() / channels;
+  d.segments.assign(domain.segments.begin(),
+                    domain.segments.begin() + static_cast<std::ptrdiff_t>(per));
+  return d;
+}
+
+namespace {
+bool SameSegment(const SpatialSegment& a, const SpatialSegment& b) {
+  return a.kind == b.kind && a.count == b.count && a.width == b.width && a.height == b.height &&
+         a.order == b.order;
+}
+}  // namespace
+
 void ValidateHeader(const CompressedTransportHeader& h, const std::string& name) {
   const uint32_t n = h.cubemap_n;
   if (n == 0 || n > 256 || (n & (n - 1)) != 0)
@@ -390,6 +420,23 @@ void ValidateHeader(const CompressedTransportHeader& h, const std::string& name)
   if (total != h.sample_count)
     throw InputError(name, "segments cover " + std::to_string(total) + " samples, header says " +
                                std::to_string(h.sample_count));
+  // Colour channels: channel c's rows [c·V, (c+1)·V) are a copy of the spatial segments, so that
+  // every segment (and thus every column transform) lies inside one channel.
+  if (h.channels != 1 && h.channels != 3)
+    throw InputError(name, "channel count " + std::to_string(h.channels) + " is not 1 or 3");
+  if (h.sample_count % h.channels != 0)
+    throw InputError(name, "sample count " + std::to_string(h.sample_count) +
+                               " is not a multiple of the channel count " +
+                               std::to_string(h.channels));
+  if (h.domain.segments.size() % h.channels != 0)
+    throw InputError(name, std::to_string(h.domain.segments.size()) +
+                               " segments do not split into " + std::to_string(h.channels) +
+                               " channels");
+  const std::size_t per = h.domain.segments.size() / h.channels;
+  for (std::size_t i = per; i < h.domain.segments.size(); ++i)
+    if (!SameSegment(h.domain.segments[i], h.domain.segments[i % per]))
+      throw InputError(name, "segment " + std::to_string(i) + " (channel " +
+                                 std::to_string(i / per) + ") differs from its copy in channel 0");
 }
 
 void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& c,
@@ -414,13 +461,17 @@ void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& 
 
 // Header layout: magic "PRTCTHD1", u32 version, u32 n, u32 samples, u8 row wavelet,
 // u8 column wavelet, u8 scheme, u8 bits, f64 keep fraction, u32 terms per column, u64 seed,
-// (version 2: u8 budget, u8 index coding, u8 light weight), u32 segment count, then per segment: u8
-// kind, u32 count, u32 width, u32 height, u8 has_order, [count × u32 order].
+// (version ≥ 2: u8 budget, u8 index coding, u8 light weight), (version 3: u8 channels),
+// u32 segment count, then per segment: u8 kind, u32 count, u32 width, u32 height, u8 has_order,
+// [count × u32 order]. Version 3 stores channel 0's segments only (the others are copies).
 std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   ValidateHeader(h, "EncodeHeader");
+  const bool v3 = h.channels != 1;
+  const SpatialDomain stored = v3 ? SpatialDomainOfChannel(h.domain, h.channels) : SpatialDomain{};
+  const SpatialDomain& domain = v3 ? stored : h.domain;
   Writer w;
   w.Bytes(kHeaderMagic, 8);
-  w.U32(kFormatVersion);
+  w.U32(v3 ? kChannelsVersion : kFormatVersion);
   w.U32(h.cubemap_n);
   w.U32(h.sample_count);
   w.U8(static_cast<uint8_t>(h.row_wavelet));
@@ -433,8 +484,9 @@ std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   w.U8(static_cast<uint8_t>(h.budget));
   w.U8(static_cast<uint8_t>(h.index_coding));
   w.U8(h.light_weight);
-  w.U32(static_cast<uint32_t>(h.domain.segments.size()));
-  for (const auto& s : h.domain.segments) {
+  if (v3) w.U8(static_cast<uint8_t>(h.channels));
+  w.U32(static_cast<uint32_t>(domain.segments.size()));
+  for (const auto& s : domain.segments) {
     w.U8(static_cast<uint8_t>(s.kind));
     w.U32(s.count);
     w.U32(s.width);
@@ -450,7 +502,7 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
   CompressedTransportHeader h;
   r.Magic(kHeaderMagic, 8, "header magic");
   const uint32_t version = r.U32("version");
-  if (version != kFormatVersion && version != 1)
+  if (version != kChannelsVersion && version != kFormatVersion && version != 1)
     r.Fail("unsupported compressed-transport version " + std::to_string(version));
   h.cubemap_n = r.U32("cubemap size");
   h.sample_count = r.U32("sample count");
@@ -478,6 +530,15 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
     h.index_coding = static_cast<IndexCoding>(ic);
     h.light_weight = r.U8("light weight");
   }
+  h.channels = 1;
+  if (version >= kChannelsVersion) {
+    const uint8_t ch = r.U8("channels");
+    if (ch != 1 && ch != 3) r.Fail("channel count " + std::to_string(ch) + " is not 1 or 3");
+    if (h.sample_count % ch != 0)
+      r.Fail("sample count " + std::to_string(h.sample_count) +
+             " is not a multiple of the channel count " + std::to_string(ch));
+    h.channels = ch;
+  }
   const uint32_t nseg = r.U32("segment count");
   // Every segment takes at least 14 bytes: bound the count before allocating.
   if (nseg == 0 || nseg > r.remaining() / 14) r.Fail("segment count " + std::to_string(nseg));
@@ -497,6 +558,8 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
       for (auto& v : s.order) v = r.U32("vertex order");
     }
   }
+  // Version 3 stored one channel's segments: the others are copies (at most 3× what was read).
+  if (h.channels != 1) h.domain = PerChannelDomain(h.domain, h.channels);
   ValidateHeader(h, name);
   return h;
 }

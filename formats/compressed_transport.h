@@ -2,7 +2,10 @@
 // (Cheslack-Postava et al. 2008, §4) that the farm writes, the packager ships and the viewer
 // relights from. Format and algorithm: docs/compression.md.
 //
-// T has one row per spatial sample and one column per cubemap texel (6·n·n, cubemap.h order).
+// T has one row per spatial sample and colour channel, and one column per cubemap texel (6·n·n,
+// cubemap.h order). With `channels` = 1 one row serves r, g and b; with 3 (interreflection with
+// coloured albedos, issue #22) the rows are channel-major: row c·V + v is colour channel c
+// (0 r, 1 g, 2 b) of spatial sample v, V = sample_count / channels.
 // Rows are 2D wavelet transformed per cubemap face (§4.1), so column j holds, for every spatial
 // sample, the coefficient of row-wavelet basis function j. Each column is then a function over
 // the spatial domain and is wavelet transformed to its own depth (§4.2), non-linearly
@@ -12,6 +15,8 @@
 // The spatial domain is a list of segments in the global sample order (scene.h): a mesh is a 1D
 // signal along the Hilbert order of its vertices, a ground grid or an image is a 2D w×h grid.
 // Each segment is transformed on its own; a column's depth is clamped to each segment's maximum.
+// With 3 channels the domain is three identical copies of the spatial segments, channel c's at
+// offset c·V (PerChannelDomain), so that no column transform mixes two channels.
 //
 // Decoders here are safe on untrusted input: every count, index and enum is validated, and no
 // allocation exceeds what the bytes read can describe. They throw prt::InputError naming `name`.
@@ -67,10 +72,22 @@ struct SpatialDomain {
   std::size_t sample_count() const;
 };
 
+// The domain of a `channels` × V row transport (channel-major rows) from the domain of its V
+// spatial samples: `channels` copies of `spatial`'s segments, one after the other. channels = 1
+// returns `spatial` unchanged. Throws InputError unless channels is 1 or 3.
+SpatialDomain PerChannelDomain(const SpatialDomain& spatial, uint32_t channels);
+// The first channel's segments of a domain of `channels` copies (the inverse of
+// PerChannelDomain; the caller has validated the header).
+SpatialDomain SpatialDomainOfChannel(const SpatialDomain& domain, uint32_t channels);
+
 // Everything a decoder needs besides the columns.
 struct CompressedTransportHeader {
   uint32_t cubemap_n = 32;
-  uint32_t sample_count = 0;  // rows of T; must equal domain.sample_count()
+  uint32_t sample_count = 0;  // rows of T, channels × V; must equal domain.sample_count()
+  // Colour channels of T: 1 (one row per spatial sample serves r, g and b) or 3 (row c·V + v is
+  // channel c of spatial sample v). The domain then holds `channels` identical copies of the
+  // spatial segments (PerChannelDomain). Format version 3; version 1 and 2 headers read as 1.
+  uint32_t channels = 1;
   RowWavelet row_wavelet = RowWavelet::kHaar;
   ColumnWavelet column_wavelet = ColumnWavelet::kLeGall53;
   CompressionScheme scheme = CompressionScheme::kAdaptive4D;
@@ -86,6 +103,8 @@ struct CompressedTransportHeader {
   SpatialDomain domain;
 
   uint32_t column_count() const { return 6u * cubemap_n * cubemap_n; }
+  // V: spatial samples (rows per channel); 0 while `channels` is 0 (an unvalidated header).
+  uint32_t spatial_count() const { return channels == 0 ? 0 : sample_count / channels; }
 };
 
 // One compressed column: the kept coefficients of column `column` after its column transform to
@@ -115,7 +134,9 @@ struct CompressedTransport {
   std::size_t term_count() const;
 };
 
-// Throws prt::InputError(name, ...) if the header is inconsistent (see docs/compression.md).
+// Throws prt::InputError(name, ...) if the header is inconsistent (see docs/compression.md),
+// among others: channels other than 1 or 3, a sample count that is not a multiple of channels,
+// or a domain that is not `channels` identical copies of one channel's segments.
 void ValidateHeader(const CompressedTransportHeader& h, const std::string& name);
 // Throws if a column breaks any rule above for header h (index order, bounds, q range, depth).
 void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& c,

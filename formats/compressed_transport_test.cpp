@@ -10,6 +10,7 @@
 #include "formats/column_coding.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
 
 namespace prt {
 namespace {
@@ -258,6 +259,194 @@ TEST(CompressedTransportFormat, MaliciousCountsAreRejectedWithoutAllocating) {
   hb = h;
   hb.cubemap_n = 3;
   EXPECT_THROW(ValidateHeader(hb, "x"), InputError);
+}
+
+// TestHeader's domain three times over: a 3-channel transport of 3 × 67 rows.
+CompressedTransportHeader ThreeChannelHeader(int bits = 9) {
+  CompressedTransportHeader h = TestHeader(bits);
+  h.domain = PerChannelDomain(h.domain, 3);
+  h.sample_count = 3 * 67;
+  h.channels = 3;
+  return h;
+}
+
+// Byte offsets in an encoded header: the version, the sample count and (version 3) the channels.
+constexpr std::size_t kVersionAt = 8, kSamplesAt = 16, kChannelsAt = 47;
+
+uint32_t LoadU32At(const std::vector<uint8_t>& b, std::size_t at) {
+  uint32_t v;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+// A one-channel header is written as version 2, exactly as before channels existed; a 3-channel
+// header as version 3: one more byte (the channel count) and channel 0's segments only, the
+// decoder repeating them at offsets V and 2V.
+TEST(CompressedTransportFormat, ThreeChannelHeaderIsVersion3WithOneChannelsSegments) {
+  const std::vector<uint8_t> one = EncodeHeader(TestHeader());
+  EXPECT_EQ(LoadU32At(one, kVersionAt), 2u);
+  EXPECT_EQ(DecodeHeader(one, "h").channels, 1u);
+  const CompressedTransportHeader h = ThreeChannelHeader();
+  const std::vector<uint8_t> three = EncodeHeader(h);
+  EXPECT_EQ(LoadU32At(three, kVersionAt), 3u);
+  EXPECT_EQ(three[kChannelsAt], 3u);
+  EXPECT_EQ(three.size(), one.size() + 1);
+  const CompressedTransportHeader d = DecodeHeader(three, "h3");
+  EXPECT_EQ(d.channels, 3u);
+  EXPECT_EQ(d.sample_count, 201u);
+  EXPECT_EQ(d.spatial_count(), 67u);
+  ASSERT_EQ(d.domain.segments.size(), 6u);
+  for (std::size_t i = 0; i < 6; ++i) {
+    EXPECT_EQ(d.domain.segments[i].kind, h.domain.segments[i % 2].kind);
+    EXPECT_EQ(d.domain.segments[i].count, h.domain.segments[i % 2].count);
+    EXPECT_EQ(d.domain.segments[i].order, h.domain.segments[i % 2].order);
+  }
+  EXPECT_EQ(EncodeHeader(d), three);
+  // A version 3 header may say 1 channel (this writer never does): it reads as version 2's.
+  std::vector<uint8_t> v3one = EncodeHeader(TestHeader());
+  v3one[kVersionAt] = 3;
+  v3one.insert(v3one.begin() + kChannelsAt, uint8_t{1});
+  EXPECT_EQ(EncodeHeader(DecodeHeader(v3one, "h")), one);
+  // Whole files round-trip at every block size, and the channels stay apart in the domain: no
+  // segment crosses a multiple of V.
+  for (uint32_t per_block : {1u, 5u, 1024u}) {
+    const CompressedTransport t = RandomTransport(h, 11 + per_block);
+    ExpectSameTransport(t, DecodeCompressedTransport(EncodeCompressedTransport(t, per_block), "t"));
+  }
+  std::size_t off = 0;
+  for (const SpatialSegment& s : d.domain.segments) {
+    EXPECT_EQ(off / 67, (off + s.count - 1) / 67);
+    off += s.count;
+  }
+}
+
+// The bytes of a one-channel .prtc are those main wrote before channels existed: the size and
+// XXH64 of a fixed transport's encoding, computed with the encoder of commit 8ad5212.
+constexpr std::size_t kOneChannelFileSize = 492;
+constexpr uint64_t kOneChannelFileXxh64 = 0xa7026226b2b1f8e6ull;
+
+TEST(CompressedTransportFormat, OneChannelFilesKeepTheirBytes) {
+  CompressedTransportHeader h;
+  h.cubemap_n = 2;
+  h.bits = 9;
+  h.dither_seed = 99;
+  h.terms_per_column = 5;
+  h.budget = CompressionBudget::kGlobal;
+  h.light_weight = 2;
+  SpatialSegment mesh;
+  mesh.count = 10;
+  for (uint32_t k = 0; k < 10; ++k) mesh.order.push_back(9 - k);
+  SpatialSegment grid;
+  grid.kind = SpatialSegment::Kind::kGrid2D;
+  grid.count = 12;
+  grid.width = 4;
+  grid.height = 3;
+  h.domain.segments = {mesh, grid};
+  h.sample_count = 22;
+  CompressedTransport t;
+  t.header = h;
+  for (uint32_t j = 0; j < 24; j += 3) {
+    CompressedColumn c;
+    c.column = j;
+    c.depth = static_cast<uint8_t>(j % 4);
+    c.scale = 0.25f * static_cast<float>(j + 1);
+    for (uint32_t i = j % 5; i < 22; i += 1 + j % 3) {
+      c.index.push_back(i);
+      c.q.push_back(static_cast<int32_t>((i * 7 + j) % 255) - 127 == 0
+                        ? 1
+                        : static_cast<int32_t>((i * 7 + j) % 255) - 127);
+    }
+    t.columns.push_back(c);
+  }
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, 5);
+  EXPECT_EQ(bytes.size(), kOneChannelFileSize);
+  EXPECT_EQ(Checksum64(bytes.data(), bytes.size()), kOneChannelFileXxh64);
+}
+
+// Channel counts other than 1 and 3, sample counts that do not split into the channels, and
+// channels whose segments differ are refused, in memory and in the bytes.
+TEST(CompressedTransportFormat, BadChannelCountsAreRejectedWithInputError) {
+  const CompressedTransportHeader good = ThreeChannelHeader();
+  EXPECT_NO_THROW(ValidateHeader(good, "x"));
+  for (uint32_t channels : {0u, 2u, 4u}) {
+    CompressedTransportHeader h = good;
+    h.channels = channels;
+    EXPECT_THROW(ValidateHeader(h, "x"), InputError) << channels;
+    EXPECT_THROW(PerChannelDomain(TestHeader().domain, channels), InputError) << channels;
+  }
+  CompressedTransportHeader h = TestHeader();
+  h.channels = 3;  // 67 rows in one copy: not a multiple of 3
+  EXPECT_THROW(ValidateHeader(h, "x"), InputError);
+  h = good;
+  h.domain.segments[3].width = 5;  // channel 1's grid differs
+  EXPECT_THROW(ValidateHeader(h, "x"), InputError);
+  h = good;
+  std::swap(h.domain.segments[2].order[0], h.domain.segments[2].order[1]);  // a valid order
+  try {
+    ValidateHeader(h, "x");
+    ADD_FAILURE() << "channel 1's mesh order differs from channel 0's";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("differs from its copy in channel 0"), std::string::npos);
+  }
+  const std::vector<uint8_t> bytes = EncodeHeader(good);
+  for (uint8_t channels : {uint8_t{0}, uint8_t{2}, uint8_t{4}, uint8_t{255}}) {
+    std::vector<uint8_t> b = bytes;
+    b[kChannelsAt] = channels;
+    try {
+      DecodeHeader(b, "bad.prtc");
+      ADD_FAILURE() << "channels " << int(channels) << " decoded";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("channel count " + std::to_string(channels) +
+                                           " is not 1 or 3"),
+                std::string::npos)
+          << e.what();
+      EXPECT_NE(std::string(e.what()).find("bad.prtc"), std::string::npos);
+    }
+  }
+  std::vector<uint8_t> b = bytes;
+  b[kSamplesAt] = 200;  // 200 rows for 3 channels
+  try {
+    DecodeHeader(b, "bad.prtc");
+    ADD_FAILURE() << "200 rows of 3 channels decoded";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("not a multiple of the channel count 3"),
+              std::string::npos)
+        << e.what();
+  }
+  b[kSamplesAt] = 198;  // a multiple of 3, but not what the segments cover
+  EXPECT_THROW(DecodeHeader(b, "bad.prtc"), InputError);
+}
+
+// Every truncation of a 3-channel file, and 3000 random corruptions, are refused with an
+// InputError naming the file or decode to data that passes validation.
+TEST(CompressedTransportFormat, ThreeChannelFilesSurviveTruncationAndCorruption) {
+  const CompressedTransport t = RandomTransport(ThreeChannelHeader(), 21);
+  const std::vector<uint8_t> bytes = EncodeCompressedTransport(t, 8);
+  for (std::size_t len = 0; len < bytes.size(); len += 1 + len / 64) {
+    EXPECT_THROW(DecodeCompressedTransport(std::span(bytes.data(), len), "cut.prtc"), InputError)
+        << len;
+  }
+  std::mt19937 rng(4);
+  int rejected = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::vector<uint8_t> b = bytes;
+    const int flips = 1 + static_cast<int>(rng() % 4);
+    // Half the trials aim at the header (where the channel count and the segments are).
+    for (int f = 0; f < flips; ++f) {
+      const std::size_t at = trial % 2 == 0 ? rng() % 200 : rng() % b.size();
+      b[at] ^= static_cast<uint8_t>(1 + rng() % 255);
+    }
+    try {
+      const CompressedTransport d = DecodeCompressedTransport(b, "bad.prtc");
+      ValidateHeader(d.header, "bad.prtc");
+      EXPECT_EQ(d.header.sample_count % d.header.channels, 0u);
+      for (const auto& c : d.columns) ValidateColumn(d.header, c, "bad.prtc");
+    } catch (const InputError& e) {
+      ++rejected;
+      EXPECT_NE(std::string(e.what()).find("bad.prtc"), std::string::npos);
+    }
+  }
+  EXPECT_GT(rejected, 1000);
 }
 
 TEST(CompressedTransportFormat, ParsesSchemeAndWaveletNames) {

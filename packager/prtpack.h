@@ -45,13 +45,19 @@ typedef struct prtpack_mesh {
   uint32_t grid_resolution;  /* ground plane: vertices per side, else 0 */
 } prtpack_mesh;
 
+/* The transport T has row_count rows (channels × V spatial samples; V = the meshes' vertices in
+ * mesh order) and column_count columns. Rows are channel-major: row c·V + v is colour channel c
+ * (0 r, 1 g, 2 b) of spatial sample v, so that B_c(v) = albedo_c(v) · Σ_j T[c·V + v][j]·L_c[j].
+ * With channels = 1 (every 1.0 pack) one row per sample serves r, g and b:
+ * B_c(v) = albedo_c(v) · Σ_j T[v][j]·L_c[j]. */
 typedef struct prtpack_transport_info {
   uint32_t encoding;     /* the transport encoder's format version */
-  uint64_t row_count;    /* spatial samples */
+  uint64_t row_count;    /* rows of T: channels × spatial samples */
   uint64_t column_count; /* columns over all blocks */
   size_t block_count;
   const uint8_t* params; /* opaque global parameters (owned by the handle) */
   size_t params_size;
+  uint32_t channels; /* colour channels of T, 1 or 3 (.prtpack 1.1; 1 in a 1.0 pack) */
 } prtpack_transport_info;
 
 typedef struct prtpack_block_info {

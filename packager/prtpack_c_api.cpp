@@ -173,6 +173,7 @@ int prtpack_get_transport_info(prtpack* pack, prtpack_transport_info* out) {
     out->block_count = t.blocks.size();
     out->params = t.params.data();
     out->params_size = t.params.size();
+    out->channels = t.channels;
     return PRTPACK_OK;
   });
 }

@@ -1,7 +1,9 @@
 /* The C interface (prtpack.h) compiled as C: opens the seed pack fuzz_corpus/small.prtpack
  * (written from prtpack_test_util.h's MakeSmallInput), checks meshes, albedo, metadata and the
- * transport blocks bit for bit against the generator, and the error paths.
- * Usage: prtpack_c_test path/to/small.prtpack */
+ * transport blocks bit for bit against the generator, and the error paths; with a second
+ * argument, fuzz_corpus/compressed_transport_rgb.prtpack (a 1.1 pack whose transport has 3
+ * colour channels), its version and channel count.
+ * Usage: prtpack_c_test path/to/small.prtpack [path/to/compressed_transport_rgb.prtpack] */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -87,6 +89,7 @@ static void check_pack(prtpack* p) {
 
   CHECK(prtpack_get_transport_info(p, &t) == PRTPACK_OK);
   CHECK(t.encoding == 7 && t.row_count == 12 && t.column_count == 9 && t.block_count == 3);
+  CHECK(t.channels == 1); /* a 1.0 pack */
   CHECK(t.params_size == 5 && t.params[0] == 1 && t.params[4] == 5);
   for (b = 0; b < 3; ++b) {
     CHECK(prtpack_get_block_info(p, b, &bi) == PRTPACK_OK);
@@ -101,14 +104,29 @@ static void check_pack(prtpack* p) {
   CHECK(prtpack_verify(p) == PRTPACK_OK);
 }
 
+/* A 1.1 pack of MakeSmallInput's meshes with a 3-channel transport of 3 × 12 rows. */
+static void check_rgb_pack(const char* path) {
+  uint32_t major = 0, minor = 0;
+  prtpack_transport_info t;
+  prtpack* p = prtpack_open_file(path);
+  CHECK(p != NULL);
+  if (!p) return;
+  CHECK(prtpack_version(p, &major, &minor) == PRTPACK_OK && major == 1 && minor == 1);
+  CHECK(prtpack_get_transport_info(p, &t) == PRTPACK_OK);
+  CHECK(t.channels == 3 && t.row_count == 36 && t.column_count == 24 && t.encoding == 3);
+  CHECK(prtpack_verify(p) == PRTPACK_OK);
+  prtpack_close(p);
+}
+
 int main(int argc, char** argv) {
   size_t size = 0;
   unsigned char* data;
   prtpack* p;
-  if (argc != 2) {
-    fprintf(stderr, "usage: %s small.prtpack\n", argv[0]);
+  if (argc != 2 && argc != 3) {
+    fprintf(stderr, "usage: %s small.prtpack [compressed_transport_rgb.prtpack]\n", argv[0]);
     return 2;
   }
+  if (argc == 3) check_rgb_pack(argv[2]);
   p = prtpack_open_file(argv[1]);
   CHECK(p != NULL);
   if (p) check_pack(p);

@@ -14,6 +14,7 @@
 #include "packager/prtpack_format.h"
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_test_util.h"
+#include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/mesh_io.h"
@@ -95,6 +96,18 @@ TEST(PrtpackCorruption, EveryFlippedByteOfAGlossyPackIsPaddingOrDetected) {
   ExpectEveryFlippedByteIsPaddingOrDetected(testing::MakeSmallGlossyInput());
 }
 
+// A 1.1 pack with a 3-channel compressed transport: every flip of its TRNS channel count or
+// row count is caught (the index checksum covers them).
+PackInput SmallThreeChannelInput() {
+  PackInput in = testing::MakeSmallInput();
+  in.transport = testing::MakeSmallCompressedTransportInput(3);
+  return in;
+}
+
+TEST(PrtpackCorruption, EveryFlippedByteOfAThreeChannelPackIsPaddingOrDetected) {
+  ExpectEveryFlippedByteIsPaddingOrDetected(SmallThreeChannelInput());
+}
+
 void ExpectEveryTruncationFailsClearly(const PackInput& input) {
   const std::vector<uint8_t> file = WritePack(input);
   for (std::size_t n = 0; n < file.size(); ++n) {
@@ -115,6 +128,7 @@ void ExpectEveryTruncationFailsClearly(const PackInput& input) {
 TEST(PrtpackCorruption, EveryTruncationFailsClearly) {
   ExpectEveryTruncationFailsClearly(testing::MakeSmallInput());
   ExpectEveryTruncationFailsClearly(testing::MakeSmallGlossyInput());
+  ExpectEveryTruncationFailsClearly(SmallThreeChannelInput());
 }
 
 // Hostile VISB payloads behind valid checksums (ResealChecksums): every byte of each VISB
@@ -195,6 +209,7 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
   in.transport = testing::MakeSmallCompressedTransportInput();
   seeds.emplace_back("compressed_transport.prtpack", WritePack(in));
   seeds.emplace_back("visibility.prtpack", WritePack(testing::MakeSmallGlossyInput()));
+  seeds.emplace_back("compressed_transport_rgb.prtpack", WritePack(SmallThreeChannelInput()));
   PackInput real;
   // A real mesh from the Debian data package the build extracts (always present, unlike
   // ../shared/data); the committed corpus also holds bunny_lowres.prtpack from an earlier run.
@@ -214,6 +229,37 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
       out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
     }
   }
+}
+
+std::vector<uint8_t> ReadCorpusFile(const std::string& name) {
+  std::ifstream in(std::filesystem::path(PRT_SOURCE_DIR) / "packager/fuzz_corpus" / name,
+                   std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The corpus's 1.0 packs were written before transports had channels (commit 8ad5212 and
+// earlier): they still open, read as one channel, and a one-channel pack written today is the
+// same file byte for byte.
+TEST(PrtpackCorruption, OneChannelPacksAreTheVersion1_0FixturesByteForByte) {
+  const std::vector<uint8_t> small = ReadCorpusFile("small.prtpack");
+  const std::vector<uint8_t> compressed = ReadCorpusFile("compressed_transport.prtpack");
+  ASSERT_FALSE(small.empty());
+  ASSERT_FALSE(compressed.empty());
+  EXPECT_EQ(WritePack(testing::MakeSmallInput()), small);
+  PackInput in = testing::MakeSmallInput();
+  in.transport = testing::MakeSmallCompressedTransportInput();
+  EXPECT_EQ(WritePack(in), compressed);
+  for (const std::vector<uint8_t>* bytes : {&small, &compressed}) {
+    const PackReader r = PackReader::OpenMemory(bytes->data(), bytes->size());
+    EXPECT_EQ(r.version_minor(), 0);
+    EXPECT_EQ(r.ReadTransportIndex().channels, 1u);
+  }
+  const PackReader r = PackReader::OpenMemory(compressed.data(), compressed.size());
+  EXPECT_EQ(ReadCompressedTransport(r).header.channels, 1u);
+  const std::vector<uint8_t> rgb = ReadCorpusFile("compressed_transport_rgb.prtpack");
+  const PackReader r3 = PackReader::OpenMemory(rgb.data(), rgb.size());
+  EXPECT_EQ(r3.version_minor(), 1);
+  EXPECT_EQ(ReadCompressedTransport(r3).header.channels, 3u);
 }
 
 std::vector<std::vector<uint8_t>> SeedCorpus() {

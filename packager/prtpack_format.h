@@ -14,7 +14,11 @@ namespace prt::pack {
 
 inline constexpr std::array<uint8_t, 8> kMagic = {0x89, 'P', 'R', 'T', 'P', 'A', 'C', 'K'};
 inline constexpr uint16_t kVersionMajor = 1;
-inline constexpr uint16_t kVersionMinor = 0;
+// The newest minor version this code reads and writes. 1.1 defines the TRNS channel count
+// (kTransportChannels); a pack that does not need it (no transport, or a one-channel transport)
+// is written as 1.0, byte-identical to what 1.0 writers wrote.
+inline constexpr uint16_t kVersionMinor = 1;
+inline constexpr uint16_t kVersionMinorChannels = 1;
 inline constexpr uint32_t kHeaderSize = 64;
 inline constexpr uint32_t kEntrySize = 64;
 inline constexpr uint32_t kDefaultAlignment = 64;
@@ -22,6 +26,12 @@ inline constexpr uint32_t kMaxSectionCount = 65536;
 inline constexpr uint32_t kMaxMeshNameLength = 4096;
 inline constexpr uint32_t kMaxTransportParams = 1u << 30;
 inline constexpr uint32_t kTransportHeaderSize = 40;
+// TRNS header field offsets.
+inline constexpr std::size_t kTransportEncoding = 0, kTransportBlockCount = 4,
+                             kTransportRowCount = 8, kTransportColumnCount = 16,
+                             kTransportParamsSize = 24,
+                             kTransportChannels = 28,  // 1.1; reserved (0) in 1.0
+    kTransportIndexChecksum = 32;
 inline constexpr uint32_t kBlockEntrySize = 48;
 inline constexpr uint32_t kMaterialHeaderSize = 24;
 // A MESH may declare at most this many raw bytes per stored byte (plus 4 KiB).

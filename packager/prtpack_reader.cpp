@@ -347,18 +347,30 @@ TransportIndex PackReader::Impl::Transport() const {
   const uint64_t n = s.stored_size;
   if (n < kTransportHeaderSize) Fail(where + " is too short for its header");
   TransportIndex t;
-  t.encoding = LoadU32(p + 0);
-  const uint32_t block_count = LoadU32(p + 4);
-  t.row_count = LoadU64(p + 8);
-  t.column_count = LoadU64(p + 16);
-  const uint32_t params_size = LoadU32(p + 24);
+  t.encoding = LoadU32(p + kTransportEncoding);
+  const uint32_t block_count = LoadU32(p + kTransportBlockCount);
+  t.row_count = LoadU64(p + kTransportRowCount);
+  t.column_count = LoadU64(p + kTransportColumnCount);
+  const uint32_t params_size = LoadU32(p + kTransportParamsSize);
   if (params_size > kMaxTransportParams) Fail(where + " parameters exceed 1 GiB");
   const uint64_t index_offset = AlignUp(kTransportHeaderSize + uint64_t(params_size), 8);
   const uint64_t index_size = uint64_t(block_count) * kBlockEntrySize;
   if (!InRange(index_offset, index_size, n)) Fail(where + " block index extends past the section");
-  const uint64_t expect = LoadU64(p + 32);
+  const uint64_t expect = LoadU64(p + kTransportIndexChecksum);
   const uint64_t got = TransportIndexChecksum(p, params_size, index_offset, block_count);
   if (expect != got) Fail(where + " index checksum mismatch: the transport index is corrupted");
+  // The channel count (1.1; a reserved field that 1.0 readers ignore, so 1 in a 1.0 pack).
+  if (minor >= kVersionMinorChannels) {
+    const uint32_t channels = LoadU32(p + kTransportChannels);
+    if (channels != 1 && channels != 3) {
+      Fail(where + " channel count " + std::to_string(channels) + " is not 1 or 3");
+    }
+    t.channels = channels;
+  }
+  if (t.row_count % t.channels != 0) {
+    Fail(where + " row count " + std::to_string(t.row_count) +
+         " is not a multiple of its channel count " + std::to_string(t.channels));
+  }
   t.params.assign(p + kTransportHeaderSize, p + kTransportHeaderSize + params_size);
   t.blocks.reserve(block_count);
   uint64_t next_column = 0;

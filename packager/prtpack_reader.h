@@ -77,8 +77,11 @@ struct TransportBlockInfo {
 
 // The TRNS section's global parameters and block index.
 struct TransportIndex {
-  uint32_t encoding = 0;  // the transport encoder's own format version
-  uint64_t row_count = 0;
+  uint32_t encoding = 0;   // the transport encoder's own format version
+  uint64_t row_count = 0;  // rows of T: channels × spatial samples
+  // Colour channels of T (1 or 3; 1 in every 1.0 pack): row c·V + v is colour channel c of
+  // spatial sample v, V = row_count / channels. With 1, one row serves r, g and b.
+  uint32_t channels = 1;
   uint64_t column_count = 0;
   std::vector<uint8_t> params;  // opaque global parameters
   std::vector<TransportBlockInfo> blocks;
@@ -123,8 +126,9 @@ class PackReader {
   // Mesh `i`'s material only (cheap). Same errors as ReadMesh for the MATL section.
   MeshMaterial ReadMaterial(std::size_t i) const;
   // The TRNS header, parameters and block index (validated: blocks contiguous in columns,
-  // inside the section, aligned, non-overlapping). Throws InputError if there is no TRNS
-  // section, its checksum fails or the index is inconsistent.
+  // inside the section, aligned, non-overlapping; in a 1.1 pack a channel count of 1 or 3 that
+  // divides the row count). Throws InputError if there is no TRNS section, its checksum fails or
+  // the index is inconsistent.
   TransportIndex ReadTransportIndex() const;
   // Block `b`'s bytes, decompressed and bit-identical to what the writer was given. Verifies
   // only this block's own checksum (for streaming); throws InputError on an index out of range,

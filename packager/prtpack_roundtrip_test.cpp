@@ -220,10 +220,21 @@ TEST(PrtpackRoundTrip, PageAlignmentAndFileOpen) {
   }
 }
 
+// Where the TRNS section of `bytes` starts.
+uint64_t TransportOffset(const std::vector<uint8_t>& bytes) {
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+  for (const SectionInfo& s : r.sections())
+    if (s.type_code == kTypeTransport) return s.offset;
+  ADD_FAILURE() << "no TRNS";
+  return 0;
+}
+
 TEST(PrtpackRoundTrip, UnknownMajorVersionIsRefusedAndMinorIsRead) {
   std::vector<uint8_t> bytes = WritePack(MakeSmallInput());
   std::vector<uint8_t> minor = bytes;
   StoreU16(minor.data() + kHdrMinor, 5);
+  // From 1.1 on TRNS states its channel count (1.0 writers left 0 there).
+  StoreU32(minor.data() + TransportOffset(bytes) + kTransportChannels, 1);
   ResealChecksums(minor);
   EXPECT_EQ(ErrorOf(minor), "");
   StoreU16(bytes.data() + kHdrMajor, 2);
@@ -281,6 +292,101 @@ TEST(PrtpackRoundTrip, DecodedSizesAreBoundedBeforeAllocation) {
   EXPECT_NE(e4.find("more than Draco can compress"), std::string::npos) << e4;
 }
 
+// A 3-channel transport (issue #22: row c·V + v is colour channel c of vertex v) packs as
+// version 1.1 with its channel count in TRNS; its compressed columns read back unchanged.
+TEST(PrtpackRoundTrip, ThreeChannelTransportPacksAsVersion1_1) {
+  PackInput in = MakeSmallInput();
+  in.transport = testing::MakeSmallCompressedTransportInput(3);
+  EXPECT_EQ(in.transport->channels, 3u);
+  EXPECT_EQ(in.transport->row_count, 36u);
+  EXPECT_EQ(in.transport->encoding, 3u);  // the .prtc header's version with channels
+  const std::vector<uint8_t> bytes = WritePack(in);
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+  EXPECT_EQ(r.version_major(), 1);
+  EXPECT_EQ(r.version_minor(), 1);
+  EXPECT_EQ(LoadU32(bytes.data() + TransportOffset(bytes) + kTransportChannels), 3u);
+  const TransportIndex index = r.ReadTransportIndex();
+  EXPECT_EQ(index.channels, 3u);
+  EXPECT_EQ(index.row_count, 36u);
+  EXPECT_EQ(nlohmann::json::parse(r.ReadMetadata())["format_version"], "1.1");
+  const CompressedTransport want = testing::MakeSmallCompressedTransport(3);
+  const CompressedTransport back = ReadCompressedTransport(r);
+  EXPECT_EQ(back.header.channels, 3u);
+  EXPECT_EQ(back.header.spatial_count(), 12u);
+  EXPECT_EQ(EncodeHeader(back.header), EncodeHeader(want.header));
+  ASSERT_EQ(back.columns.size(), want.columns.size());
+  for (std::size_t k = 0; k < back.columns.size(); ++k) {
+    EXPECT_EQ(back.columns[k].index, want.columns[k].index);
+    EXPECT_EQ(back.columns[k].q, want.columns[k].q);
+  }
+  EXPECT_NO_THROW(r.VerifyAll());
+  // A one-channel transport keeps 1.0 (and 1.0's bytes: PrtpackCorruption's fixtures).
+  in.transport = testing::MakeSmallCompressedTransportInput(1);
+  const std::vector<uint8_t> one = WritePack(in);
+  const PackReader r1 = PackReader::OpenMemory(one.data(), one.size());
+  EXPECT_EQ(r1.version_minor(), 0);
+  EXPECT_EQ(r1.ReadTransportIndex().channels, 1u);
+  EXPECT_EQ(nlohmann::json::parse(r1.ReadMetadata())["format_version"], "1.0");
+}
+
+// Hostile channel counts behind valid checksums: in a 1.1 pack 0, 2 or 4 channels, or a row
+// count the channels do not divide, are refused with an InputError naming TRNS; a 1.0 pack's
+// field is reserved (ignored: 1 channel), so 3-channel parameters in a 1.0 pack disagree with
+// its TRNS section, and so does a TRNS of 1 channel over 3-channel parameters.
+TEST(PrtpackRoundTrip, BadChannelCountsAreRefusedClearly) {
+  PackInput in = MakeSmallInput();
+  in.transport = testing::MakeSmallCompressedTransportInput(3);
+  const std::vector<uint8_t> good = WritePack(in);
+  const uint64_t trns = TransportOffset(good);
+  for (uint32_t channels : {0u, 2u, 4u, 0xffffffffu}) {
+    std::vector<uint8_t> bad = good;
+    StoreU32(bad.data() + trns + kTransportChannels, channels);
+    ResealChecksums(bad);
+    const std::string error = ErrorOf(bad);
+    EXPECT_NE(error.find("TRNS"), std::string::npos) << error;
+    EXPECT_NE(error.find("channel count " + std::to_string(channels) + " is not 1 or 3"),
+              std::string::npos)
+        << error;
+  }
+  std::vector<uint8_t> rows = good;
+  StoreU64(rows.data() + trns + kTransportRowCount, 35);
+  ResealChecksums(rows);
+  EXPECT_NE(ErrorOf(rows).find("row count 35 is not a multiple of its channel count 3"),
+            std::string::npos)
+      << ErrorOf(rows);
+  // The index is fine, but the parameters (3 channels, 36 rows) disagree with the section.
+  auto transport_error = [](const std::vector<uint8_t>& bytes) -> std::string {
+    try {
+      ReadCompressedTransport(PackReader::OpenMemory(bytes.data(), bytes.size()));
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  std::vector<uint8_t> one = good;
+  StoreU32(one.data() + trns + kTransportChannels, 1);
+  ResealChecksums(one);
+  EXPECT_EQ(ErrorOf(one), "");
+  EXPECT_NE(transport_error(one).find("TRNS parameters have 3 colour channel(s), the section 1"),
+            std::string::npos)
+      << transport_error(one);
+  std::vector<uint8_t> old = good;
+  StoreU16(old.data() + kHdrMinor, 0);
+  ResealChecksums(old);
+  EXPECT_EQ(PackReader::OpenMemory(old.data(), old.size()).ReadTransportIndex().channels, 1u);
+  EXPECT_NE(transport_error(old).find("TRNS parameters have 3 colour channel(s)"),
+            std::string::npos)
+      << transport_error(old);
+  // A 1.0 pack with anything in the reserved field reads as one channel.
+  PackInput plain = MakeSmallInput();
+  std::vector<uint8_t> reserved = WritePack(plain);
+  StoreU32(reserved.data() + TransportOffset(reserved) + kTransportChannels, 2);
+  ResealChecksums(reserved);
+  EXPECT_EQ(ErrorOf(reserved), "");
+  EXPECT_EQ(PackReader::OpenMemory(reserved.data(), reserved.size()).ReadTransportIndex().channels,
+            1u);
+}
+
 TEST(PrtpackRoundTrip, WriterRejectsBadInputs) {
   PackInput in = MakeSmallInput();
   in.metadata_json = "[1, 2]";
@@ -302,6 +408,12 @@ TEST(PrtpackRoundTrip, WriterRejectsBadInputs) {
   EXPECT_THROW(WritePack(in), InputError);
   in = MakeSmallInput();
   in.meshes[0].albedo[1] = 1.5f;
+  EXPECT_THROW(WritePack(in), InputError);
+  in = MakeSmallInput();
+  in.transport->channels = 2;
+  EXPECT_THROW(WritePack(in), InputError);
+  in.transport->channels = 3;
+  in.transport->row_count = 13;
   EXPECT_THROW(WritePack(in), InputError);
   WriterOptions o;
   o.alignment = 100;

@@ -93,24 +93,34 @@ inline PackInput MakeSmallGlossyInput() {
 }
 
 // A valid compressed transport (formats/compressed_transport.h) for 12 samples at n = 2,
-// split into blocks of 5 columns.
-inline TransportInput MakeSmallCompressedTransportInput() {
+// split into blocks of 5 columns; with channels = 3, 3 × 12 channel-major rows (a term in each
+// channel's rows).
+inline CompressedTransport MakeSmallCompressedTransport(uint32_t channels = 1) {
   CompressedTransport ct;
   ct.header.cubemap_n = 2;
-  ct.header.sample_count = 12;
+  ct.header.sample_count = 12 * channels;
+  ct.header.channels = channels;
   ct.header.terms_per_column = 3;
   SpatialSegment seg;
   seg.count = 12;
   ct.header.domain.segments.push_back(seg);
+  ct.header.domain = PerChannelDomain(ct.header.domain, channels);
   for (uint32_t col : {0u, 4u, 5u, 17u, 23u}) {
     CompressedColumn c;
     c.column = col;
     c.scale = 0.5f + float(col);
     c.index = {1, 2 + col % 10};
     c.q = {5, -static_cast<int32_t>(col) - 1};
+    for (uint32_t ch = 1; ch < channels; ++ch) {
+      c.index.push_back(12 * ch + col % 12);
+      c.q.push_back(static_cast<int32_t>(ch + col));
+    }
     ct.columns.push_back(c);
   }
-  return MakeTransportInput(ct, 5);
+  return ct;
+}
+inline TransportInput MakeSmallCompressedTransportInput(uint32_t channels = 1) {
+  return MakeTransportInput(MakeSmallCompressedTransport(channels), 5);
 }
 
 // Everything a pack holds, fully decoded (throws InputError like the reader).

@@ -3,6 +3,7 @@
 #include "packager/prtpack_transport.h"
 
 #include <algorithm>
+#include <string>
 
 #include "packager/prtpack_format.h"
 #include "vocabulary/errors.h"
@@ -16,6 +17,7 @@ TransportInput MakeTransportInput(const CompressedTransport& t, uint32_t columns
   // EncodeHeader writes its magic (8 bytes) then its format version (u32).
   in.encoding = in.params.size() >= 12 ? LoadU32(in.params.data() + 8) : 0;
   in.row_count = t.header.sample_count;
+  in.channels = t.header.channels;
   const uint32_t ncol = t.header.column_count();
   std::size_t k = 0;
   for (uint32_t first = 0; first < ncol; first += columns_per_block) {
@@ -39,6 +41,11 @@ CompressedTransportHeader ReadCompressedTransportHeader(const PackReader& reader
     throw InputError(reader.name(),
                      "TRNS parameters disagree with the section's row or column "
                      "count");
+  }
+  if (h.channels != index.channels) {
+    throw InputError(reader.name(), "TRNS parameters have " + std::to_string(h.channels) +
+                                        " colour channel(s), the section " +
+                                        std::to_string(index.channels));
   }
   return h;
 }

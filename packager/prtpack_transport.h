@@ -18,8 +18,8 @@ namespace prt::pack {
 TransportInput MakeTransportInput(const CompressedTransport& t, uint32_t columns_per_block = 256);
 
 // The header stored in the TRNS parameters. Throws prt::InputError (naming the pack) if the pack
-// has no TRNS section or the parameters do not decode, or if the header's sample and column
-// counts disagree with the section's.
+// has no TRNS section or the parameters do not decode, or if the header's sample (row), column
+// or channel counts disagree with the section's.
 CompressedTransportHeader ReadCompressedTransportHeader(const PackReader& reader,
                                                         const TransportIndex& index);
 // Block `b` decoded (checksum, decompression and column-block validation). Throws

@@ -67,6 +67,12 @@ nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
           {"is_ground", m.is_ground}};
 }
 
+// 1.1 only where the pack uses what 1.1 defines (a TRNS channel count other than 1), so that
+// every other pack keeps the bytes 1.0 writers gave it.
+uint16_t MinorVersionOf(const PackInput& input) {
+  return input.transport && input.transport->channels != 1 ? kVersionMinorChannels : 0;
+}
+
 PendingSection MetaSection(const PackInput& input, const WriterOptions& o) {
   nlohmann::json meta = nlohmann::json::object();
   if (!input.metadata_json.empty()) {
@@ -76,7 +82,8 @@ PendingSection MetaSection(const PackInput& input, const WriterOptions& o) {
     }
   }
   meta["format"] = "prtpack";
-  meta["format_version"] = std::to_string(kVersionMajor) + "." + std::to_string(kVersionMinor);
+  meta["format_version"] =
+      std::to_string(kVersionMajor) + "." + std::to_string(MinorVersionOf(input));
   meta["writer"] = "prt-pack";
   nlohmann::json meshes = nlohmann::json::array();
   for (const PackMeshInput& m : input.meshes) meshes.push_back(MeshSummary(m, o));
@@ -118,6 +125,14 @@ PendingSection TransportSection(const TransportInput& t, const WriterOptions& o)
   if (t.blocks.size() > std::numeric_limits<uint32_t>::max()) {
     throw InputError("transport", "too many blocks");
   }
+  if (t.channels != 1 && t.channels != 3) {
+    throw InputError("transport", "channel count " + std::to_string(t.channels) + " is not 1 or 3");
+  }
+  if (t.row_count % t.channels != 0) {
+    throw InputError("transport", "row count " + std::to_string(t.row_count) +
+                                      " is not a multiple of the channel count " +
+                                      std::to_string(t.channels));
+  }
   const uint64_t index_offset = AlignUp(kTransportHeaderSize + t.params.size(), 8);
   const uint64_t index_end = index_offset + t.blocks.size() * kBlockEntrySize;
   std::vector<std::vector<uint8_t>> stored(t.blocks.size());
@@ -147,11 +162,13 @@ PendingSection TransportSection(const TransportInput& t, const WriterOptions& o)
   s.type = kTypeTransport;
   s.bytes.assign(end, 0);
   uint8_t* p = s.bytes.data();
-  StoreU32(p + 0, t.encoding);
-  StoreU32(p + 4, static_cast<uint32_t>(t.blocks.size()));
-  StoreU64(p + 8, t.row_count);
-  StoreU64(p + 16, columns);
-  StoreU32(p + 24, static_cast<uint32_t>(t.params.size()));
+  StoreU32(p + kTransportEncoding, t.encoding);
+  StoreU32(p + kTransportBlockCount, static_cast<uint32_t>(t.blocks.size()));
+  StoreU64(p + kTransportRowCount, t.row_count);
+  StoreU64(p + kTransportColumnCount, columns);
+  StoreU32(p + kTransportParamsSize, static_cast<uint32_t>(t.params.size()));
+  // 1.1: the channel count; a one-channel transport keeps 1.0's reserved 0 (and the pack 1.0).
+  StoreU32(p + kTransportChannels, t.channels == 1 ? 0u : t.channels);
   std::copy(t.params.begin(), t.params.end(), p + kTransportHeaderSize);
   uint64_t first = 0;
   for (std::size_t b = 0; b < t.blocks.size(); ++b) {
@@ -166,7 +183,8 @@ PendingSection TransportSection(const TransportInput& t, const WriterOptions& o)
     std::copy(stored[b].begin(), stored[b].end(), p + offsets[b]);
     first += t.blocks[b].column_count;
   }
-  StoreU64(p + 32, TransportIndexChecksum(p, t.params.size(), index_offset, t.blocks.size()));
+  StoreU64(p + kTransportIndexChecksum,
+           TransportIndexChecksum(p, t.params.size(), index_offset, t.blocks.size()));
   s.raw_size = s.bytes.size();
   return s;
 }
@@ -251,7 +269,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
   uint8_t* h = file.data();
   std::copy(kMagic.begin(), kMagic.end(), h);
   StoreU16(h + kHdrMajor, kVersionMajor);
-  StoreU16(h + kHdrMinor, kVersionMinor);
+  StoreU16(h + kHdrMinor, MinorVersionOf(input));
   StoreU32(h + kHdrHeaderSize, kHeaderSize);
   StoreU32(h + kHdrSectionCount, static_cast<uint32_t>(sections.size()));
   StoreU32(h + kHdrEntrySize, kEntrySize);

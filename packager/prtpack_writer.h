@@ -32,8 +32,11 @@ struct TransportBlockInput {
 };
 
 struct TransportInput {
-  uint32_t encoding = 0;        // the encoder's format version, stored as is
-  uint64_t row_count = 0;       // spatial samples
+  uint32_t encoding = 0;   // the encoder's format version, stored as is
+  uint64_t row_count = 0;  // rows of T: channels × spatial samples
+  // Colour channels of T, 1 or 3: with 3, row c·V + v is colour channel c of spatial sample v
+  // (V = row_count / 3), and the pack is written as version 1.1 (docs/prtpack-format.md, TRNS).
+  uint32_t channels = 1;
   std::vector<uint8_t> params;  // opaque global parameters
   std::vector<TransportBlockInput> blocks;
 };
@@ -76,7 +79,8 @@ struct WriterOptions {
 // (see draco_mesh_codec.h), a transport block with no columns, visibility that does not decode,
 // has not one entry per mesh, a map count other than the mesh's vertex count, or n/bits that
 // differ between meshes,
-// albedo outside [0, 1], bad options.
+// albedo outside [0, 1], bad options, a transport whose channels is not 1 or 3 or does not divide
+// its row count.
 std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options = {});
 // WritePack, then writes the bytes to `path` (via a temporary file renamed into place).
 // Throws InputError(path, ...) if the file cannot be written.

@@ -38,17 +38,21 @@ nlohmann::json SceneJson(const std::string& text, const std::string& file) {
   }
 }
 
+// META "parameters"; "channels" only for a transport of 3 channels, so that a one-channel pack
+// keeps the bytes it had before transports had channels.
 nlohmann::json ParametersJson(const CompressedTransportHeader& h, uint32_t columns_per_block) {
-  return {{"cubemap_n", h.cubemap_n},
-          {"sample_count", h.sample_count},
-          {"row_wavelet", ToString(h.row_wavelet)},
-          {"column_wavelet", ToString(h.column_wavelet)},
-          {"scheme", ToString(h.scheme)},
-          {"bits", h.bits},
-          {"keep_fraction", h.keep_fraction},
-          {"terms_per_column", h.terms_per_column},
-          {"dither_seed", h.dither_seed},
-          {"columns_per_block", columns_per_block}};
+  nlohmann::json j = {{"cubemap_n", h.cubemap_n},
+                      {"sample_count", h.sample_count},
+                      {"row_wavelet", ToString(h.row_wavelet)},
+                      {"column_wavelet", ToString(h.column_wavelet)},
+                      {"scheme", ToString(h.scheme)},
+                      {"bits", h.bits},
+                      {"keep_fraction", h.keep_fraction},
+                      {"terms_per_column", h.terms_per_column},
+                      {"dither_seed", h.dither_seed},
+                      {"columns_per_block", columns_per_block}};
+  if (h.channels != 1) j["channels"] = h.channels;
+  return j;
 }
 
 std::string Bytes(uint64_t n) {
@@ -251,10 +255,14 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
     const CompressedTransport t = DecodeCompressedTransport(
         std::span(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
         transport.string());
-    if (t.header.sample_count != geometry.vertex_count()) {
+    // channels × V rows, channel-major (formats/compressed_transport.h).
+    if (static_cast<uint64_t>(t.header.sample_count) !=
+        uint64_t{t.header.channels} * geometry.vertex_count()) {
       throw InputError(transport.string(),
-                       "transport has " + std::to_string(t.header.sample_count) +
-                           " samples but the geometry has " +
+                       "transport has " + std::to_string(t.header.sample_count) + " rows (" +
+                           std::to_string(t.header.channels) + " colour channel(s) × " +
+                           std::to_string(t.header.spatial_count()) +
+                           " samples) but the geometry has " +
                            std::to_string(geometry.vertex_count()) + " vertices");
     }
     in.transport = MakeTransportInput(t, options.columns_per_block);
@@ -330,9 +338,11 @@ std::string InspectPack(const PackReader& r) {
       braw += b.raw_size;
       bstored += b.stored_size;
     }
-    out << "transport: " << t.row_count << " samples x " << t.column_count << " columns in "
-        << t.blocks.size() << " blocks (encoding " << t.encoding << "), " << Bytes(braw)
-        << " raw -> " << Bytes(bstored) << " stored";
+    out << "transport: " << t.row_count / t.channels << " samples x " << t.channels
+        << (t.channels == 1 ? " channel (one row per sample for r, g, b)"
+                            : " colour channels (rows channel-major)")
+        << " x " << t.column_count << " columns in " << t.blocks.size() << " blocks (encoding "
+        << t.encoding << "), " << Bytes(braw) << " raw -> " << Bytes(bstored) << " stored";
     if (bstored > 0) {
       std::snprintf(line, sizeof line, " (%.2fx)", double(braw) / double(bstored));
       out << line;

@@ -115,7 +115,11 @@ TEST(RunFolderPack, RunFolderRoundTrip) {
   EXPECT_NE(inspect.find("run: brute, n = 2"), std::string::npos) << inspect;
   EXPECT_EQ(inspect.find("wall_seconds"), std::string::npos) << inspect;  // no JSON dump
   EXPECT_NE(inspect.find("scene: \"octa-scene\""), std::string::npos) << inspect;
-  EXPECT_NE(inspect.find("12 samples x 24 columns in 5 blocks"), std::string::npos) << inspect;
+  EXPECT_NE(inspect.find("transport: 12 samples x 1 channel (one row per sample for r, g, b) x 24 "
+                         "columns in 5 blocks"),
+            std::string::npos)
+      << inspect;
+  EXPECT_FALSE(meta["parameters"].contains("channels"));  // one-channel META as before
   EXPECT_NE(inspect.find("mesh 1 \"ground\": 6 vertices, 8 triangles"), std::string::npos)
       << inspect;
   const std::string verify = VerifyPack(r);
@@ -137,8 +141,36 @@ TEST(RunFolderPack, MissingOrMismatchedTransportIsAnError) {
     PackInputFromRunFolder(f.dir.string(), {});
     FAIL() << "accepted a transport for another geometry";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("10 samples but the geometry has 12"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find(
+                  "10 rows (1 colour channel(s) × 10 samples) but the geometry has 12"),
+              std::string::npos)
         << e.what();
+  }
+  // 3 × 12 rows packed as one channel would be 36 samples; 3 × 10 rows are not 12 vertices.
+  for (uint32_t channels : {1u, 3u}) {
+    CompressedTransport t = testing::MakeSmallCompressedTransport(3);
+    if (channels == 1) {
+      t.header.channels = 1;
+      t.header.domain.segments = {SpatialSegment{SpatialSegment::Kind::kMesh1D, 36, 0, 0, {}}};
+    } else {
+      wrong = t;
+      t.header.sample_count = 30;
+      for (SpatialSegment& s : t.header.domain.segments) s.count = 10;
+      for (CompressedColumn& c : t.columns)
+        for (uint32_t& i : c.index) i = i / 12 * 10 + i % 12 % 10;
+    }
+    const std::vector<uint8_t> b = EncodeCompressedTransport(t);
+    WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                     std::string_view(reinterpret_cast<const char*>(b.data()), b.size()));
+    try {
+      PackInputFromRunFolder(f.dir.string(), {});
+      FAIL() << "accepted " << t.header.sample_count << " rows of " << channels << " channel(s)";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(channels == 1 ? "36 rows (1 colour channel(s) × 36"
+                                                         : "30 rows (3 colour channel(s) × 10"),
+                std::string::npos)
+          << e.what();
+    }
   }
   fs::remove(f.dir / kCompressedTransportFileName);
   EXPECT_THROW(PackInputFromRunFolder(f.dir.string(), {}), InputError);
@@ -149,6 +181,36 @@ TEST(RunFolderPack, MissingOrMismatchedTransportIsAnError) {
   EXPECT_EQ(in.meshes.size(), 2u);
   fs::remove_all(f.dir);
   EXPECT_THROW(PackInputFromRunFolder(f.dir.string(), {}), InputError);
+}
+
+// A run with interreflection and coloured albedos (issue #22): transport.prtc has 3 × 12
+// channel-major rows for the 12 vertices; the pack is 1.1, TRNS and META say 3 channels, inspect
+// shows them and verify decodes every column.
+TEST(RunFolderPack, ThreeChannelTransportPacksWithItsChannels) {
+  const RunFolderFixture f = MakeRunFolder("prtpack_run_folder_test_rgb");
+  const CompressedTransport t = testing::MakeSmallCompressedTransport(3);
+  const std::vector<uint8_t> b = EncodeCompressedTransport(t, 7);
+  WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(b.data()), b.size()));
+  RunPackOptions o;
+  o.columns_per_block = 5;
+  const std::vector<uint8_t> bytes = WritePack(PackInputFromRunFolder(f.dir.string(), o));
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size(), "rgb.prtpack");
+  EXPECT_EQ(r.version_minor(), 1);
+  EXPECT_EQ(r.ReadTransportIndex().channels, 3u);
+  EXPECT_EQ(r.ReadTransportIndex().row_count, 36u);
+  const nlohmann::json meta = nlohmann::json::parse(r.ReadMetadata());
+  EXPECT_EQ(meta["parameters"]["channels"], 3);
+  EXPECT_EQ(meta["parameters"]["sample_count"], 36);
+  EXPECT_EQ(ReadCompressedTransport(r).header.channels, 3u);
+  const std::string inspect = InspectPack(r);
+  EXPECT_NE(inspect.find("rgb.prtpack: .prtpack 1.1"), std::string::npos) << inspect;
+  EXPECT_NE(inspect.find("transport: 12 samples x 3 colour channels (rows channel-major) x 24 "
+                         "columns in 5 blocks (encoding 3)"),
+            std::string::npos)
+      << inspect;
+  EXPECT_NE(VerifyPack(r).find("5 compressed columns decoded"), std::string::npos) << VerifyPack(r);
+  fs::remove_all(f.dir);
 }
 
 // A visibility run (farm job "visibility"): visibility.prtv and no transport packs into one

@@ -42,12 +42,17 @@ std::string Number(double v) {
 CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::string name)
     : name_(std::move(name)), header_(t.header), max_depth_(MaxColumnDepth(t.header.domain)) {
   ValidateHeader(header_, name_);
+  spatial_ = header_.spatial_count();
   const std::size_t S = header_.sample_count;
   slot_.assign(header_.column_count(), -1);
-  coefficient_of_sample_.resize(S);
+  // A 3-channel transport's channels are copies of channel 0's segments (ValidateHeader): X
+  // and the outputs have channel 0's V samples.
+  const std::size_t channel_segments = header_.domain.segments.size() / header_.channels;
+  coefficient_of_sample_.resize(spatial_);
   {
     std::size_t off = 0;
-    for (const auto& seg : header_.domain.segments) {
+    for (std::size_t s = 0; s < channel_segments; ++s) {
+      const SpatialSegment& seg = header_.domain.segments[s];
       const bool permuted = seg.kind == SpatialSegment::Kind::kMesh1D && !seg.order.empty();
       for (uint32_t k = 0; k < seg.count; ++k)
         coefficient_of_sample_[off + (permuted ? seg.order[k] : k)] =
@@ -61,13 +66,15 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::stri
   std::vector<std::vector<uint8_t>> levels(max_depth_ + 1);
   {
     std::size_t off = 0;
-    for (const auto& seg : header_.domain.segments) {
+    for (std::size_t s = 0; s < channel_segments; ++s) {
+      const SpatialSegment& seg = header_.domain.segments[s];
       Segment b{off, off + seg.count, 0, 0, MaxSegmentDepth(seg)};
       SegmentShape(seg, b.w, b.h);
       segments_.push_back(b);
       off += seg.count;
     }
   }
+  const std::size_t V = spatial_;
   for (const auto& c : t.columns) {
     ValidateColumn(header_, c, name_);
     if (slot_[c.column] >= 0) throw InputError(name_, "duplicate column");
@@ -79,9 +86,16 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::stri
     slot_[c.column] = static_cast<int32_t>(columns_.size());
     Column col{c.depth, static_cast<uint32_t>(terms_.size()), 0,
                static_cast<uint32_t>(late_terms_.size()), 0};
-    std::size_t si = 0;  // segment of index i (indices increase)
+    std::size_t si = 0;  // segment of index i (indices increase within a channel)
+    std::size_t channel = 0;
     for (std::size_t k = 0; k < c.index.size(); ++k) {
       const uint32_t i = c.index[k];
+      // Row i is position e = i − channel·V of its channel: X's element e.
+      if (i / V != channel) {
+        channel = i / V;
+        si = 0;
+      }
+      const std::size_t e = i - channel * V;
       const double value = DequantiseTerm(c.q[k], DitherOffset(header_.dither_seed, c.column, i),
                                           c.scale, header_.bits, lv[i]);
       // |value| ≤ (A + ½)/A · scale with a finite float scale (ValidateColumn): only a scale
@@ -91,7 +105,7 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::stri
                                     std::to_string(i) + " dequantises to " + Number(value) +
                                     ", outside the float range");
       const Term term{i, static_cast<float>(value)};
-      while (i >= segments_[si].hi) ++si;
+      while (e >= segments_[si].hi) ++si;
       // Late: in the low band that the segment's inverse step c.depth + 1 writes. A segment
       // whose maximum depth is at most c.depth is not touched by any step before the column's
       // lights are due, so all of its terms are early; depth-0 columns are scattered after
@@ -99,7 +113,7 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::stri
       const Segment& b = segments_[si];
       bool late = false;
       if (c.depth > 0 && c.depth < b.max_depth) {
-        const std::size_t p = i - b.lo;
+        const std::size_t p = e - b.lo;
         const auto pw = static_cast<std::size_t>(b.w);
         late = p % pw < static_cast<std::size_t>(SizeAtDepth(b.w, c.depth)) &&
                p / pw < static_cast<std::size_t>(SizeAtDepth(b.h, c.depth));
@@ -112,16 +126,20 @@ CompressedRelighter::CompressedRelighter(const CompressedTransport& t, std::stri
   }
   // Tiles of at least 4096 coefficients (64 KB of X with three channels: the core's L2) and at
   // most 64 per column (the offsets cost 4·65 bytes per column); past 256 Ki samples a tile is
-  // S/64 coefficients.
-  tile_ = std::max<std::size_t>(4096, (S + kMaxTiles - 1) / kMaxTiles);
-  tiles_ = std::max<std::size_t>(1, (S + tile_ - 1) / tile_);
-  tile_offsets_.resize(columns_.size() * (tiles_ + 1));
+  // V/64 coefficients. A column's terms in a tile are one piece per colour channel of T (its
+  // rows are channel-major, so channel c's terms come after channel c − 1's).
+  const std::size_t P = header_.channels;
+  tile_ = std::max<std::size_t>(4096, (V + kMaxTiles - 1) / kMaxTiles);
+  tiles_ = std::max<std::size_t>(1, (V + tile_ - 1) / tile_);
+  tile_offsets_.resize(columns_.size() * P * (tiles_ + 1));
   for (std::size_t c = 0; c < columns_.size(); ++c) {
     uint32_t k = columns_[c].begin;
-    for (std::size_t tile = 0; tile <= tiles_; ++tile) {
-      const std::size_t bound = tile * tile_;
-      while (k < columns_[c].end && terms_[k].index < bound) ++k;
-      tile_offsets_[c * (tiles_ + 1) + tile] = tile == tiles_ ? columns_[c].end : k;
+    for (std::size_t ch = 0; ch < P; ++ch) {
+      for (std::size_t tile = 0; tile <= tiles_; ++tile) {
+        const std::size_t bound = ch * V + std::min(tile * tile_, V);
+        while (k < columns_[c].end && terms_[k].index < bound) ++k;
+        tile_offsets_[(c * P + ch) * (tiles_ + 1) + tile] = k;
+      }
     }
   }
 }
@@ -217,8 +235,15 @@ void CompressedRelighter::Copy(std::size_t lo, std::size_t hi, const float* base
   }
 }
 
+void CompressedRelighter::CheckChannels(int channels, const char* what) const {
+  if (header_.channels != 1 && channels != static_cast<int>(header_.channels))
+    throw std::invalid_argument(
+        std::string(what) + ": a transport of " + std::to_string(header_.channels) +
+        " colour channels needs lighting of as many channels, not " + std::to_string(channels));
+}
+
 void CompressedRelighter::ThrowNonFinite(int channels, const Output& out) const {
-  const std::size_t S = header_.sample_count;
+  const std::size_t S = spatial_;  // values per output channel
   for (int c = 0; c < channels; ++c) {
     for (std::size_t i = 0; i < S; ++i) {
       const double v =
@@ -262,9 +287,16 @@ void CompressedRelighter::ThrowNonFinite(int channels, const Output& out) const 
 // X holds the channels of a sample side by side (3 channels padded to 4 floats): a term then
 // updates one 16-byte element, a single cache line, with one SIMD multiply-add, and one float
 // inverse step per level (InverseWavelet2DStepInterleaved) transforms every channel at once.
+// A 3-channel transport (rows channel-major, its channels' segments identical) has the same X:
+// row c·V + e is channel c of element e, so a term of channel c adds to one lane of its element
+// with that lane's lighting (the other lanes' weights are 0), and the inverse steps and the way
+// back are those of a one-channel frame of V samples. Only the scatter sees the 3·V rows: a
+// column's terms in a tile are one piece per channel.
 void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels,
                                         Output out) const {
-  const std::size_t S = header_.sample_count;
+  const std::size_t S = spatial_;          // elements of X: samples
+  const std::size_t P = header_.channels;  // T's colour channels: pieces per column and tile
+  const bool per_channel = P != 1;         // CheckChannels: then channels = 3
   const auto C = static_cast<std::size_t>(channels);
   const std::size_t K = C == 3 ? 4 : C;  // floats per sample in X
   std::unique_ptr<FrameBuffers> buffers = TakeBuffers();
@@ -309,10 +341,11 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       std::size_t total = 0;
       for (std::size_t t = 0; t < tiles_; ++t) {
         std::size_t w = zero ? std::min(S, (t + 1) * tile_) - t * tile_ : 0;
-        for (std::size_t k = l0; k < l1; ++k) {
-          const uint32_t* off = tile_offsets_.data() + lights[k].slot * stride + t;
-          w += off[1] - off[0];
-        }
+        for (std::size_t k = l0; k < l1; ++k)
+          for (std::size_t ch = 0; ch < P; ++ch) {
+            const uint32_t* off = tile_offsets_.data() + (lights[k].slot * P + ch) * stride + t;
+            w += off[1] - off[0];
+          }
         total += w;
         tile_work[t] = total;  // cumulative: the work of tiles [0, t]
       }
@@ -337,20 +370,30 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
           const std::size_t lo = t * tile_, hi = std::min(S, lo + tile_);
           std::memset(xl + K * lo, 0, sizeof(float) * K * (hi - lo));
         }
-        for (std::size_t k = l0; k < l1; ++k) {
-          const uint32_t* off = tile_offsets_.data() + lights[k].slot * stride + t;
+        for (std::size_t piece = l0 * P; piece < l1 * P; ++piece) {
+          // Light k's terms of T's channel ch in tile t: rows ch·S + [t·tile, …), elements
+          // [t·tile, …) of X.
+          const std::size_t k = piece / P, ch = piece % P;
+          const uint32_t* off = tile_offsets_.data() + (lights[k].slot * P + ch) * stride + t;
           const Term* b = terms + off[0];
           const Term* e = terms + off[1];
-          if (k + 1 < l1) {  // the next column's piece, while this one is added
-            const uint32_t* n = tile_offsets_.data() + lights[k + 1].slot * stride + t;
+          if (piece + 1 < l1 * P) {  // the next piece, while this one is added
+            const uint32_t* n = tile_offsets_.data() +
+                                (lights[(piece + 1) / P].slot * P + (piece + 1) % P) * stride + t;
             const std::ptrdiff_t len = std::min<std::ptrdiff_t>(kPrefetchTerms, n[1] - n[0]);
             for (std::ptrdiff_t q = 0; q < len; q += 8) __builtin_prefetch(terms + n[0] + q);
           }
           const float* w = lights[k].weight;
+          // Row index − shift is the element of X (0 for a one-channel T).
+          const std::size_t shift = ch * S;
           if (K == 4) {
-            const Float4 w4 = {w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
-            const auto add = [xl, w4](const Term& term) {
-              float* xi = xl + 4 * static_cast<std::size_t>(term.index);
+            // A 3-channel T's channel ch lights lane ch only.
+            const Float4 w4 = per_channel ? Float4{ch == 0 ? w[0] : 0.0f, ch == 1 ? w[1] : 0.0f,
+                                                   ch == 2 ? w[2] : 0.0f, 0.0f}
+                                          : Float4{w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f,
+                                                   C > 3 ? w[3] : 0.0f};
+            const auto add = [xl, w4, shift](const Term& term) {
+              float* xi = xl + 4 * (static_cast<std::size_t>(term.index) - shift);
               Float4 xv;
               std::memcpy(&xv, xi, sizeof xv);
               xv += w4 * term.value;
@@ -403,12 +446,22 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       for (; next < deep_end && columns_[lights[next].slot].depth == d; ++next) {
         const Column& col = columns_[lights[next].slot];
         const float* w = lights[next].weight;
-        std::size_t si = 0;  // the segment of the term (sorted)
+        std::size_t si = 0;  // the segment of the term (sorted within T's channel)
+        std::size_t ch = 0;  // T's channel of the term: row ch·S + element
         for (uint32_t q = col.late_begin; q < col.late_end; ++q) {
           const Term& term = late_terms_[q];
-          while (term.index >= segments_[si].hi) ++si;
-          float* xi = (in_scratch[si] ? scratch : x) + K * static_cast<std::size_t>(term.index);
-          for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * term.value;
+          if (term.index / S != ch) {
+            ch = term.index / S;
+            si = 0;
+          }
+          const std::size_t element = term.index - ch * S;
+          while (element >= segments_[si].hi) ++si;
+          float* xi = (in_scratch[si] ? scratch : x) + K * element;
+          if (per_channel) {
+            xi[ch] += w[ch] * term.value;
+          } else {
+            for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * term.value;
+          }
         }
       }
       for (std::size_t si = 0; si < segments; ++si) {
@@ -489,9 +542,10 @@ void CompressedRelighter::ReturnBuffers(std::unique_ptr<FrameBuffers> b) const {
 
 void CompressedRelighter::Relight(std::span<const float> lighting_hat, int channels,
                                   std::span<float> radiance, SampleOrder order) const {
-  const std::size_t S = header_.sample_count, M = header_.column_count();
+  const std::size_t S = spatial_, M = header_.column_count();
   if (channels < 1 || lighting_hat.size() != M * channels || radiance.size() != S * channels)
     throw std::invalid_argument("CompressedRelighter::Relight: buffer sizes");
+  CheckChannels(channels, "CompressedRelighter::Relight");
   // Weights per column, channel-interleaved, for the columns that are stored and lit.
   std::vector<float> w;
   std::vector<Light> lights;
@@ -512,6 +566,7 @@ std::vector<CompressedRelighter::Light> CompressedRelighter::LightsOf(
     std::span<const uint32_t> columns, std::span<const float> weights, int channels) const {
   if (channels < 1 || weights.size() != columns.size() * channels)
     throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
+  CheckChannels(channels, "CompressedRelighter::RelightSparse");
   std::vector<Light> lights;
   lights.reserve(columns.size());
   for (std::size_t k = 0; k < columns.size(); ++k) {
@@ -525,7 +580,7 @@ std::vector<CompressedRelighter::Light> CompressedRelighter::LightsOf(
 void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
                                         std::span<const float> weights, int channels,
                                         std::span<float> radiance, SampleOrder order) const {
-  if (radiance.size() != header_.sample_count * channels)
+  if (radiance.size() != spatial_ * channels)
     throw std::invalid_argument("CompressedRelighter::RelightSparse: buffer sizes");
   std::vector<Light> lights = LightsOf(columns, weights, channels);
   RelightLights(lights, channels, {radiance.data(), nullptr, order});

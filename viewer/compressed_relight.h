@@ -36,6 +36,15 @@ enum class SampleOrder : uint8_t { kSamples, kCoefficients };
 // the gather back to sample order run on the calling thread, where X is cached). Thread-compatible
 // (const methods are safe to call from several threads with separate outputs).
 //
+// Colour channels of T (formats/compressed_transport.h): with a one-channel transport every
+// lighting channel c relights the same rows, B_c = T̂·L̂_c. With a 3-channel transport (rows
+// channel-major, row c·V + v is colour channel c of spatial sample v) the lighting must have 3
+// channels and B_c(v) = Σ_j T̂[c·V + v][j]·L̂_c[j]. The channels' segments are copies, so X is
+// the same V samples × 4 floats: a term of channel c adds to lane c of its sample only, and the
+// inverse steps and the way back are a one-channel frame's; a frame costs a one-channel frame
+// plus the scatter of the extra terms (about 3× as many). Either way the outputs have
+// sample_count() = V values per channel.
+//
 // Non-finite values (docs/viewer.md, "NaN and Inf"): every dequantised term must be a finite float
 // (InputError naming `name` and the column otherwise; the pack reader's checks, a finite scale and
 // |q| ≤ A, leave only a scale within 0.4 % of FLT_MAX to fail here). X accumulates in float, so
@@ -50,20 +59,25 @@ class CompressedRelighter {
 
   const std::string& name() const { return name_; }
   const CompressedTransportHeader& header() const { return header_; }
-  std::size_t sample_count() const { return header_.sample_count; }
+  // Spatial samples V: the values per channel of every output.
+  std::size_t sample_count() const { return spatial_; }
+  // Rows of T (channels × V) and T's colour channels (1 or 3).
+  std::size_t row_count() const { return header_.sample_count; }
+  uint32_t channels() const { return header_.channels; }
   std::size_t column_count() const { return header_.column_count(); }
   // Depth chosen for a column (0 for absent/all-zero columns); -1 when absent.
   int ColumnDepth(uint32_t column) const;
   // Stored terms of a column (0 for absent columns).
   std::size_t ColumnTermCount(uint32_t column) const;
 
-  // Sample (global order) → its position in the depth-0 coefficient layout, the position its
-  // radiance takes in SampleOrder::kCoefficients outputs.
+  // Sample (global order, V of them) → its position in the depth-0 coefficient layout, the
+  // position its radiance takes in SampleOrder::kCoefficients outputs (the same in every colour
+  // channel: the channels' segments are copies).
   std::span<const uint32_t> coefficient_of_sample() const { return coefficient_of_sample_; }
 
   // Dense lighting in the row-wavelet basis: lighting_hat = channels × column_count floats,
   // radiance = channels × sample_count floats (channel-major, samples in `order`), B = T̂·L̂ per
-  // channel.
+  // channel. A 3-channel transport needs channels = 3 (std::invalid_argument otherwise).
   void Relight(std::span<const float> lighting_hat, int channels, std::span<float> radiance,
                SampleOrder order = SampleOrder::kSamples) const;
   // Sparse lighting (a non-linear lighting approximation): terms (columns[k], weights[k·channels
@@ -99,6 +113,8 @@ class CompressedRelighter {
   template <class Index>
   static void Copy(std::size_t lo, std::size_t hi, const float* base, const Index& index,
                    std::size_t C, std::size_t K, std::size_t S, const Output& out);
+  // Throws std::invalid_argument unless `channels` lighting channels can relight this transport.
+  void CheckChannels(int channels, const char* what) const;
   // Throws the NumericalError for the first non-finite output value.
   [[noreturn]] void ThrowNonFinite(int channels, const Output& out) const;
 
@@ -107,6 +123,7 @@ class CompressedRelighter {
                               int channels) const;
 
   CompressedTransportHeader header_;
+  std::size_t spatial_ = 0;  // V = rows / channels
   int max_depth_ = 0;
   std::vector<int32_t> slot_;  // column → index into columns_, or −1
   // Sample (global order) → its coefficient in the depth-0 layout (the Hilbert order's inverse).
@@ -114,7 +131,7 @@ class CompressedRelighter {
   std::vector<Column> columns_;
   // Each segment of the domain as the relighter uses it, derived once from the header: its
   // coefficient range [lo, hi) in the global order, its w×h shape (a mesh is count×1) and its
-  // maximum depth.
+  // maximum depth. A 3-channel transport's channel 0 segments only (X's V samples).
   struct Segment {
     std::size_t lo, hi;
     int w, h, max_depth;
@@ -131,8 +148,9 @@ class CompressedRelighter {
   // X is scattered tile by tile: tile_ consecutive coefficients (4096, 64 KB of X with three
   // channels, so that every term's read-modify-write stays within L1/L2 of the core that owns
   // the tile), all of a depth's lights per tile.
-  // tile_offsets_[slot·(tiles_ + 1) + t] is the first term of column `slot` whose index is at
-  // least t·tile_ (its last entry is the column's end).
+  // tile_offsets_[(slot·P + c)·(tiles_ + 1) + t], P = T's colour channels, is the first term
+  // of column `slot` whose index is at least c·V + t·tile_ (entry tiles_: at least (c + 1)·V;
+  // the last one is the column's end).
   std::size_t tile_ = 0, tiles_ = 0;
   std::vector<uint32_t> tile_offsets_;
   // Per-frame buffers (X and the inverse steps' scratch), kept between frames: a fresh

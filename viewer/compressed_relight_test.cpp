@@ -188,12 +188,15 @@ TEST(CompressedRelighter, Equation8MatchesDenseProductForEveryWaveletPair) {
 // A transport at n = 2 (24 columns), 11 bits, on TwoSegmentDomain(mesh_count, 67, 61, 5): column
 // j has depth j mod (maximum + 1) and stores coefficient i where stored(j, i), with a random
 // non-zero quantised value (no column where it stores nothing).
+// With `channels` = 3, the rows of 3 colour channels over 3 copies of that domain.
 template <class Stored>
-CompressedTransport TiledTransport(uint32_t mesh_count, std::mt19937& rng, Stored stored) {
+CompressedTransport TiledTransport(uint32_t mesh_count, std::mt19937& rng, Stored stored,
+                                   uint32_t channels = 1) {
   CompressedTransport t;
   t.header.cubemap_n = 2;
   t.header.bits = 11;
-  t.header.domain = TwoSegmentDomain(mesh_count, 67, 61, 5);
+  t.header.domain = PerChannelDomain(TwoSegmentDomain(mesh_count, 67, 61, 5), channels);
+  t.header.channels = channels;
   t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
   const uint32_t S = t.header.sample_count;
   const auto M = static_cast<uint32_t>(t.header.column_count());
@@ -304,6 +307,116 @@ TEST(CompressedRelighter, ManyTilesEveryChannelCountMatchesDenseProduct) {
     std::vector<float> Bf(S * channels, -7.0f);
     relighter.RelightSparse(few, wf, channels, Bf);
     EXPECT_LT(RelErr(std::vector<double>(Bf.begin(), Bf.end()), ref_few), 1e-5) << channels;
+  }
+}
+
+// B_c = T̂_c·L̂_c for a 3-channel transport (rows channel-major, row c·V + v): what one relight
+// of all 3·V rows with all three lighting channels gives when channel c of sample v is read
+// from row c·V + v, the dense reference here.
+std::vector<double> ChannelProduct(const std::vector<float>& That, const std::vector<float>& Lhat,
+                                   std::size_t V, std::size_t M) {
+  std::vector<double> ref(3 * V);
+  for (std::size_t c = 0; c < 3; ++c)
+    for (std::size_t v = 0; v < V; ++v) {
+      double a = 0;
+      for (std::size_t j = 0; j < M; ++j)
+        a += static_cast<double>(That[(c * V + v) * M + j]) * Lhat[c * M + j];
+      ref[c * V + v] = a;
+    }
+  return ref;
+}
+
+// A 3-channel transport (issue #22): every entry point relights channel c of sample v from row
+// c·V + v with lighting channel c, against the dense product of the decompressed rows; small
+// (one tile, the calling thread) and large (tiles that straddle the channel boundaries, the
+// parallel scatter), with columns of every depth, dense lights, sparse lists, a few lights (the
+// low-band terms between the inverse steps), both output orders, and adding or assigning.
+TEST(CompressedRelighter, ThreeChannelTransportRelightsEachChannelFromItsRows) {
+  std::mt19937 rng(31);
+  for (uint32_t mesh_count : {40u, 9001u}) {
+    const CompressedTransport t = TiledTransport(
+        mesh_count, rng,
+        [&](uint32_t j, uint32_t) {
+          if (j % 7 == 3) return false;
+          const uint32_t keep = j % 3 == 0 ? 1 : (j % 3 == 1 ? 5 : 50);
+          return rng() % keep == 0;
+        },
+        3);
+    const std::size_t V = t.header.spatial_count(), M = t.header.column_count();
+    const int maxd = MaxColumnDepth(t.header.domain);
+    const std::vector<float> That = DecompressToRowWaveletBasis(t);
+    ASSERT_EQ(That.size(), 3 * V * M);
+    const CompressedRelighter relighter(t);
+    EXPECT_EQ(relighter.sample_count(), V);
+    EXPECT_EQ(relighter.row_count(), 3 * V);
+    EXPECT_EQ(relighter.channels(), 3u);
+    const std::span<const uint32_t> coef = relighter.coefficient_of_sample();
+    ASSERT_EQ(coef.size(), V);
+    std::vector<float> Lhat(3 * M);
+    for (float& v : Lhat) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+    const std::vector<double> ref = ChannelProduct(That, Lhat, V, M);
+    // Not what lighting every channel's rows with one lighting channel would give.
+    std::vector<float> same(3 * M);
+    for (int c = 0; c < 3; ++c)
+      std::copy(Lhat.begin(), Lhat.begin() + static_cast<std::ptrdiff_t>(M),
+                same.begin() + static_cast<std::ptrdiff_t>(c * M));
+    EXPECT_GT(RelErr(ChannelProduct(That, same, V, M), ref), 0.1);
+    std::vector<float> B(3 * V, -7.0f);
+    relighter.Relight(Lhat, 3, B);
+    EXPECT_LT(RelErr(std::vector<double>(B.begin(), B.end()), ref), 1e-5) << mesh_count;
+    std::vector<float> Blay(3 * V, -7.0f);
+    relighter.Relight(Lhat, 3, Blay, SampleOrder::kCoefficients);
+    std::size_t mismatched = 0;
+    for (std::size_t c = 0; c < 3; ++c)
+      for (std::size_t v = 0; v < V; ++v) mismatched += Blay[c * V + coef[v]] != B[c * V + v];
+    EXPECT_EQ(mismatched, 0u) << mesh_count;
+    // Every column as a sparse list, added into doubles and written over them.
+    std::vector<uint32_t> cols(M);
+    std::vector<float> w(3 * M);
+    for (uint32_t k = 0; k < M; ++k) {
+      cols[k] = static_cast<uint32_t>(M - 1 - k);
+      for (int c = 0; c < 3; ++c) w[3 * k + c] = Lhat[c * M + cols[k]];
+    }
+    std::vector<double> acc(3 * V, 1.0);
+    std::vector<double*> out = {acc.data(), acc.data() + V, acc.data() + 2 * V};
+    relighter.RelightSparseAdd(cols, w, 3, out);
+    for (double& v : acc) v -= 1.0;
+    EXPECT_LT(RelErr(acc, ref), 1e-5) << mesh_count;
+    std::vector<double> lay(3 * V, std::nan(""));
+    out = {lay.data(), lay.data() + V, lay.data() + 2 * V};
+    relighter.RelightSparseAdd(cols, w, 3, out, SampleOrder::kCoefficients, true);
+    mismatched = 0;
+    for (std::size_t c = 0; c < 3; ++c)
+      for (std::size_t v = 0; v < V; ++v)
+        mismatched +=
+            std::abs(lay[c * V + coef[v]] - ref[c * V + v]) > 1e-4 * (1 + std::abs(ref[c * V + v]));
+    EXPECT_EQ(mismatched, 0u) << mesh_count;
+    // A few lights: every depth's smallest column.
+    std::vector<uint32_t> few;
+    for (int d = 0; d <= maxd; ++d) {
+      uint32_t best = UINT32_MAX;
+      for (uint32_t j = 0; j < M; ++j)
+        if (relighter.ColumnDepth(j) == d &&
+            (best == UINT32_MAX || relighter.ColumnTermCount(j) < relighter.ColumnTermCount(best)))
+          best = j;
+      if (best != UINT32_MAX) few.push_back(best);
+    }
+    ASSERT_GE(few.size(), 5u);
+    std::vector<float> wf(3 * few.size());
+    for (float& v : wf) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+    std::vector<float> Lfew(3 * M, 0.0f);
+    for (std::size_t k = 0; k < few.size(); ++k)
+      for (int c = 0; c < 3; ++c) Lfew[c * M + few[k]] += wf[3 * k + c];
+    std::vector<float> Bf(3 * V, -7.0f);
+    relighter.RelightSparse(few, wf, 3, Bf);
+    EXPECT_LT(RelErr(std::vector<double>(Bf.begin(), Bf.end()), ChannelProduct(That, Lfew, V, M)),
+              1e-5)
+        << mesh_count;
+    // One or two lighting channels cannot light three transport channels.
+    std::vector<float> L1(M), B1(V);
+    EXPECT_THROW(relighter.Relight(L1, 1, B1), std::invalid_argument);
+    std::vector<float> w2(2 * few.size()), B2(2 * V);
+    EXPECT_THROW(relighter.RelightSparse(few, w2, 2, B2), std::invalid_argument);
   }
 }
 

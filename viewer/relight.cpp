@@ -80,28 +80,40 @@ std::size_t BlockCount(std::size_t samples, std::size_t block) {
   return (samples + block - 1) / block;
 }
 
+void CheckChannelCount(uint32_t channels, const char* what) {
+  if (channels != 1 && channels != 3)
+    throw std::invalid_argument(std::string(what) + ": channel count " + std::to_string(channels) +
+                                " is not 1 or 3");
+}
+
 }  // namespace
 
 DenseTransport::DenseTransport(std::span<const float> rows, std::size_t samples,
-                               std::size_t coefficients)
-    : samples_(samples), coefficients_(coefficients) {
-  if (rows.size() != samples * coefficients) {
+                               std::size_t coefficients, uint32_t channels)
+    : samples_(samples), coefficients_(coefficients), channels_(channels) {
+  CheckChannelCount(channels, "DenseTransport");
+  if (rows.size() != channels * samples * coefficients) {
     throw std::invalid_argument("DenseTransport: " + std::to_string(rows.size()) + " values for " +
-                                std::to_string(samples) + " × " + std::to_string(coefficients));
+                                std::to_string(channels) + " × " + std::to_string(samples) + " × " +
+                                std::to_string(coefficients));
   }
   const std::size_t nb = BlockCount(samples, kBlockSamples);
-  blocks_.assign(nb * coefficients * kBlockSamples, 0.0f);
-  // Transpose each block of rows into column-major order (parallel over blocks).
-  tbb::parallel_for(std::size_t{0}, nb, [&](std::size_t b) {
+  blocks_.assign(channels * nb * coefficients * kBlockSamples, 0.0f);
+  // Transpose each block of rows into column-major order (parallel over blocks of every channel:
+  // block (c, b) holds rows c·samples + [b·kBlockSamples, …)).
+  tbb::parallel_for(std::size_t{0}, channels * nb, [&](std::size_t cb) {
+    const std::size_t c = cb / nb, b = cb % nb;
     const std::size_t s0 = b * kBlockSamples;
     const std::size_t s1 = std::min(samples, s0 + kBlockSamples);
-    float* dst = blocks_.data() + b * coefficients * kBlockSamples;
+    float* dst = blocks_.data() + cb * coefficients * kBlockSamples;
     for (std::size_t s = s0; s < s1; ++s) {
-      const float* row = rows.data() + s * coefficients;
+      const float* row = rows.data() + (c * samples + s) * coefficients;
       for (std::size_t j = 0; j < coefficients; ++j) {
         if (!std::isfinite(row[j])) {
-          throw std::invalid_argument("DenseTransport: NaN/Inf at sample " + std::to_string(s) +
-                                      ", coefficient " + std::to_string(j));
+          throw std::invalid_argument(
+              "DenseTransport: NaN/Inf at sample " + std::to_string(s) +
+              (channels > 1 ? " (channel " + std::to_string(c) + ")" : std::string()) +
+              ", coefficient " + std::to_string(j));
         }
         dst[j * kBlockSamples + (s - s0)] = row[j];
       }
@@ -119,15 +131,29 @@ void DenseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadia
       const std::size_t len = std::min(samples_, s0 + kBlockSamples) - s0;
       // Accumulate the block locally (fixed size, stays in L1), then add once.
       alignas(64) double acc[3][kBlockSamples] = {};
-      const float* base = blocks_.data() + b * coefficients_ * kBlockSamples;
-      for (const LightingTerm& t : terms) {
-        const float* __restrict col = base + static_cast<std::size_t>(t.index) * kBlockSamples;
-        const double vr = t.value[0], vg = t.value[1], vb = t.value[2];
-        for (std::size_t i = 0; i < kBlockSamples; ++i) {
-          const double x = static_cast<double>(col[i]);
-          acc[0][i] += x * vr;
-          acc[1][i] += x * vg;
-          acc[2][i] += x * vb;
+      if (channels_ == 1) {
+        const float* base = blocks_.data() + b * coefficients_ * kBlockSamples;
+        for (const LightingTerm& t : terms) {
+          const float* __restrict col = base + static_cast<std::size_t>(t.index) * kBlockSamples;
+          const double vr = t.value[0], vg = t.value[1], vb = t.value[2];
+          for (std::size_t i = 0; i < kBlockSamples; ++i) {
+            const double x = static_cast<double>(col[i]);
+            acc[0][i] += x * vr;
+            acc[1][i] += x * vg;
+            acc[2][i] += x * vb;
+          }
+        }
+      } else {
+        // Channel c's rows are block (c, b): lit by lighting channel c only.
+        for (int c = 0; c < 3; ++c) {
+          const float* base = blocks_.data() + (static_cast<std::size_t>(c) * nb + b) *
+                                                   coefficients_ * kBlockSamples;
+          double* __restrict a = acc[c];
+          for (const LightingTerm& t : terms) {
+            const float* __restrict col = base + static_cast<std::size_t>(t.index) * kBlockSamples;
+            const double v = t.value[c];
+            for (std::size_t i = 0; i < kBlockSamples; ++i) a[i] += static_cast<double>(col[i]) * v;
+          }
         }
       }
       for (int c = 0; c < 3; ++c) {
@@ -140,13 +166,21 @@ void DenseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadia
 
 SparseTransport::SparseTransport(std::span<const uint64_t> row_offsets,
                                  std::span<const uint32_t> indices, std::span<const float> values,
-                                 std::size_t coefficients)
-    : samples_(row_offsets.empty() ? 0 : row_offsets.size() - 1), coefficients_(coefficients) {
+                                 std::size_t coefficients, uint32_t channels)
+    : samples_(0), coefficients_(coefficients), channels_(channels) {
+  CheckChannelCount(channels, "SparseTransport");
   if (row_offsets.empty() || row_offsets.front() != 0 || row_offsets.back() != indices.size() ||
       indices.size() != values.size()) {
     throw std::invalid_argument("SparseTransport: inconsistent CSR offsets/indices/values");
   }
-  for (std::size_t s = 0; s < samples_; ++s) {
+  const std::size_t rows = row_offsets.size() - 1;
+  if (rows % channels != 0) {
+    throw std::invalid_argument("SparseTransport: " + std::to_string(rows) +
+                                " rows are not a multiple of " + std::to_string(channels) +
+                                " channels");
+  }
+  samples_ = rows / channels;
+  for (std::size_t s = 0; s < rows; ++s) {
     if (row_offsets[s + 1] < row_offsets[s]) {
       throw std::invalid_argument("SparseTransport: row offsets decrease at sample " +
                                   std::to_string(s));
@@ -164,16 +198,18 @@ SparseTransport::SparseTransport(std::span<const uint64_t> row_offsets,
   }
   const std::size_t nb = BlockCount(samples_, kBlockSamples);
   const std::size_t stride = coefficients + 1;
-  column_start_.assign(nb * stride, 0);
+  column_start_.assign(channels * nb * stride, 0);
   local_sample_.resize(values.size());
   values_.resize(values.size());
   // Counting sort of each block's non-zeros by column; blocks occupy the same value range as in
-  // the CSR input (rows of a block are contiguous there), so blocks fill independently.
-  tbb::parallel_for(std::size_t{0}, nb, [&](std::size_t b) {
-    const std::size_t s0 = b * kBlockSamples;
-    const std::size_t s1 = std::min(samples_, s0 + kBlockSamples);
+  // the CSR input (rows of a block are contiguous there), so blocks fill independently. Block
+  // (c, b) holds rows c·samples + [b·kBlockSamples, …).
+  tbb::parallel_for(std::size_t{0}, channels * nb, [&](std::size_t cb) {
+    const std::size_t row0 = (cb / nb) * samples_;
+    const std::size_t s0 = row0 + (cb % nb) * kBlockSamples;
+    const std::size_t s1 = std::min(row0 + samples_, s0 + kBlockSamples);
     const uint64_t first = row_offsets[s0];
-    uint64_t* start = column_start_.data() + b * stride;
+    uint64_t* start = column_start_.data() + cb * stride;
     for (std::size_t s = s0; s < s1; ++s) {
       for (uint64_t k = row_offsets[s]; k < row_offsets[s + 1]; ++k) ++start[indices[k] + 1];
     }
@@ -195,6 +231,23 @@ void SparseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadi
   if (terms.empty() || samples_ == 0) return;
   const std::size_t nb = BlockCount(samples_, kBlockSamples);
   const std::size_t stride = coefficients_ + 1;
+  if (channels_ != 1) {
+    // Block (c, b) adds lighting channel c to radiance channel c only; blocks of one b in
+    // different channels write different arrays, so they run in parallel too.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, channels_ * nb), [&](const auto& range) {
+      for (std::size_t cb = range.begin(); cb != range.end(); ++cb) {
+        const std::size_t c = cb / nb;
+        double* __restrict o = out.channel[c].data() + (cb % nb) * kBlockSamples;
+        const uint64_t* start = column_start_.data() + cb * stride;
+        for (const LightingTerm& t : terms) {
+          const double v = t.value[c];
+          for (uint64_t k = start[t.index]; k < start[t.index + 1]; ++k)
+            o[local_sample_[k]] += static_cast<double>(values_[k]) * v;
+        }
+      }
+    });
+    return;
+  }
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb), [&](const auto& range) {
     for (std::size_t b = range.begin(); b != range.end(); ++b) {
       const std::size_t s0 = b * kBlockSamples;

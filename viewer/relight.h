@@ -43,14 +43,18 @@ struct SampleRadiance {
   SampleRadiance& operator+=(const SampleRadiance& other);
 };
 
-// A light transport operator: sample_count() rows, coefficient_count() Haar columns.
+// A light transport operator: sample_count() spatial samples, coefficient_count() Haar columns.
+// T has one row per sample (one colour channel: the same row for r, g and b) or, with 3 colour
+// channels, one row per sample and channel (channel-major: row c·samples + s is channel c of
+// sample s); either way its radiance is per sample, channel c lit by lighting channel c.
 class TransportOperator {
  public:
   virtual ~TransportOperator() = default;
   virtual std::size_t sample_count() const = 0;
   virtual std::size_t coefficient_count() const = 0;
 
-  // out.channel[c][s] += Σ_k T[s][terms[k].index] · terms[k].value[c] for every sample s.
+  // out.channel[c][s] += Σ_k T_c[s][terms[k].index] · terms[k].value[c] for every sample s,
+  // T_c[s] the row of sample s (one channel) or of its colour channel c (three channels).
   // out must have sample_count() samples; every index must be < coefficient_count() (throws
   // std::out_of_range otherwise). Repeated indices are allowed (their values add).
   virtual void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const = 0;
@@ -70,18 +74,23 @@ class DenseTransport final : public TransportOperator {
  public:
   static constexpr std::size_t kBlockSamples = 256;
 
-  // rows: samples × coefficients floats, row-major (one Haar-transformed row per sample).
-  // Throws std::invalid_argument on a size mismatch or a NaN/Inf entry.
-  DenseTransport(std::span<const float> rows, std::size_t samples, std::size_t coefficients);
+  // rows: channels × samples × coefficients floats, row-major (one Haar-transformed row per
+  // sample, or with channels = 3 per sample and colour channel, row c·samples + s).
+  // Throws std::invalid_argument on a size mismatch, channels other than 1 or 3, or a NaN/Inf.
+  DenseTransport(std::span<const float> rows, std::size_t samples, std::size_t coefficients,
+                 uint32_t channels = 1);
 
   std::size_t sample_count() const override { return samples_; }
   std::size_t coefficient_count() const override { return coefficients_; }
+  uint32_t channels() const { return channels_; }
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
 
  private:
   std::size_t samples_;
   std::size_t coefficients_;
-  std::vector<float> blocks_;  // [block][coefficient][sample in block], zero-padded
+  uint32_t channels_;
+  // [channel][block][coefficient][sample in block], zero-padded
+  std::vector<float> blocks_;
 };
 
 // Sparse rows (CSR: row_offsets has samples + 1 entries, indices/values hold the non-zeros of each
@@ -91,19 +100,24 @@ class SparseTransport final : public TransportOperator {
  public:
   static constexpr std::size_t kBlockSamples = 1024;
 
-  // Throws std::invalid_argument on inconsistent offsets, an index ≥ coefficients, or NaN/Inf.
+  // With channels = 3 the rows are channel-major (row c·samples + s), row_offsets has
+  // 3·samples + 1 entries. Throws std::invalid_argument on inconsistent offsets, a row count
+  // that is not a multiple of channels (1 or 3), an index ≥ coefficients, or NaN/Inf.
   SparseTransport(std::span<const uint64_t> row_offsets, std::span<const uint32_t> indices,
-                  std::span<const float> values, std::size_t coefficients);
+                  std::span<const float> values, std::size_t coefficients, uint32_t channels = 1);
 
   std::size_t sample_count() const override { return samples_; }
   std::size_t coefficient_count() const override { return coefficients_; }
   std::size_t nonzero_count() const { return values_.size(); }
+  uint32_t channels() const { return channels_; }
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
 
  private:
   std::size_t samples_;
   std::size_t coefficients_;
-  std::vector<uint64_t> column_start_;  // [block · (coefficients + 1) + column]
+  uint32_t channels_;
+  // [(channel · blocks + block) · (coefficients + 1) + column]
+  std::vector<uint64_t> column_start_;
   std::vector<uint16_t> local_sample_;  // sample within its block
   std::vector<float> values_;
 };
@@ -117,6 +131,8 @@ class SparseTransport final : public TransportOperator {
 // whose value is outside the float range, or a relight that overflows the relighter's float
 // accumulation, throws NumericalError naming the relighter's name() (the pack); after that
 // exception `out` may hold non-finite values and must be discarded.
+// A 3-channel compressed transport relights channel c of each sample from its channel-c row
+// (sample_count() is the relighter's V, not its rows).
 // Its outputs are in the relighter's sample order `order` (viewer/compressed_relight.h):
 // kSamples, the pack's order, or kCoefficients, the depth-0 coefficient layout, which spares the
 // frame the gather through the Hilbert permutation (ViewerSession renders in that order).
@@ -136,7 +152,9 @@ class CompressedTransportOperator final : public TransportOperator {
   SampleOrder order_;
 };
 
-// Final colours: albedo ⊙ radiance, interleaved RGB float per sample. albedo may be empty (white),
+// Final colours: albedo ⊙ radiance, interleaved RGB float per sample (T is albedo-free at the
+// receiving sample for any number of channels: a 3-channel T carries the albedos of the surfaces
+// the light bounced off, not of the sample it reaches). albedo may be empty (white),
 // hold one colour (uniform) or one per sample (else std::invalid_argument). A colour that is not
 // a finite float (radiance NaN/Inf, or a finite double beyond 3.4e38: finite T and L whose product
 // overflows float) throws NumericalError naming `source` (the pack) and the sample, as

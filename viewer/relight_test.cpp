@@ -107,6 +107,41 @@ TEST(RelightTest, DenseAndSparseMatchBruteForceWithPartialBlocks) {
   }
 }
 
+// With 3 colour channels (rows channel-major: row c·samples + s), channel c of sample s is
+// Σ_k T[c·samples + s][k]·L_c[k]: the dense and sparse operators against brute force.
+TEST(RelightTest, ThreeChannelDenseAndSparseLightEachChannelFromItsRows) {
+  const std::size_t samples = 700, cols = 96;  // 700 = 2·256 + 188 = 1024 − 324
+  const auto m = RandomMatrix(3 * samples, cols, 0.3, 5);
+  const auto terms = RandomTerms(40, cols, 6);
+  SampleRadiance ref(samples);
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t s = 0; s < samples; ++s)
+      for (const auto& t : terms)
+        ref.channel[c][s] += double(m[(c * samples + s) * cols + t.index]) * t.value[c];
+  const DenseTransport dense(m, samples, cols, 3);
+  EXPECT_EQ(dense.sample_count(), samples);
+  EXPECT_EQ(dense.channels(), 3u);
+  ExpectNear(dense.Apply(terms), ref, 1e-12);
+  std::vector<uint64_t> off;
+  std::vector<uint32_t> idx;
+  std::vector<float> val;
+  ToCsr(m, 3 * samples, cols, off, idx, val);
+  const SparseTransport sparse(off, idx, val, cols, 3);
+  EXPECT_EQ(sparse.sample_count(), samples);
+  ExpectNear(sparse.Apply(terms), ref, 1e-12);
+  // Not the one-channel reading of the same rows.
+  const DenseTransport first(std::span<const float>(m).first(samples * cols), samples, cols);
+  EXPECT_GT(std::abs(first.Apply(terms).channel[2][5] - ref.channel[2][5]), 1e-6);
+  EXPECT_THROW(DenseTransport(m, samples, cols, 2), std::invalid_argument);
+  EXPECT_THROW(DenseTransport(m, samples + 1, cols, 3), std::invalid_argument);
+  std::vector<uint64_t> short_off(off.begin(), off.end() - 1);
+  short_off.back() = off[off.size() - 2];
+  std::vector<uint32_t> short_idx(idx.begin(), idx.begin() + std::ptrdiff_t(short_off.back()));
+  std::vector<float> short_val(val.begin(), val.begin() + std::ptrdiff_t(short_off.back()));
+  EXPECT_THROW(SparseTransport(short_off, short_idx, short_val, cols, 3), std::invalid_argument);
+  EXPECT_THROW(SparseTransport(off, idx, val, cols, 0), std::invalid_argument);
+}
+
 TEST(RelightTest, RejectsBadInput) {
   const auto m = RandomMatrix(4, 6, 1.0, 3);
   const DenseTransport dense(m, 4, 6);
@@ -300,6 +335,54 @@ TEST(RelightTest, CompressedOperatorMatchesItsDecompressedMatrix) {
   for (const auto& ch : assigned.channel)
     for (double v : ch) EXPECT_EQ(v, 0.0);
   // In the coefficient order, sample s sits at coefficient_of_sample()[s].
+  const CompressedTransportOperator lay(relighter, SampleOrder::kCoefficients);
+  const SampleRadiance l = lay.Apply(terms);
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t v = 0; v < 19; ++v)
+      EXPECT_EQ(l.channel[c][relighter.coefficient_of_sample()[v]], a.channel[c][v]);
+}
+
+// A 3-channel compressed transport (57 rows: 3 channels × 19 samples) through the operator: 19
+// samples, channel c lit from rows 19c … 19c + 18, like the 3-channel dense matrix it
+// decompresses to, in both sample orders.
+TEST(RelightTest, ThreeChannelCompressedOperatorMatchesItsDecompressedMatrix) {
+  CompressedTransport t = NineteenSampleTransport();
+  t.header.domain = PerChannelDomain(t.header.domain, 3);
+  t.header.sample_count = 57;
+  t.header.channels = 3;
+  std::mt19937 rng(10);
+  std::uniform_int_distribution<int> q(-255, 255), depth(0, 5);
+  std::bernoulli_distribution keep(0.4);
+  for (uint32_t col = 0; col < 24; ++col) {
+    if (col % 5 == 4) continue;
+    CompressedColumn c;
+    c.column = col;
+    c.depth = static_cast<uint8_t>(depth(rng));
+    c.scale = 0.5f + 0.1f * static_cast<float>(col);
+    for (uint32_t i = 0; i < 57; ++i) {
+      const int v = q(rng);
+      if (v != 0 && keep(rng)) {
+        c.index.push_back(i);
+        c.q.push_back(v);
+      }
+    }
+    if (!c.index.empty()) t.columns.push_back(c);
+  }
+  const CompressedRelighter relighter(t);
+  const CompressedTransportOperator op(relighter);
+  ASSERT_EQ(op.sample_count(), 19u);
+  const DenseTransport dense(DecompressToRowWaveletBasis(t), 19, 24, 3);
+  const auto terms = RandomTerms(12, 24, 7);
+  const SampleRadiance a = op.Apply(terms), b = dense.Apply(terms);
+  double scale = 0.0;
+  for (int c = 0; c < 3; ++c)
+    for (double v : b.channel[c]) scale = std::max(scale, std::abs(v));
+  ASSERT_GT(scale, 0.0);
+  ExpectNear(a, b, 1e-5 * scale);
+  SampleRadiance assigned(19);
+  for (auto& ch : assigned.channel) std::fill(ch.begin(), ch.end(), 1e30);
+  op.Assign(terms, assigned);
+  ExpectNear(assigned, b, 1e-5 * scale);
   const CompressedTransportOperator lay(relighter, SampleOrder::kCoefficients);
   const SampleRadiance l = lay.Apply(terms);
   for (int c = 0; c < 3; ++c)

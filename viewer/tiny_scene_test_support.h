@@ -51,13 +51,23 @@ inline CompressionOptions KeepAllCompression(int bits = 16) {
   return o;
 }
 
-// Compresses `rows` (the scene's samples × 6n² texels) with `o` and packs them with the scene's
-// meshes and a camera into `path`.
+// Compresses `rows` (the scene's samples × 6n² texels; with channels = 3, 3 × samples rows,
+// channel-major: row c·samples + s is colour channel c of sample s) with `o` and packs them with
+// the scene's meshes and a camera into `path`.
 inline std::string PackTinyRows(const TinyScene& t, const std::vector<float>& rows,
                                 const std::string& path,
-                                const CompressionOptions& o = KeepAllCompression()) {
+                                const CompressionOptions& o = KeepAllCompression(),
+                                uint32_t channels = 1) {
   const CompressedTransport ct =
-      CompressTransport(rows.data(), t.n, SpatialDomainOf(t.geometry), o);
+      channels == 1 ? CompressTransport(rows.data(), t.n, SpatialDomainOf(t.geometry), o)
+                    : CompressTransport(
+                          rows.data(),
+                          MakeCompressedHeader(
+                              o, t.n,
+                              SpatialDomainOf(t.geometry, CompressionSettings{}.order_normal_weight,
+                                              channels),
+                              channels),
+                          o);
   pack::PackInput in;
   in.metadata_json =
       R"({"scene": {"scene": {"name": "tiny"}, "camera": {"eye": [2.0, 2.0, 3.0],

@@ -69,9 +69,12 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
   }
   s->compressed_ = std::make_unique<CompressedTransport>(pack::ReadCompressedTransport(reader));
   const CompressedTransportHeader& h = s->compressed_->header;
-  if (h.sample_count != s->albedo_.size())
-    throw InputError(pack_path, "the transport has " + std::to_string(h.sample_count) +
-                                    " rows but the meshes have " +
+  // channels × V rows, channel-major (formats/compressed_transport.h).
+  if (static_cast<uint64_t>(h.sample_count) != uint64_t{h.channels} * s->albedo_.size())
+    throw InputError(pack_path, "the transport has " + std::to_string(h.sample_count) + " rows (" +
+                                    std::to_string(h.channels) + " colour channel(s) × " +
+                                    std::to_string(h.spatial_count()) +
+                                    " samples) but the meshes have " +
                                     std::to_string(s->albedo_.size()) + " vertices");
   if (h.row_wavelet != RowWavelet::kHaar)
     throw InputError(pack_path, std::string("the transport's row wavelet is ") +

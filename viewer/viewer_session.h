@@ -55,8 +55,10 @@ class ViewerSession {
  public:
   // Reads meshes, materials, metadata and the whole compressed transport. Throws
   // prt::InputError naming the file on: an unreadable or corrupt pack (PackReader's errors), no
-  // transport, a transport whose row count differs from the meshes' vertex count, a row wavelet
-  // other than Haar (the lighting basis of viewer/lighting.h).
+  // transport, a transport whose row count differs from its channel count (1 or 3) times the
+  // meshes' vertex count, a row wavelet other than Haar (the lighting basis of
+  // viewer/lighting.h). A 3-channel transport relights colour channel c of vertex v from row
+  // c·V + v with lighting channel c; everything per sample stays per vertex (V samples).
   static std::unique_ptr<ViewerSession> Open(const std::string& pack_path);
   // The same from a pack the caller already opened (`pack_path` names it in errors).
   static std::unique_ptr<ViewerSession> FromReader(const pack::PackReader& reader,

@@ -240,6 +240,101 @@ TEST(ViewerSessionTest, ExactRelightMatchesTracedTransport) {
   EXPECT_EQ(back, pack_triangles);
 }
 
+// Interreflection with coloured albedos (issue #22): a transport of 3 rows per vertex,
+// channel-major (row c·V + v is colour channel c of vertex v). Here T_r is the traced T, T_g half
+// of it on the box and zero on the ground, T_b the traced T with the texels of faces 2–5 doubled:
+// each channel must be lit from its own rows by its own lighting channel,
+// B_c(v) = Σ_j T_c[v][j]·L_c[j], to within the compression error, through every path the viewer
+// has (RelightExact, the TransportOperator's terms, NWA, BI/PBI, shading and rendering).
+TEST(ViewerSessionTest, ThreeChannelPackRelightsEachChannelFromItsRows) {
+  const TinyScene& tiny = Tiny();
+  const std::size_t V = tiny.rows.size() / (6u * 64u), texels = 6u * 64u;
+  const std::size_t box = tiny.geometry.meshes[0].mesh.positions.size();
+  ASSERT_FALSE(tiny.geometry.meshes[0].is_ground);
+  std::vector<float> rows(3 * V * texels);
+  for (std::size_t v = 0; v < V; ++v)
+    for (std::size_t j = 0; j < texels; ++j) {
+      const float t = tiny.rows[v * texels + j];
+      rows[(0 * V + v) * texels + j] = t;
+      rows[(1 * V + v) * texels + j] = v < box ? 0.5f * t : 0.0f;
+      rows[(2 * V + v) * texels + j] = j >= 2 * 64 ? 2.0f * t : t;
+    }
+  const std::string pack = testing::PackTinyRows(
+      tiny, rows, (WorkDir() / "tiny_rgb.prtpack").string(), testing::KeepAllCompression(), 3);
+  const auto s = ViewerSession::Open(pack);
+  EXPECT_EQ(s->transport_header().channels, 3u);
+  EXPECT_EQ(s->transport_header().sample_count, 3 * V);
+  ASSERT_EQ(s->sample_count(), V);
+  ASSERT_EQ(s->transport().sample_count(), V);
+  const CubemapRgb cube = ResampleToCubemap(SunSky(0.3f, 40.f), tiny.n);
+  const WaveletLighting l = ProjectLighting(cube);
+  std::vector<float> ref(3 * V), ref_one(3 * V);  // pack order, interleaved RGB
+  for (std::size_t v = 0; v < V; ++v)
+    for (int c = 0; c < 3; ++c) {
+      double sum = 0, one = 0;
+      for (std::size_t j = 0; j < texels; ++j) {
+        sum += double(rows[(c * V + v) * texels + j]) * cube.Channel(c)[j];
+        one += double(tiny.rows[v * texels + j]) * cube.Channel(c)[j];
+      }
+      ref[3 * v + c] = static_cast<float>(sum);
+      ref_one[3 * v + c] = static_cast<float>(one);
+    }
+  const auto interleave = [&](const SampleRadiance& r) {
+    std::vector<float> out(3 * V);
+    for (std::size_t p = 0; p < V; ++p)
+      for (int c = 0; c < 3; ++c) out[3 * p + c] = static_cast<float>(r.channel[c][p]);
+    return out;
+  };
+  const std::vector<float> exact = interleave(s->RelightExact(l));
+  const std::vector<float> exact_pack = s->ToPackOrder(exact);
+  EXPECT_LT(RelativeRmsError(exact_pack, ref), 2e-3);
+  EXPECT_GT(RelativeRmsError(exact_pack, ref), 0.0);      // through compression
+  EXPECT_GT(RelativeRmsError(exact_pack, ref_one), 0.1);  // not the one-channel radiance
+  // Each channel on its own, where its rows differ from the others'.
+  for (int c = 0; c < 3; ++c) {
+    std::vector<float> got, want;
+    for (std::size_t v = 0; v < V; ++v) {
+      got.push_back(exact_pack[3 * v + c]);
+      want.push_back(ref[3 * v + c]);
+    }
+    EXPECT_LT(RelativeRmsError(got, want), 2e-3) << "channel " << c;
+  }
+  for (std::size_t v = box; v < V; ++v) EXPECT_NEAR(exact_pack[3 * v + 1], 0.0f, 1e-4f) << v;
+  // The operator (sparse terms, incremental relighters) agrees with the dense relight.
+  EXPECT_LT(RelativeRmsError(interleave(s->transport().Apply(ExactLightingTerms(l))), exact), 1e-5);
+  EXPECT_LT(
+      RelativeRmsError(
+          interleave(RelightApproximate(s->transport(), l, LightingMode::kNwa, 6 * 64)), exact),
+      1e-5);
+  EXPECT_LT(
+      RelativeRmsError(
+          interleave(RelightApproximate(s->transport(), l, LightingMode::kPbi, 6 * 64)), exact),
+      1e-5);
+  // Shading multiplies the receiving vertex's albedo, and the image renders.
+  const std::vector<float> rgb = s->Shade(s->RelightExact(l));
+  for (std::size_t p = 0; p < V; ++p)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_FLOAT_EQ(rgb[3 * p + c], static_cast<float>(s->albedo()[p][c] * exact[3 * p + c]));
+  const ImageRgb image = s->Render(s->camera(), rgb, static_cast<const CubemapRgb*>(nullptr));
+  EXPECT_GT(std::count_if(image.pixels.begin(), image.pixels.end(), [](float x) { return x > 0; }),
+            0);
+  // A 3-channel pack whose channels are all T relights like the one-channel pack of T (both
+  // within their compression error of the same radiance).
+  std::vector<float> same(3 * V * texels);
+  for (std::size_t c = 0; c < 3; ++c)
+    std::copy(tiny.rows.begin(), tiny.rows.end(),
+              same.begin() + static_cast<std::ptrdiff_t>(c * V * texels));
+  const auto s3 = ViewerSession::Open(
+      testing::PackTinyRows(tiny, same, (WorkDir() / "tiny_rgb_same.prtpack").string(),
+                            testing::KeepAllCompression(), 3));
+  const auto s1 = ViewerSession::Open(tiny.pack);
+  const std::vector<float> b3 = s3->ToPackOrder(interleave(s3->RelightExact(l)));
+  const std::vector<float> b1 = s1->ToPackOrder(interleave(s1->RelightExact(l)));
+  EXPECT_LT(RelativeRmsError(b3, ref_one), 2e-3);
+  EXPECT_LT(RelativeRmsError(b1, ref_one), 2e-3);
+  EXPECT_LT(RelativeRmsError(b3, b1), 2e-3);
+}
+
 // NWA with every non-zero coefficient is exact; fewer terms are not. BI/PBI from zero with N
 // terms equal NWA's first frame up to the ranking they share (area-weighted |L|).
 TEST(ViewerSessionTest, ApproximationsConvergeToExact) {

@@ -117,7 +117,8 @@ SpatialSegment GridSegment(uint32_t width, uint32_t height) {
   return s;
 }
 
-SpatialDomain SpatialDomainOf(const SceneGeometry& geometry, double order_normal_weight) {
+SpatialDomain SpatialDomainOf(const SceneGeometry& geometry, double order_normal_weight,
+                              uint32_t channels) {
   SpatialDomain d;
   for (const SceneMesh& m : geometry.meshes) {
     const uint32_t r = static_cast<uint32_t>(m.grid_resolution);
@@ -130,7 +131,7 @@ SpatialDomain SpatialDomainOf(const SceneGeometry& geometry, double order_normal
           MeshSegment(m.mesh.positions, m.mesh.normals, normals ? order_normal_weight : 0.0));
     }
   }
-  return d;
+  return PerChannelDomain(d, channels);
 }
 
 SpatialDomain ImageDomain(uint32_t width, uint32_t height) {

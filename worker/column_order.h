@@ -42,10 +42,14 @@ SpatialSegment GridSegment(uint32_t width, uint32_t height);  // 2D, row-major x
 // The domain of a scene's vertices in global sample order (scene.h): every mesh a Hilbert-ordered
 // 1D segment (HilbertOrder with the normals and `order_normal_weight`, the scene's
 // [compression] order_normal_weight; by position alone for a mesh without one normal per
-// vertex), the ground plane a res×res grid segment.
+// vertex), the ground plane a res×res grid segment. With `channels` = 3 (a transport with one row
+// per spatial sample and colour channel, channel-major: row c·V + v) the domain of its 3·V rows:
+// those segments three times, channel c's at offset c·V (PerChannelDomain), so that no column
+// transform mixes channels; 1 gives the V spatial samples' domain. Throws InputError unless
+// channels is 1 or 3.
 SpatialDomain SpatialDomainOf(
     const SceneGeometry& geometry,
-    double order_normal_weight = CompressionSettings{}.order_normal_weight);
+    double order_normal_weight = CompressionSettings{}.order_normal_weight, uint32_t channels = 1);
 // Image relighting: one width×height grid.
 SpatialDomain ImageDomain(uint32_t width, uint32_t height);
 

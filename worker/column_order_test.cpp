@@ -7,6 +7,8 @@
 #include <numeric>
 #include <random>
 
+#include "vocabulary/errors.h"
+
 namespace prt {
 namespace {
 
@@ -118,6 +120,32 @@ TEST(SpatialDomainOf, MeshesAreHilbertSegmentsAndTheGroundIsAGrid) {
   EXPECT_EQ(d.segments[1].width, 4u);
   EXPECT_EQ(d.sample_count(), 26u);
   EXPECT_EQ(ImageDomain(7, 3).segments[0].count, 21u);
+}
+
+// With 3 colour channels the domain of the 3·V channel-major rows: the spatial segments three
+// times, so that every segment lies inside one channel.
+TEST(SpatialDomainOf, ThreeChannelsRepeatTheSpatialSegments) {
+  SceneGeometry g;
+  SceneMesh m;
+  for (int i = 0; i < 10; ++i)
+    m.mesh.positions.push_back({std::cos(i * 0.6), std::sin(i * 0.6), 0.1 * i});
+  g.meshes.push_back(m);
+  SceneMesh ground;
+  ground.is_ground = true;
+  ground.grid_resolution = 4;
+  ground.mesh.positions.resize(16);
+  g.meshes.push_back(ground);
+  const SpatialDomain one = SpatialDomainOf(g);
+  const SpatialDomain three = SpatialDomainOf(g, 2.0, 3);
+  ASSERT_EQ(three.segments.size(), 6u);
+  EXPECT_EQ(three.sample_count(), 78u);
+  for (std::size_t i = 0; i < 6; ++i) {
+    EXPECT_EQ(three.segments[i].kind, one.segments[i % 2].kind);
+    EXPECT_EQ(three.segments[i].count, one.segments[i % 2].count);
+    EXPECT_EQ(three.segments[i].order, one.segments[i % 2].order);
+  }
+  EXPECT_EQ(SpatialDomainOf(g, 2.0, 1).segments.size(), 2u);
+  EXPECT_THROW(SpatialDomainOf(g, 2.0, 2), InputError);
 }
 
 TEST(SpatialDomainOf, MeshOrderUsesTheNormalsWithTheGivenWeight) {

@@ -48,10 +48,11 @@ uint32_t RowTermBudget(const CompressionOptions& o, std::size_t column_count) {
 }
 
 CompressedTransportHeader MakeCompressedHeader(const CompressionOptions& o, int cubemap_n,
-                                               const SpatialDomain& domain) {
+                                               const SpatialDomain& domain, uint32_t channels) {
   CompressedTransportHeader h;
   h.cubemap_n = static_cast<uint32_t>(cubemap_n);
   h.sample_count = static_cast<uint32_t>(domain.sample_count());
+  h.channels = channels;
   h.row_wavelet = o.row_wavelet;
   h.column_wavelet = o.column_wavelet;
   h.scheme = o.scheme;
@@ -294,8 +295,15 @@ uint64_t GlobalTermBudget(const CompressedTransportHeader& h) {
 CompressedTransport CompressTransport(const float* T, int cubemap_n, const SpatialDomain& domain,
                                       const CompressionOptions& o,
                                       std::vector<ColumnStats>* stats) {
+  return CompressTransport(T, MakeCompressedHeader(o, cubemap_n, domain), o, stats);
+}
+
+CompressedTransport CompressTransport(const float* T, const CompressedTransportHeader& h,
+                                      const CompressionOptions& o,
+                                      std::vector<ColumnStats>* stats) {
+  ValidateHeader(h, "CompressTransport");
   CompressedTransport out;
-  out.header = MakeCompressedHeader(o, cubemap_n, domain);
+  out.header = h;
   const std::size_t S = out.header.sample_count, M = out.header.column_count();
   std::vector<float> rows(T, T + S * M);
   PrepareRows(out.header, o, rows.data(), S);

@@ -42,9 +42,12 @@ struct CompressionOptions {
 // From the scene file's [compression] table; throws InputError(file, ...) on bad names/values.
 CompressionOptions CompressionOptionsFrom(const CompressionSettings& s, const std::string& file);
 
-// Header for T with `sample_count` rows over `domain` and cubemap size n (validated).
+// Header for T with domain.sample_count() rows over `domain` and cubemap size n (validated).
+// `channels` (1 or 3): colour channels of T, whose rows are then channel-major (row c·V + v) and
+// whose domain must be `channels` copies of the spatial one (SpatialDomainOf(…, channels),
+// PerChannelDomain); throws InputError otherwise.
 CompressedTransportHeader MakeCompressedHeader(const CompressionOptions& o, int cubemap_n,
-                                               const SpatialDomain& domain);
+                                               const SpatialDomain& domain, uint32_t channels = 1);
 // Per-column and per-row budgets in terms.
 uint32_t ColumnTermBudget(const CompressionOptions& o, std::size_t sample_count);
 uint32_t RowTermBudget(const CompressionOptions& o, std::size_t column_count);
@@ -115,6 +118,11 @@ uint64_t GlobalTermBudget(const CompressedTransportHeader& h);
 
 // The whole pipeline in memory: T is samples × 6n², row-major, in the cubemap texel basis.
 CompressedTransport CompressTransport(const float* T, int cubemap_n, const SpatialDomain& domain,
+                                      const CompressionOptions& o,
+                                      std::vector<ColumnStats>* stats = nullptr);
+// The same for the header `h` (MakeCompressedHeader with `o`; e.g. a 3-channel T:
+// h.sample_count = 3·V rows, channel-major).
+CompressedTransport CompressTransport(const float* T, const CompressedTransportHeader& h,
                                       const CompressionOptions& o,
                                       std::vector<ColumnStats>* stats = nullptr);
 

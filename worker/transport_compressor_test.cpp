@@ -143,6 +143,47 @@ TEST(TransportCompressor, NoTruncationAt16BitsReproducesTToQuantisationError) {
   }
 }
 
+// A 3-channel T (rows channel-major, row c·V + v; issue #22) over PerChannelDomain: at 16 bits
+// with no truncation it comes back to quantisation error, and no column transform mixes two
+// channels: with channels 1 and 2 zero, their rows decode to exactly zero (a transform across
+// the channel boundary would spread channel 0's energy into them).
+TEST(TransportCompressor, ThreeChannelTransportKeepsItsChannelsApart) {
+  const Synthetic syn = MakeSynthetic(4, 9, 8, 6);
+  const std::size_t V = syn.domain.sample_count(), M = 6 * 16;
+  const SpatialDomain domain = PerChannelDomain(syn.domain, 3);
+  ASSERT_EQ(domain.sample_count(), 3 * V);
+  for (CompressionScheme scheme : {CompressionScheme::k2D, CompressionScheme::kAdaptive4D}) {
+    CompressionOptions o;
+    o.scheme = scheme;
+    o.bits = 16;
+    o.keep_fraction = 1.0;
+    const CompressedTransportHeader h = MakeCompressedHeader(o, 4, domain, 3);
+    EXPECT_EQ(h.channels, 3u);
+    EXPECT_EQ(h.sample_count, 3 * V);
+    // Channel c: T scaled by (1, 0.6, 0.3) plus a channel-dependent ripple.
+    std::vector<float> T(3 * V * M);
+    for (std::size_t c = 0; c < 3; ++c)
+      for (std::size_t v = 0; v < V; ++v)
+        for (std::size_t j = 0; j < M; ++j)
+          T[(c * V + v) * M + j] = static_cast<float>(
+              (1.0 - 0.35 * static_cast<double>(c)) * syn.T[v * M + j] +
+              0.01 * static_cast<double>(c) * std::sin(0.3 * static_cast<double>(v + 7 * j)));
+    const CompressedTransport ct = CompressTransport(T.data(), h, o);
+    EXPECT_EQ(ct.header.channels, 3u);
+    EXPECT_LT(RelFrobenius(DecompressTransport(ct), T), 2e-4) << ToString(scheme);
+    std::vector<float> only_red(T.size(), 0.0f);
+    std::copy(T.begin(), T.begin() + static_cast<std::ptrdiff_t>(V * M), only_red.begin());
+    const std::vector<float> back = DecompressTransport(CompressTransport(only_red.data(), h, o));
+    EXPECT_LT(RelFrobenius(back, only_red), 2e-4) << ToString(scheme);
+    EXPECT_TRUE(std::all_of(back.begin() + static_cast<std::ptrdiff_t>(V * M), back.end(),
+                            [](float x) { return x == 0.0f; }))
+        << ToString(scheme) << ": channel 0's energy reached channels 1 and 2";
+  }
+  CompressionOptions o;
+  EXPECT_THROW(MakeCompressedHeader(o, 4, syn.domain, 3), InputError);  // V rows, 3 channels
+  EXPECT_THROW(MakeCompressedHeader(o, 4, domain, 2), InputError);
+}
+
 // Eq. 8 relighting from the compressed columns equals the dense decompressed T times L.
 TEST(TransportCompressor, Equation8RelightingEqualsDenseDecompressedProduct) {
   const Synthetic syn = MakeSynthetic(8, 12, 16, 10);
