@@ -81,6 +81,9 @@ int main(int argc, char** argv) {
   app.add_option("--ref-vertices", ref_vertices, "reference vertices per group (model, ground)")
       ->capture_default_str();
   app.add_option("--ground-albedo", ground_albedo, "r,g,b: a coloured ground (colour bleeding)");
+  int ground_resolution = 0;
+  app.add_option("--ground-resolution", ground_resolution,
+                 "ground grid vertices per side (0: the scene's)");
   app.add_option("--threads", threads, "TBB threads (0: all)");
   app.add_option("--out", out_dir, "output folder (results.json, images)")->capture_default_str();
   app.add_flag("--images", images, "write images and the per-bounce energy plot");
@@ -98,6 +101,7 @@ int main(int argc, char** argv) {
         throw std::invalid_argument("--ground-albedo wants r,g,b");
       scene.ground.albedo = {r, g, b};
     }
+    if (ground_resolution > 0) scene.ground.resolution = ground_resolution;
     const SceneGeometry geometry = BuildSceneGeometry(scene);
     const std::vector<SpatialSample> samples = SpatialSamplesOf(geometry);
     const uint64_t V = samples.size();
@@ -225,15 +229,16 @@ int main(int argc, char** argv) {
     std::printf(" (%.2fx of the direct for K = %d); reference %.3f s per vertex\n",
                 std::accumulate(bounce_s.begin(), bounce_s.end(), 0.0) / direct_s, bounces,
                 reference_s / double(picked.size()));
-    std::printf("\n%-2s %-9s %-7s %10s %10s %10s %10s %9s\n", "K", "light", "group", "gather",
-                "ref noise", "direct-only", "indirect", "err/noise");
+    std::printf("\n%-2s %-9s %-7s %10s %10s %10s %10s %9s %9s\n", "K", "light", "group", "gather",
+                "ref noise", "direct-only", "indirect", "err/noise", "bias");
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
     for (int K = 1; K <= bounces; ++K) {
       for (std::size_t l = 0; l < NL; ++l) {
         for (int g = 0; g < 2; ++g) {
           const std::size_t first = g == 0 ? 0 : model.size();
           const std::size_t last = g == 0 ? model.size() : picked.size();
-          double diff2 = 0, ref2 = 0, noise2 = 0, direct2 = 0, ind = 0, tot = 0;
+          double diff2 = 0, ref2 = 0, noise2 = 0, direct2 = 0, ind = 0, tot = 0, signed_diff = 0,
+                 ref_sum = 0;
           for (std::size_t i = first; i < last; ++i) {
             const uint64_t v = picked[i];
             const Rgb& rho = geometry.meshes[geometry.MeshOfVertex(v)].albedo;
@@ -248,6 +253,8 @@ int main(int argc, char** argv) {
               for (int k = 1; k <= K; ++k) indirect += bounce_relit(k, l, v, c);
               gathered += indirect;
               diff2 += rho[c] * rho[c] * (gathered - ref) * (gathered - ref);
+              signed_diff += rho[c] * (gathered - ref);
+              ref_sum += rho[c] * ref;
               ref2 += rho[c] * rho[c] * ref * ref;
               noise2 += rho[c] * rho[c] * se2;
               direct2 += rho[c] * rho[c] * (r.bounce[0] - ref) * (r.bounce[0] - ref);
@@ -258,13 +265,15 @@ int main(int argc, char** argv) {
           const double err = std::sqrt(diff2 / ref2), noise = std::sqrt(noise2 / ref2),
                        direct_err = std::sqrt(direct2 / ref2);
           const char* group = g == 0 ? "model" : "ground";
-          std::printf("%-2d %-9s %-7s %9.2f%% %9.2f%% %10.2f%% %9.1f%% %9.2f\n", K,
+          const double bias = ref_sum > 0 ? signed_diff / ref_sum : 0.0;
+          std::printf("%-2d %-9s %-7s %9.2f%% %9.2f%% %10.2f%% %9.1f%% %9.2f %+8.2f%%\n", K,
                       lights[l].name.c_str(), group, 100 * err, 100 * noise, 100 * direct_err,
-                      tot > 0 ? 100 * ind / tot : 0.0, noise > 0 ? err / noise : 0.0);
+                      tot > 0 ? 100 * ind / tot : 0.0, noise > 0 ? err / noise : 0.0, 100 * bias);
           rows.push_back({{"bounces", K},
                           {"light", lights[l].name},
                           {"group", group},
                           {"gather_error", err},
+                          {"gather_bias", bias},
                           {"reference_noise", noise},
                           {"direct_only_error", direct_err},
                           {"indirect_share", tot > 0 ? ind / tot : 0.0}});

@@ -47,14 +47,16 @@ std::string CompressedHeaderKey(const CompressedTransportHeader& header) {
 }
 
 CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
-                                int cubemap_n, const FarmOptions& options) {
+                                int cubemap_n, const FarmOptions& options, int channels) {
   CompressionPlan plan;
   plan.options = CompressionOptionsFrom(scene.compression, scene.file);
   if (!options.compression_scheme.empty())
     plan.options.scheme =
         ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
-  const SpatialDomain domain = SpatialDomainOf(geometry, scene.compression.order_normal_weight);
-  plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain);
+  const auto c = static_cast<uint32_t>(channels);
+  const SpatialDomain domain =
+      SpatialDomainOf(geometry, scene.compression.order_normal_weight, c);
+  plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain, c);
   return plan;
 }
 
@@ -108,7 +110,7 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
   }
 
   if (!visibility) {
-    CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options);
+    CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options, s.channels);
     const CompressedTransportHeader& h = plan.header;
     m.SetStage(kStageCompression, {{"scheme", ToString(h.scheme)},
                                    {"row_wavelet", ToString(h.row_wavelet)},

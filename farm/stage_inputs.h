@@ -20,8 +20,9 @@ struct CompressionPlan {
   CompressionOptions options;
   CompressedTransportHeader header;
 };
+// channels: rows of T per sample (3 with bounces and coloured albedos, docs/interreflection.md).
 CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
-                                int cubemap_n, const FarmOptions& options);
+                                int cubemap_n, const FarmOptions& options, int channels = 1);
 
 // What setup resolved from the scene and the command line (the overrides applied).
 struct ResolvedSampling {
