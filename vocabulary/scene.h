@@ -89,7 +89,7 @@ struct SamplingSettings {
   // phase per bounce) or "path" (per-element Monte-Carlo path tracing, the reference).
   std::string estimator = "gather";
   int indirect_n = 0;      // cubemap n of the bounce rows (power of two ≤ n); 0: n/4, at least 1
-  int gather_paths = 256;  // directions per vertex and bounce (gather), paths per vertex (path)
+  int gather_paths = 1024;  // directions per vertex and bounce (gather), paths per vertex (path)
 };
 
 // Per-vertex binary (or anti-aliased) visibility cubemaps, Inger et al. 2013 §4.2

@@ -29,7 +29,7 @@
 namespace prt {
 
 struct BounceGatherOptions {
-  int paths = 256;  // cosine-distributed directions per vertex and bounce, in [1, 65536]
+  int paths = 1024;  // cosine-distributed directions per vertex and bounce, in [1, 65536]
   uint64_t seed = 1;
 };
 
