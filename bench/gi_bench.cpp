@@ -19,6 +19,7 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -65,9 +66,10 @@ std::vector<uint64_t> PickVertices(uint64_t first, uint64_t last, std::size_t s,
 
 int main(int argc, char** argv) {
   std::string scene_name = "default", out_dir = "gi-bench", ground_albedo;
-  int n = 32, bounces = 2, paths = 256, indirect_n = 0, ref_paths = 256, threads = 0;
+  int n = 32, bounces = 2, paths = 1024, indirect_n = 0, ref_paths = 256, threads = 0;
   std::size_t ref_vertices = 64;
-  bool images = false;
+  bool images = false, worst = false;
+  double near_field = 1.0, near_probability = 0.0625;
   CLI::App app("prt-gi-bench: bounce gathering against the path-traced reference");
   app.add_option("--scene", scene_name, "benchmark scene (bench_scene.h: default, dragon, …)");
   app.add_option("--n", n, "cubemap n")->capture_default_str();
@@ -87,6 +89,14 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "TBB threads (0: all)");
   app.add_option("--out", out_dir, "output folder (results.json, images)")->capture_default_str();
   app.add_flag("--images", images, "write images and the per-bounce energy plot");
+  app.add_option("--near-field", near_field,
+                 "bounce 1 traces T0 at hits closer than this × their triangle's longest edge "
+                 "(0: interpolate every hit)")
+      ->capture_default_str();
+  app.add_option("--near-probability", near_probability,
+                 "the share of near-field hits traced (weighted by its inverse)")
+      ->capture_default_str();
+  app.add_flag("--worst", worst, "list the 5 worst reference vertices per light and group");
   CLI11_PARSE(app, argc, argv);
   std::unique_ptr<tbb::global_control> limit;
   if (threads > 0)
@@ -130,8 +140,12 @@ int main(int argc, char** argv) {
     BounceGatherOptions go;
     go.paths = paths;
     go.seed = 1;
+    go.indirect_n = m;
+    go.near_field = near_field;
+    go.near_probability = near_probability;
     const BounceGatherer gatherer(embree, surfaces, go);
     std::vector<double> bounce_s;
+    std::atomic<uint64_t> near_hits{0}, traced{0};
     std::vector<std::vector<float>> bounce_rows;
     {
       std::vector<float> coarse_direct(V * mcols);
@@ -144,14 +158,21 @@ int main(int argc, char** argv) {
         t0 = Clock::now();
         tbb::parallel_for(uint64_t{0}, V, [&](uint64_t v) {
           thread_local std::vector<GatherTerm> terms;
-          thread_local std::vector<float> row;
+          thread_local std::vector<float> row, near;
           row.resize(C * mcols);
-          gatherer.Terms(samples[v], v, k, C, terms);
-          ApplyGather(terms, prev.data(), V, pc, C, mcols, row.data());
+          const GatherStats st = gatherer.GatherRow(samples[v], v, k, C, prev.data(), V, pc, mcols,
+                                                    row.data(), terms, near);
+          near_hits.fetch_add(st.near_hits, std::memory_order_relaxed);
+          traced.fetch_add(st.rays_traced, std::memory_order_relaxed);
           for (int c = 0; c < C; ++c)
             std::copy_n(row.data() + c * mcols, mcols, next.data() + (c * V + v) * mcols);
         });
         bounce_s.push_back(Seconds(t0));
+        std::printf("bounce %d: %.1f rays per vertex, %.2f%% of the directions in the near field\n",
+                    k, double(traced.load()) / double(V),
+                    100.0 * double(near_hits.load()) / (double(V) * paths));
+        near_hits = 0;
+        traced = 0;
         bounce_rows.push_back(std::move(next));
       }
     }
@@ -260,6 +281,31 @@ int main(int argc, char** argv) {
               direct2 += rho[c] * rho[c] * (r.bounce[0] - ref) * (r.bounce[0] - ref);
               ind += rho[c] * indirect;
               tot += rho[c] * gathered;
+            }
+          }
+          if (worst && K == bounces) {
+            std::vector<std::pair<double, std::size_t>> order;
+            for (std::size_t i = first; i < last; ++i) {
+              const RelitEstimate& r = relit[(i * NL + l) * 3];
+              double ref = r.bounce[0], gathered = direct_relit(l, picked[i], 0);
+              for (int k = 1; k <= K; ++k) {
+                ref += r.bounce[k];
+                gathered += bounce_relit(k, l, picked[i], 0);
+              }
+              order.push_back({std::abs(gathered - ref), i});
+            }
+            std::sort(order.rbegin(), order.rend());
+            for (std::size_t w = 0; w < 5 && w < order.size(); ++w) {
+              const std::size_t i = order[w].second;
+              const SpatialSample& s = samples[picked[i]];
+              const RelitEstimate& r = relit[(i * NL + l) * 3];
+              std::printf(
+                  "   worst %s %s: vertex %llu at (%.3f, %.3f, %.3f) normal (%.2f, %.2f, "
+                  "%.2f): |gather - ref| %.4f, ref direct %.4f indirect %.4f +- %.4f\n",
+                  lights[l].name.c_str(), g == 0 ? "model" : "ground",
+                  static_cast<unsigned long long>(picked[i]), s.position.x, s.position.y,
+                  s.position.z, s.normal.x, s.normal.y, s.normal.z, order[w].first, r.bounce[0],
+                  r.total() - r.bounce[0], r.indirect_standard_error);
             }
           }
           const double err = std::sqrt(diff2 / ref2), noise = std::sqrt(noise2 / ref2),

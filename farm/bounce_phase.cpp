@@ -115,6 +115,7 @@ class BouncePhase final : public FarmPhase {
       BounceGatherOptions go;
       go.paths = ctx.params.gather_paths;
       go.seed = ctx.params.seed;
+      go.indirect_n = ctx.params.indirect_n;
       gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, go);
     }
     RunJobPhase(
@@ -256,11 +257,12 @@ class BouncePhase final : public FarmPhase {
     tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 8),
                       [&](const tbb::blocked_range<uint64_t>& r) {
                         std::vector<GatherTerm> terms;
+                        std::vector<float> near;
                         for (uint64_t i = r.begin(); i != r.end(); ++i) {
                           const uint64_t v = range.first + i;
-                          stats.local() += gatherer.Terms(ctx.samples[v], v, k_, C, terms);
-                          ApplyGather(terms, previous.data(), V, prev_channels, C, cols,
-                                      rows + i * per_vertex);
+                          stats.local() += gatherer.GatherRow(
+                              ctx.samples[v], v, k_, C, previous.data(), V, prev_channels, cols,
+                              rows + i * per_vertex, terms, near);
                         }
                       });
     for (std::size_t i = 0; i < floats; ++i)

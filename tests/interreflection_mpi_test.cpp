@@ -68,6 +68,7 @@ std::vector<std::vector<float>> KernelBounces() {
   BounceGatherOptions go;
   go.paths = scene.sampling.gather_paths;
   go.seed = scene.sampling.seed;
+  go.indirect_n = 2;  // the farm's near field traces on the indirect grid
   const BounceGatherer gatherer(embree, surfaces, go);
   return GatherBounces(gatherer, samples, sampler.layout(), CubemapLayout(2), direct, 2, 1);
 }

@@ -40,12 +40,43 @@ BounceGatherer::BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& su
   for (int d = 1; d * d <= options.paths; ++d)
     if (options.paths % d == 0) sv_ = d;
   su_ = options.paths / sv_;
+  if (options.near_field < 0 || !(options.near_probability > 0 && options.near_probability <= 1))
+    throw std::invalid_argument(
+        "bounce gathering: near_field < 0 or near_probability outside (0, 1]");
+  if (options.near_field > 0 && options.indirect_n > 0) {
+    TransportSamplerOptions to;
+    to.rays_per_texel = 1;
+    to.seed = SplitMix64(options.seed ^ 0x4E454152u);  // its own stream
+    near_sampler_ = std::make_unique<TransportSampler>(scene, options.indirect_n, to);
+  }
+}
+
+BounceGatherer::~BounceGatherer() = default;
+
+GatherStats BounceGatherer::GatherRow(const SpatialSample& x, uint64_t index, int bounce,
+                                      int channels, const float* previous, uint64_t vertex_count,
+                                      int prev_channels, std::size_t cols, float* out,
+                                      std::vector<GatherTerm>& terms,
+                                      std::vector<float>& near) const {
+  const bool with_near =
+      bounce == 1 && near_sampler_ != nullptr && near_sampler_->layout().texel_count() == cols;
+  if (with_near) near.resize(static_cast<std::size_t>(channels) * cols);
+  const GatherStats st =
+      Terms(x, index, bounce, channels, terms, with_near ? near.data() : nullptr);
+  ApplyGather(terms, previous, vertex_count, prev_channels, channels, cols, out);
+  if (with_near && st.near_hits > 0)
+    for (std::size_t i = 0; i < static_cast<std::size_t>(channels) * cols; ++i) out[i] += near[i];
+  return st;
 }
 
 GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
-                                  std::vector<GatherTerm>& out) const {
+                                  std::vector<GatherTerm>& out, float* near) const {
   out.clear();
   GatherStats st;
+  const bool near_field = near != nullptr && bounce == 1 && near_sampler_ != nullptr;
+  const std::size_t near_cols = near_field ? near_sampler_->layout().texel_count() : 0;
+  if (near_field) std::fill(near, near + channels * near_cols, 0.0f);
+  thread_local std::vector<float> near_row;
   const double ln = Length(x.normal);
   if (!Finite(x.position) || !Finite(x.normal) || !(ln > 0))
     throw NumericalError("bounce gathering: sample " + std::to_string(index) +
@@ -90,6 +121,22 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
       continue;
     }
     const Rgb& rho = surfaces_.albedo(h.mesh);
+    if (near_field && hit.t < options_.near_field * h.max_edge) {
+      // Near field: T⁰ traced at the hit, kept with probability q, weighted 1/q.
+      ++st.near_hits;
+      const uint64_t pick = SplitMix64(key ^ (0x6E656172ull + 2 * static_cast<uint64_t>(p)));
+      if (Unit(pick) >= options_.near_probability) continue;
+      near_row.resize(near_cols);
+      const SampleStats ss = near_sampler_->ComputeRow(h.sample, SplitMix64(pick), near_row.data());
+      st.rays_traced += ss.rays_traced;
+      const double w = inv_p / options_.near_probability;
+      for (int c = 0; c < channels; ++c) {
+        const auto wc = static_cast<float>(rho[c] * w);
+        float* dst = near + c * near_cols;
+        for (std::size_t J = 0; J < near_cols; ++J) dst[J] += wc * near_row[J];
+      }
+      continue;
+    }
     for (int i = 0; i < 3; ++i) {
       GatherTerm g;
       g.vertex = h.vertices[i];
@@ -190,10 +237,11 @@ std::vector<std::vector<float>> GatherBounces(const BounceGatherer& gatherer,
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, V, 16), [&](const tbb::blocked_range<std::size_t>& r) {
           std::vector<GatherTerm> terms;
+          std::vector<float> near;
           std::vector<float> row(static_cast<std::size_t>(channels) * cols);
           for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            local.local() += gatherer.Terms(samples[v], v, k, channels, terms);
-            ApplyGather(terms, previous.data(), V, prev_channels, channels, cols, row.data());
+            local.local() += gatherer.GatherRow(samples[v], v, k, channels, previous.data(), V,
+                                                prev_channels, cols, row.data(), terms, near);
             for (int c = 0; c < channels; ++c)
               std::copy_n(row.data() + c * cols, cols, next.data() + (c * V + v) * cols);
           }

@@ -14,10 +14,20 @@
 // AddRefinedRow spreads a coarse value over its fine texels in proportion to their solid angles,
 // so that relighting the refined row with the fine light equals relighting the coarse row with
 // the light averaged over each coarse texel.
+//
+// Near field (final gathering, as in photon mapping's final gather): interpolating the hit
+// triangle's vertex rows is accurate when the triangle looks small from x, and wrong where a
+// vertex sits next to a coarsely tessellated surface — the bunny's belly a few millimetres above
+// a ground grid of 6 cm, whose contact shadow no ground vertex resolves. So in bounce 1 a hit
+// closer than near_field × its triangle's longest edge takes T⁰ traced at the hit point itself
+// on the indirect grid (one jittered ray per coarse texel, TransportSampler), kept with
+// probability near_probability and weighted by its inverse (unbiased). Later bounces interpolate
+// (there is no traced Tᵏ at a point).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -31,6 +41,10 @@ namespace prt {
 struct BounceGatherOptions {
   int paths = 1024;  // cosine-distributed directions per vertex and bounce, in [1, 65536]
   uint64_t seed = 1;
+  // Near field (above): 0 turns it off; indirect_n is the grid the traced rows are on.
+  double near_field = 1.0;
+  double near_probability = 0.0625;  // (0, 1]: 1/16 (docs/interreflection.md, "Near field")
+  int indirect_n = 0;                // 0: no near field
 };
 
 // One term of a vertex's gather: Tᵏ⁺¹(x)[c] += weight[c] · Tᵏ(vertex)[c].
@@ -40,13 +54,15 @@ struct GatherTerm {
 };
 
 struct GatherStats {
-  uint64_t rays_traced = 0;     // closest-hit rays
+  uint64_t rays_traced = 0;     // closest-hit rays and the near field's occlusion rays
   uint64_t rays_escaped = 0;    // reached the environment
   uint64_t back_face_hits = 0;  // absorbed at a back face
+  uint64_t near_hits = 0;       // bounce 1: hits in the near field (traced or skipped)
   GatherStats& operator+=(const GatherStats& o) {
     rays_traced += o.rays_traced;
     rays_escaped += o.rays_escaped;
     back_face_hits += o.back_face_hits;
+    near_hits += o.near_hits;
     return *this;
   }
 };
@@ -57,6 +73,7 @@ class BounceGatherer {
   // Throws std::invalid_argument on paths outside [1, 65536].
   BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& surfaces,
                  BounceGatherOptions options);
+  ~BounceGatherer();
   const BounceGatherOptions& options() const { return options_; }
   int strata_u() const { return su_; }
   int strata_v() const { return sv_; }
@@ -64,14 +81,25 @@ class BounceGatherer {
   // The gather terms of sample `x` (global index `index`) for bounce `bounce` (1 …): merged per
   // vertex, sorted by vertex, weights ρ_c · b_i / P (channel 0 only when `channels` is 1).
   // A pure function of (seed, index, bounce). Throws NumericalError on a non-finite sample.
+  // near (optional; bounce 1 with a near field): channels × 6·indirect_n² floats receiving the
+  // near field's traced part, to be added to the applied terms; zeroed first.
   GatherStats Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
-                    std::vector<GatherTerm>& out) const;
+                    std::vector<GatherTerm>& out, float* near = nullptr) const;
+
+  // Tᵏ(x) for bounce k into out (channels rows of `cols` floats): Terms, ApplyGather to the
+  // previous bounce's rows (prev_channels × vertex_count rows) and, in bounce 1, the near field.
+  // `terms` and `near` are the caller's scratch (per thread).
+  GatherStats GatherRow(const SpatialSample& x, uint64_t index, int bounce, int channels,
+                        const float* previous, uint64_t vertex_count, int prev_channels,
+                        std::size_t cols, float* out, std::vector<GatherTerm>& terms,
+                        std::vector<float>& near) const;
 
  private:
   const EmbreeScene& scene_;
   const SceneSurfaces& surfaces_;
   BounceGatherOptions options_;
   int su_ = 1, sv_ = 1;
+  std::unique_ptr<TransportSampler> near_sampler_;  // T⁰ at near hits, on the indirect grid
 };
 
 // Applies terms to the previous bounce's rows: `previous` holds prev_channels × vertex_count rows

@@ -1,5 +1,6 @@
 #include "worker/surface_hit.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -28,6 +29,9 @@ SurfaceHit SceneSurfaces::Resolve(const OcclusionRay& ray, const RayHit& hit) co
     p += mesh.positions[tri[i]] * h.weights[i];
     if (tri[i] < mesh.normals.size()) ns += mesh.normals[tri[i]] * h.weights[i];
   }
+  for (int i = 0; i < 3; ++i)
+    h.max_edge =
+        std::max(h.max_edge, Length(mesh.positions[tri[(i + 1) % 3]] - mesh.positions[tri[i]]));
   Vec3 ng = hit.geometric_normal;
   const double ln = Length(ns);
   ns = std::isfinite(ln) && ln > 1e-12 ? ns / ln : ng;

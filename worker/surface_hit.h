@@ -27,6 +27,7 @@ struct SurfaceHit {
   std::array<uint64_t, 3> vertices{};  // global sample indices of the triangle's vertices
   std::array<double, 3> weights{};     // barycentric weights (1 − u − v, u, v), sum 1
   bool front = false;                  // the ray arrived on the reflecting side
+  double max_edge = 0;                 // the hit triangle's longest edge
 };
 
 // The scene's surfaces for hit resolution; keeps a reference to the geometry, which must
