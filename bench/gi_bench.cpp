@@ -69,7 +69,8 @@ int main(int argc, char** argv) {
   int n = 32, bounces = 2, paths = 1024, indirect_n = 0, ref_paths = 256, threads = 0;
   std::size_t ref_vertices = 64;
   bool images = false, worst = false;
-  double near_field = 1.0, near_probability = 0.0625;
+  double near_field = 1.0;
+  int near_rows = 32;
   CLI::App app("prt-gi-bench: bounce gathering against the path-traced reference");
   app.add_option("--scene", scene_name, "benchmark scene (bench_scene.h: default, dragon, …)");
   app.add_option("--n", n, "cubemap n")->capture_default_str();
@@ -93,8 +94,8 @@ int main(int argc, char** argv) {
                  "bounce 1 traces T0 at hits closer than this × their triangle's longest edge "
                  "(0: interpolate every hit)")
       ->capture_default_str();
-  app.add_option("--near-probability", near_probability,
-                 "the share of near-field hits traced (weighted by its inverse)")
+  app.add_option("--near-rows", near_rows,
+                 "near-field rows traced per vertex, about (the rest weighted in)")
       ->capture_default_str();
   app.add_flag("--worst", worst, "list the 5 worst reference vertices per light and group");
   CLI11_PARSE(app, argc, argv);
@@ -142,7 +143,7 @@ int main(int argc, char** argv) {
     go.seed = 1;
     go.indirect_n = m;
     go.near_field = near_field;
-    go.near_probability = near_probability;
+    go.near_rows = near_rows;
     const BounceGatherer gatherer(embree, surfaces, go);
     std::vector<double> bounce_s;
     std::atomic<uint64_t> near_hits{0}, traced{0};

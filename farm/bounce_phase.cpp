@@ -116,6 +116,7 @@ class BouncePhase final : public FarmPhase {
       go.paths = ctx.params.gather_paths;
       go.seed = ctx.params.seed;
       go.indirect_n = ctx.params.indirect_n;
+      go.near_field = ctx.params.near_field;
       gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, go);
     }
     RunJobPhase(

@@ -65,7 +65,8 @@ struct SetupParams {
   // albedos), and whether the indirect stage runs.
   int32_t bounces = 0;
   int32_t indirect_n = 0;
-  int32_t gather_paths = 256;
+  int32_t gather_paths = 1024;
+  double near_field = 1.0;
   int32_t channels = 1;
   int32_t run_indirect = 0;
   int32_t path_estimator = 0;  // 1: the bounces by per-element path tracing (one phase)

@@ -193,6 +193,7 @@ class SetupPhase final : public FarmPhase {
     ctx.params.bounces = bounces;
     ctx.params.indirect_n = indirect_n;
     ctx.params.gather_paths = scene.sampling.gather_paths;
+    ctx.params.near_field = scene.sampling.near_field;
     ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
     if (bounces > 0) {
       ctx.interreflection = {{"bounces", bounces},
@@ -218,6 +219,7 @@ class SetupPhase final : public FarmPhase {
     resolved.estimator = scene.sampling.estimator;
     resolved.indirect_n = indirect_n;
     resolved.gather_paths = scene.sampling.gather_paths;
+    resolved.near_field = scene.sampling.near_field;
     resolved.channels = ctx.params.channels;
     resolved.job = job;
     resolved.method = visibility ? std::string("brute") : ctx.method;

@@ -54,8 +54,7 @@ CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeomet
     plan.options.scheme =
         ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
   const auto c = static_cast<uint32_t>(channels);
-  const SpatialDomain domain =
-      SpatialDomainOf(geometry, scene.compression.order_normal_weight, c);
+  const SpatialDomain domain = SpatialDomainOf(geometry, scene.compression.order_normal_weight, c);
   plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain, c);
   return plan;
 }
@@ -105,6 +104,7 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
                                 {"bounces", s.bounces},
                                 {"indirect_n", s.indirect_n},
                                 {"paths", s.gather_paths},
+                                {"near_field", s.near_field},
                                 {"channels", s.channels},
                                 {"albedo", AlbedoJson(geometry)}});
   }

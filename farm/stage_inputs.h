@@ -36,7 +36,8 @@ struct ResolvedSampling {
   int bounces = 0;
   std::string estimator = "gather";
   int indirect_n = 0;
-  int gather_paths = 256;
+  int gather_paths = 1024;
+  double near_field = 1.0;
   int channels = 1;
 };
 

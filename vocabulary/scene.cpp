@@ -382,6 +382,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
       s.Fail(in, "indirect_n", std::to_string(indirect_n) + " is not 0 or a power of two");
     p.indirect_n = static_cast<int>(indirect_n);
     p.gather_paths = static_cast<int>(s.Integer("gather_paths", p.gather_paths, 1, 65536));
+    p.near_field = s.Number("near_field", p.near_field, 0.0, 100.0);
     s.RejectUnknown();
   }
   {

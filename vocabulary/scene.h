@@ -88,8 +88,11 @@ struct SamplingSettings {
   // How the bounces are computed: "gather" (bounce gathering from the vertices' rows, one farm
   // phase per bounce) or "path" (per-element Monte-Carlo path tracing, the reference).
   std::string estimator = "gather";
-  int indirect_n = 0;      // cubemap n of the bounce rows (power of two ≤ n); 0: n/4, at least 1
+  int indirect_n = 0;       // cubemap n of the bounce rows (power of two ≤ n); 0: n/4, at least 1
   int gather_paths = 1024;  // directions per vertex and bounce (gather), paths per vertex (path)
+  // Gather: bounce 1 traces T⁰ at hits closer than this × their triangle's longest edge on a
+  // triangle twice as coarse as the vertex's own (docs/interreflection.md "Near field"); 0: off.
+  double near_field = 1.0;
 };
 
 // Per-vertex binary (or anti-aliased) visibility cubemaps, Inger et al. 2013 §4.2

@@ -27,6 +27,10 @@ bool Finite(const Vec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// The near field's second condition: the hit triangle is this much coarser than the gathering
+// vertex's own triangles.
+constexpr double kNearCoarser = 2.0;
+
 }  // namespace
 
 BounceGatherer::BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& surfaces,
@@ -40,9 +44,8 @@ BounceGatherer::BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& su
   for (int d = 1; d * d <= options.paths; ++d)
     if (options.paths % d == 0) sv_ = d;
   su_ = options.paths / sv_;
-  if (options.near_field < 0 || !(options.near_probability > 0 && options.near_probability <= 1))
-    throw std::invalid_argument(
-        "bounce gathering: near_field < 0 or near_probability outside (0, 1]");
+  if (options.near_field < 0 || options.near_rows < 1)
+    throw std::invalid_argument("bounce gathering: near_field < 0 or near_rows < 1");
   if (options.near_field > 0 && options.indirect_n > 0) {
     TransportSamplerOptions to;
     to.rays_per_texel = 1;
@@ -77,6 +80,13 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   const std::size_t near_cols = near_field ? near_sampler_->layout().texel_count() : 0;
   if (near_field) std::fill(near, near + channels * near_cols, 0.0f);
   thread_local std::vector<float> near_row;
+  struct NearHit {
+    SpatialSample at;
+    Rgb rho;
+    uint64_t pick;
+  };
+  thread_local std::vector<NearHit> near_hits;
+  near_hits.clear();
   const double ln = Length(x.normal);
   if (!Finite(x.position) || !Finite(x.normal) || !(ln > 0))
     throw NumericalError("bounce gathering: sample " + std::to_string(index) +
@@ -121,20 +131,13 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
       continue;
     }
     const Rgb& rho = surfaces_.albedo(h.mesh);
-    if (near_field && hit.t < options_.near_field * h.max_edge) {
-      // Near field: T⁰ traced at the hit, kept with probability q, weighted 1/q.
+    // Near: closer than the hit triangle's size, and a triangle coarser than x's own
+    // tessellation (kNearCoarser ×), whose vertices cannot resolve what x sees of it.
+    if (near_field && hit.t < options_.near_field * h.max_edge &&
+        h.max_edge > kNearCoarser * surfaces_.VertexEdge(index)) {
+      // Near field: traced below, once the vertex's near hits are known.
       ++st.near_hits;
-      const uint64_t pick = SplitMix64(key ^ (0x6E656172ull + 2 * static_cast<uint64_t>(p)));
-      if (Unit(pick) >= options_.near_probability) continue;
-      near_row.resize(near_cols);
-      const SampleStats ss = near_sampler_->ComputeRow(h.sample, SplitMix64(pick), near_row.data());
-      st.rays_traced += ss.rays_traced;
-      const double w = inv_p / options_.near_probability;
-      for (int c = 0; c < channels; ++c) {
-        const auto wc = static_cast<float>(rho[c] * w);
-        float* dst = near + c * near_cols;
-        for (std::size_t J = 0; J < near_cols; ++J) dst[J] += wc * near_row[J];
-      }
+      near_hits.push_back({h.sample, rho, SplitMix64(key ^ (0x6E656172ull + 2 * uint64_t(p)))});
       continue;
     }
     for (int i = 0; i < 3; ++i) {
@@ -143,6 +146,24 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
       for (int c = 0; c < channels; ++c)
         g.weight[c] = static_cast<float>(rho[c] * h.weights[i] * inv_p);
       raw.push_back(g);
+    }
+  }
+  // The near hits: each traced with probability q = min(1, near_rows / their count) and weighted
+  // 1/q (q is fixed by this vertex's directions, so the estimate stays unbiased), which bounds
+  // the traced rows per vertex by about near_rows.
+  if (!near_hits.empty()) {
+    const double q = std::min(1.0, double(options_.near_rows) / double(near_hits.size()));
+    near_row.resize(near_cols);
+    for (const NearHit& nh : near_hits) {
+      if (Unit(nh.pick) >= q) continue;
+      const SampleStats ss = near_sampler_->ComputeRow(nh.at, SplitMix64(nh.pick), near_row.data());
+      st.rays_traced += ss.rays_traced;
+      const double w = inv_p / q;
+      for (int c = 0; c < channels; ++c) {
+        const auto wc = static_cast<float>(nh.rho[c] * w);
+        float* dst = near + c * near_cols;
+        for (std::size_t J = 0; J < near_cols; ++J) dst[J] += wc * near_row[J];
+      }
     }
   }
   std::sort(raw.begin(), raw.end(),

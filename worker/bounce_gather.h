@@ -19,10 +19,11 @@
 // triangle's vertex rows is accurate when the triangle looks small from x, and wrong where a
 // vertex sits next to a coarsely tessellated surface — the bunny's belly a few millimetres above
 // a ground grid of 6 cm, whose contact shadow no ground vertex resolves. So in bounce 1 a hit
-// closer than near_field × its triangle's longest edge takes T⁰ traced at the hit point itself
-// on the indirect grid (one jittered ray per coarse texel, TransportSampler), kept with
-// probability near_probability and weighted by its inverse (unbiased). Later bounces interpolate
-// (there is no traced Tᵏ at a point).
+// closer than near_field × its triangle's longest edge, on a triangle more than twice as coarse
+// as the gathering vertex's own (SceneSurfaces::VertexEdge), takes T⁰ traced at the hit point
+// itself on the indirect grid (one jittered ray per coarse texel, TransportSampler), kept with
+// probability q = min(1, near_rows / the vertex's near hits) and weighted 1/q (unbiased). Later
+// bounces interpolate (there is no traced Tᵏ at a point).
 #pragma once
 
 #include <cstddef>
@@ -43,8 +44,8 @@ struct BounceGatherOptions {
   uint64_t seed = 1;
   // Near field (above): 0 turns it off; indirect_n is the grid the traced rows are on.
   double near_field = 1.0;
-  double near_probability = 0.0625;  // (0, 1]: 1/16 (docs/interreflection.md, "Near field")
-  int indirect_n = 0;                // 0: no near field
+  int near_rows = 32;  // traced near-field rows per vertex, about (docs/interreflection.md)
+  int indirect_n = 0;  // 0: no near field
 };
 
 // One term of a vertex's gather: Tᵏ⁺¹(x)[c] += weight[c] · Tᵏ(vertex)[c].

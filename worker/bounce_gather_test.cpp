@@ -381,7 +381,7 @@ TEST(BounceGather, NearFieldTracesWhatTheVerticesCannotResolve) {
   // expectation only for texels small enough that the solid angle is even across them
   // (docs/transport-sampling.md), as the reference's rays at its path vertices are.
   near.indirect_n = 8;
-  near.near_probability = 1;
+  near.near_rows = 1024;
   const CubemapLayout coarse(8);
   auto uniform = [&](const BounceGatherOptions& o) {
     const BounceGatherer gatherer(embree, surfaces, o);

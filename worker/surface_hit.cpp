@@ -13,6 +13,22 @@ SceneSurfaces::SceneSurfaces(const SceneGeometry& geometry) : geometry_(geometry
     first_.push_back(at);
     at += m.mesh.positions.size();
   }
+  vertex_edge_.assign(at, 0.0);
+  for (std::size_t mi = 0; mi < geometry.meshes.size(); ++mi) {
+    const TriangleMesh& mesh = geometry.meshes[mi].mesh;
+    for (const auto& t : mesh.triangles) {
+      if (t[0] >= mesh.positions.size() || t[1] >= mesh.positions.size() ||
+          t[2] >= mesh.positions.size())
+        continue;  // EmbreeScene reports it
+      for (int i = 0; i < 3; ++i) {
+        const double e = Length(mesh.positions[t[(i + 1) % 3]] - mesh.positions[t[i]]);
+        for (int k : {i, (i + 1) % 3}) {
+          double& slot = vertex_edge_[first_[mi] + t[k]];
+          slot = std::max(slot, e);
+        }
+      }
+    }
+  }
 }
 
 SurfaceHit SceneSurfaces::Resolve(const OcclusionRay& ray, const RayHit& hit) const {

@@ -42,11 +42,14 @@ class SceneSurfaces {
   // Global sample index of vertex `local` of mesh `mesh`.
   uint64_t GlobalVertex(uint32_t mesh, uint32_t local) const { return first_[mesh] + local; }
   const Rgb& albedo(uint32_t mesh) const { return geometry_.meshes[mesh].albedo; }
+  // The longest edge of the triangles around global vertex `vertex` (its tessellation's scale).
+  double VertexEdge(uint64_t vertex) const { return vertex_edge_[vertex]; }
   const SceneGeometry& geometry() const { return geometry_; }
 
  private:
   const SceneGeometry& geometry_;
   std::vector<uint64_t> first_;  // first global sample index of each mesh
+  std::vector<double> vertex_edge_;
 };
 
 // An orthonormal frame around unit n: t, b with (t, b, n) right-handed (Duff et al. 2017,
