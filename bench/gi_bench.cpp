@@ -376,7 +376,7 @@ int main(int argc, char** argv) {
       const std::string plot = out_dir + "/" + scene_name + "-energy.png";
       const std::string cmd =
           "gnuplot -e \"set terminal pngcairo size 640,400; set output '" + plot +
-          "'; set logscale y; set xlabel 'bounce k'; set ylabel 'energy (sum of T^k)'; set "
+          "'; set logscale y; set xlabel 'bounce k'; set xtics 1; set ylabel 'energy (sum of T^k)'; set "
           "title 'per-bounce energy, " +
           scene_name + "'; plot '" + out_dir + "/" + scene_name +
           "-energy.dat' using 1:2 with linespoints lw 2 title 'T^k'\" 2>/dev/null";
