@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/compressed_transport.h"
 #include "formats/transport_file.h"
 #include "tests/run_prt_farm.h"
 #include "vocabulary/durable_file.h"
@@ -205,6 +206,47 @@ TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCo
   const nlohmann::json rep = Report(dir + "/np2");
   EXPECT_EQ(rep["interreflection"]["per_bounce"].size(), 2u);
   EXPECT_EQ(rep["stages"][1]["name"], "indirect");
+}
+
+// Coloured albedos: T has one row per colour channel through the farm. A red box on a grey
+// ground: the bounce rows and transport.prtc hold 3 × 72 rows (prt-pack and the viewer take
+// them: packager/, viewer/ tests), and the light the
+// ground gets from the box is red (its channels in the box's albedo ratios).
+TEST(InterreflectionMpiTest, ColouredAlbedosGiveOneRowPerChannelThroughTheCompression) {
+  const std::string dir = WorkDir("colour");
+  std::string text = ReadWholeFile(kScene);
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  const std::string from = "albedo = [0.5, 0.5, 0.5]";
+  text.replace(text.find(from), from.size(), "albedo = [0.8, 0.2, 0.1]");
+  const std::string scene_file = dir + "/red.toml";
+  std::ofstream(scene_file) << text;
+  const std::string run = dir + "/run";
+  const auto r = Farm(2, scene_file + " --out " + run + kSmallJobs + " --bounces 1");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const TransportFileReader bounce(run + "/indirect/bounce-1.prtt");
+  EXPECT_EQ(bounce.info().rows, 3u * 72u);
+  const CompressedTransportHeader h = ReadCompressedTransportHeader(run + "/transport.prtc");
+  EXPECT_EQ(h.channels, 3u);
+  EXPECT_EQ(h.sample_count, 3u * 72u);
+  EXPECT_EQ(Report(run)["interreflection"]["channels"], 3);
+  // Σ over the ground's rows (samples 8…71) per channel: the box's red, green, blue ratios (the
+  // ground's own albedo is grey, so bounce 1's light on it has the box's colour).
+  const std::vector<float> rows = Rows(run + "/indirect/bounce-1.prtt");
+  const std::size_t cols = bounce.info().cols();
+  double sum[3] = {0, 0, 0};
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t v = 8; v < 72; ++v)
+      for (std::size_t j = 0; j < cols; ++j) sum[c] += rows[(c * 72 + v) * cols + j];
+  ASSERT_GT(sum[0], 0.0);
+  EXPECT_NEAR(sum[1] / sum[0], 0.2 / 0.8, 0.02);
+  EXPECT_NEAR(sum[2] / sum[0], 0.1 / 0.8, 0.02);
+  // A grey edit of the same scene is one channel again: the indirect stage and the compression
+  // re-run, the rows do not.
+  const auto grey = Farm(2, kScene + " --out " + run + kSmallJobs + " --bounces 1 --resume");
+  ASSERT_EQ(grey.exit_code, 0) << grey.output;
+  EXPECT_EQ(ReadCompressedTransportHeader(run + "/transport.prtc").channels, 1u);
+  EXPECT_EQ(Report(run)["stages"][0]["status"], "reused");
 }
 
 }  // namespace
