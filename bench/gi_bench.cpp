@@ -19,7 +19,6 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -137,7 +136,7 @@ int main(int argc, char** argv) {
     sampler.ComputeRows(samples, 0, direct.data());
     const double direct_s = Seconds(t0);
 
-    // 2. Bounces, one at a time for their wall times.
+    // 2. The bounces, with their wall times.
     BounceGatherOptions go;
     go.paths = paths;
     go.seed = 1;
@@ -146,36 +145,14 @@ int main(int argc, char** argv) {
     go.near_rows = near_rows;
     const BounceGatherer gatherer(embree, surfaces, go);
     std::vector<double> bounce_s;
-    std::atomic<uint64_t> near_hits{0}, traced{0};
-    std::vector<std::vector<float>> bounce_rows;
-    {
-      std::vector<float> coarse_direct(V * mcols);
-      for (uint64_t v = 0; v < V; ++v)
-        CoarsenRow(fine, coarse, direct.data() + v * cols, coarse_direct.data() + v * mcols);
-      for (int k = 1; k <= bounces; ++k) {
-        const std::vector<float>& prev = k == 1 ? coarse_direct : bounce_rows.back();
-        const int pc = k == 1 ? 1 : C;
-        std::vector<float> next(C * V * mcols);
-        t0 = Clock::now();
-        tbb::parallel_for(uint64_t{0}, V, [&](uint64_t v) {
-          thread_local std::vector<GatherTerm> terms;
-          thread_local std::vector<float> row, near;
-          row.resize(C * mcols);
-          const GatherStats st = gatherer.GatherRow(samples[v], v, k, C, prev.data(), V, pc, mcols,
-                                                    row.data(), terms, near);
-          near_hits.fetch_add(st.near_hits, std::memory_order_relaxed);
-          traced.fetch_add(st.rays_traced, std::memory_order_relaxed);
-          for (int c = 0; c < C; ++c)
-            std::copy_n(row.data() + c * mcols, mcols, next.data() + (c * V + v) * mcols);
-        });
-        bounce_s.push_back(Seconds(t0));
-        std::printf("bounce %d: %.1f rays per vertex, %.2f%% of the directions in the near field\n",
-                    k, double(traced.load()) / double(V),
-                    100.0 * double(near_hits.load()) / (double(V) * paths));
-        near_hits = 0;
-        traced = 0;
-        bounce_rows.push_back(std::move(next));
-      }
+    std::vector<GatherStats> bounce_stats;
+    const std::vector<std::vector<float>> bounce_rows = GatherBounces(
+        gatherer, samples, fine, coarse, direct, bounces, C, &bounce_stats, &bounce_s);
+    for (int k = 1; k <= bounces; ++k) {
+      const GatherStats& st = bounce_stats[k - 1];
+      std::printf("bounce %d: %.1f rays per vertex, %.2f%% of the directions in the near field\n",
+                  k, double(st.rays_traced) / double(V),
+                  100.0 * double(st.near_hits) / (double(V) * paths));
     }
 
     // Lights: a uniform sky and the real environments.
@@ -376,7 +353,8 @@ int main(int argc, char** argv) {
       const std::string plot = out_dir + "/" + scene_name + "-energy.png";
       const std::string cmd =
           "gnuplot -e \"set terminal pngcairo size 640,400; set output '" + plot +
-          "'; set logscale y; set xlabel 'bounce k'; set xtics 1; set ylabel 'energy (sum of T^k)'; set "
+          "'; set logscale y; set xlabel 'bounce k'; set xtics 1; set ylabel 'energy (sum of "
+          "T^k)'; set "
           "title 'per-bounce energy, " +
           scene_name + "'; plot '" + out_dir + "/" + scene_name +
           "-energy.dat' using 1:2 with linespoints lw 2 title 'T^k'\" 2>/dev/null";

@@ -30,6 +30,7 @@
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 #include "worker/bounce_gather.h"
+#include "worker/composed_transport.h"
 #include "worker/path_trace_reference.h"
 
 namespace prt {
@@ -221,16 +222,7 @@ class BouncePhase final : public FarmPhase {
       const TransportFileReader reader(ctx.folder.transport);
       if (reader.info().rows != V || reader.info().cubemap_n != uint32_t(fine.n()))
         throw InputError(ctx.folder.transport, "does not hold the run's direct rows");
-      std::vector<float> block;
-      for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
-        block.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * fine.texel_count()));
-        reader.ReadBlock(b, block);
-        const uint64_t first = reader.info().FirstRowOfBlock(b);
-        tbb::parallel_for(uint64_t{0}, reader.info().RowsInBlock(b), [&](uint64_t r) {
-          CoarsenRow(fine, coarse, block.data() + r * fine.texel_count(),
-                     previous.data() + (first + r) * cols);
-        });
-      }
+      AddCoarsenedRows(reader, coarse, previous.data());
     } else {
       const std::string path = ctx.folder.BounceFile(k_ - 1);
       const TransportFileReader reader(path);
@@ -478,36 +470,12 @@ class BouncePhase final : public FarmPhase {
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
     const std::size_t cols = coarse.texel_count();
     // T⁰ coarsened, and Σ_k Tᵏ.
-    std::vector<float> direct(static_cast<std::size_t>(V * cols));
-    {
-      const TransportFileReader reader(ctx.folder.transport);
-      std::vector<float> block;
-      for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
-        block.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * fine.texel_count()));
-        reader.ReadBlock(b, block);
-        const uint64_t first = reader.info().FirstRowOfBlock(b);
-        for (uint64_t r = 0; r < reader.info().RowsInBlock(b); ++r)
-          CoarsenRow(fine, coarse, block.data() + r * fine.texel_count(),
-                     direct.data() + (first + r) * cols);
-      }
-    }
-    std::vector<float> indirect(static_cast<std::size_t>(C * V * cols), 0.0f), rows;
-    std::vector<float> coarse_row(cols);
-    for (const std::string& file : files) {
-      // Bounce rows are on the indirect grid already; path-traced ones at n are coarsened.
-      const TransportFileReader reader(file);
-      const CubemapLayout grid(static_cast<int>(reader.info().cubemap_n));
-      for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
-        rows.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * grid.texel_count()));
-        reader.ReadBlock(b, rows);
-        const uint64_t first = reader.info().FirstRowOfBlock(b);
-        for (uint64_t r = 0; r < reader.info().RowsInBlock(b); ++r) {
-          CoarsenRow(grid, coarse, rows.data() + r * grid.texel_count(), coarse_row.data());
-          float* dst = indirect.data() + (first + r) * cols;
-          for (std::size_t J = 0; J < cols; ++J) dst[J] += coarse_row[J];
-        }
-      }
-    }
+    std::vector<float> direct(static_cast<std::size_t>(V * cols), 0.0f);
+    AddCoarsenedRows(TransportFileReader(ctx.folder.transport), coarse, direct.data());
+    // Bounce rows are on the indirect grid already; path-traced ones at n are coarsened.
+    std::vector<float> indirect(static_cast<std::size_t>(C * V * cols), 0.0f);
+    for (const std::string& file : files)
+      AddCoarsenedRows(TransportFileReader(file), coarse, indirect.data());
     nlohmann::ordered_json share = nlohmann::ordered_json::array();
     for (std::size_t l = 0; l < ctx.estimate.lights.size(); ++l) {
       double d = 0, ind = 0;

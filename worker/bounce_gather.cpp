@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -121,13 +122,10 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     std::copy_n(origin, 3, ray.origin);
     ++st.rays_traced;
     RayHit hit;
-    if (!scene_.Intersect(ray, hit)) {
-      ++st.rays_escaped;
-      continue;
-    }
-    const SurfaceHit h = surfaces_.Resolve(ray, hit);
-    if (!h.front) {
-      ++st.back_face_hits;
+    SurfaceHit h;
+    const SceneSurfaces::Outcome outcome = surfaces_.Trace(scene_, ray, hit, h);
+    if (outcome != SceneSurfaces::Outcome::kFront) {
+      ++(outcome == SceneSurfaces::Outcome::kEscaped ? st.rays_escaped : st.back_face_hits);
       continue;
     }
     const Rgb& rho = surfaces_.albedo(h.mesh);
@@ -226,22 +224,14 @@ std::vector<float> CoarsenLight(const CubemapLayout& fine, const CubemapLayout& 
   return out;
 }
 
-bool HasColouredAlbedo(const SceneGeometry& geometry) {
-  for (const SceneMesh& m : geometry.meshes)
-    if (m.albedo[0] != m.albedo[1] || m.albedo[1] != m.albedo[2]) return true;
-  return false;
-}
-
 }  // namespace prt
 
 namespace prt {
 
-std::vector<std::vector<float>> GatherBounces(const BounceGatherer& gatherer,
-                                              std::span<const SpatialSample> samples,
-                                              const CubemapLayout& fine,
-                                              const CubemapLayout& coarse,
-                                              std::span<const float> direct, int bounces,
-                                              int channels, std::vector<GatherStats>* stats) {
+std::vector<std::vector<float>> GatherBounces(
+    const BounceGatherer& gatherer, std::span<const SpatialSample> samples,
+    const CubemapLayout& fine, const CubemapLayout& coarse, std::span<const float> direct,
+    int bounces, int channels, std::vector<GatherStats>* stats, std::vector<double>* seconds) {
   const std::size_t V = samples.size(), cols = coarse.texel_count();
   std::vector<float> coarse_direct(V * cols);
   tbb::parallel_for(std::size_t{0}, V, [&](std::size_t v) {
@@ -250,11 +240,13 @@ std::vector<std::vector<float>> GatherBounces(const BounceGatherer& gatherer,
   });
   std::vector<std::vector<float>> out;
   if (stats) stats->clear();
+  if (seconds) seconds->clear();
   for (int k = 1; k <= bounces; ++k) {
     const std::vector<float>& previous = k == 1 ? coarse_direct : out.back();
     const int prev_channels = k == 1 ? 1 : channels;
     std::vector<float> next(static_cast<std::size_t>(channels) * V * cols);
     tbb::enumerable_thread_specific<GatherStats> local;
+    const auto t0 = std::chrono::steady_clock::now();
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, V, 16), [&](const tbb::blocked_range<std::size_t>& r) {
           std::vector<GatherTerm> terms;
@@ -267,6 +259,9 @@ std::vector<std::vector<float>> GatherBounces(const BounceGatherer& gatherer,
               std::copy_n(row.data() + c * cols, cols, next.data() + (c * V + v) * cols);
           }
         });
+    if (seconds)
+      seconds->push_back(
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     if (stats) {
       GatherStats s;
       for (const GatherStats& l : local) s += l;

@@ -121,9 +121,6 @@ void AddRefinedRow(const CubemapLayout& coarse, const CubemapLayout& fine, const
 std::vector<float> CoarsenLight(const CubemapLayout& fine, const CubemapLayout& coarse,
                                 std::span<const float> light);
 
-// Whether a scene needs one transport row per colour channel: some albedo is not grey.
-bool HasColouredAlbedo(const SceneGeometry& geometry);
-
 }  // namespace prt
 
 namespace prt {
@@ -131,10 +128,12 @@ namespace prt {
 // Every bounce in one process, in parallel over vertices with TBB (tests, benchmarks; the farm
 // runs the same kernels as jobs, farm/bounce_phase.cpp). `direct` holds the samples' T⁰ rows at
 // `fine` (samples.size() rows); returns bounces 1 … K, each channels × samples.size() rows of
-// coarse.texel_count() floats, channel-major. stats (optional) receives one entry per bounce.
+// coarse.texel_count() floats, channel-major. stats and seconds (optional) receive one entry per
+// bounce (its counters, its wall time).
 std::vector<std::vector<float>> GatherBounces(
     const BounceGatherer& gatherer, std::span<const SpatialSample> samples,
     const CubemapLayout& fine, const CubemapLayout& coarse, std::span<const float> direct,
-    int bounces, int channels, std::vector<GatherStats>* stats = nullptr);
+    int bounces, int channels, std::vector<GatherStats>* stats = nullptr,
+    std::vector<double>* seconds = nullptr);
 
 }  // namespace prt

@@ -10,12 +10,29 @@
 
 namespace prt {
 
+void AddCoarsenedRows(const TransportFileReader& reader, const CubemapLayout& coarse, float* out) {
+  const CubemapLayout grid(static_cast<int>(reader.info().cubemap_n));
+  const std::size_t cols = coarse.texel_count();
+  std::vector<float> block;
+  for (uint64_t b = 0; b < reader.info().block_count(); ++b) {
+    block.resize(static_cast<std::size_t>(reader.info().RowsInBlock(b) * grid.texel_count()));
+    reader.ReadBlock(b, block);
+    const uint64_t first = reader.info().FirstRowOfBlock(b);
+    tbb::parallel_for(uint64_t{0}, reader.info().RowsInBlock(b), [&](uint64_t r) {
+      thread_local std::vector<float> row;
+      row.resize(cols);
+      CoarsenRow(grid, coarse, block.data() + r * grid.texel_count(), row.data());
+      float* dst = out + (first + r) * cols;
+      for (std::size_t J = 0; J < cols; ++J) dst[J] += row[J];
+    });
+  }
+}
+
 ComposedTransport::ComposedTransport(const std::string& direct,
                                      const std::vector<std::string>& bounces, int channels)
     : direct_(std::make_unique<TransportFileReader>(direct)), channels_(channels) {
   vertices_ = direct_->info().rows;
   fine_ = CubemapLayout(static_cast<int>(direct_->info().cubemap_n));
-  std::vector<float> rows;
   for (const std::string& path : bounces) {
     const TransportFileReader r(path);
     if (r.info().rows != uint64_t(channels) * vertices_ ||
@@ -32,9 +49,7 @@ ComposedTransport::ComposedTransport(const std::string& direct,
     } else if (coarse_.n() != int(r.info().cubemap_n)) {
       throw InputError(path, "bounce rows on another grid than the first bounce's");
     }
-    rows.resize(indirect_.size());
-    r.ReadRows(0, r.info().rows, rows.data());
-    for (std::size_t i = 0; i < rows.size(); ++i) indirect_[i] += rows[i];
+    AddCoarsenedRows(r, coarse_, indirect_.data());
   }
 }
 

@@ -16,6 +16,11 @@
 
 namespace prt {
 
+// Adds every row of `reader` (a transport file at n, a multiple of coarse.n()), coarsened to
+// `coarse` by CoarsenRow, into out (rows × coarse.texel_count() floats), block by block in
+// parallel over rows (TBB). What the bounces read of T⁰ and of each other.
+void AddCoarsenedRows(const TransportFileReader& reader, const CubemapLayout& coarse, float* out);
+
 class ComposedTransport {
  public:
   // `direct`: transport.prtt (V rows at n); `bounces`: the bounce files in order (each

@@ -111,9 +111,7 @@ struct PathTraceReference::Impl {
     }
     grid_v = GridV(o.paths);
     grid_u = o.paths / grid_v;
-    for (const SceneMesh& m : surf.geometry().meshes) {
-      grey = grey && m.albedo[0] == m.albedo[1] && m.albedo[1] == m.albedo[2];
-    }
+    grey = !HasColouredAlbedo(surf.geometry());
   }
 
   void Check(int channels, const PathTraceExtras& extras) const {
@@ -195,13 +193,10 @@ struct PathTraceReference::Impl {
           ray.direction[2] = static_cast<float>(w.z);
           ++stats.intersect_rays;
           RayHit hit;
-          if (!scene.Intersect(ray, hit)) {
-            ++stats.escaped;
-            break;
-          }
-          const SurfaceHit y = surfaces.Resolve(ray, hit);
-          if (!y.front) {
-            ++stats.back_faces;
+          SurfaceHit y;
+          const SceneSurfaces::Outcome outcome = surfaces.Trace(scene, ray, hit, y);
+          if (outcome != SceneSurfaces::Outcome::kFront) {
+            ++(outcome == SceneSurfaces::Outcome::kEscaped ? stats.escaped : stats.back_faces);
             break;
           }
           const Rgb& rho = surfaces.albedo(y.mesh);

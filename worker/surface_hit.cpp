@@ -60,6 +60,19 @@ SurfaceHit SceneSurfaces::Resolve(const OcclusionRay& ray, const RayHit& hit) co
   return h;
 }
 
+SceneSurfaces::Outcome SceneSurfaces::Trace(const EmbreeScene& scene, const OcclusionRay& ray,
+                                            RayHit& hit, SurfaceHit& out) const {
+  if (!scene.Intersect(ray, hit)) return Outcome::kEscaped;
+  out = Resolve(ray, hit);
+  return out.front ? Outcome::kFront : Outcome::kBackFace;
+}
+
+bool HasColouredAlbedo(const SceneGeometry& geometry) {
+  for (const SceneMesh& m : geometry.meshes)
+    if (m.albedo[0] != m.albedo[1] || m.albedo[1] != m.albedo[2]) return true;
+  return false;
+}
+
 void OrthonormalFrame(const Vec3& n, Vec3& t, Vec3& b) {
   const double sign = std::copysign(1.0, n.z);
   const double a = -1.0 / (sign + n.z);

@@ -39,6 +39,11 @@ class SceneSurfaces {
   // Resolves Embree's closest hit `hit` of `ray` (EmbreeScene::Intersect). The shading normal is
   // the barycentric interpolation of the vertex normals (the geometric normal where they cancel).
   SurfaceHit Resolve(const OcclusionRay& ray, const RayHit& hit) const;
+  // Traces `ray` to its closest hit in `scene` (built from this geometry) and resolves it:
+  // kEscaped (nothing hit), kBackFace (absorbed) or kFront (`out` and `hit` hold the hit).
+  enum class Outcome { kEscaped, kBackFace, kFront };
+  Outcome Trace(const EmbreeScene& scene, const OcclusionRay& ray, RayHit& hit,
+                SurfaceHit& out) const;
   // Global sample index of vertex `local` of mesh `mesh`.
   uint64_t GlobalVertex(uint32_t mesh, uint32_t local) const { return first_[mesh] + local; }
   const Rgb& albedo(uint32_t mesh) const { return geometry_.meshes[mesh].albedo; }
@@ -51,6 +56,10 @@ class SceneSurfaces {
   std::vector<uint64_t> first_;  // first global sample index of each mesh
   std::vector<double> vertex_edge_;
 };
+
+// Whether a scene needs one transport row per colour channel once light bounces: some albedo
+// is not grey.
+bool HasColouredAlbedo(const SceneGeometry& geometry);
 
 // An orthonormal frame around unit n: t, b with (t, b, n) right-handed (Duff et al. 2017,
 // "Building an Orthonormal Basis, Revisited").

@@ -17,8 +17,8 @@
 #include <span>
 #include <vector>
 
-#include "vocabulary/cubemap.h"
 #include "formats/visibility_blocks.h"
+#include "vocabulary/cubemap.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"
 
