@@ -9,6 +9,10 @@
 // indirect/bounce-<k>.prtt.partial (channel-major rows c·V + v) and journals them in
 // checkpoints/indirect-journal.txt, keyed by the indirect stage's inputs, so that a killed run
 // resumes bounce by bounce and an edit that changes the bounces starts them afresh.
+// With estimator "path" the same phase class (k = 0, "path-trace") runs the indirect stage as one
+// phase of per-element path tracing (worker/path_trace_reference.h, Huang & Ramamoorthi 2010 §7's
+// baseline): every bounce at once, Σ_k Tᵏ at n into indirect/path-traced.prtt, each job's
+// per-bounce energies journaled with it.
 #include <mpi.h>
 #include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
