@@ -4,9 +4,9 @@
 #include <cstdlib>
 
 #include "viewer/rasterizer.h"
-#include "vocabulary/errors.h"
-#include "vocabulary/environment_io.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/errors.h"
 
 namespace prt::bench {
 
@@ -82,6 +82,21 @@ ImageRgb RenderVertexColours(const SceneDescription& scene, const SceneGeometry&
   ImageRgb img(r.width, r.height);
   img.pixels = r.rgb;
   return img;
+}
+
+std::vector<float> DenseVertexColours(const std::vector<uint8_t>& is_dense,
+                                      const std::vector<int>& local_rank) {
+  int max_rank = 1;
+  for (int r : local_rank) max_rank = std::max(max_rank, r);
+  std::vector<float> colours(is_dense.size() * 3, 0.25f);
+  for (std::size_t s = 0; s < is_dense.size(); ++s) {
+    if (!is_dense[s]) continue;
+    std::array<float, 3> c{1.0f, 1.0f, 1.0f};
+    if (s < local_rank.size() && local_rank[s] >= 0)
+      c = FalseColour(static_cast<double>(local_rank[s]) / max_rank);
+    for (int k = 0; k < 3; ++k) colours[s * 3 + k] = c[k];
+  }
+  return colours;
 }
 
 }  // namespace prt::bench

@@ -3,6 +3,7 @@
 // error every accuracy figure uses, and rendering relit vertices to an image.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -42,5 +43,11 @@ SampleRanges RangesOf(const SceneGeometry& geometry);
 // over the environment as background when `background` is non-null.
 ImageRgb RenderVertexColours(const SceneDescription& scene, const SceneGeometry& geometry,
                              const std::vector<float>& rgb, const CubemapRgb* background);
+
+// Figure 2 of Huang & Ramamoorthi 2010: per-sample colours showing where the dense vertices went,
+// coloured by the local rank estimated there (false colour, 0 … the largest rank); dense
+// vertices with no rank estimate (the initial random set) white, sparse vertices grey.
+std::vector<float> DenseVertexColours(const std::vector<uint8_t>& is_dense,
+                                      const std::vector<int>& local_rank);
 
 }  // namespace prt::bench

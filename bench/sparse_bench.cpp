@@ -22,8 +22,9 @@
 #include <stdexcept>
 
 #include "bench/bench_scenes.h"
-#include "vocabulary/image_io.h"
+#include "bench/sparse_variant.h"
 #include "vocabulary/hash.h"
+#include "vocabulary/image_io.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
@@ -49,63 +50,7 @@ std::vector<std::string> Split(const std::string& s) {
   return out;
 }
 
-struct Variant {
-  std::string name;
-  SparsePlan plan;
-};
-
-// A variant from "key=value;key=value" (keys: budget, initial, iterations, radius (× the scene's),
-// features, min_features (× features when < 1), window, lambda, normal_cos, empty_weight, mode
-// (visibility| transport), solver (l1|ls), unity (unity_weight), max_residual) applied to the
-// scene's plan. Throws on an unknown key.
-Variant ParseVariant(const std::string& spec, const SparsePlan& base) {
-  Variant v{spec, base};
-  std::stringstream ss(spec);
-  for (std::string kv; std::getline(ss, kv, ';');) {
-    if (kv.empty()) continue;
-    const std::size_t eq = kv.find('=');
-    if (eq == std::string::npos)
-      throw std::invalid_argument("--variant: expected key=value: " + kv);
-    const std::string key = kv.substr(0, eq), val = kv.substr(eq + 1);
-    const double x = (val == "visibility" || val == "transport" || val == "l1" || val == "ls")
-                         ? 0.0
-                         : std::stod(val);
-    if (key == "budget") {
-      v.plan.dense_budget = x;
-    } else if (key == "initial") {
-      v.plan.initial_fraction = x;
-    } else if (key == "iterations") {
-      v.plan.iterations = static_cast<int>(x);
-    } else if (key == "radius") {
-      v.plan.radius = base.radius * x;
-    } else if (key == "features") {
-      v.plan.sparse.features = static_cast<int>(std::lround(x));
-    } else if (key == "min_features") {
-      v.plan.sparse.min_features =
-          static_cast<int>(std::lround(x < 1 ? x * v.plan.sparse.features : x));
-    } else if (key == "window") {
-      v.plan.angular.window = static_cast<int>(x);
-    } else if (key == "lambda") {
-      v.plan.sparse.lambda = x;
-    } else if (key == "normal_cos") {
-      v.plan.sparse.min_normal_cos = x;
-    } else if (key == "unity") {
-      v.plan.sparse.unity_weight = x;
-    } else if (key == "max_residual") {
-      v.plan.sparse.max_residual = x;
-    } else if (key == "empty_weight") {
-      v.plan.empty_weight = static_cast<int>(x);
-    } else if (key == "mode") {
-      v.plan.sparse.mode =
-          val == "transport" ? InterpolationMode::kTransport : InterpolationMode::kVisibility;
-    } else if (key == "solver") {
-      v.plan.sparse.solver = val == "ls" ? SolverKind::kLeastSquares : SolverKind::kL1;
-    } else {
-      throw std::invalid_argument("--variant: unknown key " + key);
-    }
-  }
-  return v;
-}
+using Variant = bench::SparseVariant;
 
 }  // namespace
 
@@ -211,12 +156,13 @@ int main(int argc, char** argv) {
         base.dense_budget, base.initial_fraction, base.radius, base.sparse.features,
         std::min(base.sparse.min_features, base.sparse.features), base.angular.window,
         base.sparse.lambda);
-    std::vector<Variant> variants{{"default (L1, visibility)", base}};
-    for (const std::string& spec : variant_specs) variants.push_back(ParseVariant(spec, base));
+    std::vector<Variant> variants{{"default (L1, visibility)", base, 0, -1}};
+    for (const std::string& spec : variant_specs)
+      variants.push_back(bench::ParseSparseVariant(spec, base));
     if (!quick && variant_specs.empty()) {
-      Variant ls{"least squares", base};
+      Variant ls{"least squares", base, 0, -1};
       ls.plan.sparse.solver = SolverKind::kLeastSquares;
-      Variant tm{"L1, transport interp.", base};
+      Variant tm{"L1, transport interp.", base, 0, -1};
       tm.plan.sparse.mode = InterpolationMode::kTransport;
       variants.push_back(ls);
       variants.push_back(tm);
@@ -224,7 +170,7 @@ int main(int argc, char** argv) {
         for (SolverKind sk : {SolverKind::kL1, SolverKind::kLeastSquares}) {
           Variant v{std::string(sk == SolverKind::kL1 ? "L1" : "LS") + " radius ×" +
                         std::to_string(f).substr(0, 3),
-                    base};
+                    base, 0, -1};
           v.plan.radius = base.radius * f;
           v.plan.sparse.solver = sk;
           variants.push_back(v);
@@ -235,7 +181,7 @@ int main(int argc, char** argv) {
         for (double ffrac : {1.0, 0.7}) {
           Variant v{"dense " + std::to_string(static_cast<int>(budget * 100)) + "%, features ×" +
                         std::to_string(ffrac).substr(0, 3),
-                    base};
+                    base, 0, -1};
           v.plan.dense_budget = budget;
           v.plan.sparse.features = static_cast<int>(base.sparse.features * ffrac);
           variants.push_back(v);
@@ -360,16 +306,7 @@ int main(int argc, char** argv) {
       if (vi == 0) {
         // Figure 2: where the dense vertices went, coloured by the local rank estimated there
         // (initial random dense vertices, with no rank estimate, in white; sparse in grey).
-        int max_rank = 1;
-        for (int r : rep.local_rank) max_rank = std::max(max_rank, r);
-        std::vector<float> colours(samples.size() * 3, 0.25f);
-        for (std::size_t s = 0; s < samples.size(); ++s) {
-          if (!rep.is_dense[s]) continue;
-          std::array<float, 3> c{1.0f, 1.0f, 1.0f};
-          if (rep.local_rank[s] >= 0)
-            c = FalseColour(static_cast<double>(rep.local_rank[s]) / max_rank);
-          for (int k = 0; k < 3; ++k) colours[s * 3 + k] = c[k];
-        }
+        const std::vector<float> colours = bench::DenseVertexColours(rep.is_dense, rep.local_rank);
         try {
           WritePng(bench::RenderVertexColours(scene, geometry, colours, nullptr),
                    out_dir + "/" + name + "_dense_vertices_rank.png");

@@ -30,12 +30,14 @@
 #include "farm/farm_context.h"
 #include "farm/job_loop.h"
 #include "farm/mpi_support.h"
+#include "farm/sparse_jobs.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 #include "worker/bounce_gather.h"
 #include "worker/composed_transport.h"
 #include "worker/path_trace_reference.h"
+#include "worker/sparse_indirect.h"
 
 namespace prt {
 
@@ -59,6 +61,18 @@ void BroadcastFloats(MPI_Comm comm, std::vector<float>& v) {
   for (uint64_t at = 0; at < size; at += kPiece) {
     const int count = static_cast<int>(std::min(kPiece, size - at));
     CheckMpi(MPI_Bcast(v.data() + at, count, MPI_FLOAT, 0, comm), "MPI_Bcast bounce rows");
+  }
+}
+
+// Broadcasts rank 0's bytes to every rank.
+void BroadcastBytes(MPI_Comm comm, std::vector<uint8_t>& v) {
+  uint64_t size = v.size();
+  CheckMpi(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast bounce mask");
+  v.resize(static_cast<std::size_t>(size));
+  constexpr uint64_t kPiece = uint64_t{1} << 30;
+  for (uint64_t at = 0; at < size; at += kPiece) {
+    const int count = static_cast<int>(std::min(kPiece, size - at));
+    CheckMpi(MPI_Bcast(v.data() + at, count, MPI_BYTE, 0, comm), "MPI_Bcast bounce mask");
   }
 }
 
@@ -111,6 +125,7 @@ class BouncePhase final : public FarmPhase {
     CheckMpi(MPI_Bcast(&status, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast bounce status");
     if (status != kExitOk) throw CollectiveStop{static_cast<int>(status)};
     BroadcastFloats(ctx.comm, previous);
+    LoadCombination(ctx);
 
     // 2. The gatherer on every rank that computes.
     std::unique_ptr<SceneSurfaces> surfaces;
@@ -257,6 +272,10 @@ class BouncePhase final : public FarmPhase {
                         std::vector<float> near;
                         for (uint64_t i = r.begin(); i != r.end(); ++i) {
                           const uint64_t v = range.first + i;
+                          if (Combined(v)) {  // filled by rank 0 from the dense rows
+                            std::fill_n(rows + i * per_vertex, per_vertex, 0.0f);
+                            continue;
+                          }
                           stats.local() += gatherer.GatherRow(
                               ctx.samples[v], v, k_, C, previous.data(), V, prev_channels, cols,
                               rows + i * per_vertex, terms, near);
@@ -351,6 +370,9 @@ class BouncePhase final : public FarmPhase {
             [&](const RowRange& d) { return e.rows.first < d.end() && d.first < e.rows.end(); });
         if (overlaps) continue;
         ReadVertexMajor(*writer, V, C, cols, e.rows, rows);
+        for (uint64_t i = 0; i < e.rows.count; ++i)  // as the job returned them
+          if (Combined(e.rows.first + i))
+            std::fill_n(rows.data() + i * C * cols, static_cast<std::size_t>(C) * cols, 0.0f);
         if (Checksum64(rows.data(), rows.size() * sizeof(float)) != e.rows_checksum) {
           ++ctx.report.checkpoints_rejected;
           continue;
@@ -421,6 +443,7 @@ class BouncePhase final : public FarmPhase {
       throw;
     }
     std::swap(journal, ctx.journal);
+    if (writer && !pairs_.empty()) FillCombined(ctx, *writer, cols);
     if (writer) {
       writer->Finalize();
       writer.reset();
@@ -500,8 +523,71 @@ class BouncePhase final : public FarmPhase {
     ctx.interreflection["indirect_share"] = share;
   }
 
+  // Sparse precomputation with interreflection ([sparse] indirect = "combination"; docs/
+  // sparse-precomputation.md): rank 0 reads run/sparse/combination.bin and every rank learns
+  // which vertices have a combination; those gather nothing (their job rows are zeros), and rank
+  // 0 fills them after the job loop, Tᵏ(x) = max(0, Σ α_j Tᵏ(d_j)) over the dense vertices d_j
+  // x's direct row was reconstructed from. Without the file (a run folder from before it) every
+  // vertex gathers.
+  void LoadCombination(FarmContext& ctx) {
+    mask_.clear();
+    pairs_.clear();
+    if (!ctx.params.sparse_indirect) return;
+    const uint64_t V = ctx.params.rows;
+    if (ctx.rank == 0) {
+      try {
+        pairs_ = ReadCombinationFile(ctx.folder.SparseCombinationFile(), V, slots_);
+        mask_.assign(static_cast<std::size_t>(V), 0);
+        for (uint64_t v = 0; v < V; ++v) mask_[v] = pairs_[v * slots_ * 2] != kNoSample ? 1 : 0;
+        uint64_t combined = 0;
+        for (uint8_t m : mask_) combined += m;
+        spdlog::info("[{}] {} of {} vertices gather; {} combine the dense vertices' rows", name_,
+                     V - combined, V, combined);
+        ctx.interreflection["sparse_combined_vertices"] = combined;
+      } catch (const InputError& e) {
+        spdlog::warn("{}: every vertex gathers", e.what());
+        pairs_.clear();
+        mask_.clear();
+      }
+    }
+    BroadcastBytes(ctx.comm, mask_);
+  }
+  bool Combined(uint64_t v) const { return !mask_.empty() && mask_[v] != 0; }
+
+  // Rank 0: the combined vertices' rows from the dense ones, written over their zeros.
+  void FillCombined(const FarmContext& ctx, TransportFileWriter& writer, std::size_t cols) const {
+    const uint64_t V = ctx.params.rows;
+    const int C = ctx.params.channels;
+    std::vector<float> all(static_cast<std::size_t>(V * cols));
+    std::vector<SampleWeight> w;
+    for (int c = 0; c < C; ++c) {
+      writer.ReadRows(c * V, V, all.data());
+      std::vector<float> filled = all;
+      for (uint64_t v = 0; v < V; ++v) {
+        if (!Combined(v)) continue;
+        w.clear();
+        for (std::size_t j = 0; j < slots_; ++j) {
+          const uint32_t d = pairs_[(v * slots_ + j) * 2];
+          if (d == kNoSample) continue;
+          if (Combined(d))
+            throw InputError(ctx.folder.SparseCombinationFile(),
+                             "combines vertex " + std::to_string(v) + " from vertex " +
+                                 std::to_string(d) + ", which is not dense");
+          w.push_back({d, std::bit_cast<float>(pairs_[(v * slots_ + j) * 2 + 1])});
+        }
+        CombineRows(
+            w, [&](uint32_t d) { return all.data() + static_cast<std::size_t>(d) * cols; }, cols,
+            filled.data() + v * cols);
+      }
+      writer.WriteRows(c * V, V, filled.data());
+    }
+  }
+
   int k_;
   std::string name_;
+  std::vector<uint8_t> mask_;    // per vertex: 1 = combined (every rank)
+  std::vector<uint32_t> pairs_;  // rank 0: combination.bin's pairs
+  uint64_t slots_ = 0;
 };
 
 }  // namespace

@@ -70,6 +70,9 @@ struct SetupParams {
   int32_t channels = 1;
   int32_t run_indirect = 0;
   int32_t path_estimator = 0;  // 1: the bounces by per-element path tracing (one phase)
+  // 1: method sparse with [sparse] indirect = "combination": only the dense vertices gather (or
+  // trace paths, on the indirect grid); the others combine them (run/sparse/combination.bin).
+  int32_t sparse_indirect = 0;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;

@@ -190,6 +190,8 @@ class SetupPhase final : public FarmPhase {
       throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
                                        " is larger than the cubemap's n " + std::to_string(n));
     ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
+    ctx.params.sparse_indirect =
+        bounces > 0 && ctx.params.sparse && scene.sparse.indirect == "combination" ? 1 : 0;
     ctx.params.bounces = bounces;
     ctx.params.indirect_n = indirect_n;
     ctx.params.gather_paths = scene.sampling.gather_paths;

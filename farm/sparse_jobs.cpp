@@ -5,9 +5,12 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <mutex>
 #include <stdexcept>
 #include <type_traits>
@@ -162,7 +165,7 @@ std::string EncodeSparseJobResult(const SparseJobResult& res, std::string prefix
   w.Reserve(start + sizeof(uint32_t) + sizeof res.header + sizeof res.busy_seconds +
             VectorBytes(counters) + VectorBytes(res.transport) + VectorBytes(res.visibility) +
             VectorBytes(res.feature) + VectorBytes(res.weights) + VectorBytes(res.outcomes) +
-            sizeof(uint64_t));
+            VectorBytes(res.combination) + sizeof(uint64_t));
   PutHeader(w, kResultMagic, res.header);
   w.Put(res.busy_seconds);
   w.PutVector(counters);
@@ -172,6 +175,7 @@ std::string EncodeSparseJobResult(const SparseJobResult& res, std::string prefix
   w.PutVector(res.weights);
   w.PutVector(res.outcomes);
   w.PutVector(std::vector<char>(res.variance.begin(), res.variance.end()));
+  w.PutVector(res.combination);
   std::string& b = w.bytes();
   const uint64_t sum = Checksum64(b.data() + start, b.size() - start);
   b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
@@ -198,6 +202,7 @@ SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
   res.outcomes = r.GetVector<uint8_t>("message");
   const std::vector<char> variance = r.GetVector<char>("message");
   res.variance.assign(variance.begin(), variance.end());
+  res.combination = r.GetVector<uint32_t>("message");
   return res;
 }
 
@@ -303,6 +308,9 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
         return L1Solver(o);
       });
       SparseStats total;
+      const std::size_t slots = CombinationSlots(plan);
+      res.combination.assign(vertices.size() * slots * 2, 0);
+      for (std::size_t i = 0; i < vertices.size() * slots; ++i) res.combination[2 * i] = kNoSample;
       tbb::parallel_for(std::size_t{0}, vertices.size(), [&](std::size_t i) {
         std::vector<DenseNeighbor> nbs;
         for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
@@ -311,10 +319,18 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
                          samples[union_ids[u]].normal});
         }
         SparseStats st;
+        std::vector<NeighborWeight> weights;
         const SparseOutcome o = ReconstructSparseRow(
             sampler, samples[vertices[i]], vertices[i], nbs, plan.sparse, solvers.local(),
-            out.data() + i * T, st, with_variance ? variance.data() + i * T : nullptr);
+            out.data() + i * T, st, with_variance ? variance.data() + i * T : nullptr, &weights);
         res.outcomes[i] = static_cast<uint8_t>(o);
+        if (o == SparseOutcome::kReconstructed) {
+          uint32_t* rec = res.combination.data() + i * slots * 2;
+          for (std::size_t w = 0; w < weights.size() && w < slots; ++w) {
+            rec[2 * w] = union_ids[nb[offsets[i] + weights[w].neighbor]];
+            rec[2 * w + 1] = std::bit_cast<uint32_t>(weights[w].alpha);
+          }
+        }
         std::lock_guard lock(mutex);
         total += st;
       });
@@ -362,10 +378,61 @@ uint64_t DenseResultChecksum(std::size_t rows, std::size_t texels, const float* 
   return Checksum64(buf.data(), buf.size());
 }
 
-uint64_t SparseResultChecksum(std::span<const uint8_t> outcomes, std::span<const float> rows) {
+uint64_t SparseResultChecksum(std::span<const uint8_t> outcomes, std::span<const float> rows,
+                              std::span<const uint32_t> combination) {
   std::string buf(reinterpret_cast<const char*>(outcomes.data()), outcomes.size());
   buf.append(reinterpret_cast<const char*>(rows.data()), rows.size() * sizeof(float));
+  buf.append(reinterpret_cast<const char*>(combination.data()),
+             combination.size() * sizeof(uint32_t));
   return Checksum64(buf.data(), buf.size());
+}
+
+namespace {
+constexpr char kCombinationMagic[8] = {'P', 'R', 'T', 'C', 'M', 'B', '1', '\0'};
+}  // namespace
+
+std::string EncodeCombinationFile(uint64_t samples, uint64_t slots,
+                                  std::span<const uint32_t> pairs) {
+  std::string b(kCombinationMagic, sizeof kCombinationMagic);
+  b.append(reinterpret_cast<const char*>(&samples), sizeof samples);
+  b.append(reinterpret_cast<const char*>(&slots), sizeof slots);
+  b.append(reinterpret_cast<const char*>(pairs.data()), pairs.size() * sizeof(uint32_t));
+  const uint64_t sum = Checksum64(b.data(), b.size());
+  b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
+  return b;
+}
+
+std::vector<uint32_t> ReadCombinationFile(const std::string& path, uint64_t samples,
+                                          uint64_t& slots) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, "cannot be opened (the sparse phase writes it)");
+  const std::string b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  constexpr std::size_t kHead = sizeof kCombinationMagic + 2 * sizeof(uint64_t);
+  if (b.size() < kHead + sizeof(uint64_t) ||
+      std::memcmp(b.data(), kCombinationMagic, sizeof kCombinationMagic) != 0)
+    throw InputError(path, "is not a combination file (bad magic or too short)");
+  uint64_t n = 0, sum = 0;
+  std::memcpy(&n, b.data() + 8, sizeof n);
+  std::memcpy(&slots, b.data() + 16, sizeof slots);
+  std::memcpy(&sum, b.data() + b.size() - sizeof sum, sizeof sum);
+  if (Checksum64(b.data(), b.size() - sizeof sum) != sum)
+    throw InputError(path, "is damaged (checksum mismatch)");
+  if (n != samples)
+    throw InputError(
+        path, "holds " + std::to_string(n) + " samples, the run has " + std::to_string(samples));
+  if (slots == 0 || slots > 4096 || (b.size() - kHead - sizeof sum) != n * slots * 8)
+    throw InputError(
+        path, "has a size that does not match its " + std::to_string(slots) + " slots per sample");
+  std::vector<uint32_t> pairs(n * slots * 2);
+  std::memcpy(pairs.data(), b.data() + kHead, pairs.size() * sizeof(uint32_t));
+  for (std::size_t i = 0; i < n * slots; ++i) {
+    if (pairs[2 * i] == kNoSample) continue;
+    const float a = std::bit_cast<float>(pairs[2 * i + 1]);
+    if (pairs[2 * i] >= n || !std::isfinite(a))
+      throw InputError(path, "pair " + std::to_string(i) + " names sample " +
+                                 std::to_string(pairs[2 * i]) + " or a non-finite weight");
+  }
+  return pairs;
 }
 
 uint32_t MortonKey(const Vec3& p, const Vec3& lo, const Vec3& hi) {

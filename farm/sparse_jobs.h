@@ -12,6 +12,7 @@
 //                                                 ones (§5)
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -92,6 +93,10 @@ struct SparseJobResult {
   std::vector<int32_t> weights;
   // sparse: one SparseOutcome per vertex; `transport` holds the reconstructed rows in order
   std::vector<uint8_t> outcomes;
+  // sparse: per vertex, CombinationSlots(plan) pairs (dense sample id, α as float bits): the
+  // combination its row was reconstructed with (ReconstructSparseRow's weights), unused pairs
+  // (kNoSample, 0); all unused for a fallback. The bounces reuse it (run/sparse/combination.bin).
+  std::vector<uint32_t> combination;
   // dense and sparse: the traced texels' Monte-Carlo variance summed per mesh (an encoded
   // TransportVariance, formats/transport_variance.h; empty when not asked for)
   std::string variance;
@@ -121,8 +126,29 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
 // row. `rows` samples, `texels` each.
 uint64_t DenseResultChecksum(std::size_t rows, std::size_t texels, const float* transport,
                              const float* visibility, const uint8_t* feature);
-// XXH64 of a sparse job's outcomes followed by its reconstructed rows.
-uint64_t SparseResultChecksum(std::span<const uint8_t> outcomes, std::span<const float> rows);
+// XXH64 of a sparse job's outcomes followed by its reconstructed rows and its combination
+// records.
+uint64_t SparseResultChecksum(std::span<const uint8_t> outcomes, std::span<const float> rows,
+                              std::span<const uint32_t> combination);
+
+// The combination records (SparseJobResult::combination, run/sparse/combination.bin): pairs per
+// sparse vertex, and the id of an unused pair.
+inline constexpr uint32_t kNoSample = 0xFFFFFFFFu;
+inline std::size_t CombinationSlots(const SparsePlan& plan) {
+  return static_cast<std::size_t>(std::max(1, plan.max_neighbors));
+}
+
+// run/sparse/combination.bin, written by the sparse phase and read by the bounce phases: the
+// magic "PRTCMB1\0", uint64 samples N, uint64 slots S, N·S pairs (uint32 dense sample, float32
+// α bits), then the XXH64 of everything before it. A sample without a combination (dense, or a
+// fallback) has S unused pairs.
+std::string EncodeCombinationFile(uint64_t samples, uint64_t slots,
+                                  std::span<const uint32_t> pairs);
+// Reads it for a run of `samples` samples: the pairs (N·S·2 values) and S. Throws InputError
+// naming the file on a short, damaged or foreign file, a sample count that differs, or a pair
+// naming a sample ≥ N or a non-finite α.
+std::vector<uint32_t> ReadCombinationFile(const std::string& path, uint64_t samples,
+                                          uint64_t& slots);
 
 // Morton key (10 bits per axis, interleaved into 30) of p in the box [lo, hi]: the order of
 // the sparse vertices, so that a job's vertices are close together and share neighbours.

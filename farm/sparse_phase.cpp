@@ -224,6 +224,17 @@ class FarmSparseSteps final : public SparseSteps {
     for (const auto& k : keyed) order.push_back(k.second);
     std::vector<uint8_t> outcome(order.size(), 0xff);
     SideFile file((fs::path(ctx_.folder.sparse) / "sparse_outcome.bin").string());
+    // Each sparse vertex's combination record, at its position in `order` (journal checks).
+    SideFile comb_file((fs::path(ctx_.folder.sparse) / "combination_order.bin").string());
+    const std::size_t slots = CombinationSlots(ctx_.plan);
+    const std::size_t rec = slots * 2;  // uint32 per record
+    combination_.assign(N_ * rec, 0);
+    for (std::size_t i = 0; i < N_ * slots; ++i) combination_[2 * i] = kNoSample;
+    auto keep_combination = [&](uint64_t first, uint64_t count, const uint32_t* records) {
+      for (uint64_t i = 0; i < count; ++i)
+        std::copy_n(records + i * rec, rec,
+                    combination_.data() + static_cast<std::size_t>(order[first + i]) * rec);
+    };
     const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
 
     StepJobs p;
@@ -239,8 +250,13 @@ class FarmSparseSteps final : public SparseSteps {
         rows.resize(rows.size() + T_);
         ctx_.writer->ReadRows(order[e.rows.first + i], 1, rows.data() + rows.size() - T_);
       }
-      if (SparseResultChecksum(o, rows) != e.rows_checksum) return false;
+      std::vector<uint32_t> comb(o.size() * rec);
+      if (!comb_file.Read(comb.data(), comb.size() * sizeof(uint32_t),
+                          e.rows.first * rec * sizeof(uint32_t)))
+        return false;
+      if (SparseResultChecksum(o, rows, comb) != e.rows_checksum) return false;
       std::copy(o.begin(), o.end(), outcome.begin() + static_cast<std::ptrdiff_t>(e.rows.first));
+      keep_combination(e.rows.first, o.size(), comb.data());
       return true;
     };
     p.make_job = [&](SparseJobHeader& h, std::string prefix) {
@@ -259,15 +275,24 @@ class FarmSparseSteps final : public SparseSteps {
       }
       if (k * T_ != r.transport.size())
         throw RankFailure("a sparse job came back with too many rows");
+      if (r.combination.size() != c * rec)
+        throw RankFailure("a sparse job came back without its combinations");
+      for (std::size_t i = 0; i < c * slots; ++i)
+        if (r.combination[2 * i] != kNoSample && r.combination[2 * i] >= N_)
+          throw RankFailure("a sparse job came back naming a missing sample");
       file.Write(r.outcomes.data(), c, r.header.first);
+      comb_file.Write(r.combination.data(), r.combination.size() * sizeof(uint32_t),
+                      r.header.first * rec * sizeof(uint32_t));
       std::copy(r.outcomes.begin(), r.outcomes.end(),
                 outcome.begin() + static_cast<std::ptrdiff_t>(r.header.first));
+      keep_combination(r.header.first, c, r.combination.data());
       rows_written = k;
-      return SparseResultChecksum(r.outcomes, r.transport);
+      return SparseResultChecksum(r.outcomes, r.transport, r.combination);
     };
     p.sync = [&] {
       ctx_.writer->Sync();
       file.Sync();
+      comb_file.Sync();
     };
     RunStep(p, t0);
     CrossValidate(index, order, outcome);
@@ -529,6 +554,12 @@ class FarmSparseSteps final : public SparseSteps {
   const std::size_t Tm_;
   std::unique_ptr<SideFile> aux_;
   std::vector<std::vector<float>> low_;  // downsampled rows of the dense vertices
+
+ public:
+  // Per sample, CombinationSlots pairs (sparse_jobs.h): filled by the sparse-reconstruct step.
+  std::vector<uint32_t> combination_;
+
+ private:
   uint32_t step_number_ = 0;
   uint64_t rows_shipped_ = 0;
   double index_seconds_ = 0;
@@ -558,6 +589,11 @@ class SparsePhase final : public FarmPhase {
           rep.sparse.candidates_ranked += c.candidates_ranked;
           rep.sparse.dense_by_rank += c.dense_by_rank;
           rep.sparse.dense_fallback = c.dense_fallback;
+          // The combinations the bounces reuse (farm/bounce_phase.cpp; a fallback's is empty).
+          if (!steps.combination_.empty())
+            WriteFileDurably(ctx.folder.SparseCombinationFile(),
+                             EncodeCombinationFile(ctx.samples.size(), CombinationSlots(ctx.plan),
+                                                   steps.combination_));
           if (steps.variance_uncovered_jobs_ > 0)
             spdlog::warn(
                 "{} re-used job(s) have no logged variance: the Monte-Carlo estimate "

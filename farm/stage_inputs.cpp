@@ -28,6 +28,7 @@ Json SparseJson(const SparseSettings& s) {
           {"unity_weight", s.unity_weight},
           {"max_residual", s.max_residual},
           {"min_normal_cos", s.min_normal_cos},
+          {"rank_floor", s.rank_floor},
           {"seed", s.seed}};
 }
 
@@ -105,6 +106,7 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
                                 {"indirect_n", s.indirect_n},
                                 {"paths", s.gather_paths},
                                 {"near_field", s.near_field},
+                                {"sparse", s.method == "sparse" ? scene.sparse.indirect : "full"},
                                 {"channels", s.channels},
                                 {"albedo", AlbedoJson(geometry)}});
   }

@@ -58,6 +58,8 @@ struct RunFolder {
     return (std::filesystem::path(indirect) / "path-traced.prtt").string();
   }
   // indirect/bounce-<k>.prtt
+  // The sparse phase's combinations, reused by the bounces (farm/sparse_jobs.h).
+  std::string SparseCombinationFile() const { return sparse + "/combination.bin"; }
   std::string BounceFile(int k) const {
     return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + ".prtt")).string();
   }

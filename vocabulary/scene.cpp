@@ -423,6 +423,8 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.unity_weight = s.Number("unity_weight", p.unity_weight, 0, 100, false);
     p.max_residual = s.Number("max_residual", p.max_residual, 0, 10, false);
     p.min_normal_cos = s.Number("min_normal_cos", p.min_normal_cos, -2, 1, false);
+    p.rank_floor = static_cast<int>(s.Integer("rank_floor", p.rank_floor, 0, 1000));
+    p.indirect = s.Choice("indirect", p.indirect, {"combination", "full"});
     if (p.window % 2 == 0) {
       s.Fail(t ? t->get("window") : nullptr, "window",
              "must be odd (a window centred on the texel), got " + std::to_string(p.window));

@@ -57,13 +57,33 @@ BounceGatherer::BounceGatherer(const EmbreeScene& scene, const SceneSurfaces& su
 
 BounceGatherer::~BounceGatherer() = default;
 
+bool BounceGatherer::HasNearField(int bounce, std::size_t cols) const {
+  return bounce == 1 && near_sampler_ != nullptr && near_sampler_->layout().texel_count() == cols;
+}
+
+GatherStats BounceGatherer::GatherTexels(const SpatialSample& x, uint64_t index, int bounce,
+                                         int channels, const float* previous, uint64_t vertex_count,
+                                         int prev_channels, std::size_t cols,
+                                         std::span<const uint32_t> texels, float* out,
+                                         std::vector<GatherTerm>& terms,
+                                         std::vector<float>& near) const {
+  const bool with_near = HasNearField(bounce, cols);
+  const std::size_t count = texels.size();
+  if (with_near) near.resize(static_cast<std::size_t>(channels) * count);
+  const GatherStats st =
+      Terms(x, index, bounce, channels, terms, with_near ? near.data() : nullptr, texels);
+  ApplyGatherTexels(terms, previous, vertex_count, prev_channels, channels, cols, texels, out);
+  if (with_near && st.near_hits > 0)
+    for (std::size_t i = 0; i < static_cast<std::size_t>(channels) * count; ++i) out[i] += near[i];
+  return st;
+}
+
 GatherStats BounceGatherer::GatherRow(const SpatialSample& x, uint64_t index, int bounce,
                                       int channels, const float* previous, uint64_t vertex_count,
                                       int prev_channels, std::size_t cols, float* out,
                                       std::vector<GatherTerm>& terms,
                                       std::vector<float>& near) const {
-  const bool with_near =
-      bounce == 1 && near_sampler_ != nullptr && near_sampler_->layout().texel_count() == cols;
+  const bool with_near = HasNearField(bounce, cols);
   if (with_near) near.resize(static_cast<std::size_t>(channels) * cols);
   const GatherStats st =
       Terms(x, index, bounce, channels, terms, with_near ? near.data() : nullptr);
@@ -74,11 +94,15 @@ GatherStats BounceGatherer::GatherRow(const SpatialSample& x, uint64_t index, in
 }
 
 GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
-                                  std::vector<GatherTerm>& out, float* near) const {
+                                  std::vector<GatherTerm>& out, float* near,
+                                  std::span<const uint32_t> near_texels) const {
   out.clear();
   GatherStats st;
   const bool near_field = near != nullptr && bounce == 1 && near_sampler_ != nullptr;
-  const std::size_t near_cols = near_field ? near_sampler_->layout().texel_count() : 0;
+  const bool subset = !near_texels.empty();
+  const std::size_t near_cols = !near_field ? 0
+                                : subset    ? near_texels.size()
+                                            : near_sampler_->layout().texel_count();
   if (near_field) std::fill(near, near + channels * near_cols, 0.0f);
   thread_local std::vector<float> near_row;
   struct NearHit {
@@ -154,7 +178,10 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     near_row.resize(near_cols);
     for (const NearHit& nh : near_hits) {
       if (Unit(nh.pick) >= q) continue;
-      const SampleStats ss = near_sampler_->ComputeRow(nh.at, SplitMix64(nh.pick), near_row.data());
+      const SampleStats ss =
+          subset ? near_sampler_->ComputeTexels(nh.at, SplitMix64(nh.pick), near_texels,
+                                                near_row.data())
+                 : near_sampler_->ComputeRow(nh.at, SplitMix64(nh.pick), near_row.data());
       st.rays_traced += ss.rays_traced;
       const double w = inv_p / q;
       for (int c = 0; c < channels; ++c) {
@@ -188,6 +215,24 @@ void ApplyGather(std::span<const GatherTerm> terms, const float* previous, uint6
       const float* src = previous + row * cols;
       float* dst = out + static_cast<std::size_t>(c) * cols;
       for (std::size_t j = 0; j < cols; ++j) dst[j] += w * src[j];
+    }
+  }
+}
+
+void ApplyGatherTexels(std::span<const GatherTerm> terms, const float* previous,
+                       uint64_t vertex_count, int prev_channels, int channels, std::size_t cols,
+                       std::span<const uint32_t> texels, float* out) {
+  const std::size_t count = texels.size();
+  std::fill(out, out + static_cast<std::size_t>(channels) * count, 0.0f);
+  for (const GatherTerm& g : terms) {
+    for (int c = 0; c < channels; ++c) {
+      const float w = g.weight[c];
+      if (w == 0) continue;
+      const uint64_t row =
+          static_cast<uint64_t>(prev_channels == 1 ? 0 : c) * vertex_count + g.vertex;
+      const float* src = previous + row * cols;
+      float* dst = out + static_cast<std::size_t>(c) * count;
+      for (std::size_t i = 0; i < count; ++i) dst[i] += w * src[texels[i]];
     }
   }
 }

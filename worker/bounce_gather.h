@@ -83,9 +83,13 @@ class BounceGatherer {
   // vertex, sorted by vertex, weights ρ_c · b_i / P (channel 0 only when `channels` is 1).
   // A pure function of (seed, index, bounce). Throws NumericalError on a non-finite sample.
   // near (optional; bounce 1 with a near field): channels × 6·indirect_n² floats receiving the
-  // near field's traced part, to be added to the applied terms; zeroed first.
+  // near field's traced part, to be added to the applied terms; zeroed first. near_texels (a
+  // sparse vertex's feature texels, worker/sparse_indirect.h): only these coarse texels are
+  // traced at the near hits, near then holds channels × near_texels.size() floats (channel c at
+  // c·size), each value bit-identical to the full near row's at that texel.
   GatherStats Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
-                    std::vector<GatherTerm>& out, float* near = nullptr) const;
+                    std::vector<GatherTerm>& out, float* near = nullptr,
+                    std::span<const uint32_t> near_texels = {}) const;
 
   // Tᵏ(x) for bounce k into out (channels rows of `cols` floats): Terms, ApplyGather to the
   // previous bounce's rows (prev_channels × vertex_count rows) and, in bounce 1, the near field.
@@ -94,6 +98,15 @@ class BounceGatherer {
                         const float* previous, uint64_t vertex_count, int prev_channels,
                         std::size_t cols, float* out, std::vector<GatherTerm>& terms,
                         std::vector<float>& near) const;
+  // The same at the listed coarse texels only (sorted, distinct): out receives channels ×
+  // texels.size() floats (channel c at c·size), each bit-identical to GatherRow's at that texel
+  // (the same rays, the same order of sums). What a sparse vertex gathers (its features).
+  GatherStats GatherTexels(const SpatialSample& x, uint64_t index, int bounce, int channels,
+                           const float* previous, uint64_t vertex_count, int prev_channels,
+                           std::size_t cols, std::span<const uint32_t> texels, float* out,
+                           std::vector<GatherTerm>& terms, std::vector<float>& near) const;
+  // Whether bounce `bounce` on rows of `cols` texels traces a near field.
+  bool HasNearField(int bounce, std::size_t cols) const;
 
  private:
   const EmbreeScene& scene_;
@@ -108,6 +121,11 @@ class BounceGatherer {
 // `cols` floats (channel c from the previous bounce's channel c, or its only channel).
 void ApplyGather(std::span<const GatherTerm> terms, const float* previous, uint64_t vertex_count,
                  int prev_channels, int channels, std::size_t cols, float* out);
+// The same at the listed texels only: out receives channels × texels.size() floats (channel c at
+// c·size), each summed in the same order as ApplyGather's (bit-identical values).
+void ApplyGatherTexels(std::span<const GatherTerm> terms, const float* previous,
+                       uint64_t vertex_count, int prev_channels, int channels, std::size_t cols,
+                       std::span<const uint32_t> texels, float* out);
 
 // coarse[J] = Σ_{j ∈ J} fine[j] (fine.n() a multiple of coarse.n()).
 void CoarsenRow(const CubemapLayout& fine, const CubemapLayout& coarse, const float* in,

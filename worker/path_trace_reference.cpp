@@ -133,6 +133,91 @@ struct PathTraceReference::Impl {
     }
   }
 
+  // Walks the P paths leaving x (the estimator above): at the d-th front-face hit y of path p,
+  // with throughput beta[c] = Π ρ_c, calls visit(p, d, beta, y, row_key), row_key seeding the
+  // direct row at y. Counts the segments, escapes, back faces and path vertices.
+  template <class Visit>
+  void Walk(const SpatialSample& sample, uint64_t sample_index, PathTraceStats& stats,
+            Visit&& visit) const {
+    const int k_max = options.bounces;
+    const int paths = options.paths;
+    // The frame at x as TransportSampler's (unit shading normal; geometric normal unit and in
+    // its hemisphere).
+    const Vec3 nx = Normalize(sample.normal);
+    Vec3 gx = sample.geometric_normal;
+    const double lg = Length(gx);
+    gx = (std::isfinite(lg) && lg > 0) ? gx / lg : nx;
+    if (Dot(gx, nx) < 0) gx = -gx;
+    Vec3 tx, bx;
+    OrthonormalFrame(nx, tx, bx);
+    const uint64_t vertex_key = SplitMix64(SplitMix64(options.seed ^ kPathStream) ^ sample_index);
+    const ScopedFlushDenormals ftz;
+    for (int p = 0; p < paths; ++p) {
+      const uint64_t path_key = SplitMix64(vertex_key ^ static_cast<uint64_t>(p));
+      Vec3 pos = sample.position, ns = nx, ng = gx, t = tx, b = bx;
+      double beta[3] = {1, 1, 1};
+      for (int d = 0; d < k_max; ++d) {
+        double u1, u2;
+        UnitPoint(SplitMix64(path_key ^ (2 * static_cast<uint64_t>(d))), u1, u2);
+        if (d == 0) {  // stratum p = pv·a + pu of the a×b grid
+          u1 = ((p % grid_u) + u1) / grid_u;
+          u2 = ((p / grid_u) + u2) / grid_v;
+        }
+        const Vec3 w = Normalize(CosineDirection(ns, t, b, u1, u2));
+        OcclusionRay ray{};
+        scene.RobustOrigin(pos, LeavingSide(ng, w), ray.origin);
+        ray.tnear = 0.0f;
+        ray.tfar = std::numeric_limits<float>::infinity();
+        ray.direction[0] = static_cast<float>(w.x);
+        ray.direction[1] = static_cast<float>(w.y);
+        ray.direction[2] = static_cast<float>(w.z);
+        ++stats.intersect_rays;
+        RayHit hit;
+        SurfaceHit y;
+        const SceneSurfaces::Outcome outcome = surfaces.Trace(scene, ray, hit, y);
+        if (outcome != SceneSurfaces::Outcome::kFront) {
+          ++(outcome == SceneSurfaces::Outcome::kEscaped ? stats.escaped : stats.back_faces);
+          break;
+        }
+        const Rgb& rho = surfaces.albedo(y.mesh);
+        for (int c = 0; c < 3; ++c) beta[c] *= rho[c];
+        if (beta[0] == 0 && beta[1] == 0 && beta[2] == 0) break;  // nothing more to carry
+        ++stats.path_vertices;
+        visit(p, d, static_cast<const double*>(beta), y.sample,
+              SplitMix64(path_key ^ (2 * static_cast<uint64_t>(d) + 1)));
+        pos = y.sample.position;
+        ns = y.sample.normal;
+        ng = y.sample.geometric_normal;
+        OrthonormalFrame(ns, t, b);
+      }
+    }
+  }
+
+  // Σ_k Tᵏ_c[x][J] (k = 1..K) at the listed texels (all when empty): out[c·count + i].
+  PathTraceStats Indirect(const SpatialSample& sample, uint64_t sample_index, int channels,
+                          std::span<const uint32_t> texels, float* out) const {
+    const bool all = texels.empty();
+    const std::size_t count = all ? direct.layout().texel_count() : texels.size();
+    PathTraceStats stats;
+    std::vector<double> acc(static_cast<std::size_t>(channels) * count, 0.0);
+    std::vector<float> hit_row(count);
+    if (options.bounces > 0) {
+      Walk(sample, sample_index, stats,
+           [&](int, int, const double* beta, const SpatialSample& y, uint64_t row_key) {
+             stats.shadow_rays += (all ? at_hit.ComputeRow(y, row_key, hit_row.data())
+                                       : at_hit.ComputeTexels(y, row_key, texels, hit_row.data()))
+                                      .rays_traced;
+             for (int c = 0; c < channels; ++c) {
+               double* a = acc.data() + static_cast<std::size_t>(c) * count;
+               for (std::size_t i = 0; i < count; ++i) a[i] += beta[c] * hit_row[i];
+             }
+           });
+    }
+    const double inv_p = 1.0 / options.paths;
+    for (std::size_t i = 0; i < acc.size(); ++i) out[i] = static_cast<float>(acc[i] * inv_p);
+    return stats;
+  }
+
   PathTraceStats Row(const SpatialSample& sample, uint64_t sample_index, int channels, float* row,
                      const PathTraceExtras& extras) const {
     const std::size_t texels = direct.layout().texel_count();
@@ -161,77 +246,29 @@ struct PathTraceReference::Impl {
     std::vector<float> hit_row(k_max > 0 ? texels : 0);
 
     if (k_max > 0) {
-      // The frame at x as TransportSampler's (unit shading normal; geometric normal unit and in
-      // its hemisphere).
-      const Vec3 nx = Normalize(sample.normal);
-      Vec3 gx = sample.geometric_normal;
-      const double lg = Length(gx);
-      gx = (std::isfinite(lg) && lg > 0) ? gx / lg : nx;
-      if (Dot(gx, nx) < 0) gx = -gx;
-      Vec3 tx, bx;
-      OrthonormalFrame(nx, tx, bx);
-      const uint64_t vertex_key = SplitMix64(SplitMix64(options.seed ^ kPathStream) ^ sample_index);
-      const ScopedFlushDenormals ftz;
-      for (int p = 0; p < paths; ++p) {
-        const uint64_t path_key = SplitMix64(vertex_key ^ static_cast<uint64_t>(p));
-        Vec3 pos = sample.position, ns = nx, ng = gx, t = tx, b = bx;
-        double beta[3] = {1, 1, 1};
-        for (int d = 0; d < k_max; ++d) {
-          double u1, u2;
-          UnitPoint(SplitMix64(path_key ^ (2 * static_cast<uint64_t>(d))), u1, u2);
-          if (d == 0) {  // stratum p = pv·a + pu of the a×b grid
-            u1 = ((p % grid_u) + u1) / grid_u;
-            u2 = ((p / grid_u) + u2) / grid_v;
-          }
-          const Vec3 w = Normalize(CosineDirection(ns, t, b, u1, u2));
-          OcclusionRay ray{};
-          scene.RobustOrigin(pos, LeavingSide(ng, w), ray.origin);
-          ray.tnear = 0.0f;
-          ray.tfar = std::numeric_limits<float>::infinity();
-          ray.direction[0] = static_cast<float>(w.x);
-          ray.direction[1] = static_cast<float>(w.y);
-          ray.direction[2] = static_cast<float>(w.z);
-          ++stats.intersect_rays;
-          RayHit hit;
-          SurfaceHit y;
-          const SceneSurfaces::Outcome outcome = surfaces.Trace(scene, ray, hit, y);
-          if (outcome != SceneSurfaces::Outcome::kFront) {
-            ++(outcome == SceneSurfaces::Outcome::kEscaped ? stats.escaped : stats.back_faces);
-            break;
-          }
-          const Rgb& rho = surfaces.albedo(y.mesh);
-          for (int c = 0; c < 3; ++c) beta[c] *= rho[c];
-          if (beta[0] == 0 && beta[1] == 0 && beta[2] == 0) break;  // nothing more to carry
-          ++stats.path_vertices;
-          stats.shadow_rays +=
-              at_hit
-                  .ComputeRow(y.sample, SplitMix64(path_key ^ (2 * static_cast<uint64_t>(d) + 1)),
-                              hit_row.data())
-                  .rays_traced;
-          for (int c = 0; c < channels; ++c) {
-            double* a = acc.data() + static_cast<std::size_t>(c) * texels;
-            for (std::size_t j = 0; j < texels; ++j) a[j] += beta[c] * hit_row[j];
-            if (!per_bounce.empty()) {
-              double* q = per_bounce.data() + (static_cast<std::size_t>(d) * channels + c) * texels;
-              for (std::size_t j = 0; j < texels; ++j) q[j] += beta[c] * hit_row[j];
-            }
-          }
-          for (std::size_t l = 0; l < lights; ++l) {
-            for (int c = 0; c < 3; ++c) {
-              const float* lc = extras.lights[l].Channel(c).data();
-              double dot = 0;
-              for (std::size_t j = 0; j < texels; ++j)
-                dot += static_cast<double>(hit_row[j]) * lc[j];
-              path_sample[(l * 3 + c) * per_estimate + static_cast<std::size_t>(d) * paths + p] =
-                  beta[channels == 1 ? 0 : c] * dot;
-            }
-          }
-          pos = y.sample.position;
-          ns = y.sample.normal;
-          ng = y.sample.geometric_normal;
-          OrthonormalFrame(ns, t, b);
-        }
-      }
+      Walk(sample, sample_index, stats,
+           [&](int p, int d, const double* beta, const SpatialSample& y, uint64_t row_key) {
+             stats.shadow_rays += at_hit.ComputeRow(y, row_key, hit_row.data()).rays_traced;
+             for (int c = 0; c < channels; ++c) {
+               double* a = acc.data() + static_cast<std::size_t>(c) * texels;
+               for (std::size_t j = 0; j < texels; ++j) a[j] += beta[c] * hit_row[j];
+               if (!per_bounce.empty()) {
+                 double* q =
+                     per_bounce.data() + (static_cast<std::size_t>(d) * channels + c) * texels;
+                 for (std::size_t j = 0; j < texels; ++j) q[j] += beta[c] * hit_row[j];
+               }
+             }
+             for (std::size_t l = 0; l < lights; ++l) {
+               for (int c = 0; c < 3; ++c) {
+                 const float* lc = extras.lights[l].Channel(c).data();
+                 double dot = 0;
+                 for (std::size_t j = 0; j < texels; ++j)
+                   dot += static_cast<double>(hit_row[j]) * lc[j];
+                 path_sample[(l * 3 + c) * per_estimate + static_cast<std::size_t>(d) * paths + p] =
+                     beta[channels == 1 ? 0 : c] * dot;
+               }
+             }
+           });
     }
 
     // The row: T⁰ + (1/P)·Σ, rounded once per element (K = 0: T⁰ exactly).
@@ -326,6 +363,17 @@ PathTraceStats PathTraceReference::ComputeRow(const SpatialSample& sample, uint6
                                               const PathTraceExtras& extras) const {
   impl_->Check(channels, extras);
   return impl_->Row(sample, sample_index, channels, row, extras);
+}
+
+PathTraceStats PathTraceReference::ComputeIndirect(const SpatialSample& sample,
+                                                   uint64_t sample_index, int channels,
+                                                   std::span<const uint32_t> texels,
+                                                   float* out) const {
+  impl_->Check(channels, {});
+  const std::size_t t = layout().texel_count();
+  for (uint32_t j : texels)
+    if (j >= t) throw std::out_of_range("PathTraceReference: texel " + std::to_string(j));
+  return impl_->Indirect(sample, sample_index, channels, texels, out);
 }
 
 PathTraceStats PathTraceReference::ComputeRows(std::span<const SpatialSample> samples,

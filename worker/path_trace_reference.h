@@ -147,6 +147,16 @@ class PathTraceReference {
   PathTraceStats ComputeRow(const SpatialSample& sample, uint64_t sample_index, int channels,
                             float* row, const PathTraceExtras& extras = {}) const;
 
+  // The indirect part alone, Σ_k Tᵏ_c[x][j] for k = 1..K, at the listed texels (sorted or not;
+  // every texel when empty) into out[c·count + i]: the same paths as ComputeRow, the direct rows
+  // at the path vertices evaluated at those texels only (TransportSampler::ComputeTexels, the
+  // same values as the full rows'), so a texel's value does not depend on which others are
+  // asked for. What sparse precomputation traces at a vertex's feature texels
+  // (worker/sparse_indirect.h); its cost is proportional to the texels asked for.
+  // Throws as ComputeRow, and std::out_of_range on a texel ≥ texel_count.
+  PathTraceStats ComputeIndirect(const SpatialSample& sample, uint64_t sample_index, int channels,
+                                 std::span<const uint32_t> texels, float* out) const;
+
   // Rows for samples[0..count) with global indices first_index.., row-major into out (count ×
   // channels × texels), in parallel over samples with TBB; extras hold one block per sample.
   PathTraceStats ComputeRows(std::span<const SpatialSample> samples, uint64_t first_index,

@@ -36,6 +36,7 @@ SparsePlan PlanFromSettings(const SparseSettings& s, double scene_diagonal, int 
   p.sparse.unity_weight = s.unity_weight;
   p.sparse.max_residual = s.max_residual;
   p.sparse.min_normal_cos = s.min_normal_cos;
+  p.rank_floor = s.rank_floor;
   p.rank_resolution = std::min(8, cubemap_n);
   return p;
 }
@@ -92,6 +93,11 @@ int SparseCandidateWeight(std::span<const float* const> rows, std::size_t low_di
   // dense vertex within the radius) gets the largest weight by default: nothing is known there,
   // and a sparse vertex there would fall back to dense anyway.
   const int empty = plan.empty_weight == 0 ? plan.max_neighbors : std::max(0, plan.empty_weight);
+  if (plan.rank_floor > 0) {
+    if (static_cast<int>(rows.size()) < std::max(1, plan.sparse.min_neighbors)) return empty;
+    const int rank = std::max(1, LocalRank(rows, low_dim, plan.rank_threshold));
+    return rank <= plan.rank_floor ? -1 : rank;
+  }
   return rows.empty() ? empty : std::max(1, LocalRank(rows, low_dim, plan.rank_threshold));
 }
 
@@ -100,10 +106,19 @@ std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
                                        const SparsePlan& plan, int it) {
   double top = 0;
   for (double w : weights) top = std::max(top, w);
-  std::vector<double> w(weights.begin(), weights.end());
-  for (double& x : w)
-    if (!(x > 0)) x = top > 0 ? top : 1.0;
-  return WeightedSampleWithoutReplacement(candidates, w, picks, plan.seed + 7919 * (it + 1));
+  std::vector<uint32_t> ids;
+  std::vector<double> w;
+  for (std::size_t i = 0; i < candidates.size(); ++i) {
+    if (weights[i] < 0) continue;  // covered (rank_floor)
+    ids.push_back(candidates[i]);
+    w.push_back(weights[i] > 0 ? weights[i] : (top > 0 ? top : 1.0));
+  }
+  if (plan.rank_floor > 0 && !candidates.empty())
+    picks = static_cast<std::size_t>(
+        std::ceil(static_cast<double>(picks) * static_cast<double>(ids.size()) /
+                  static_cast<double>(candidates.size())));
+  return WeightedSampleWithoutReplacement(ids, w, std::min(picks, ids.size()),
+                                          plan.seed + 7919 * (it + 1));
 }
 
 int SparseRankResolution(const SparsePlan& plan, int cubemap_n) {
@@ -247,10 +262,17 @@ class InProcessSteps final : public SparseSteps {
         nbs.push_back({out_ + static_cast<std::size_t>(d) * T_, vis_[d].data(), feat_[d].data(),
                        samples_[d].normal});
       SparseStats st;
+      thread_local std::vector<NeighborWeight> w;
       const SparseOutcome o =
           ReconstructSparseRow(sampler_, samples_[s], s, nbs, plan_.sparse, solvers.local(),
-                               out_ + static_cast<std::size_t>(s) * T_, st);
-      if (o != SparseOutcome::kReconstructed) fallback[s] = 1;
+                               out_ + static_cast<std::size_t>(s) * T_, st, nullptr, &w);
+      if (o != SparseOutcome::kReconstructed) {
+        fallback[s] = 1;
+      } else {
+        std::vector<SampleWeight>& c = report_.combination[s];
+        c.clear();
+        for (const NeighborWeight& x : w) c.push_back({nb[x.neighbor], x.alpha});
+      }
       std::lock_guard<std::mutex> lock(stats_mutex_);
       report_.sparse_stats += st;
       if (progress_ && (++done % 1024 == 0 || done == sparse_ids.size()))
@@ -299,6 +321,7 @@ void RunSparsePrecomputation(
   report.samples = N;
   report.is_dense.assign(N, 0);
   report.local_rank.assign(N, -1);
+  report.combination.assign(N, {});
   if (N == 0) return;
   InProcessSteps steps(sampler, samples, plan, report, out, progress);
   SparseScheduleCounts counts = RunSparseSchedule(N, plan, steps);

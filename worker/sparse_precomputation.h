@@ -36,6 +36,14 @@ struct SparsePlan {
   // same round. Measured on the default scene and the dragon (docs/sparse-precomputation.md):
   // the round's largest rank gave more fallbacks and slightly larger ground errors.
   int empty_weight = 0;
+  // The dense budget driven by rank ("skip what a scene doesn't need"): a candidate with at
+  // least sparse.min_neighbors dense neighbours whose local rank is ≤ rank_floor is covered (a
+  // combination of its neighbours already explains it) and is never picked, and each round picks
+  // its share of the budget × the fraction of its candidates that are not covered, so flat,
+  // unoccluded, low-rank regions stop early and dense_budget becomes a cap. A candidate with
+  // fewer dense neighbours than a sparse vertex needs gets the empty weight (it would fall back
+  // to dense). 0: off, the fixed budget (the paper's).
+  int rank_floor = 0;
   uint64_t seed = 1;
   AngularOptions angular;
   SparseOptions sparse;
@@ -57,6 +65,10 @@ struct SparseReport {
   double seconds_dense = 0, seconds_rank = 0, seconds_sparse = 0;
   std::vector<int> local_rank;    // rank estimated at each candidate vertex, −1 elsewhere
   std::vector<uint8_t> is_dense;  // per sample
+  // Per sample: the dense samples and weights α its reconstructed row combines (§5, Eq. 4;
+  // empty for dense samples and fallbacks). The indirect components may reuse them
+  // (worker/sparse_indirect.h, SparseIndirectOptions::direct_weights).
+  std::vector<std::vector<SampleWeight>> combination;
   // Traced texels as a fraction of what brute force traces (texels above the horizons).
   double SampledFraction() const;
 };
@@ -78,12 +90,16 @@ std::size_t SparsePicksForRound(std::size_t budget, std::size_t dense_count, int
 std::vector<uint32_t> SparseRankCandidates(std::span<const uint8_t> is_dense, std::size_t picks,
                                            const SparsePlan& plan, int it);
 // A candidate's weight from its dense neighbours' downsampled rows (6·m·m floats each): the
-// local rank, at least 1; with no dense neighbour, max_neighbors (or plan.empty_weight when
-// positive; 0, "unknown", when negative: SparsePickByRank resolves it to the round's largest rank).
+// local rank, at least 1; with no dense neighbour (with rank_floor > 0: fewer than
+// sparse.min_neighbors), max_neighbors (or plan.empty_weight when positive; 0, "unknown", when
+// negative: SparsePickByRank resolves it to the round's largest rank); −1, covered, when
+// rank_floor > 0 and the rank is ≤ rank_floor.
 int SparseCandidateWeight(std::span<const float* const> neighbor_low_rows, std::size_t low_dim,
                           const SparsePlan& plan);
-// The next dense vertices of round `it`, drawn with weight = rank (a weight ≤ 0, unknown, counts
-// as the largest weight of the round, 1 if there is none); sorted.
+// The next dense vertices of round `it`, drawn with weight = rank (a weight 0, unknown, counts
+// as the largest weight of the round, 1 if there is none); covered candidates (weight < 0) are
+// never drawn, and with rank_floor > 0 the picks shrink to picks × the uncovered fraction of the
+// candidates; sorted.
 std::vector<uint32_t> SparsePickByRank(std::span<const uint32_t> candidates,
                                        std::span<const double> weights, std::size_t picks,
                                        const SparsePlan& plan, int it);

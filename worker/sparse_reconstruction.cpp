@@ -151,12 +151,17 @@ std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const
 SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
                                    uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
                                    const SparseOptions& options, L1Solver& solver, float* row,
-                                   SparseStats& stats, float* variance) {
+                                   SparseStats& stats, float* variance,
+                                   std::vector<NeighborWeight>* weights) {
   std::vector<DenseNeighbor> same_side;
+  std::vector<uint32_t> kept;  // index into the caller's neighbours of each one used
   if (options.min_normal_cos > -1) {
     const Vec3 nx = Normalize(sample.normal);
-    for (const DenseNeighbor& nb : neighbors)
-      if (Dot(nx, Normalize(nb.normal)) >= options.min_normal_cos) same_side.push_back(nb);
+    for (std::size_t i = 0; i < neighbors.size(); ++i)
+      if (Dot(nx, Normalize(neighbors[i].normal)) >= options.min_normal_cos) {
+        same_side.push_back(neighbors[i]);
+        kept.push_back(static_cast<uint32_t>(i));
+      }
     stats.neighbors_dropped_by_normal += neighbors.size() - same_side.size();
     neighbors = same_side;
   }
@@ -300,6 +305,15 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   }
   for (int i = 0; i < m; ++i)
     row[feats[static_cast<std::size_t>(i)]] = traced[static_cast<std::size_t>(i)];
+  if (weights != nullptr) {
+    weights->clear();
+    for (int c = 0; c < k; ++c) {
+      const auto a = static_cast<float>(alpha[static_cast<std::size_t>(c)]);
+      if (a == 0.0f || !std::isfinite(a)) continue;
+      weights->push_back(
+          {kept.empty() ? static_cast<uint32_t>(c) : kept[static_cast<std::size_t>(c)], a});
+    }
+  }
   ++stats.reconstructed;
   stats.texels_above_horizon += above_count;
   return SparseOutcome::kReconstructed;

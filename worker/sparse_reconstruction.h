@@ -99,9 +99,22 @@ std::vector<uint32_t> ChooseFeatureDirections(const CubemapLayout& layout, const
 // variance (optional, texel_count floats): the Monte-Carlo variance of the traced feature texels
 // (kept exactly in the row), 0 elsewhere: the reconstructed texels' error is the fit's, not the
 // rays'.
+// weights (optional): on kReconstructed, receives the fit's α_k with the index (into
+// `neighbors`) of each neighbour it used, the non-zero ones only: what the vertex's row is a
+// combination of, for the indirect components (worker/sparse_indirect.h).
+struct NeighborWeight {
+  uint32_t neighbor = 0;
+  float alpha = 0;
+};
+// The same with the neighbour's global sample index: a sparse row as a combination of dense rows.
+struct SampleWeight {
+  uint32_t sample = 0;
+  float alpha = 0;
+};
 SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const SpatialSample& sample,
                                    uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
                                    const SparseOptions& options, L1Solver& solver, float* row,
-                                   SparseStats& stats, float* variance = nullptr);
+                                   SparseStats& stats, float* variance = nullptr,
+                                   std::vector<NeighborWeight>* weights = nullptr);
 
 }  // namespace prt
