@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "farm/sparse_jobs.h"
 #include "formats/compressed_transport.h"
 #include "formats/transport_file.h"
 #include "tests/run_prt_farm.h"
@@ -20,6 +21,7 @@
 #include "worker/bounce_gather.h"
 #include "worker/embree_scene.h"
 #include "worker/path_trace_reference.h"
+#include "worker/sparse_indirect.h"
 #include "worker/transport_sampler.h"
 
 namespace prt {
@@ -163,6 +165,86 @@ TEST(InterreflectionMpiTest, AnAlbedoEditReRunsTheBouncesNotTheRows) {
   EXPECT_TRUE(ReadWholeFile(run + "/transport.prtt") == rows);
   // The ground gathers from the box: brighter box, more bounce light.
   EXPECT_FALSE(ReadWholeFile(run + "/indirect/bounce-1.prtt") == bounce);
+}
+
+// Sparse precomputation with interreflection ([sparse] indirect = "combination", the default for
+// method "sparse"): only the dense vertices gather; every other vertex's bounce rows are the
+// combination (run/sparse/combination.bin) its direct row was reconstructed with. The bounce
+// files are the same for 1 and 2 ranks and after a kill and resume inside a bounce, the dense
+// rows are the gather kernel's on the sparse T⁰, the others Σ α·(dense rows) clamped at 0.
+TEST(InterreflectionMpiTest, SparseBouncesGatherAtDenseVerticesAndCombineTheRest) {
+  const std::string dir = WorkDir("sparse");
+  const std::string sparse_scene = std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml";
+  const std::string args = kSmallJobs + " --bounces 2";
+  for (int ranks : {1, 2}) {
+    const auto r =
+        Farm(ranks, sparse_scene + " --out " + dir + "/np" + std::to_string(ranks) + args);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::string run = dir + "/np2";
+  for (int k = 1; k <= 2; ++k) {
+    const std::string f = "/indirect/bounce-" + std::to_string(k) + ".prtt";
+    EXPECT_TRUE(ReadWholeFile(dir + "/np1" + f) == ReadWholeFile(run + f)) << f;
+  }
+  const SceneDescription scene = LoadSceneFile(sparse_scene);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
+  const uint64_t V = samples.size();
+  uint64_t slots = 0;
+  const std::vector<uint32_t> pairs =
+      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
+  std::vector<uint8_t> combined(V, 0);
+  uint64_t count = 0;
+  for (uint64_t v = 0; v < V; ++v) count += combined[v] = pairs[v * slots * 2] != kNoSample;
+  EXPECT_GT(count, V / 3);
+  EXPECT_LT(count, V);
+  EXPECT_EQ(Report(run)["interreflection"]["sparse_combined_vertices"].get<uint64_t>(), count);
+  // Bounce 1's dense rows: the kernel on the run's (sparse) T⁰ coarsened to the indirect grid.
+  const std::vector<float> direct = Rows(run + "/transport.prtt");
+  const CubemapLayout fine(scene.cubemap_n), coarse(scene.cubemap_n / 4);
+  const std::size_t cols = coarse.texel_count();
+  std::vector<float> previous(V * cols);
+  for (uint64_t v = 0; v < V; ++v)
+    CoarsenRow(fine, coarse, direct.data() + v * fine.texel_count(), previous.data() + v * cols);
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  BounceGatherOptions go;
+  go.paths = scene.sampling.gather_paths;
+  go.seed = scene.sampling.seed;
+  go.indirect_n = coarse.n();
+  const BounceGatherer gatherer(embree, surfaces, go);
+  const std::vector<float> b1 = Rows(run + "/indirect/bounce-1.prtt");
+  ASSERT_EQ(b1.size(), V * cols);
+  std::vector<GatherTerm> terms;
+  std::vector<float> near, row(cols);
+  for (uint64_t v = 0; v < V; ++v) {
+    if (combined[v]) {
+      std::vector<SampleWeight> w;
+      for (uint64_t j = 0; j < slots; ++j)
+        if (pairs[(v * slots + j) * 2] != kNoSample) {
+          const uint32_t d = pairs[(v * slots + j) * 2];
+          ASSERT_FALSE(combined[d]) << v << " combines " << d << ", not a dense vertex";
+          float a = 0;
+          std::memcpy(&a, &pairs[(v * slots + j) * 2 + 1], sizeof a);
+          w.push_back({d, a});
+        }
+      CombineRows(
+          w, [&](uint32_t d) { return b1.data() + d * cols; }, cols, row.data());
+    } else {
+      gatherer.GatherRow(samples[v], v, 1, 1, previous.data(), V, 1, cols, row.data(), terms, near);
+    }
+    for (std::size_t j = 0; j < cols; ++j) ASSERT_EQ(b1[v * cols + j], row[j]) << v << " " << j;
+  }
+  // Killed inside bounce 2, then resumed: the same bytes.
+  const std::string again = dir + "/again";
+  ASSERT_EQ(Farm(1, sparse_scene + " --out " + again + kSmallJobs).exit_code, 0);
+  const auto killed =
+      Farm(1, sparse_scene + " --out " + again + args + " --resume --fail-after-jobs 3");
+  EXPECT_NE(killed.exit_code, 0) << killed.output;
+  const auto resumed = Farm(1, sparse_scene + " --out " + again + args + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  for (const char* f : {"/indirect/bounce-1.prtt", "/indirect/bounce-2.prtt", "/transport.prtc"})
+    EXPECT_TRUE(ReadWholeFile(run + f) == ReadWholeFile(again + f)) << f;
 }
 
 // estimator = "path": the indirect stage is one phase of per-element path tracing, its file
