@@ -13,6 +13,10 @@
 // phase of per-element path tracing (worker/path_trace_reference.h, Huang & Ramamoorthi 2010 §7's
 // baseline): every bounce at once, Σ_k Tᵏ at n into indirect/path-traced.prtt, each job's
 // per-bounce energies journaled with it.
+// Method "sparse" with [sparse] indirect = "combination" (docs/sparse-precomputation.md, "With
+// interreflection"): only the dense vertices gather or trace paths (paths on the indirect grid,
+// the paper's "low-resolution grid"); every other vertex's rows are the combination of dense
+// rows its direct row was reconstructed with, filled in by rank 0 after the job loop.
 #include <mpi.h>
 #include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
@@ -94,9 +98,12 @@ class BouncePhase final : public FarmPhase {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
-    const std::size_t cols = k_ > 0 ? coarse.texel_count() : fine.texel_count();
+    // Path tracing at n, or on the indirect grid when only the dense vertices trace (below).
+    const bool path_on_grid = k_ == 0 && ctx.params.sparse_indirect;
+    const std::size_t cols = k_ > 0 || path_on_grid ? coarse.texel_count() : fine.texel_count();
     const int prev_channels = k_ == 1 ? 1 : C;
     if (k_ == 0) {
+      LoadCombination(ctx);
       RunPathTracing(ctx, cols, start);
       return;
     }
@@ -163,8 +170,10 @@ class BouncePhase final : public FarmPhase {
       po.rays_per_texel = ctx.params.rays_per_texel;
       po.path_rays_per_texel = 1;
       po.seed = ctx.params.seed;
-      reference =
-          std::make_unique<PathTraceReference>(*ctx.embree, *surfaces, ctx.params.cubemap_n, po);
+      // Sparse: the dense vertices' rows on the indirect grid (Huang & Ramamoorthi 2010 §4.2:
+      // "we directly use the low-resolution grid"), the others combined from them.
+      const int grid_n = ctx.params.sparse_indirect ? ctx.params.indirect_n : ctx.params.cubemap_n;
+      reference = std::make_unique<PathTraceReference>(*ctx.embree, *surfaces, grid_n, po);
     }
     RunJobPhase(
         ctx,
@@ -193,6 +202,10 @@ class BouncePhase final : public FarmPhase {
     });
     tbb::parallel_for(uint64_t{0}, range.count, [&](uint64_t i) {
       thread_local std::vector<float> row, bounce_rows;
+      if (Combined(range.first + i)) {  // filled by rank 0 from the dense rows
+        std::fill_n(rows + i * per_vertex, per_vertex, 0.0f);
+        return;
+      }
       row.resize(per_vertex);
       bounce_rows.resize((K + 1) * per_vertex);
       PathTraceExtras ex;
@@ -324,8 +337,9 @@ class BouncePhase final : public FarmPhase {
     const std::string partial = final_path + ".partial";
     std::error_code ec;
     fs::create_directories(f.indirect, ec);
+    const bool on_grid = k_ > 0 || ctx.params.sparse_indirect;
     const TransportFileInfo info{
-        C * V, static_cast<uint32_t>(k_ > 0 ? ctx.params.indirect_n : ctx.params.cubemap_n),
+        C * V, static_cast<uint32_t>(on_grid ? ctx.params.indirect_n : ctx.params.cubemap_n),
         ctx.options.rows_per_block, static_cast<uint32_t>(ctx.params.gather_paths),
         ctx.params.seed};
     nlohmann::ordered_json bounce = nlohmann::ordered_json::object();
@@ -478,6 +492,8 @@ class BouncePhase final : public FarmPhase {
         ctx.interreflection["per_bounce"].push_back({{"bounce", k}, {"energy", e}});
       }
       ctx.interreflection["path_trace"] = bounce;
+      if (!pairs_.empty())  // the combined vertices have no per-bounce split
+        ctx.interreflection["per_bounce_energy_over"] = "the vertices that trace paths (dense)";
     }
     spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
                  energy.dump(), rays, FarmNow() - start);

@@ -53,7 +53,8 @@ struct RunFolder {
     indirect_journal = (p / kCheckpointsDirName / "indirect-journal.txt").string();
   }
   // indirect/path-traced.prtt: Σ_k Tᵏ by per-element path tracing ([sampling] estimator =
-  // "path"), channels × samples rows at the cubemap's n.
+  // "path"), channels × samples rows at the cubemap's n (on the indirect grid with method
+  // "sparse" and [sparse] indirect = "combination").
   std::string PathTracedFile() const {
     return (std::filesystem::path(indirect) / "path-traced.prtt").string();
   }

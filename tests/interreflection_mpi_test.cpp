@@ -247,6 +247,71 @@ TEST(InterreflectionMpiTest, SparseBouncesGatherAtDenseVerticesAndCombineTheRest
     EXPECT_TRUE(ReadWholeFile(run + f) == ReadWholeFile(again + f)) << f;
 }
 
+// The same with per-element path tracing: the dense vertices trace paths on the indirect grid
+// (the reference kernel built at indirect_n), the others combine them; 1 and 2 ranks agree.
+TEST(InterreflectionMpiTest, SparsePathTracingTracesDenseVerticesOnTheIndirectGrid) {
+  const std::string dir = WorkDir("sparse_path");
+  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  text.replace(text.find("method = \"sparse\""), 17,
+               "method = \"sparse\"\nbounces = 2\nestimator = \"path\"\ngather_paths = 8");
+  const std::string scene_file = dir + "/path.toml";
+  std::ofstream(scene_file) << text;
+  for (int ranks : {1, 2}) {
+    const auto r =
+        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::string run = dir + "/np2";
+  const std::vector<float> a = Rows(run + "/indirect/path-traced.prtt");
+  EXPECT_TRUE(a == Rows(dir + "/np1/indirect/path-traced.prtt"));
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
+  const uint64_t V = samples.size();
+  const int m = scene.cubemap_n / 4;
+  EXPECT_EQ(TransportFileReader(run + "/indirect/path-traced.prtt").info().cubemap_n,
+            static_cast<uint32_t>(m));
+  uint64_t slots = 0;
+  const std::vector<uint32_t> pairs =
+      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  PathTraceOptions po;
+  po.bounces = 2;
+  po.paths = 8;
+  po.rays_per_texel = scene.sampling.rays_per_texel;
+  po.seed = scene.sampling.seed;
+  const PathTraceReference reference(embree, surfaces, m, po);
+  const std::size_t cols = reference.layout().texel_count();
+  ASSERT_EQ(a.size(), V * cols);
+  std::vector<float> row(cols), bounces(3 * cols), want(cols);
+  uint64_t combined = 0;
+  for (uint64_t v = 0; v < V; ++v) {
+    std::vector<SampleWeight> w;
+    for (uint64_t j = 0; j < slots; ++j)
+      if (pairs[(v * slots + j) * 2] != kNoSample) {
+        float x = 0;
+        std::memcpy(&x, &pairs[(v * slots + j) * 2 + 1], sizeof x);
+        w.push_back({pairs[(v * slots + j) * 2], x});
+      }
+    if (!w.empty()) {
+      ++combined;
+      CombineRows(
+          w, [&](uint32_t d) { return a.data() + d * cols; }, cols, want.data());
+    } else {
+      PathTraceExtras ex;
+      ex.bounce_rows = bounces.data();
+      reference.ComputeRow(samples[v], v, 1, row.data(), ex);
+      for (std::size_t j = 0; j < cols; ++j)
+        want[j] = 0.0f + bounces[cols + j] + bounces[2 * cols + j];
+    }
+    for (std::size_t j = 0; j < cols; ++j) ASSERT_EQ(a[v * cols + j], want[j]) << v << " " << j;
+  }
+  EXPECT_GT(combined, V / 3);
+}
+
 // estimator = "path": the indirect stage is one phase of per-element path tracing, its file
 // (Σ_k Tᵏ at n) the same for 1 and 2 ranks and equal to the reference kernel's rows minus T⁰.
 TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCount) {
