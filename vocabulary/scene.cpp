@@ -532,6 +532,8 @@ window = 7
 unity_weight = 1
 max_residual = 0.3
 min_normal_cos = 0.5
+rank_floor = 2
+indirect = "combination"
 seed = 1
 
 [compression]

@@ -121,9 +121,9 @@ struct SparseSettings {
   double max_residual = 0.3;
   double min_normal_cos = 0.5;  // neighbours whose normal is farther than 60° are not used
   // The dense budget driven by rank (worker/sparse_precomputation.h, SparsePlan::rank_floor):
-  // candidates whose dense neighbours' local rank is at most this are covered; 0: the fixed
-  // budget.
-  int rank_floor = 0;
+  // candidates whose dense neighbours' local rank is at most this are covered and dense_budget
+  // is a cap; 0: the fixed budget (the paper's). docs/sparse-precomputation.md measures 2.
+  int rank_floor = 2;
   // With bounces: "combination" (a sparse vertex's bounce rows are the combination of its dense
   // neighbours' that its direct row was reconstructed with; only dense vertices gather or trace
   // paths) or "full" (every vertex does). docs/sparse-precomputation.md, "With interreflection".
