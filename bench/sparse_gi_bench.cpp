@@ -84,7 +84,7 @@ std::vector<uint64_t> PickVertices(uint64_t first, uint64_t last, std::size_t s,
 // A full transport as this benchmark holds it: T⁰ rows (V × 6n²) and indirect components, each
 // C × V rows of `cols` texels (channel-major), relit with the light averaged to their grid.
 struct Transport {
-  std::vector<float> direct;
+  const std::vector<float>* direct = nullptr;  // not owned (n = 64: 4 GB for the default scene)
   std::vector<std::vector<float>> indirect;
   std::size_t indirect_cols = 0;
 };
@@ -93,12 +93,12 @@ struct Transport {
 std::vector<float> Relit(const SceneGeometry& geometry, const Transport& t, int C, std::size_t cols,
                          const CubemapRgb& light,
                          const std::array<std::vector<float>, 3>& coarse_light) {
-  const uint64_t V = t.direct.size() / cols;
+  const uint64_t V = t.direct->size() / cols;
   std::vector<float> b(V * 3);
   tbb::parallel_for(uint64_t{0}, V, [&](uint64_t v) {
     const Rgb& rho = geometry.meshes[geometry.MeshOfVertex(v)].albedo;
     for (int c = 0; c < 3; ++c) {
-      double x = DotRow(t.direct.data() + v * cols, light.Channel(c).data(), cols);
+      double x = DotRow(t.direct->data() + v * cols, light.Channel(c).data(), cols);
       const int tc = C == 1 ? 0 : c;
       for (const std::vector<float>& ind : t.indirect)
         x += DotRow(ind.data() + (tc * V + v) * t.indirect_cols, coarse_light[c].data(),
@@ -191,11 +191,12 @@ int main(int argc, char** argv) {
       };
 
       // Brute force's T⁰, shared by both estimators (timed once).
+      std::vector<float> brute_direct(V * cols, 0.0f);
       Transport brute_direct_only;
-      brute_direct_only.direct.assign(V * cols, 0.0f);
+      brute_direct_only.direct = &brute_direct;
       auto t0 = Clock::now();
       double c0 = CpuSeconds();
-      const SampleStats bst = sampler.ComputeRows(samples, 0, brute_direct_only.direct.data());
+      const SampleStats bst = sampler.ComputeRows(samples, 0, brute_direct.data());
       const double brute_direct_s = Seconds(t0), brute_direct_cpu = CpuSeconds() - c0;
       std::printf("brute T0: %.2f s wall, %.2f s CPU, %llu texels\n", brute_direct_s,
                   brute_direct_cpu, static_cast<unsigned long long>(bst.texels_traced));
@@ -257,7 +258,7 @@ int main(int argc, char** argv) {
         const bool path = estimator == "path";
         // ---- brute force of this estimator
         Transport brute;
-        brute.direct = brute_direct_only.direct;
+        brute.direct = &brute_direct;
         std::vector<double> brute_phase_s;
         double brute_ind_cpu = 0;
         BounceGatherOptions go;
@@ -275,7 +276,7 @@ int main(int argc, char** argv) {
         uint64_t brute_ind_elements = 0;
         c0 = CpuSeconds();
         if (!path) {
-          brute.indirect = GatherBounces(gatherer, samples, fine, coarse, brute.direct, bounces, C,
+          brute.indirect = GatherBounces(gatherer, samples, fine, coarse, brute_direct, bounces, C,
                                          nullptr, &brute_phase_s);
           brute.indirect_cols = mcols;
           brute_ind_elements = V * mcols * bounces;
@@ -334,19 +335,20 @@ int main(int argc, char** argv) {
           // Gathering: the T⁰ combination by default (its cost is rays, not texels); path
           // tracing: the features (its cost is texels).
           io.direct_weights = var.direct_weights >= 0 ? var.direct_weights == 1 : !path;
+          std::vector<float> sparse_direct(V * cols, 0.0f);
           Transport sparse;
-          sparse.direct.assign(V * cols, 0.0f);
+          sparse.direct = &sparse_direct;
           sparse.indirect_cols = mcols;
           std::vector<SparseIndirectStats> ist;
           SparseReport rep;
           const auto ts = Clock::now();
           const double cs = CpuSeconds();
-          RunSparsePrecomputation(sampler, samples, var.plan, rep, sparse.direct.data());
+          RunSparsePrecomputation(sampler, samples, var.plan, rep, sparse_direct.data());
           const double direct_s = Seconds(ts);
           if (!path) {
             std::vector<float> previous(V * mcols);
             tbb::parallel_for(uint64_t{0}, V, [&](uint64_t v) {
-              CoarsenRow(fine, coarse, sparse.direct.data() + v * cols,
+              CoarsenRow(fine, coarse, sparse_direct.data() + v * cols,
                          previous.data() + v * mcols);
             });
             int prev_channels = 1;
@@ -430,7 +432,7 @@ int main(int argc, char** argv) {
           std::printf("    samples: %.1f%% of brute force's elements\n", 100 * samples_rate);
           coarse_for(coarse);
           Transport sparse_direct_only;
-          sparse_direct_only.direct = sparse.direct;
+          sparse_direct_only.direct = &sparse_direct;
           for (std::size_t l = 0; l < lights.size(); ++l) {
             const std::vector<float> b =
                 Relit(geometry, sparse, C, cols, lights[l].cube, lights[l].coarse);

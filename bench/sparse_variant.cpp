@@ -31,6 +31,8 @@ SparseVariant ParseSparseVariant(const std::string& spec, const SparsePlan& base
     } else if (key == "min_features") {
       v.plan.sparse.min_features =
           static_cast<int>(std::lround(x < 1 ? x * v.plan.sparse.features : x));
+    } else if (key == "grid_step") {
+      v.plan.angular.grid_step = static_cast<int>(x);
     } else if (key == "window") {
       v.plan.angular.window = static_cast<int>(x);
     } else if (key == "lambda") {

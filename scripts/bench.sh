@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -125,6 +125,43 @@ run_mc_error() {
 # path-traced reference on the default scene and two more real meshes, K = 1 and 2, n = 32, four
 # lights, model and ground apart, with images and the per-bounce energy plot; the colour-bleeding
 # scene (a red ground); then prt-farm's wall time with K = 2 against K = 0 on the same 2 ranks.
+run_sparse_gi() {
+  # Sparse precomputation with interreflection against brute force of the same estimator
+  # (docs/sparse-precomputation.md, "With interreflection"), one run per case.
+  local dir="$OUT/sparse-gi" bench="$BUILD_DIR/bench/prt-sparse-gi-bench"
+  mkdir -p "$dir"
+  echo "== gather, n = 32: default, dragon, armadillo (the fixed budget and the features as variants) =="
+  "$bench" --scenes default,dragon,armadillo --estimators gather --variant "rank_floor=0" \
+    --variant "direct_weights=0" --out "$dir/gather32" 2>&1 | grep -v '\[info\]\|\[warning\]'
+  echo "== path tracing (64 paths), n = 32: dragon, armadillo (the combination as a variant) =="
+  "$bench" --scenes dragon,armadillo --estimators path --path-paths 64 --variant "direct_weights=1" \
+    --out "$dir/path32" 2>&1 | grep -v '\[info\]\|\[warning\]'
+  echo "== gather, n = 64: dragon, default (the half-resolution grid as a variant) =="
+  "$bench" --scenes dragon,default --n 64 --estimators gather --variant "grid_step=2" \
+    --out "$dir/gather64" 2>&1 | grep -v '\[info\]\|\[warning\]'
+  echo "== prt-farm, default scene, 2 ranks, K = 2: brute against sparse =="
+  for m in brute sparse; do
+    mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$dir/farm-$m" --force \
+      --method "$m" --bounces 2 -q
+  done
+  python3 - "$dir" <<'PY'
+import json, sys
+d = sys.argv[1]
+r = {m: json.load(open(f"{d}/farm-{m}/report.json")) for m in ("brute", "sparse")}
+def phases(rep):
+    return {p["name"]: p["wall_seconds"] for p in rep["phases"]}
+for m in ("brute", "sparse"):
+    print(m, {k: round(v, 1) for k, v in phases(r[m]).items()})
+b, s = phases(r["brute"]), phases(r["sparse"])
+rows_b = b.get("brute", 0.0)
+rows_s = s.get("sparse", 0.0)
+ind_b = sum(v for k, v in b.items() if k.startswith("bounce-"))
+ind_s = sum(v for k, v in s.items() if k.startswith("bounce-"))
+print(f"rows {rows_s:.1f} / {rows_b:.1f} s = {rows_s / rows_b:.3f}x; bounces {ind_s:.1f} / {ind_b:.1f} s = "
+      f"{ind_s / ind_b:.3f}x; rows + bounces {(rows_s + ind_s) / (rows_b + ind_b):.3f}x")
+PY
+}
+
 run_gi() {
   local dir="$OUT/gi" args="--bounces 2 --ref-vertices ${PRT_GI_REF_VERTICES:-48} --ref-paths ${PRT_GI_REF_PATHS:-1024} --images"
   mkdir -p "$dir"
@@ -164,5 +201,6 @@ case "$WHAT" in
   transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
   mc-error) run_mc_error ;;
   gi) run_gi ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi] [--quick]" >&2; exit 1 ;;
+  sparse-gi) run_sparse_gi ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi] [--quick]" >&2; exit 1 ;;
 esac

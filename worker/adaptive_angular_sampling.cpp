@@ -56,6 +56,15 @@ void VisibilityOfRow(const TransportSampler& sampler, const SpatialSample& sampl
   }
 }
 
+int AngularGridStep(const AngularOptions& options, int n) {
+  if (n < 2) return 1;
+  return options.grid_step > 0 ? options.grid_step : std::max(2, n / 16);
+}
+
+int AngularWindowHalf(const AngularOptions& options, int n) {
+  return (options.window / 2) * std::max(1, AngularGridStep(options, n) / 2);
+}
+
 AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const SpatialSample& sample,
                                     uint64_t sample_index, const AngularOptions& options,
                                     DenseRow& out) {
@@ -71,12 +80,12 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   std::vector<uint8_t> above(count), fully(count);
   stats.texels_above_horizon = layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
 
-  // Pass 1: the regular grid at half resolution per face axis. The same rays give the
+  // Pass 1: the regular grid (half resolution per face axis up to n = 32). The same rays give the
   // unoccluded estimate U_j, so v_j = T_j / U_j is exactly 1 where nothing blocks the texel.
   std::vector<uint8_t> sampled(count, 0);
   std::vector<uint32_t> grid;
   grid.reserve(count / 4 + 8);
-  const int step = n >= 2 ? 2 : 1;
+  const int step = AngularGridStep(options, n);
   for (int face = 0; face < 6; ++face)
     for (int y = 0; y < n; y += step)
       for (int x = 0; x < n; x += step) {
@@ -99,7 +108,7 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   // visibility of the sampled texels in the window, as a separable filter (along the rows, then
   // the columns of the row results: the same min and max as the 2D window, at 2·window instead
   // of window² reads per texel). lo > hi where the window holds no sampled texel.
-  const int half = options.window / 2;
+  const int half = AngularWindowHalf(options, n);
   std::vector<float> row_lo(static_cast<std::size_t>(n) * n), row_hi(row_lo.size());
   std::vector<uint32_t> features, borrowed;
   std::vector<float> borrowed_v;

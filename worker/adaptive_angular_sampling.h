@@ -1,7 +1,8 @@
 // Dense vertices, angular domain (Huang & Ramamoorthi 2010, §4.2, Figure 3): trace a regular grid
-// at half resolution per face axis (1/4 of the texels), then for every other texel above the
-// horizon inspect the sampled texels in a 7×7 window: where they disagree (non-zero variance) the
-// texel is a feature and is traced; where they agree it borrows their value.
+// at half resolution per face axis (1/4 of the texels; coarser above n = 32, AngularOptions::
+// grid_step), then for every other texel above the horizon inspect the sampled texels in a 7×7
+// window: where they disagree (non-zero variance) the texel is a feature and is traced; where
+// they agree it borrows their value.
 //
 // The test is made on visibility, not on T: a texel's fractional visibility is
 // v_j = T_j / U_j, with U_j the same estimator with visibility ≡ 1 (TransportSampler::
@@ -39,9 +40,19 @@ struct AngularStats {
 };
 
 struct AngularOptions {
-  int window = 7;           // the paper's 7×7
+  int window = 7;           // the paper's 7×7 (at a grid step of 2)
   double tolerance = 1e-6;  // |v_a − v_b| above this counts as non-zero variance
+  // The first pass's grid step per face axis: 0 = max(2, n/16), the paper's half resolution
+  // (1/4 of the texels) up to n = 32 and the same angular spacing above (n = 64: every 4th texel
+  // per axis, 1/16), with the window scaled by step/2 (13×13 at n = 64) so that it spans the same
+  // solid angle and holds as many grid samples. At n = 64 the half-resolution grid alone was a
+  // quarter of every dense row and the 7×7 window half as wide in angle (docs/
+  // sparse-precomputation.md, "n = 64").
+  int grid_step = 0;
 };
+// The grid step and the window's half-width used at cubemap resolution n.
+int AngularGridStep(const AngularOptions& options, int n);
+int AngularWindowHalf(const AngularOptions& options, int n);
 
 // One dense vertex row by two-pass adaptive angular sampling. Deterministic: traced values are
 // bit-identical to TransportSampler::ComputeRow's entries for the same texels.
