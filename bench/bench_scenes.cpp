@@ -1,12 +1,16 @@
 #include "bench/bench_scenes.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <ctime>
+#include <sstream>
 
 #include "viewer/rasterizer.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
 
 namespace prt::bench {
 
@@ -82,6 +86,37 @@ ImageRgb RenderVertexColours(const SceneDescription& scene, const SceneGeometry&
   ImageRgb img(r.width, r.height);
   img.pixels = r.rgb;
   return img;
+}
+
+std::vector<std::string> Split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+double CpuSeconds() {
+  return static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
+}
+
+double DotRow(const float* a, const float* b, std::size_t n) {
+  double s = 0;
+  for (std::size_t i = 0; i < n; ++i) s += double(a[i]) * b[i];
+  return s;
+}
+
+std::vector<uint64_t> PickVertices(uint64_t first, uint64_t last, std::size_t count,
+                                   uint64_t seed) {
+  std::vector<uint64_t> all;
+  for (uint64_t v = first; v < last; ++v) all.push_back(v);
+  for (std::size_t i = 0; i < all.size() && i < count; ++i) {
+    const uint64_t j = i + SplitMix64(seed ^ (0x9E37ull * (i + 1))) % (all.size() - i);
+    std::swap(all[i], all[j]);
+  }
+  all.resize(std::min(count, all.size()));
+  std::sort(all.begin(), all.end());
+  return all;
 }
 
 std::vector<float> DenseVertexColours(const std::vector<uint8_t>& is_dense,

@@ -44,6 +44,14 @@ SampleRanges RangesOf(const SceneGeometry& geometry);
 ImageRgb RenderVertexColours(const SceneDescription& scene, const SceneGeometry& geometry,
                              const std::vector<float>& rgb, const CubemapRgb* background);
 
+// Small helpers the benchmark programs share: a comma-separated list, the process's CPU seconds
+// (all threads: the ratio of two CPU times is robust on a shared machine), a dot product in
+// double, and `count` distinct vertices of [first, last) by a seeded shuffle, sorted.
+std::vector<std::string> Split(const std::string& s);
+double CpuSeconds();
+double DotRow(const float* a, const float* b, std::size_t n);
+std::vector<uint64_t> PickVertices(uint64_t first, uint64_t last, std::size_t count, uint64_t seed);
+
 // Figure 2 of Huang & Ramamoorthi 2010: per-sample colours showing where the dense vertices went,
 // coloured by the local rank estimated there (false colour, 0 … the largest rank); dense
 // vertices with no rank estimate (the initial random set) white, sparse vertices grey.

@@ -42,25 +42,6 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-double DotRow(const float* a, const float* b, std::size_t n) {
-  double s = 0;
-  for (std::size_t i = 0; i < n; ++i) s += double(a[i]) * b[i];
-  return s;
-}
-
-// S distinct vertices of [first, last), by a seeded shuffle.
-std::vector<uint64_t> PickVertices(uint64_t first, uint64_t last, std::size_t s, uint64_t seed) {
-  std::vector<uint64_t> all;
-  for (uint64_t v = first; v < last; ++v) all.push_back(v);
-  for (std::size_t i = 0; i < all.size() && i < s; ++i) {
-    const uint64_t j = i + SplitMix64(seed ^ (0x9E37ull * (i + 1))) % (all.size() - i);
-    std::swap(all[i], all[j]);
-  }
-  all.resize(std::min(s, all.size()));
-  std::sort(all.begin(), all.end());
-  return all;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -173,20 +154,20 @@ int main(int argc, char** argv) {
         coarse_light[l][c] = CoarsenLight(fine, coarse, lights[l].cube.Channel(c));
     // Relit without albedo: D[l][v][c], I[k][l][v][c].
     auto direct_relit = [&](std::size_t l, uint64_t v, int c) {
-      return DotRow(direct.data() + v * cols, lights[l].cube.Channel(c).data(), cols);
+      return bench::DotRow(direct.data() + v * cols, lights[l].cube.Channel(c).data(), cols);
     };
     auto bounce_relit = [&](int k, std::size_t l, uint64_t v, int c) {
       const int tc = C == 1 ? 0 : c;
-      return DotRow(bounce_rows[k - 1].data() + (tc * V + v) * mcols, coarse_light[l][c].data(),
-                    mcols);
+      return bench::DotRow(bounce_rows[k - 1].data() + (tc * V + v) * mcols,
+                           coarse_light[l][c].data(), mcols);
     };
 
     // 3. The reference on S vertices of each group.
     const bench::SampleRanges ranges = bench::RangesOf(geometry);
     const std::vector<uint64_t> model =
-        PickVertices(ranges.model_first, ranges.model_last, ref_vertices, 11);
+        bench::PickVertices(ranges.model_first, ranges.model_last, ref_vertices, 11);
     const std::vector<uint64_t> ground =
-        PickVertices(ranges.ground_first, ranges.ground_last, ref_vertices, 12);
+        bench::PickVertices(ranges.ground_first, ranges.ground_last, ref_vertices, 12);
     std::vector<uint64_t> picked = model;
     picked.insert(picked.end(), ground.begin(), ground.end());
     PathTraceOptions po;

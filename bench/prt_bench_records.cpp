@@ -14,10 +14,6 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-double CpuSeconds() {
-  return static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
-}
-
 std::vector<std::string> SplitList(const std::string& s, char sep) {
   std::vector<std::string> out;
   std::stringstream ss(s);

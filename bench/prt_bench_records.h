@@ -8,14 +8,13 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_scenes.h"  // CpuSeconds (process CPU seconds, all threads)
+
 namespace prt::bench {
 
 using Clock = std::chrono::steady_clock;
 
 double Seconds(Clock::time_point t0);
-// Process CPU seconds, all threads.
-double CpuSeconds();
-
 std::vector<std::string> SplitList(const std::string& s, char sep = ',');
 std::vector<double> Numbers(const std::string& s);
 std::string Fmt(double v);

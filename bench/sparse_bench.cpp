@@ -36,20 +36,6 @@ using Clock = std::chrono::steady_clock;
 double Seconds(Clock::time_point a) {
   return std::chrono::duration<double>(Clock::now() - a).count();
 }
-// Process CPU seconds (all threads): the ratio of two CPU times is robust on a shared machine
-// where wall time includes waiting for a core.
-double CpuSeconds() {
-  return static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
-}
-
-std::vector<std::string> Split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 using Variant = bench::SparseVariant;
 
 }  // namespace
@@ -91,7 +77,7 @@ int main(int argc, char** argv) {
          "ground\n";
   std::ostringstream md;
 
-  for (const std::string& name : Split(scenes_arg)) {
+  for (const std::string& name : bench::Split(scenes_arg)) {
     const SceneDescription scene = bench::BenchScene(name, n);
     const SceneGeometry geometry = BuildSceneGeometry(scene);
     const EmbreeScene embree(geometry);
@@ -126,10 +112,10 @@ int main(int argc, char** argv) {
     }
     if (!cached) {
       auto t0 = Clock::now();
-      double c0 = CpuSeconds();
+      double c0 = bench::CpuSeconds();
       bst = sampler.ComputeRows(samples, 0, brute.data());
       brute_s = Seconds(t0);
-      brute_cpu = CpuSeconds() - c0;
+      brute_cpu = bench::CpuSeconds() - c0;
       if (!cache_file.empty()) {
         std::filesystem::create_directories(brute_cache);
         std::ofstream out(cache_file, std::ios::binary);
@@ -206,10 +192,10 @@ int main(int argc, char** argv) {
       std::vector<float> rows(brute.size(), 0.0f);
       sampler.MeasureTraceCpu(true);
       const auto t0 = Clock::now();
-      const double c0 = CpuSeconds();
+      const double c0 = bench::CpuSeconds();
       RunSparsePrecomputation(sampler, samples, v.plan, rep, rows.data());
       const double sec = Seconds(t0);
-      const double cpu = CpuSeconds() - c0;
+      const double cpu = bench::CpuSeconds() - c0;
       const double trace_cpu = sampler.trace_cpu_seconds();
       sampler.MeasureTraceCpu(false);
       const double dense_n =

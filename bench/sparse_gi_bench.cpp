@@ -50,37 +50,6 @@ using Clock = std::chrono::steady_clock;
 double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
-double CpuSeconds() {
-  return static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
-}
-
-std::vector<std::string> Split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
-double DotRow(const float* a, const float* b, std::size_t n) {
-  double s = 0;
-  for (std::size_t i = 0; i < n; ++i) s += double(a[i]) * b[i];
-  return s;
-}
-
-// S distinct vertices of [first, last), by a seeded shuffle.
-std::vector<uint64_t> PickVertices(uint64_t first, uint64_t last, std::size_t s, uint64_t seed) {
-  std::vector<uint64_t> all;
-  for (uint64_t v = first; v < last; ++v) all.push_back(v);
-  for (std::size_t i = 0; i < all.size() && i < s; ++i) {
-    const uint64_t j = i + SplitMix64(seed ^ (0x9E37ull * (i + 1))) % (all.size() - i);
-    std::swap(all[i], all[j]);
-  }
-  all.resize(std::min(s, all.size()));
-  std::sort(all.begin(), all.end());
-  return all;
-}
-
 // A full transport as this benchmark holds it: T⁰ rows (V × 6n²) and indirect components, each
 // C × V rows of `cols` texels (channel-major), relit with the light averaged to their grid.
 struct Transport {
@@ -98,11 +67,11 @@ std::vector<float> Relit(const SceneGeometry& geometry, const Transport& t, int 
   tbb::parallel_for(uint64_t{0}, V, [&](uint64_t v) {
     const Rgb& rho = geometry.meshes[geometry.MeshOfVertex(v)].albedo;
     for (int c = 0; c < 3; ++c) {
-      double x = DotRow(t.direct->data() + v * cols, light.Channel(c).data(), cols);
+      double x = bench::DotRow(t.direct->data() + v * cols, light.Channel(c).data(), cols);
       const int tc = C == 1 ? 0 : c;
       for (const std::vector<float>& ind : t.indirect)
-        x += DotRow(ind.data() + (tc * V + v) * t.indirect_cols, coarse_light[c].data(),
-                    t.indirect_cols);
+        x += bench::DotRow(ind.data() + (tc * V + v) * t.indirect_cols, coarse_light[c].data(),
+                           t.indirect_cols);
       b[v * 3 + c] = static_cast<float>(rho[c] * x);
     }
   });
@@ -158,7 +127,7 @@ int main(int argc, char** argv) {
            "direct_ratio_wall,samples,dense_spatial,light,err_model,err_ground,ref_model,"
            "ref_ground\n";
     std::ofstream pareto(out_dir + "/pareto.dat");
-    for (const std::string& name : Split(scenes_arg)) {
+    for (const std::string& name : bench::Split(scenes_arg)) {
       const SceneDescription scene = bench::BenchScene(name, n);
       const SceneGeometry geometry = BuildSceneGeometry(scene);
       const std::vector<SpatialSample> samples = SpatialSamplesOf(geometry);
@@ -181,7 +150,7 @@ int main(int argc, char** argv) {
           ranges.ground_last - ranges.ground_first, n, m, bounces, C);
 
       std::vector<Light> lights;
-      for (auto& e : bench::BenchEnvironments(n, Split(envs_arg))) {
+      for (auto& e : bench::BenchEnvironments(n, bench::Split(envs_arg))) {
         Light l{e.name, std::move(e.cube), {}};
         lights.push_back(std::move(l));
       }
@@ -195,9 +164,9 @@ int main(int argc, char** argv) {
       Transport brute_direct_only;
       brute_direct_only.direct = &brute_direct;
       auto t0 = Clock::now();
-      double c0 = CpuSeconds();
+      double c0 = bench::CpuSeconds();
       const SampleStats bst = sampler.ComputeRows(samples, 0, brute_direct.data());
-      const double brute_direct_s = Seconds(t0), brute_direct_cpu = CpuSeconds() - c0;
+      const double brute_direct_s = Seconds(t0), brute_direct_cpu = bench::CpuSeconds() - c0;
       std::printf("brute T0: %.2f s wall, %.2f s CPU, %llu texels\n", brute_direct_s,
                   brute_direct_cpu, static_cast<unsigned long long>(bst.texels_traced));
 
@@ -207,10 +176,11 @@ int main(int argc, char** argv) {
       std::vector<CubemapRgb> light_cubes;
       for (const Light& l : lights) light_cubes.push_back(l.cube);
       const std::size_t ref_model =
-          PickVertices(ranges.model_first, ranges.model_last, ref_vertices, 11).size();
+          bench::PickVertices(ranges.model_first, ranges.model_last, ref_vertices, 11).size();
       if (ref_vertices > 0) {
-        picked = PickVertices(ranges.model_first, ranges.model_last, ref_vertices, 11);
-        const auto g = PickVertices(ranges.ground_first, ranges.ground_last, ref_vertices, 12);
+        picked = bench::PickVertices(ranges.model_first, ranges.model_last, ref_vertices, 11);
+        const auto g =
+            bench::PickVertices(ranges.ground_first, ranges.ground_last, ref_vertices, 12);
         picked.insert(picked.end(), g.begin(), g.end());
         PathTraceOptions po;
         po.bounces = bounces;
@@ -252,7 +222,7 @@ int main(int argc, char** argv) {
       for (const std::string& spec : variant_specs)
         variants.push_back(bench::ParseSparseVariant(spec, base));
 
-      for (const std::string& estimator : Split(estimators_arg)) {
+      for (const std::string& estimator : bench::Split(estimators_arg)) {
         if (estimator != "gather" && estimator != "path")
           throw std::invalid_argument("--estimators: gather or path, not " + estimator);
         const bool path = estimator == "path";
@@ -274,7 +244,7 @@ int main(int argc, char** argv) {
         po.path_rays_per_texel = 1;
         po.seed = scene.sampling.seed;
         uint64_t brute_ind_elements = 0;
-        c0 = CpuSeconds();
+        c0 = bench::CpuSeconds();
         if (!path) {
           brute.indirect = GatherBounces(gatherer, samples, fine, coarse, brute_direct, bounces, C,
                                          nullptr, &brute_phase_s);
@@ -296,7 +266,7 @@ int main(int argc, char** argv) {
           brute_phase_s.push_back(Seconds(tp));
           brute_ind_elements = V * cols;
         }
-        brute_ind_cpu = CpuSeconds() - c0;
+        brute_ind_cpu = bench::CpuSeconds() - c0;
         double brute_ind_s = 0;
         for (double s : brute_phase_s) brute_ind_s += s;
         const double brute_s = brute_direct_s + brute_ind_s;
@@ -342,7 +312,7 @@ int main(int argc, char** argv) {
           std::vector<SparseIndirectStats> ist;
           SparseReport rep;
           const auto ts = Clock::now();
-          const double cs = CpuSeconds();
+          const double cs = bench::CpuSeconds();
           RunSparsePrecomputation(sampler, samples, var.plan, rep, sparse_direct.data());
           const double direct_s = Seconds(ts);
           if (!path) {
@@ -375,7 +345,7 @@ int main(int argc, char** argv) {
             ist.push_back(st);
             sparse.indirect.push_back(std::move(rows));
           }
-          const double sec = Seconds(ts), cpu = CpuSeconds() - cs;
+          const double sec = Seconds(ts), cpu = bench::CpuSeconds() - cs;
           // Rates (Figure 9) and phases (Figure 10).
           const double dense_spatial =
               double(rep.dense_initial + rep.dense_by_rank + rep.dense_fallback) / double(V);
@@ -474,7 +444,7 @@ int main(int argc, char** argv) {
               }
             }
           }
-          if (vi == 0 && estimator == Split(estimators_arg)[0]) {
+          if (vi == 0 && estimator == bench::Split(estimators_arg)[0]) {
             try {
               WritePng(bench::RenderVertexColours(
                            scene, geometry, bench::DenseVertexColours(rep.is_dense, rep.local_rank),

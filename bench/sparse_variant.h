@@ -17,8 +17,8 @@ struct SparseVariant {
 
 // Keys: budget, initial, iterations, radius (× the scene's), features, min_features (× features
 // when < 1), window, lambda, normal_cos, empty_weight, mode (visibility|transport), solver
-// (l1|ls), unity (unity_weight), max_residual, rank_floor, ind_features, direct_weights (0|1), grid_step.
-// Throws std::invalid_argument on an unknown key or a malformed pair.
+// (l1|ls), unity (unity_weight), max_residual, rank_floor, ind_features, direct_weights (0|1),
+// grid_step. Throws std::invalid_argument on an unknown key or a malformed pair.
 SparseVariant ParseSparseVariant(const std::string& spec, const SparsePlan& base);
 
 }  // namespace prt::bench

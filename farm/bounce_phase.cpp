@@ -40,6 +40,7 @@
 #include "vocabulary/hash.h"
 #include "worker/bounce_gather.h"
 #include "worker/composed_transport.h"
+#include "worker/neighbor_index.h"
 #include "worker/path_trace_reference.h"
 #include "worker/sparse_indirect.h"
 
@@ -56,27 +57,16 @@ struct BounceResultHeader {
   uint64_t back_face_hits = 0;
 };
 
-// Broadcasts rank 0's floats to every rank, in pieces an int count can address.
-void BroadcastFloats(MPI_Comm comm, std::vector<float>& v) {
+// Broadcasts rank 0's vector to every rank, in pieces an int count can address.
+template <class T>
+void BroadcastVector(MPI_Comm comm, std::vector<T>& v, MPI_Datatype type, const char* what) {
   uint64_t size = v.size();
-  CheckMpi(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast bounce rows");
+  CheckMpi(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm), what);
   v.resize(static_cast<std::size_t>(size));
   constexpr uint64_t kPiece = uint64_t{1} << 28;
   for (uint64_t at = 0; at < size; at += kPiece) {
     const int count = static_cast<int>(std::min(kPiece, size - at));
-    CheckMpi(MPI_Bcast(v.data() + at, count, MPI_FLOAT, 0, comm), "MPI_Bcast bounce rows");
-  }
-}
-
-// Broadcasts rank 0's bytes to every rank.
-void BroadcastBytes(MPI_Comm comm, std::vector<uint8_t>& v) {
-  uint64_t size = v.size();
-  CheckMpi(MPI_Bcast(&size, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast bounce mask");
-  v.resize(static_cast<std::size_t>(size));
-  constexpr uint64_t kPiece = uint64_t{1} << 30;
-  for (uint64_t at = 0; at < size; at += kPiece) {
-    const int count = static_cast<int>(std::min(kPiece, size - at));
-    CheckMpi(MPI_Bcast(v.data() + at, count, MPI_BYTE, 0, comm), "MPI_Bcast bounce mask");
+    CheckMpi(MPI_Bcast(v.data() + at, count, type, 0, comm), what);
   }
 }
 
@@ -88,9 +78,13 @@ double Dot(const float* a, const float* b, std::size_t n) {
 
 class BouncePhase final : public FarmPhase {
  public:
-  // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing.
+  // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing (with [sparse]
+  // indirect = "features": the dense vertices only); k = −1: the other vertices' features.
   explicit BouncePhase(int k)
-      : k_(k), name_(k > 0 ? "bounce-" + std::to_string(k) : std::string("path-trace")) {}
+      : k_(k),
+        name_(k > 0    ? "bounce-" + std::to_string(k)
+              : k == 0 ? std::string("path-trace")
+                       : std::string("path-trace-sparse")) {}
   const char* name() const override { return name_.c_str(); }
 
   void Run(FarmContext& ctx) override {
@@ -99,7 +93,7 @@ class BouncePhase final : public FarmPhase {
     const int C = ctx.params.channels;
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
     // Path tracing at n, or on the indirect grid when only the dense vertices trace (below).
-    const bool path_on_grid = k_ == 0 && ctx.params.sparse_indirect;
+    const bool path_on_grid = k_ <= 0 && ctx.params.sparse_indirect;
     const std::size_t cols = k_ > 0 || path_on_grid ? coarse.texel_count() : fine.texel_count();
     const int prev_channels = k_ == 1 ? 1 : C;
     if (k_ == 0) {
@@ -115,9 +109,10 @@ class BouncePhase final : public FarmPhase {
       try {
         const uint64_t bytes = uint64_t(prev_channels) * V * cols * sizeof(float);
         if (bytes > ctx.options.memory_budget_bytes)
-          throw UsageError("bounce " + std::to_string(k_) + " needs the previous bounce's rows (" +
-                           std::to_string(bytes >> 20) + " MiB) on every rank, more than " +
-                           "--memory-budget (" +
+          throw UsageError(name_ + " needs the " +
+                           (k_ > 0 ? "previous bounce's" : "dense vertices' path-traced") +
+                           " rows (" + std::to_string(bytes >> 20) +
+                           " MiB) on every rank, more than " + "--memory-budget (" +
                            std::to_string(ctx.options.memory_budget_bytes >> 20) +
                            " MiB): raise it or lower [sampling] indirect_n");
         ctx.run_eta.StepStarted(name_);
@@ -131,8 +126,12 @@ class BouncePhase final : public FarmPhase {
     }
     CheckMpi(MPI_Bcast(&status, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast bounce status");
     if (status != kExitOk) throw CollectiveStop{static_cast<int>(status)};
-    BroadcastFloats(ctx.comm, previous);
+    BroadcastVector(ctx.comm, previous, MPI_FLOAT, "MPI_Bcast bounce rows");
     LoadCombination(ctx);
+    if (k_ < 0) {
+      RunPathFeatures(ctx, previous, cols, start);
+      return;
+    }
 
     // 2. The gatherer on every rank that computes.
     std::unique_ptr<SceneSurfaces> surfaces;
@@ -164,12 +163,7 @@ class BouncePhase final : public FarmPhase {
     std::unique_ptr<PathTraceReference> reference;
     if (ctx.computes_here()) {
       surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
-      PathTraceOptions po;
-      po.bounces = ctx.params.bounces;
-      po.paths = ctx.params.gather_paths;
-      po.rays_per_texel = ctx.params.rays_per_texel;
-      po.path_rays_per_texel = 1;
-      po.seed = ctx.params.seed;
+      const PathTraceOptions po = PathOptions(ctx);
       // Sparse: the dense vertices' rows on the indirect grid (Huang & Ramamoorthi 2010 §4.2:
       // "we directly use the low-resolution grid"), the others combined from them.
       const int grid_n = ctx.params.sparse_indirect ? ctx.params.indirect_n : ctx.params.cubemap_n;
@@ -181,6 +175,101 @@ class BouncePhase final : public FarmPhase {
           ComputePaths(ctx, *reference, cols, range, out);
         },
         [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
+  }
+
+  // Path tracing with [sparse] indirect = "features" (docs/sparse-precomputation.md, "With
+  // interreflection"): after the dense vertices traced their whole rows on the indirect grid
+  // (phase path-trace, indirect/path-traced-dense.prtt, broadcast as `dense`), every other
+  // vertex traces its feature texels and is reconstructed from its dense neighbours by L1
+  // (ReconstructIndirectRow, §5), the traced values kept exactly; dense rows are copied.
+  void RunPathFeatures(FarmContext& ctx, const std::vector<float>& dense, std::size_t cols,
+                       double start) {
+    const uint64_t V = ctx.params.rows;
+    const int C = ctx.params.channels;
+    std::unique_ptr<SceneSurfaces> surfaces;
+    std::unique_ptr<PathTraceReference> reference;
+    std::unique_ptr<PathTracedIndirect> component;
+    std::unique_ptr<NeighborIndex> index;
+    std::vector<float> by_vertex;  // the dense rows vertex-major: C rows of cols per vertex
+    if (ctx.computes_here()) {
+      surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
+      reference = std::make_unique<PathTraceReference>(*ctx.embree, *surfaces,
+                                                       ctx.params.indirect_n, PathOptions(ctx));
+      component = std::make_unique<PathTracedIndirect>(*reference, C);
+      std::vector<uint32_t> ids;
+      std::vector<Vec3> points;
+      for (uint64_t v = 0; v < V; ++v)
+        if (!Combined(v)) {
+          ids.push_back(static_cast<uint32_t>(v));
+          points.push_back(ctx.samples[v].position);
+        }
+      index = std::make_unique<NeighborIndex>(points, ids);
+      by_vertex.resize(dense.size());
+      for (int c = 0; c < C; ++c)
+        for (uint64_t v = 0; v < V; ++v)
+          std::copy_n(dense.data() + (c * V + v) * cols, cols,
+                      by_vertex.data() + (v * C + c) * cols);
+    }
+    SparseIndirectOptions io;
+    io.features =
+        IndirectFeatures(ctx.plan.sparse.features, ctx.params.cubemap_n, ctx.params.indirect_n);
+    io.lambda = ctx.plan.sparse.lambda;
+    io.min_neighbors = ctx.plan.sparse.min_neighbors;
+    io.min_normal_cos = ctx.plan.sparse.min_normal_cos;
+    io.max_residual = ctx.plan.sparse.max_residual;
+    if (ctx.rank == 0) ctx.run_eta.StepStarted(name_);
+    RunJobPhase(
+        ctx,
+        [&](const RowRange& range, std::string_view, std::string& out) {
+          const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
+          const std::size_t at = out.size();
+          const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
+          out.resize(at + sizeof(BounceResultHeader) + floats * sizeof(float));
+          float* rows = reinterpret_cast<float*>(out.data() + at + sizeof(BounceResultHeader));
+          tbb::enumerable_thread_specific<L1Solver> solvers([&] {
+            L1Options o;
+            o.lambda = io.lambda;
+            return L1Solver(o);
+          });
+          tbb::enumerable_thread_specific<SparseIndirectStats> stats;
+          tbb::parallel_for(uint64_t{0}, range.count, [&](uint64_t i) {
+            const uint64_t v = range.first + i;
+            float* row = rows + i * per_vertex;
+            if (!Combined(v)) {
+              std::copy_n(by_vertex.data() + v * per_vertex, per_vertex, row);
+              return;
+            }
+            std::vector<IndirectNeighbor> nbs;
+            for (uint32_t d : index->RadiusSearch(ctx.samples[v].position, ctx.plan.radius,
+                                                  ctx.plan.max_neighbors))
+              nbs.push_back({by_vertex.data() + d * per_vertex, ctx.samples[d].normal});
+            ReconstructIndirectRow(*component, ctx.samples[v], v, nbs, io, solvers.local(), row,
+                                   stats.local());
+          });
+          for (std::size_t i = 0; i < floats; ++i)
+            if (!std::isfinite(rows[i]))
+              throw NumericalError(name_ + ": a non-finite value for sample " +
+                                   std::to_string(range.first + i / per_vertex));
+          BounceResultHeader h;
+          for (const SparseIndirectStats& st : stats) {
+            h.rays_traced += st.rays;
+            h.rays_escaped += st.texels_evaluated;  // journaled: the texels evaluated
+            h.back_face_hits += st.fallbacks();     // and the whole rows of fallbacks
+          }
+          h.rows_checksum = Checksum64(rows, floats * sizeof(float));
+          std::memcpy(out.data() + at, &h, sizeof h);
+        },
+        [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
+  }
+
+  static PathTraceOptions PathOptions(const FarmContext& ctx) {
+    PathTraceOptions po;
+    po.bounces = ctx.params.bounces;
+    po.paths = ctx.params.gather_paths;
+    po.rays_per_texel = ctx.params.rays_per_texel;
+    po.path_rays_per_texel = 1;
+    po.seed = ctx.params.seed;
+    return po;
   }
 
   void ComputePaths(const FarmContext& ctx, const PathTraceReference& reference, std::size_t cols,
@@ -211,9 +300,16 @@ class BouncePhase final : public FarmPhase {
       PathTraceExtras ex;
       ex.bounce_rows = bounce_rows.data();
       Local& local = locals.local();
+      float* dst = rows + i * per_vertex;
+      if (ctx.params.sparse_indirect) {
+        // The indirect rows alone, as the sparse kernels evaluate them (worker/
+        // sparse_indirect.h: PathTracedIndirect); no per-bounce split.
+        local.stats +=
+            reference.ComputeIndirect(ctx.samples[range.first + i], range.first + i, C, {}, dst);
+        return;
+      }
       local.stats +=
           reference.ComputeRow(ctx.samples[range.first + i], range.first + i, C, row.data(), ex);
-      float* dst = rows + i * per_vertex;
       std::fill(dst, dst + per_vertex, 0.0f);
       for (int k = 1; k <= K; ++k)
         for (int c = 0; c < C; ++c) {
@@ -250,7 +346,14 @@ class BouncePhase final : public FarmPhase {
     const std::size_t cols = coarse.texel_count();
     const uint64_t V = ctx.params.rows;
     std::vector<float> previous(static_cast<std::size_t>(prev_channels * V * cols));
-    if (k_ == 1) {
+    if (k_ < 0) {
+      const std::string path = ctx.folder.PathTracedDenseFile();
+      const TransportFileReader reader(path);
+      if (reader.info().rows != prev_channels * V ||
+          reader.info().cubemap_n != uint32_t(coarse.n()))
+        throw InputError(path, "does not hold the dense vertices' path-traced rows");
+      reader.ReadRows(0, reader.info().rows, previous.data());
+    } else if (k_ == 1) {
       const TransportFileReader reader(ctx.folder.transport);
       if (reader.info().rows != V || reader.info().cubemap_n != uint32_t(fine.n()))
         throw InputError(ctx.folder.transport, "does not hold the run's direct rows");
@@ -325,10 +428,14 @@ class BouncePhase final : public FarmPhase {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const RunFolder& f = ctx.folder;
-    const std::string final_path = k_ > 0 ? f.BounceFile(k_) : f.PathTracedFile();
+    // Path tracing with features: the dense rows first (path-trace), then every row.
+    const bool features = ctx.params.path_estimator && ctx.params.sparse_indirect == 2;
+    const std::string final_path = k_ > 0                ? f.BounceFile(k_)
+                                   : k_ == 0 && features ? f.PathTracedDenseFile()
+                                                         : f.PathTracedFile();
     const int K = ctx.params.bounces;
     // Path tracing: each job's per-bounce energies (journaled as its counters, bit-cast).
-    const std::size_t energies = k_ > 0 ? 0 : static_cast<std::size_t>(K) * C;
+    const std::size_t energies = k_ == 0 ? static_cast<std::size_t>(K) * C : 0;
     std::vector<double> path_energy(energies, 0.0);
     auto add_energy = [&](const std::vector<uint64_t>& counters) {
       for (std::size_t e = 0; e < energies && e < counters.size(); ++e)
@@ -457,7 +564,7 @@ class BouncePhase final : public FarmPhase {
       throw;
     }
     std::swap(journal, ctx.journal);
-    if (writer && !pairs_.empty()) FillCombined(ctx, *writer, cols);
+    if (writer && !pairs_.empty() && k_ >= 0 && !features) FillCombined(ctx, *writer, cols);
     if (writer) {
       writer->Finalize();
       writer.reset();
@@ -484,21 +591,26 @@ class BouncePhase final : public FarmPhase {
     bounce["wall_seconds"] = FarmNow() - start;
     if (k_ > 0) {
       ctx.interreflection["per_bounce"].push_back(bounce);
+    } else if (k_ < 0) {
+      bounce["texels_evaluated"] = escaped;  // journaled in place of escapes (RunPathFeatures)
+      bounce["fallbacks"] = back;
+      bounce.erase("rays_escaped");
+      bounce.erase("back_face_hits");
+      ctx.interreflection["path_trace_features"] = bounce;
     } else {
-      // Path tracing: the whole indirect part in one phase; each bounce's energy from the jobs'.
-      for (int k = 1; k <= K; ++k) {
+      // Path tracing: the whole indirect part in one phase; each bounce's energy from the jobs'
+      // (none with the sparse method: its rows are Σ_k Tᵏ, evaluated at once).
+      for (int k = 1; k <= K && !ctx.params.sparse_indirect; ++k) {
         nlohmann::ordered_json e = nlohmann::ordered_json::array();
         for (int c = 0; c < C; ++c) e.push_back(path_energy[(k - 1) * C + c]);
         ctx.interreflection["per_bounce"].push_back({{"bounce", k}, {"energy", e}});
       }
       ctx.interreflection["path_trace"] = bounce;
-      if (!pairs_.empty())  // the combined vertices have no per-bounce split
-        ctx.interreflection["per_bounce_energy_over"] = "the vertices that trace paths (dense)";
     }
     spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
                  energy.dump(), rays, FarmNow() - start);
     ctx.report.jobs_total = ctx.report.jobs_done + ctx.report.jobs_reused;
-    if (k_ == K || k_ == 0) IndirectShare(ctx);
+    if (k_ == K || (k_ == 0 && !features) || k_ < 0) IndirectShare(ctx);
     ctx.report.interreflection_json = ctx.interreflection.dump();
   }
 
@@ -566,7 +678,7 @@ class BouncePhase final : public FarmPhase {
         mask_.clear();
       }
     }
-    BroadcastBytes(ctx.comm, mask_);
+    BroadcastVector(ctx.comm, mask_, MPI_BYTE, "MPI_Bcast bounce mask");
   }
   bool Combined(uint64_t v) const { return !mask_.empty() && mask_[v] != 0; }
 

@@ -21,6 +21,7 @@
 #include "farm/run_manifest.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "worker/sparse_indirect.h"
 
 namespace prt {
 
@@ -105,11 +106,23 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
     steps.push_back({"pack", "pack", raw_bytes, 1e-9});
   // A bounce: P closest-hit rays per vertex (~2 M/s per thread) and the gather's multiply-adds
   // (~3·P·6m² per vertex and channel at ~1 G/s per thread).
+  // With the sparse method's indirect part only the dense vertices (about the dense budget) do
+  // the whole work (docs/sparse-precomputation.md, "With interreflection").
+  const double dense_share =
+      ctx.params.sparse_indirect ? std::min(1.0, ctx.plan.dense_budget + 0.05) : 1.0;
   if (ctx.params.run_indirect && ctx.params.path_estimator) {
-    // A direct row (~3n² shadow rays) per path vertex, K per path, P paths per vertex.
-    steps.push_back({"path-trace", "path-trace", rows,
-                     ctx.params.bounces * ctx.params.gather_paths * cols * 0.5 *
-                         ctx.params.channels / (1e7 * threads)});
+    // A direct row (~3n² shadow rays) per path vertex, K per path, P paths per vertex; on the
+    // indirect grid with the sparse method.
+    const double path_cols =
+        ctx.params.sparse_indirect ? 6.0 * ctx.params.indirect_n * ctx.params.indirect_n : cols;
+    const double per_texel =
+        ctx.params.bounces * ctx.params.gather_paths * 0.5 * ctx.params.channels / (1e7 * threads);
+    steps.push_back({"path-trace", "path-trace", rows * dense_share, path_cols * per_texel});
+    if (ctx.params.sparse_indirect == 2)
+      steps.push_back(
+          {"path-trace-sparse", "path-trace", rows * (1 - dense_share),
+           IndirectFeatures(ctx.plan.sparse.features, ctx.params.cubemap_n, ctx.params.indirect_n) *
+               per_texel});
   } else if (ctx.params.run_indirect) {
     const double m = ctx.params.indirect_n;
     const double per_vertex =
@@ -117,7 +130,7 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
          3.0 * ctx.params.gather_paths * 6 * m * m * ctx.params.channels / 1e9) /
         threads;
     for (int k = 1; k <= ctx.params.bounces; ++k)
-      steps.push_back({"bounce-" + std::to_string(k), "bounce", rows, per_vertex});
+      steps.push_back({"bounce-" + std::to_string(k), "bounce", rows * dense_share, per_vertex});
   }
   if (ctx.params.run_compression)
     steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
@@ -167,9 +180,10 @@ std::vector<std::unique_ptr<FarmPhase>> PhasesAfterSetup(const FarmContext& ctx)
     phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
     phases.push_back(MakeFinalizePhase());
   }
-  if (ctx.params.run_indirect && ctx.params.path_estimator)
+  if (ctx.params.run_indirect && ctx.params.path_estimator) {
     phases.push_back(MakeBouncePhase(0));
-  else if (ctx.params.run_indirect)
+    if (ctx.params.sparse_indirect == 2) phases.push_back(MakeBouncePhase(-1));
+  } else if (ctx.params.run_indirect)
     for (int k = 1; k <= ctx.params.bounces; ++k) phases.push_back(MakeBouncePhase(k));
   if (ctx.params.run_compression) phases.push_back(MakeCompressionPhase());
   if (ctx.params.run_estimate) phases.push_back(MakeEstimatePhase());
@@ -181,7 +195,7 @@ const char* StageOfPhase(const std::string& phase) {
   if (phase == "compress") return kStageCompression;
   if (phase == "estimate") return kStageEstimate;
   if (phase == "setup") return kStageAssets;
-  if (phase.rfind("bounce-", 0) == 0 || phase == "path-trace") return kStageIndirect;
+  if (phase.rfind("bounce-", 0) == 0 || phase.rfind("path-trace", 0) == 0) return kStageIndirect;
   return kStageRows;
 }
 

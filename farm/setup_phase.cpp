@@ -190,8 +190,16 @@ class SetupPhase final : public FarmPhase {
       throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
                                        " is larger than the cubemap's n " + std::to_string(n));
     ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
-    ctx.params.sparse_indirect =
-        bounces > 0 && ctx.params.sparse && scene.sparse.indirect == "combination" ? 1 : 0;
+    // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
+    // 2 features (path tracing only: a gathering vertex's cost is its rays, not its texels).
+    ctx.params.sparse_indirect = 0;
+    if (bounces > 0 && ctx.params.sparse && scene.sparse.indirect != "full") {
+      if (scene.sparse.indirect == "features" && scene.sampling.estimator != "path")
+        throw InputError(scene.file,
+                         "[sparse] indirect = \"features\" needs [sampling] estimator = "
+                         "\"path\" (with gathering use \"combination\" or \"full\")");
+      ctx.params.sparse_indirect = scene.sparse.indirect == "features" ? 2 : 1;
+    }
     ctx.params.bounces = bounces;
     ctx.params.indirect_n = indirect_n;
     ctx.params.gather_paths = scene.sampling.gather_paths;

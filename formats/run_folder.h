@@ -58,6 +58,11 @@ struct RunFolder {
   std::string PathTracedFile() const {
     return (std::filesystem::path(indirect) / "path-traced.prtt").string();
   }
+  // indirect/path-traced-dense.prtt: with [sparse] indirect = "features", the dense vertices'
+  // path-traced rows on the indirect grid (the others 0) that phase path-trace-sparse reads.
+  std::string PathTracedDenseFile() const {
+    return (std::filesystem::path(indirect) / "path-traced-dense.prtt").string();
+  }
   // indirect/bounce-<k>.prtt
   // The sparse phase's combinations, reused by the bounces (farm/sparse_jobs.h).
   std::string SparseCombinationFile() const { return sparse + "/combination.bin"; }

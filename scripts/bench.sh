@@ -136,8 +136,8 @@ run_sparse_gi() {
   echo "== path tracing (64 paths), n = 32: dragon, armadillo (the combination as a variant) =="
   "$bench" --scenes dragon,armadillo --estimators path --path-paths 64 --variant "direct_weights=1" \
     --out "$dir/path32" 2>&1 | grep -v '\[info\]\|\[warning\]'
-  echo "== gather, n = 64: dragon, default (the half-resolution grid as a variant) =="
-  "$bench" --scenes dragon,default --n 64 --estimators gather --variant "grid_step=2" \
+  echo "== gather, n = 64: dragon, default (a quarter-resolution grid as a variant) =="
+  "$bench" --scenes dragon,default --n 64 --estimators gather --variant "grid_step=4" \
     --out "$dir/gather64" 2>&1 | grep -v '\[info\]\|\[warning\]'
   echo "== prt-farm, default scene, 2 ranks, K = 2: brute against sparse =="
   for m in brute sparse; do

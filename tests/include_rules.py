@@ -28,7 +28,7 @@ def is_program(path):
     n = os.path.basename(path)
     return (n.endswith(("_test.cpp", "_main.cpp", "_fuzz.cpp", "_test.c", "_check.cpp"))
             or path.startswith(("tests/", "bench/")) or n == "prtpack_test_util.h"
-            or n == "window_test_support.h")
+            or n == "window_test_support.h" or n == "grid_scene_test_support.h")
 
 problems = []
 graph = {}

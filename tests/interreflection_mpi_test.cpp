@@ -22,6 +22,7 @@
 #include "worker/embree_scene.h"
 #include "worker/path_trace_reference.h"
 #include "worker/sparse_indirect.h"
+#include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
 
 namespace prt {
@@ -52,6 +53,19 @@ std::vector<float> Rows(const std::string& path) {
 
 nlohmann::json Report(const std::string& run) {
   return nlohmann::json::parse(ReadWholeFile(run + "/report.json"));
+}
+
+// Vertex v's combination from combination.bin's pairs (empty: v gathers itself).
+std::vector<SampleWeight> CombinationOf(const std::vector<uint32_t>& pairs, uint64_t slots,
+                                        uint64_t v) {
+  std::vector<SampleWeight> w;
+  for (uint64_t j = 0; j < slots; ++j)
+    if (pairs[(v * slots + j) * 2] != kNoSample) {
+      float a = 0;
+      std::memcpy(&a, &pairs[(v * slots + j) * 2 + 1], sizeof a);
+      w.push_back({pairs[(v * slots + j) * 2], a});
+    }
+  return w;
 }
 
 // The kernels in one process: the tiny scene's direct rows and two gathered bounces on the
@@ -219,15 +233,9 @@ TEST(InterreflectionMpiTest, SparseBouncesGatherAtDenseVerticesAndCombineTheRest
   std::vector<float> near, row(cols);
   for (uint64_t v = 0; v < V; ++v) {
     if (combined[v]) {
-      std::vector<SampleWeight> w;
-      for (uint64_t j = 0; j < slots; ++j)
-        if (pairs[(v * slots + j) * 2] != kNoSample) {
-          const uint32_t d = pairs[(v * slots + j) * 2];
-          ASSERT_FALSE(combined[d]) << v << " combines " << d << ", not a dense vertex";
-          float a = 0;
-          std::memcpy(&a, &pairs[(v * slots + j) * 2 + 1], sizeof a);
-          w.push_back({d, a});
-        }
+      const std::vector<SampleWeight> w = CombinationOf(pairs, slots, v);
+      for (const SampleWeight& x : w)
+        ASSERT_FALSE(combined[x.sample]) << v << " combines " << x.sample << ", not dense";
       CombineRows(
           w, [&](uint32_t d) { return b1.data() + d * cols; }, cols, row.data());
     } else {
@@ -248,7 +256,8 @@ TEST(InterreflectionMpiTest, SparseBouncesGatherAtDenseVerticesAndCombineTheRest
 }
 
 // The same with per-element path tracing: the dense vertices trace paths on the indirect grid
-// (the reference kernel built at indirect_n), the others combine them; 1 and 2 ranks agree.
+// (the reference kernel's ComputeIndirect at indirect_n), the others combine them; 1 and 2 ranks
+// agree.
 TEST(InterreflectionMpiTest, SparsePathTracingTracesDenseVerticesOnTheIndirectGrid) {
   const std::string dir = WorkDir("sparse_path");
   std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
@@ -286,30 +295,77 @@ TEST(InterreflectionMpiTest, SparsePathTracingTracesDenseVerticesOnTheIndirectGr
   const PathTraceReference reference(embree, surfaces, m, po);
   const std::size_t cols = reference.layout().texel_count();
   ASSERT_EQ(a.size(), V * cols);
-  std::vector<float> row(cols), bounces(3 * cols), want(cols);
+  std::vector<float> want(cols);
   uint64_t combined = 0;
   for (uint64_t v = 0; v < V; ++v) {
-    std::vector<SampleWeight> w;
-    for (uint64_t j = 0; j < slots; ++j)
-      if (pairs[(v * slots + j) * 2] != kNoSample) {
-        float x = 0;
-        std::memcpy(&x, &pairs[(v * slots + j) * 2 + 1], sizeof x);
-        w.push_back({pairs[(v * slots + j) * 2], x});
-      }
+    const std::vector<SampleWeight> w = CombinationOf(pairs, slots, v);
     if (!w.empty()) {
       ++combined;
       CombineRows(
           w, [&](uint32_t d) { return a.data() + d * cols; }, cols, want.data());
     } else {
-      PathTraceExtras ex;
-      ex.bounce_rows = bounces.data();
-      reference.ComputeRow(samples[v], v, 1, row.data(), ex);
-      for (std::size_t j = 0; j < cols; ++j)
-        want[j] = 0.0f + bounces[cols + j] + bounces[2 * cols + j];
+      reference.ComputeIndirect(samples[v], v, 1, {}, want.data());
     }
     for (std::size_t j = 0; j < cols; ++j) ASSERT_EQ(a[v * cols + j], want[j]) << v << " " << j;
   }
   EXPECT_GT(combined, V / 3);
+}
+
+// [sparse] indirect = "features" with path tracing: the dense vertices trace whole rows on the
+// indirect grid, the others their feature texels, reconstructed by L1 (phase path-trace-sparse):
+// the farm's file for 1 and 2 ranks is the in-process kernel's (RunSparseIndirect) bit for bit.
+TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
+  const std::string dir = WorkDir("sparse_features");
+  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  text.replace(text.find("method = \"sparse\""), 17,
+               "method = \"sparse\"\nbounces = 2\nestimator = \"path\"\ngather_paths = 8");
+  text += "indirect = \"features\"\n";  // the file ends in [sparse]
+  const std::string scene_file = dir + "/features.toml";
+  std::ofstream(scene_file) << text;
+  for (int ranks : {1, 2}) {
+    const auto r =
+        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::string run = dir + "/np2";
+  const std::vector<float> a = Rows(run + "/indirect/path-traced.prtt");
+  EXPECT_TRUE(a == Rows(dir + "/np1/indirect/path-traced.prtt"));
+  EXPECT_TRUE(Report(run)["interreflection"].contains("path_trace_features"));
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
+  const uint64_t V = samples.size();
+  uint64_t slots = 0;
+  const std::vector<uint32_t> pairs =
+      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
+  std::vector<uint8_t> is_dense(V);
+  for (uint64_t v = 0; v < V; ++v) is_dense[v] = CombinationOf(pairs, slots, v).empty();
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  PathTraceOptions po;
+  po.bounces = 2;
+  po.paths = 8;
+  po.rays_per_texel = scene.sampling.rays_per_texel;
+  po.seed = scene.sampling.seed;
+  const int m = scene.cubemap_n / 4;
+  const PathTraceReference reference(embree, surfaces, m, po);
+  const PathTracedIndirect component(reference, 1);
+  const SparsePlan plan = PlanFromSettings(scene.sparse, g.diagonal(), scene.cubemap_n);
+  SparseIndirectOptions io;
+  io.features = IndirectFeatures(plan.sparse.features, scene.cubemap_n, m);
+  io.lambda = plan.sparse.lambda;
+  io.min_neighbors = plan.sparse.min_neighbors;
+  io.min_normal_cos = plan.sparse.min_normal_cos;
+  io.max_residual = plan.sparse.max_residual;
+  std::vector<float> want(V * component.cols());
+  SparseIndirectStats st;
+  RunSparseIndirect(component, samples, is_dense, plan.radius, plan.max_neighbors, io, want.data(),
+                    st);
+  EXPECT_GT(st.reconstructed, V / 4);
+  ASSERT_EQ(a.size(), want.size());
+  for (std::size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a[i], want[i]) << i;
 }
 
 // estimator = "path": the indirect stage is one phase of per-element path tracing, its file

@@ -126,7 +126,8 @@ struct SparseSettings {
   int rank_floor = 2;
   // With bounces: "combination" (a sparse vertex's bounce rows are the combination of its dense
   // neighbours' that its direct row was reconstructed with; only dense vertices gather or trace
-  // paths) or "full" (every vertex does). docs/sparse-precomputation.md, "With interreflection".
+  // paths), "features" (estimator "path": sparse vertices trace their feature texels, L1) or
+  // "full" (every vertex does). docs/sparse-precomputation.md, "With interreflection".
   std::string indirect = "combination";
   uint64_t seed = 1;
 };

@@ -58,7 +58,7 @@ void VisibilityOfRow(const TransportSampler& sampler, const SpatialSample& sampl
 
 int AngularGridStep(const AngularOptions& options, int n) {
   if (n < 2) return 1;
-  return options.grid_step > 0 ? options.grid_step : std::max(2, n / 16);
+  return options.grid_step > 0 ? options.grid_step : 2;
 }
 
 int AngularWindowHalf(const AngularOptions& options, int n) {
@@ -80,7 +80,7 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   std::vector<uint8_t> above(count), fully(count);
   stats.texels_above_horizon = layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
 
-  // Pass 1: the regular grid (half resolution per face axis up to n = 32). The same rays give the
+  // Pass 1: the regular grid (half resolution per face axis by default). The same rays give the
   // unoccluded estimate U_j, so v_j = T_j / U_j is exactly 1 where nothing blocks the texel.
   std::vector<uint8_t> sampled(count, 0);
   std::vector<uint32_t> grid;

@@ -203,26 +203,13 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   return st;
 }
 
-void ApplyGather(std::span<const GatherTerm> terms, const float* previous, uint64_t vertex_count,
-                 int prev_channels, int channels, std::size_t cols, float* out) {
-  std::fill(out, out + static_cast<std::size_t>(channels) * cols, 0.0f);
-  for (const GatherTerm& g : terms) {
-    for (int c = 0; c < channels; ++c) {
-      const float w = g.weight[c];
-      if (w == 0) continue;
-      const uint64_t row =
-          static_cast<uint64_t>(prev_channels == 1 ? 0 : c) * vertex_count + g.vertex;
-      const float* src = previous + row * cols;
-      float* dst = out + static_cast<std::size_t>(c) * cols;
-      for (std::size_t j = 0; j < cols; ++j) dst[j] += w * src[j];
-    }
-  }
-}
+namespace {
 
-void ApplyGatherTexels(std::span<const GatherTerm> terms, const float* previous,
-                       uint64_t vertex_count, int prev_channels, int channels, std::size_t cols,
-                       std::span<const uint32_t> texels, float* out) {
-  const std::size_t count = texels.size();
+// out[c·count + i] = Σ_terms w_c · previous[row(c, vertex)][texel(i)], terms in order.
+template <class Texel>
+void Apply(std::span<const GatherTerm> terms, const float* previous, uint64_t vertex_count,
+           int prev_channels, int channels, std::size_t cols, std::size_t count, Texel&& texel,
+           float* out) {
   std::fill(out, out + static_cast<std::size_t>(channels) * count, 0.0f);
   for (const GatherTerm& g : terms) {
     for (int c = 0; c < channels; ++c) {
@@ -232,9 +219,26 @@ void ApplyGatherTexels(std::span<const GatherTerm> terms, const float* previous,
           static_cast<uint64_t>(prev_channels == 1 ? 0 : c) * vertex_count + g.vertex;
       const float* src = previous + row * cols;
       float* dst = out + static_cast<std::size_t>(c) * count;
-      for (std::size_t i = 0; i < count; ++i) dst[i] += w * src[texels[i]];
+      for (std::size_t i = 0; i < count; ++i) dst[i] += w * src[texel(i)];
     }
   }
+}
+
+}  // namespace
+
+void ApplyGather(std::span<const GatherTerm> terms, const float* previous, uint64_t vertex_count,
+                 int prev_channels, int channels, std::size_t cols, float* out) {
+  Apply(
+      terms, previous, vertex_count, prev_channels, channels, cols, cols,
+      [](std::size_t i) { return i; }, out);
+}
+
+void ApplyGatherTexels(std::span<const GatherTerm> terms, const float* previous,
+                       uint64_t vertex_count, int prev_channels, int channels, std::size_t cols,
+                       std::span<const uint32_t> texels, float* out) {
+  Apply(
+      terms, previous, vertex_count, prev_channels, channels, cols, texels.size(),
+      [&](std::size_t i) { return texels[i]; }, out);
 }
 
 void CoarsenRow(const CubemapLayout& fine, const CubemapLayout& coarse, const float* in,
