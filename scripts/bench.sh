@@ -139,6 +139,11 @@ run_sparse_gi() {
   echo "== gather, n = 64: dragon, default (a quarter-resolution grid as a variant) =="
   "$bench" --scenes dragon,default --n 64 --estimators gather --variant "grid_step=4" \
     --out "$dir/gather64" 2>&1 | grep -v '\[info\]\|\[warning\]'
+  echo "== time against error (docs/benchmarks.md) =="
+  for scene in dragon armadillo default; do
+    python3 "$ROOT/scripts/sparse_gi_pareto.py" "$dir" "$scene" "$dir/gather32/results.csv" \
+      "$dir/path32/results.csv"
+  done
   echo "== prt-farm, default scene, 2 ranks, K = 2: brute against sparse =="
   for m in brute sparse; do
     mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$dir/farm-$m" --force \
