@@ -491,7 +491,9 @@ class BouncePhase final : public FarmPhase {
             [&](const RowRange& d) { return e.rows.first < d.end() && d.first < e.rows.end(); });
         if (overlaps) continue;
         ReadVertexMajor(*writer, V, C, cols, e.rows, rows);
-        for (uint64_t i = 0; i < e.rows.count; ++i)  // as the job returned them
+        // As the job returned them: zeros for combined vertices, except in path-trace-sparse,
+        // whose jobs return every row.
+        for (uint64_t i = 0; i < e.rows.count && k_ >= 0; ++i)
           if (Combined(e.rows.first + i))
             std::fill_n(rows.data() + i * C * cols, static_cast<std::size_t>(C) * cols, 0.0f);
         if (Checksum64(rows.data(), rows.size() * sizeof(float)) != e.rows_checksum) {
@@ -669,8 +671,12 @@ class BouncePhase final : public FarmPhase {
         for (uint64_t v = 0; v < V; ++v) mask_[v] = pairs_[v * slots_ * 2] != kNoSample ? 1 : 0;
         uint64_t combined = 0;
         for (uint8_t m : mask_) combined += m;
-        spdlog::info("[{}] {} of {} vertices gather; {} combine the dense vertices' rows", name_,
-                     V - combined, V, combined);
+        if (k_ < 0)
+          spdlog::info("[{}] {} of {} vertices are dense; {} trace their features", name_,
+                       V - combined, V, combined);
+        else
+          spdlog::info("[{}] {} of {} vertices gather; {} combine the dense vertices' rows", name_,
+                       V - combined, V, combined);
         ctx.interreflection["sparse_combined_vertices"] = combined;
       } catch (const InputError& e) {
         spdlog::warn("{}: every vertex gathers", e.what());

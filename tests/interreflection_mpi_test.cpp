@@ -366,6 +366,19 @@ TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
   EXPECT_GT(st.reconstructed, V / 4);
   ASSERT_EQ(a.size(), want.size());
   for (std::size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a[i], want[i]) << i;
+  // Killed inside path-trace-sparse (its file removed, the dense one kept), then resumed: its
+  // journaled jobs are re-used and the bytes are the same.
+  const std::string again = dir + "/again";
+  fs::copy(dir + "/np1", again, fs::copy_options::recursive);
+  fs::remove(again + "/indirect/path-traced.prtt");
+  const auto killed =
+      Farm(1, scene_file + " --out " + again + kSmallJobs + " --resume --fail-after-jobs 3");
+  EXPECT_NE(killed.exit_code, 0) << killed.output;
+  const auto resumed = Farm(1, scene_file + " --out " + again + kSmallJobs + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  EXPECT_NE(resumed.output.find("job(s) re-used from checkpoints"), std::string::npos)
+      << resumed.output;
+  EXPECT_TRUE(Rows(again + "/indirect/path-traced.prtt") == a);
 }
 
 // estimator = "path": the indirect stage is one phase of per-element path tracing, its file
