@@ -68,6 +68,28 @@ std::vector<SampleWeight> CombinationOf(const std::vector<uint32_t>& pairs, uint
   return w;
 }
 
+// sparse_tiny.toml with 2 bounces by path tracing (8 paths) and `sparse_extra` appended to its
+// [sparse] table, farmed with 1 and 2 ranks into dir/np1 and dir/np2, whose path-traced files
+// must be the same; returns the scene file.
+std::string FarmSparsePathTracing(const std::string& dir, const std::string& sparse_extra) {
+  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  text.replace(text.find("method = \"sparse\""), 17,
+               "method = \"sparse\"\nbounces = 2\nestimator = \"path\"\ngather_paths = 8");
+  text += sparse_extra;  // the file ends in [sparse]
+  const std::string scene_file = dir + "/path.toml";
+  std::ofstream(scene_file) << text;
+  for (int ranks : {1, 2}) {
+    const auto r =
+        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+  }
+  EXPECT_TRUE(Rows(dir + "/np1/indirect/path-traced.prtt") ==
+              Rows(dir + "/np2/indirect/path-traced.prtt"));
+  return scene_file;
+}
+
 // The kernels in one process: the tiny scene's direct rows and two gathered bounces on the
 // n = 2 grid (n/4 of the scene's 8), the farm's seed and directions.
 std::vector<std::vector<float>> KernelBounces() {
@@ -260,21 +282,9 @@ TEST(InterreflectionMpiTest, SparseBouncesGatherAtDenseVerticesAndCombineTheRest
 // agree.
 TEST(InterreflectionMpiTest, SparsePathTracingTracesDenseVerticesOnTheIndirectGrid) {
   const std::string dir = WorkDir("sparse_path");
-  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
-  text.replace(text.find("method = \"sparse\""), 17,
-               "method = \"sparse\"\nbounces = 2\nestimator = \"path\"\ngather_paths = 8");
-  const std::string scene_file = dir + "/path.toml";
-  std::ofstream(scene_file) << text;
-  for (int ranks : {1, 2}) {
-    const auto r =
-        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
-    ASSERT_EQ(r.exit_code, 0) << r.output;
-  }
+  const std::string scene_file = FarmSparsePathTracing(dir, "");
   const std::string run = dir + "/np2";
   const std::vector<float> a = Rows(run + "/indirect/path-traced.prtt");
-  EXPECT_TRUE(a == Rows(dir + "/np1/indirect/path-traced.prtt"));
   const SceneDescription scene = LoadSceneFile(scene_file);
   const SceneGeometry g = BuildSceneGeometry(scene);
   const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
@@ -316,22 +326,9 @@ TEST(InterreflectionMpiTest, SparsePathTracingTracesDenseVerticesOnTheIndirectGr
 // the farm's file for 1 and 2 ranks is the in-process kernel's (RunSparseIndirect) bit for bit.
 TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
   const std::string dir = WorkDir("sparse_features");
-  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
-  text.replace(text.find("method = \"sparse\""), 17,
-               "method = \"sparse\"\nbounces = 2\nestimator = \"path\"\ngather_paths = 8");
-  text += "indirect = \"features\"\n";  // the file ends in [sparse]
-  const std::string scene_file = dir + "/features.toml";
-  std::ofstream(scene_file) << text;
-  for (int ranks : {1, 2}) {
-    const auto r =
-        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
-    ASSERT_EQ(r.exit_code, 0) << r.output;
-  }
+  const std::string scene_file = FarmSparsePathTracing(dir, "indirect = \"features\"\n");
   const std::string run = dir + "/np2";
   const std::vector<float> a = Rows(run + "/indirect/path-traced.prtt");
-  EXPECT_TRUE(a == Rows(dir + "/np1/indirect/path-traced.prtt"));
   EXPECT_TRUE(Report(run)["interreflection"].contains("path_trace_features"));
   const SceneDescription scene = LoadSceneFile(scene_file);
   const SceneGeometry g = BuildSceneGeometry(scene);
