@@ -6,9 +6,14 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
 
 #include "farm/checkpoint_journal.h"
+#include "vocabulary/errors.h"
 #include "worker/embree_scene.h"
 #include "worker/local_rank.h"
 
@@ -256,6 +261,50 @@ TEST(MortonKeyTest, FollowsSpaceAndClampsToTheBox) {
   // near corner of the next octant in x.
   EXPECT_LT(MortonKey({0.49, 0.49, 0.49}, lo, hi), MortonKey({0.51, 0.0, 0.0}, lo, hi));
   EXPECT_EQ(MortonKey({0.5, 0.5, 0.5}, {1, 1, 1}, {1, 1, 1}), 0u);  // a flat box
+}
+
+// run/sparse/combination.bin (the bounce phases' input) round-trips, and a damaged, truncated,
+// foreign or inconsistent file is an InputError naming it, never a crash or a wrong read.
+TEST(CombinationFileTest, RoundTripsAndRejectsHostileFiles) {
+  const std::string path = ::testing::TempDir() + "/combination.bin";
+  const uint64_t N = 5, slots = 2;
+  std::vector<uint32_t> pairs(N * slots * 2, 0);
+  for (uint64_t i = 0; i < N * slots; ++i) pairs[2 * i] = kNoSample;
+  pairs[(3 * slots) * 2] = 1;  // sample 3 = 0.75 · row 1 + 0.25 · row 4
+  pairs[(3 * slots) * 2 + 1] = std::bit_cast<uint32_t>(0.75f);
+  pairs[(3 * slots + 1) * 2] = 4;
+  pairs[(3 * slots + 1) * 2 + 1] = std::bit_cast<uint32_t>(0.25f);
+  auto write = [&](const std::string& bytes) { std::ofstream(path, std::ios::binary) << bytes; };
+  auto read = [&](uint64_t n) {
+    uint64_t s = 0;
+    return ReadCombinationFile(path, n, s);
+  };
+  const std::string good = EncodeCombinationFile(N, slots, pairs);
+  write(good);
+  uint64_t s = 0;
+  EXPECT_EQ(ReadCombinationFile(path, N, s), pairs);
+  EXPECT_EQ(s, slots);
+  EXPECT_THROW(read(N + 1), InputError);  // another run's
+  std::string bad = good;
+  bad[30] ^= 1;  // damaged
+  write(bad);
+  EXPECT_THROW(read(N), InputError);
+  write(good.substr(0, good.size() - 9));  // truncated
+  EXPECT_THROW(read(N), InputError);
+  write("PRTCMB2" + good.substr(7));  // foreign magic
+  EXPECT_THROW(read(N), InputError);
+  std::vector<uint32_t> out_of_range = pairs;
+  out_of_range[0] = static_cast<uint32_t>(N);  // names a sample the run lacks
+  write(EncodeCombinationFile(N, slots, out_of_range));
+  EXPECT_THROW(read(N), InputError);
+  std::vector<uint32_t> nan = pairs;
+  nan[(3 * slots) * 2 + 1] = std::bit_cast<uint32_t>(std::numeric_limits<float>::quiet_NaN());
+  write(EncodeCombinationFile(N, slots, nan));
+  EXPECT_THROW(read(N), InputError);
+  write(EncodeCombinationFile(N, 3, pairs));  // slots that do not match the size
+  EXPECT_THROW(read(N), InputError);
+  std::filesystem::remove(path);
+  EXPECT_THROW(read(N), InputError);  // missing
 }
 
 }  // namespace
