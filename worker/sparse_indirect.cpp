@@ -235,7 +235,13 @@ void RunSparseIndirect(const IndirectComponent& component, std::span<const Spati
     const uint32_t s = sparse_ids[i];
     thread_local std::vector<float> row;
     row.resize(C * cols);
-    if (options.direct_weights && s < combination.size() && !combination[s].empty()) {
+    // A combination of dense samples only (a reconstructed T⁰ row always is; anything else
+    // evaluates its features).
+    const bool combine =
+        options.direct_weights && s < combination.size() && !combination[s].empty() &&
+        std::all_of(combination[s].begin(), combination[s].end(),
+                    [&](const SampleWeight& w) { return w.sample < N && is_dense[w.sample]; });
+    if (combine) {
       CombineRows(
           combination[s],
           [&](uint32_t d) {
