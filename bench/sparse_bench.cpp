@@ -142,13 +142,13 @@ int main(int argc, char** argv) {
         base.dense_budget, base.initial_fraction, base.radius, base.sparse.features,
         std::min(base.sparse.min_features, base.sparse.features), base.angular.window,
         base.sparse.lambda);
-    std::vector<Variant> variants{{"default (L1, visibility)", base, 0, -1}};
+    std::vector<Variant> variants{{"default (L1, visibility)", base, 0, -1, 0}};
     for (const std::string& spec : variant_specs)
       variants.push_back(bench::ParseSparseVariant(spec, base));
     if (!quick && variant_specs.empty()) {
-      Variant ls{"least squares", base, 0, -1};
+      Variant ls{"least squares", base, 0, -1, 0};
       ls.plan.sparse.solver = SolverKind::kLeastSquares;
-      Variant tm{"L1, transport interp.", base, 0, -1};
+      Variant tm{"L1, transport interp.", base, 0, -1, 0};
       tm.plan.sparse.mode = InterpolationMode::kTransport;
       variants.push_back(ls);
       variants.push_back(tm);
@@ -156,7 +156,7 @@ int main(int argc, char** argv) {
         for (SolverKind sk : {SolverKind::kL1, SolverKind::kLeastSquares}) {
           Variant v{std::string(sk == SolverKind::kL1 ? "L1" : "LS") + " radius ×" +
                         std::to_string(f).substr(0, 3),
-                    base, 0, -1};
+                    base, 0, -1, 0};
           v.plan.radius = base.radius * f;
           v.plan.sparse.solver = sk;
           variants.push_back(v);
@@ -167,7 +167,7 @@ int main(int argc, char** argv) {
         for (double ffrac : {1.0, 0.7}) {
           Variant v{"dense " + std::to_string(static_cast<int>(budget * 100)) + "%, features ×" +
                         std::to_string(ffrac).substr(0, 3),
-                    base, 0, -1};
+                    base, 0, -1, 0};
           v.plan.dense_budget = budget;
           v.plan.sparse.features = static_cast<int>(base.sparse.features * ffrac);
           variants.push_back(v);

@@ -30,6 +30,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -218,7 +219,7 @@ int main(int argc, char** argv) {
       };
 
       const SparsePlan base = PlanFromSettings(scene.sparse, geometry.diagonal(), n);
-      std::vector<bench::SparseVariant> variants{{"default", base, 0, -1}};
+      std::vector<bench::SparseVariant> variants{{"default", base, 0, -1, 0}};
       for (const std::string& spec : variant_specs)
         variants.push_back(bench::ParseSparseVariant(spec, base));
 
@@ -326,9 +327,20 @@ int main(int argc, char** argv) {
               std::vector<float> rows(static_cast<std::size_t>(C) * V * mcols);
               const GatheredBounce component(gatherer, k, C, previous.data(), V, prev_channels,
                                              mcols);
+              // feature_paths: the sparse vertices gather their features with fewer directions.
+              std::unique_ptr<BounceGatherer> few;
+              std::unique_ptr<GatheredBounce> few_component;
+              if (var.feature_paths > 0) {
+                BounceGatherOptions fo = go;
+                fo.paths = var.feature_paths;
+                few = std::make_unique<BounceGatherer>(embree, surfaces, fo);
+                few_component = std::make_unique<GatheredBounce>(*few, k, C, previous.data(), V,
+                                                                 prev_channels, mcols);
+              }
               SparseIndirectStats st;
               RunSparseIndirect(component, samples, rep.is_dense, var.plan.radius,
-                                var.plan.max_neighbors, io, rows.data(), st, rep.combination);
+                                var.plan.max_neighbors, io, rows.data(), st, rep.combination,
+                                few_component.get());
               ist.push_back(st);
               previous = rows;
               prev_channels = C;

@@ -7,7 +7,7 @@
 namespace prt::bench {
 
 SparseVariant ParseSparseVariant(const std::string& spec, const SparsePlan& base) {
-  SparseVariant v{spec, base, 0, -1};
+  SparseVariant v{spec, base, 0, -1, 0};
   std::stringstream ss(spec);
   for (std::string kv; std::getline(ss, kv, ';');) {
     if (kv.empty()) continue;
@@ -47,6 +47,8 @@ SparseVariant ParseSparseVariant(const std::string& spec, const SparsePlan& base
       v.plan.empty_weight = static_cast<int>(x);
     } else if (key == "rank_floor") {
       v.plan.rank_floor = static_cast<int>(x);
+    } else if (key == "feature_paths") {
+      v.feature_paths = static_cast<int>(x);
     } else if (key == "direct_weights") {
       v.direct_weights = static_cast<int>(x);
     } else if (key == "ind_features") {

@@ -13,6 +13,7 @@ struct SparseVariant {
   SparsePlan plan;
   int indirect_features = 0;  // 0: IndirectFeatures() of the plan's direct features
   int direct_weights = -1;    // -1: the estimator's default; 0 / 1 (SparseIndirectOptions)
+  int feature_paths = 0;      // gathering: directions of the sparse vertices' features (0: all)
 };
 
 // Keys: budget, initial, iterations, radius (× the scene's), features, min_features (× features

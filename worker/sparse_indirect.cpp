@@ -183,7 +183,8 @@ SparseOutcome ReconstructIndirectRow(const IndirectComponent& component, const S
 void RunSparseIndirect(const IndirectComponent& component, std::span<const SpatialSample> samples,
                        std::span<const uint8_t> is_dense, double radius, int max_neighbors,
                        const SparseIndirectOptions& options, float* out, SparseIndirectStats& stats,
-                       std::span<const std::vector<SampleWeight>> combination) {
+                       std::span<const std::vector<SampleWeight>> combination,
+                       const IndirectComponent* sparse_component) {
   const std::size_t N = samples.size();
   const int C = component.channels();
   const std::size_t cols = component.cols();
@@ -261,8 +262,8 @@ void RunSparseIndirect(const IndirectComponent& component, std::span<const Spati
     nbs.reserve(nb.size());
     for (uint32_t d : nb)
       nbs.push_back({dense_rows.data() + slot[d] * C * cols, samples[d].normal});
-    ReconstructIndirectRow(component, samples[s], s, nbs, options, solvers.local(), row.data(),
-                           local.local());
+    ReconstructIndirectRow(sparse_component != nullptr ? *sparse_component : component, samples[s],
+                           s, nbs, options, solvers.local(), row.data(), local.local());
     scatter(s, row.data());
   });
   for (const SparseIndirectStats& l : local) stats += l;

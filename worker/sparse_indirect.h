@@ -157,10 +157,14 @@ SparseOutcome ReconstructIndirectRow(const IndirectComponent& component, const S
 // out: channels × samples.size() rows of cols floats, channel-major (row c·N + s), as
 // GatherBounces' bounces.
 // combination (with options.direct_weights): per sample, SparseReport::combination.
+// sparse_component (optional): what the sparse vertices evaluate their features (and fallback
+// rows) with, when it differs from the dense vertices' estimator (a gather with fewer
+// directions, prt-sparse-gi-bench's `feature_paths`); same channels and cols.
 void RunSparseIndirect(const IndirectComponent& component, std::span<const SpatialSample> samples,
                        std::span<const uint8_t> is_dense, double radius, int max_neighbors,
                        const SparseIndirectOptions& options, float* out, SparseIndirectStats& stats,
-                       std::span<const std::vector<SampleWeight>> combination = {});
+                       std::span<const std::vector<SampleWeight>> combination = {},
+                       const IndirectComponent* sparse_component = nullptr);
 
 // I_x = max(0, Σ α_k I_k) (channels × cols) from the dense samples' rows; row_of(sample) gives a
 // dense sample's row (channels × cols, channel c at c·cols). Non-finite values become 0.
