@@ -78,13 +78,14 @@ double Dot(const float* a, const float* b, std::size_t n) {
 
 class BouncePhase final : public FarmPhase {
  public:
-  // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing (with [sparse]
-  // indirect = "features": the dense vertices only); k = −1: the other vertices' features.
-  explicit BouncePhase(int k)
+  // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing. With [sparse]
+  // indirect = "features" these run at the dense vertices only, and `features_step` is the
+  // phase after each that reconstructs the other vertices from their feature texels.
+  BouncePhase(int k, bool features_step)
       : k_(k),
-        name_(k > 0    ? "bounce-" + std::to_string(k)
-              : k == 0 ? std::string("path-trace")
-                       : std::string("path-trace-sparse")) {}
+        step_(features_step),
+        name_((k > 0 ? "bounce-" + std::to_string(k) : std::string("path-trace")) +
+              (features_step ? "-sparse" : "")) {}
   const char* name() const override { return name_.c_str(); }
 
   void Run(FarmContext& ctx) override {
@@ -93,30 +94,33 @@ class BouncePhase final : public FarmPhase {
     const int C = ctx.params.channels;
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
     // Path tracing at n, or on the indirect grid when only the dense vertices trace (below).
-    const bool path_on_grid = k_ <= 0 && ctx.params.sparse_indirect;
+    const bool path_on_grid = k_ == 0 && ctx.params.sparse_indirect;
     const std::size_t cols = k_ > 0 || path_on_grid ? coarse.texel_count() : fine.texel_count();
     const int prev_channels = k_ == 1 ? 1 : C;
-    if (k_ == 0) {
+    if (k_ == 0 && !step_) {
       LoadCombination(ctx);
       RunPathTracing(ctx, cols, start);
       return;
     }
 
-    // 1. The previous bounce's rows of the whole scene on every rank.
-    std::vector<float> previous;
+    // 1. The previous bounce's rows of the whole scene on every rank (gathering), and in a
+    // features step this bounce's dense rows.
+    std::vector<float> previous, dense;
     uint64_t status = kExitOk;
     if (ctx.rank == 0) {
       try {
-        const uint64_t bytes = uint64_t(prev_channels) * V * cols * sizeof(float);
+        const uint64_t bytes = (k_ > 0 ? uint64_t(prev_channels) : 0) * V * cols * sizeof(float) +
+                               (step_ ? uint64_t(C) : 0) * V * cols * sizeof(float);
         if (bytes > ctx.options.memory_budget_bytes)
-          throw UsageError(name_ + " needs the " +
-                           (k_ > 0 ? "previous bounce's" : "dense vertices' path-traced") +
-                           " rows (" + std::to_string(bytes >> 20) +
-                           " MiB) on every rank, more than " + "--memory-budget (" +
+          throw UsageError(name_ + " needs " +
+                           (k_ > 0 ? "the previous bounce's rows" : "the dense vertices' rows") +
+                           " (" + std::to_string(bytes >> 20) +
+                           " MiB in all) on every rank, more than " + "--memory-budget (" +
                            std::to_string(ctx.options.memory_budget_bytes >> 20) +
                            " MiB): raise it or lower [sampling] indirect_n");
         ctx.run_eta.StepStarted(name_);
-        previous = LoadPrevious(ctx, fine, coarse, prev_channels);
+        if (k_ > 0) previous = LoadPrevious(ctx, fine, coarse, prev_channels);
+        if (step_) dense = LoadDense(ctx, coarse);
       } catch (...) {
         std::string message;
         status = static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, name_));
@@ -127,9 +131,10 @@ class BouncePhase final : public FarmPhase {
     CheckMpi(MPI_Bcast(&status, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast bounce status");
     if (status != kExitOk) throw CollectiveStop{static_cast<int>(status)};
     BroadcastVector(ctx.comm, previous, MPI_FLOAT, "MPI_Bcast bounce rows");
+    BroadcastVector(ctx.comm, dense, MPI_FLOAT, "MPI_Bcast dense rows");
     LoadCombination(ctx);
-    if (k_ < 0) {
-      RunPathFeatures(ctx, previous, cols, start);
+    if (step_) {
+      RunFeatures(ctx, previous, prev_channels, dense, cols, start);
       return;
     }
 
@@ -138,12 +143,7 @@ class BouncePhase final : public FarmPhase {
     std::unique_ptr<BounceGatherer> gatherer;
     if (ctx.computes_here()) {
       surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
-      BounceGatherOptions go;
-      go.paths = ctx.params.gather_paths;
-      go.seed = ctx.params.seed;
-      go.indirect_n = ctx.params.indirect_n;
-      go.near_field = ctx.params.near_field;
-      gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, go);
+      gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, GatherOptions(ctx));
     }
     RunJobPhase(
         ctx,
@@ -177,25 +177,35 @@ class BouncePhase final : public FarmPhase {
         [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
   }
 
-  // Path tracing with [sparse] indirect = "features" (docs/sparse-precomputation.md, "With
-  // interreflection"): after the dense vertices traced their whole rows on the indirect grid
-  // (phase path-trace, indirect/path-traced-dense.prtt, broadcast as `dense`), every other
-  // vertex traces its feature texels and is reconstructed from its dense neighbours by L1
-  // (ReconstructIndirectRow, §5), the traced values kept exactly; dense rows are copied.
-  void RunPathFeatures(FarmContext& ctx, const std::vector<float>& dense, std::size_t cols,
-                       double start) {
+  // [sparse] indirect = "features" (docs/sparse-precomputation.md, "With interreflection"):
+  // after the dense vertices evaluated their whole rows on the indirect grid (the phase before,
+  // its dense file broadcast as `dense`), every other vertex evaluates its feature texels and is
+  // reconstructed from its dense neighbours by L1 (ReconstructIndirectRow, §5), the evaluated
+  // values kept exactly; dense rows are copied. Path tracing evaluates them with the same paths,
+  // gathering with [sparse] feature_paths directions from the previous bounce's rows.
+  void RunFeatures(FarmContext& ctx, const std::vector<float>& previous, int prev_channels,
+                   const std::vector<float>& dense, std::size_t cols, double start) {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     std::unique_ptr<SceneSurfaces> surfaces;
     std::unique_ptr<PathTraceReference> reference;
-    std::unique_ptr<PathTracedIndirect> component;
+    std::unique_ptr<BounceGatherer> gatherer;
+    std::unique_ptr<IndirectComponent> component;
     std::unique_ptr<NeighborIndex> index;
     std::vector<float> by_vertex;  // the dense rows vertex-major: C rows of cols per vertex
     if (ctx.computes_here()) {
       surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
-      reference = std::make_unique<PathTraceReference>(*ctx.embree, *surfaces,
-                                                       ctx.params.indirect_n, PathOptions(ctx));
-      component = std::make_unique<PathTracedIndirect>(*reference, C);
+      if (k_ == 0) {
+        reference = std::make_unique<PathTraceReference>(*ctx.embree, *surfaces,
+                                                         ctx.params.indirect_n, PathOptions(ctx));
+        component = std::make_unique<PathTracedIndirect>(*reference, C);
+      } else {
+        BounceGatherOptions go = GatherOptions(ctx);
+        if (ctx.params.sparse_feature_paths > 0) go.paths = ctx.params.sparse_feature_paths;
+        gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, go);
+        component = std::make_unique<GatheredBounce>(*gatherer, k_, C, previous.data(), V,
+                                                     prev_channels, cols);
+      }
       std::vector<uint32_t> ids;
       std::vector<Vec3> points;
       for (uint64_t v = 0; v < V; ++v)
@@ -217,7 +227,6 @@ class BouncePhase final : public FarmPhase {
     io.min_neighbors = ctx.plan.sparse.min_neighbors;
     io.min_normal_cos = ctx.plan.sparse.min_normal_cos;
     io.max_residual = ctx.plan.sparse.max_residual;
-    if (ctx.rank == 0) ctx.run_eta.StepStarted(name_);
     RunJobPhase(
         ctx,
         [&](const RowRange& range, std::string_view, std::string& out) {
@@ -260,6 +269,15 @@ class BouncePhase final : public FarmPhase {
           std::memcpy(out.data() + at, &h, sizeof h);
         },
         [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
+  }
+
+  static BounceGatherOptions GatherOptions(const FarmContext& ctx) {
+    BounceGatherOptions go;
+    go.paths = ctx.params.gather_paths;
+    go.seed = ctx.params.seed;
+    go.indirect_n = ctx.params.indirect_n;
+    go.near_field = ctx.params.near_field;
+    return go;
   }
 
   static PathTraceOptions PathOptions(const FarmContext& ctx) {
@@ -346,14 +364,7 @@ class BouncePhase final : public FarmPhase {
     const std::size_t cols = coarse.texel_count();
     const uint64_t V = ctx.params.rows;
     std::vector<float> previous(static_cast<std::size_t>(prev_channels * V * cols));
-    if (k_ < 0) {
-      const std::string path = ctx.folder.PathTracedDenseFile();
-      const TransportFileReader reader(path);
-      if (reader.info().rows != prev_channels * V ||
-          reader.info().cubemap_n != uint32_t(coarse.n()))
-        throw InputError(path, "does not hold the dense vertices' path-traced rows");
-      reader.ReadRows(0, reader.info().rows, previous.data());
-    } else if (k_ == 1) {
+    if (k_ == 1) {
       const TransportFileReader reader(ctx.folder.transport);
       if (reader.info().rows != V || reader.info().cubemap_n != uint32_t(fine.n()))
         throw InputError(ctx.folder.transport, "does not hold the run's direct rows");
@@ -367,6 +378,20 @@ class BouncePhase final : public FarmPhase {
       reader.ReadRows(0, reader.info().rows, previous.data());
     }
     return previous;
+  }
+
+  // Rank 0, in a features step: the dense vertices' rows of this bounce (or path tracing's).
+  std::vector<float> LoadDense(FarmContext& ctx, const CubemapLayout& coarse) const {
+    const uint64_t V = ctx.params.rows;
+    const int C = ctx.params.channels;
+    const std::string path =
+        k_ > 0 ? ctx.folder.BounceDenseFile(k_) : ctx.folder.PathTracedDenseFile();
+    const TransportFileReader reader(path);
+    if (reader.info().rows != C * V || reader.info().cubemap_n != uint32_t(coarse.n()))
+      throw InputError(path, "does not hold the dense vertices' rows of " + name_);
+    std::vector<float> dense(static_cast<std::size_t>(reader.info().rows * coarse.texel_count()));
+    reader.ReadRows(0, reader.info().rows, dense.data());
+    return dense;
   }
 
   // Vertices `range` into the payload: the header, then channels rows per vertex
@@ -428,14 +453,14 @@ class BouncePhase final : public FarmPhase {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const RunFolder& f = ctx.folder;
-    // Path tracing with features: the dense rows first (path-trace), then every row.
-    const bool features = ctx.params.path_estimator && ctx.params.sparse_indirect == 2;
-    const std::string final_path = k_ > 0                ? f.BounceFile(k_)
-                                   : k_ == 0 && features ? f.PathTracedDenseFile()
-                                                         : f.PathTracedFile();
+    // With features: the dense rows first (bounce-k, path-trace), then every row (-sparse).
+    const bool features = ctx.params.sparse_indirect == 2;
+    const std::string final_path = features && !step_
+                                       ? (k_ > 0 ? f.BounceDenseFile(k_) : f.PathTracedDenseFile())
+                                       : (k_ > 0 ? f.BounceFile(k_) : f.PathTracedFile());
     const int K = ctx.params.bounces;
     // Path tracing: each job's per-bounce energies (journaled as its counters, bit-cast).
-    const std::size_t energies = k_ == 0 ? static_cast<std::size_t>(K) * C : 0;
+    const std::size_t energies = k_ == 0 && !step_ ? static_cast<std::size_t>(K) * C : 0;
     std::vector<double> path_energy(energies, 0.0);
     auto add_energy = [&](const std::vector<uint64_t>& counters) {
       for (std::size_t e = 0; e < energies && e < counters.size(); ++e)
@@ -493,7 +518,7 @@ class BouncePhase final : public FarmPhase {
         ReadVertexMajor(*writer, V, C, cols, e.rows, rows);
         // As the job returned them: zeros for combined vertices, except in path-trace-sparse,
         // whose jobs return every row.
-        for (uint64_t i = 0; i < e.rows.count && k_ >= 0; ++i)
+        for (uint64_t i = 0; i < e.rows.count && !step_; ++i)
           if (Combined(e.rows.first + i))
             std::fill_n(rows.data() + i * C * cols, static_cast<std::size_t>(C) * cols, 0.0f);
         if (Checksum64(rows.data(), rows.size() * sizeof(float)) != e.rows_checksum) {
@@ -566,7 +591,8 @@ class BouncePhase final : public FarmPhase {
       throw;
     }
     std::swap(journal, ctx.journal);
-    if (writer && !pairs_.empty() && k_ >= 0 && !features) FillCombined(ctx, *writer, cols);
+    if (writer && !pairs_.empty() && ctx.params.sparse_indirect == 1)
+      FillCombined(ctx, *writer, cols);
     if (writer) {
       writer->Finalize();
       writer.reset();
@@ -591,14 +617,22 @@ class BouncePhase final : public FarmPhase {
     bounce["back_face_hits"] = back;
     bounce["jobs_reused"] = reused_jobs;
     bounce["wall_seconds"] = FarmNow() - start;
-    if (k_ > 0) {
-      ctx.interreflection["per_bounce"].push_back(bounce);
-    } else if (k_ < 0) {
-      bounce["texels_evaluated"] = escaped;  // journaled in place of escapes (RunPathFeatures)
+    if (step_) {
+      bounce["texels_evaluated"] = escaped;  // journaled in place of escapes (RunFeatures)
       bounce["fallbacks"] = back;
       bounce.erase("rays_escaped");
       bounce.erase("back_face_hits");
-      ctx.interreflection["path_trace_features"] = bounce;
+      bounce.erase("bounce");
+      if (k_ > 0 && !ctx.interreflection["per_bounce"].empty()) {
+        // The bounce's entry (its dense phase's) takes the whole bounce's energy.
+        auto& entry = ctx.interreflection["per_bounce"].back();
+        entry["energy"] = energy;
+        entry["features"] = bounce;
+      } else if (k_ == 0) {
+        ctx.interreflection["path_trace_features"] = bounce;
+      }
+    } else if (k_ > 0) {
+      ctx.interreflection["per_bounce"].push_back(bounce);
     } else {
       // Path tracing: the whole indirect part in one phase; each bounce's energy from the jobs'
       // (none with the sparse method: its rows are Σ_k Tᵏ, evaluated at once).
@@ -612,7 +646,7 @@ class BouncePhase final : public FarmPhase {
     spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
                  energy.dump(), rays, FarmNow() - start);
     ctx.report.jobs_total = ctx.report.jobs_done + ctx.report.jobs_reused;
-    if (k_ == K || (k_ == 0 && !features) || k_ < 0) IndirectShare(ctx);
+    if ((k_ == K || k_ == 0) && (step_ || !features)) IndirectShare(ctx);
     ctx.report.interreflection_json = ctx.interreflection.dump();
   }
 
@@ -671,8 +705,8 @@ class BouncePhase final : public FarmPhase {
         for (uint64_t v = 0; v < V; ++v) mask_[v] = pairs_[v * slots_ * 2] != kNoSample ? 1 : 0;
         uint64_t combined = 0;
         for (uint8_t m : mask_) combined += m;
-        if (k_ < 0)
-          spdlog::info("[{}] {} of {} vertices are dense; {} trace their features", name_,
+        if (step_)
+          spdlog::info("[{}] {} of {} vertices are dense; {} evaluate their features", name_,
                        V - combined, V, combined);
         else
           spdlog::info("[{}] {} of {} vertices gather; {} combine the dense vertices' rows", name_,
@@ -718,6 +752,7 @@ class BouncePhase final : public FarmPhase {
   }
 
   int k_;
+  bool step_;
   std::string name_;
   std::vector<uint8_t> mask_;    // per vertex: 1 = combined (every rank)
   std::vector<uint32_t> pairs_;  // rank 0: combination.bin's pairs
@@ -726,8 +761,8 @@ class BouncePhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeBouncePhase(int k) {
-  return std::make_unique<BouncePhase>(k);
+std::unique_ptr<FarmPhase> MakeBouncePhase(int k, bool features_step) {
+  return std::make_unique<BouncePhase>(k, features_step);
 }
 
 }  // namespace prt

@@ -70,9 +70,14 @@ struct SetupParams {
   int32_t channels = 1;
   int32_t run_indirect = 0;
   int32_t path_estimator = 0;  // 1: the bounces by per-element path tracing (one phase)
-  // 1: method sparse with [sparse] indirect = "combination": only the dense vertices gather (or
-  // trace paths, on the indirect grid); the others combine them (run/sparse/combination.bin).
+  // Method sparse with bounces ([sparse] indirect): 1 "combination": only the dense vertices
+  // gather (or trace paths, on the indirect grid), the others combine them (run/sparse/
+  // combination.bin); 2 "features": the others evaluate their feature texels (a -sparse phase
+  // after each bounce).
   int32_t sparse_indirect = 0;
+  // [sparse] indirect = "features" with gathering: the directions a sparse vertex gathers its
+  // feature texels with (0: gather_paths).
+  int32_t sparse_feature_paths = 0;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
@@ -178,7 +183,7 @@ std::unique_ptr<FarmPhase> MakeCompressionPhase();
 std::unique_ptr<FarmPhase> MakeEstimatePhase();
 // Bounce k of the interreflection (farm/bounce_phase.cpp), 1 ≤ k ≤ bounces; k = 0: every
 // bounce at once by per-element path tracing (estimator "path").
-std::unique_ptr<FarmPhase> MakeBouncePhase(int k);
+std::unique_ptr<FarmPhase> MakeBouncePhase(int k, bool features_step = false);
 // The indirect stage's files: indirect/bounce-1 … K.prtt, or indirect/path-traced.prtt.
 inline std::vector<std::string> IndirectFiles(const RunFolder& f, int bounces, bool path) {
   std::vector<std::string> files;

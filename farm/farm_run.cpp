@@ -129,8 +129,14 @@ std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
         (ctx.params.gather_paths / 2e6 +
          3.0 * ctx.params.gather_paths * 6 * m * m * ctx.params.channels / 1e9) /
         threads;
-    for (int k = 1; k <= ctx.params.bounces; ++k)
+    for (int k = 1; k <= ctx.params.bounces; ++k) {
       steps.push_back({"bounce-" + std::to_string(k), "bounce", rows * dense_share, per_vertex});
+      if (ctx.params.sparse_indirect == 2)  // the features' directions, a fraction of P
+        steps.push_back({"bounce-" + std::to_string(k) + "-sparse", "bounce",
+                         rows * (1 - dense_share),
+                         per_vertex * std::max(1, ctx.params.sparse_feature_paths) /
+                             std::max(1, ctx.params.gather_paths)});
+    }
   }
   if (ctx.params.run_compression)
     steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
@@ -180,11 +186,18 @@ std::vector<std::unique_ptr<FarmPhase>> PhasesAfterSetup(const FarmContext& ctx)
     phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
     phases.push_back(MakeFinalizePhase());
   }
+  // [sparse] indirect = "features": each bounce (or the path tracing) is followed by its
+  // features step (farm/bounce_phase.cpp).
+  const bool features = ctx.params.sparse_indirect == 2;
   if (ctx.params.run_indirect && ctx.params.path_estimator) {
     phases.push_back(MakeBouncePhase(0));
-    if (ctx.params.sparse_indirect == 2) phases.push_back(MakeBouncePhase(-1));
-  } else if (ctx.params.run_indirect)
-    for (int k = 1; k <= ctx.params.bounces; ++k) phases.push_back(MakeBouncePhase(k));
+    if (features) phases.push_back(MakeBouncePhase(0, true));
+  } else if (ctx.params.run_indirect) {
+    for (int k = 1; k <= ctx.params.bounces; ++k) {
+      phases.push_back(MakeBouncePhase(k));
+      if (features) phases.push_back(MakeBouncePhase(k, true));
+    }
+  }
   if (ctx.params.run_compression) phases.push_back(MakeCompressionPhase());
   if (ctx.params.run_estimate) phases.push_back(MakeEstimatePhase());
   return phases;

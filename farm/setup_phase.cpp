@@ -191,15 +191,11 @@ class SetupPhase final : public FarmPhase {
                                        " is larger than the cubemap's n " + std::to_string(n));
     ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
     // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
-    // 2 features (path tracing only: a gathering vertex's cost is its rays, not its texels).
+    // 2 features.
     ctx.params.sparse_indirect = 0;
-    if (bounces > 0 && ctx.params.sparse && scene.sparse.indirect != "full") {
-      if (scene.sparse.indirect == "features" && scene.sampling.estimator != "path")
-        throw InputError(scene.file,
-                         "[sparse] indirect = \"features\" needs [sampling] estimator = "
-                         "\"path\" (with gathering use \"combination\" or \"full\")");
+    if (bounces > 0 && ctx.params.sparse && scene.sparse.indirect != "full")
       ctx.params.sparse_indirect = scene.sparse.indirect == "features" ? 2 : 1;
-    }
+    ctx.params.sparse_feature_paths = scene.sparse.feature_paths;
     ctx.params.bounces = bounces;
     ctx.params.indirect_n = indirect_n;
     ctx.params.gather_paths = scene.sampling.gather_paths;

@@ -107,6 +107,7 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
                                 {"paths", s.gather_paths},
                                 {"near_field", s.near_field},
                                 {"sparse", s.method == "sparse" ? scene.sparse.indirect : "full"},
+                                {"sparse_feature_paths", scene.sparse.feature_paths},
                                 {"channels", s.channels},
                                 {"albedo", AlbedoJson(geometry)}});
   }

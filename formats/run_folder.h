@@ -63,9 +63,15 @@ struct RunFolder {
   std::string PathTracedDenseFile() const {
     return (std::filesystem::path(indirect) / "path-traced-dense.prtt").string();
   }
-  // indirect/bounce-<k>.prtt
   // The sparse phase's combinations, reused by the bounces (farm/sparse_jobs.h).
   std::string SparseCombinationFile() const { return sparse + "/combination.bin"; }
+  // indirect/bounce-<k>-dense.prtt: with [sparse] indirect = "features", the dense vertices'
+  // rows of bounce k (the others 0) that phase bounce-<k>-sparse reads.
+  std::string BounceDenseFile(int k) const {
+    return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + "-dense.prtt"))
+        .string();
+  }
+  // indirect/bounce-<k>.prtt
   std::string BounceFile(int k) const {
     return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + ".prtt")).string();
   }

@@ -378,6 +378,77 @@ TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
   EXPECT_TRUE(Rows(again + "/indirect/path-traced.prtt") == a);
 }
 
+// [sparse] indirect = "features" with gathering: bounce-k gathers at the dense vertices,
+// bounce-k-sparse gathers the other vertices' feature texels with feature_paths directions and
+// reconstructs them by L1; both bounces equal the in-process kernels (RunSparseIndirect with the
+// fewer-direction gatherer as its sparse component) for 1 and 2 ranks.
+TEST(InterreflectionMpiTest, SparseGatherFeaturesAreTheKernelsForAnyRankCount) {
+  const std::string dir = WorkDir("sparse_gather_features");
+  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  text.replace(text.find("method = \"sparse\""), 17,
+               "method = \"sparse\"\nbounces = 2\ngather_paths = 256");
+  text += "indirect = \"features\"\nfeature_paths = 32\n";  // the file ends in [sparse]
+  const std::string scene_file = dir + "/gather.toml";
+  std::ofstream(scene_file) << text;
+  for (int ranks : {1, 2}) {
+    const auto r =
+        Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::string run = dir + "/np2";
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
+  const uint64_t V = samples.size();
+  uint64_t slots = 0;
+  const std::vector<uint32_t> pairs =
+      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
+  std::vector<uint8_t> is_dense(V);
+  for (uint64_t v = 0; v < V; ++v) is_dense[v] = CombinationOf(pairs, slots, v).empty();
+  const CubemapLayout fine(scene.cubemap_n), coarse(scene.cubemap_n / 4);
+  const std::size_t cols = coarse.texel_count();
+  const std::vector<float> direct = Rows(run + "/transport.prtt");
+  std::vector<float> previous(V * cols);
+  for (uint64_t v = 0; v < V; ++v)
+    CoarsenRow(fine, coarse, direct.data() + v * fine.texel_count(), previous.data() + v * cols);
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  BounceGatherOptions go;
+  go.paths = 256;
+  go.seed = scene.sampling.seed;
+  go.indirect_n = coarse.n();
+  const BounceGatherer all(embree, surfaces, go);
+  go.paths = 32;
+  const BounceGatherer few(embree, surfaces, go);
+  const SparsePlan plan = PlanFromSettings(scene.sparse, g.diagonal(), scene.cubemap_n);
+  SparseIndirectOptions io;
+  io.features = IndirectFeatures(plan.sparse.features, scene.cubemap_n, coarse.n());
+  io.lambda = plan.sparse.lambda;
+  io.min_neighbors = plan.sparse.min_neighbors;
+  io.min_normal_cos = plan.sparse.min_normal_cos;
+  io.max_residual = plan.sparse.max_residual;
+  for (int k = 1; k <= 2; ++k) {
+    const GatheredBounce dense_rows(all, k, 1, previous.data(), V, 1, cols);
+    const GatheredBounce features(few, k, 1, previous.data(), V, 1, cols);
+    std::vector<float> want(V * cols);
+    SparseIndirectStats st;
+    RunSparseIndirect(dense_rows, samples, is_dense, plan.radius, plan.max_neighbors, io,
+                      want.data(), st, {}, &features);
+    EXPECT_GT(st.reconstructed, V / 4);
+    const std::string f = "/indirect/bounce-" + std::to_string(k) + ".prtt";
+    const std::vector<float> got = Rows(run + f);
+    EXPECT_TRUE(got == Rows(dir + "/np1" + f)) << f;
+    ASSERT_EQ(got.size(), want.size());
+    for (std::size_t i = 0; i < got.size(); ++i) ASSERT_EQ(got[i], want[i]) << k << " " << i;
+    previous = got;
+  }
+  const nlohmann::json rep = Report(run);
+  ASSERT_EQ(rep["interreflection"]["per_bounce"].size(), 2u);
+  EXPECT_TRUE(rep["interreflection"]["per_bounce"][1].contains("features"));
+}
+
 // estimator = "path": the indirect stage is one phase of per-element path tracing, its file
 // (Σ_k Tᵏ at n) the same for 1 and 2 ranks and equal to the reference kernel's rows minus T⁰.
 TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCount) {

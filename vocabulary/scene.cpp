@@ -425,6 +425,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     p.min_normal_cos = s.Number("min_normal_cos", p.min_normal_cos, -2, 1, false);
     p.rank_floor = static_cast<int>(s.Integer("rank_floor", p.rank_floor, 0, 1000));
     p.indirect = s.Choice("indirect", p.indirect, {"combination", "features", "full"});
+    p.feature_paths = static_cast<int>(s.Integer("feature_paths", p.feature_paths, 0, 65536));
     if (p.window % 2 == 0) {
       s.Fail(t ? t->get("window") : nullptr, "window",
              "must be odd (a window centred on the texel), got " + std::to_string(p.window));
