@@ -295,14 +295,8 @@ int main(int argc, char** argv) {
         // ---- the sparse method, per variant
         for (std::size_t vi = 0; vi < variants.size(); ++vi) {
           const bench::SparseVariant& var = variants[vi];
-          SparseIndirectOptions io;
-          io.features = var.indirect_features > 0
-                            ? var.indirect_features
-                            : IndirectFeatures(var.plan.sparse.features, n, m);
-          io.lambda = var.plan.sparse.lambda;
-          io.min_neighbors = var.plan.sparse.min_neighbors;
-          io.min_normal_cos = var.plan.sparse.min_normal_cos;
-          io.max_residual = var.plan.sparse.max_residual;
+          SparseIndirectOptions io = IndirectOptionsOf(var.plan, n, m);
+          if (var.indirect_features > 0) io.features = var.indirect_features;
           // Gathering: the T⁰ combination by default (its cost is rays, not texels); path
           // tracing: the features (its cost is texels).
           io.direct_weights = var.direct_weights >= 0 ? var.direct_weights == 1 : !path;

@@ -220,13 +220,8 @@ class BouncePhase final : public FarmPhase {
           std::copy_n(dense.data() + (c * V + v) * cols, cols,
                       by_vertex.data() + (v * C + c) * cols);
     }
-    SparseIndirectOptions io;
-    io.features =
-        IndirectFeatures(ctx.plan.sparse.features, ctx.params.cubemap_n, ctx.params.indirect_n);
-    io.lambda = ctx.plan.sparse.lambda;
-    io.min_neighbors = ctx.plan.sparse.min_neighbors;
-    io.min_normal_cos = ctx.plan.sparse.min_normal_cos;
-    io.max_residual = ctx.plan.sparse.max_residual;
+    const SparseIndirectOptions io =
+        IndirectOptionsOf(ctx.plan, ctx.params.cubemap_n, ctx.params.indirect_n);
     RunJobPhase(
         ctx,
         [&](const RowRange& range, std::string_view, std::string& out) {

@@ -90,6 +90,16 @@ std::string FarmSparsePathTracing(const std::string& dir, const std::string& spa
   return scene_file;
 }
 
+// Per sample: 1 where the run's combination.bin gives no combination (a dense vertex).
+std::vector<uint8_t> DenseOf(const std::string& run, uint64_t V) {
+  uint64_t slots = 0;
+  const std::vector<uint32_t> pairs =
+      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
+  std::vector<uint8_t> is_dense(V);
+  for (uint64_t v = 0; v < V; ++v) is_dense[v] = CombinationOf(pairs, slots, v).empty();
+  return is_dense;
+}
+
 // The kernels in one process: the tiny scene's direct rows and two gathered bounces on the
 // n = 2 grid (n/4 of the scene's 8), the farm's seed and directions.
 std::vector<std::vector<float>> KernelBounces() {
@@ -334,11 +344,7 @@ TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
   const SceneGeometry g = BuildSceneGeometry(scene);
   const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
   const uint64_t V = samples.size();
-  uint64_t slots = 0;
-  const std::vector<uint32_t> pairs =
-      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
-  std::vector<uint8_t> is_dense(V);
-  for (uint64_t v = 0; v < V; ++v) is_dense[v] = CombinationOf(pairs, slots, v).empty();
+  const std::vector<uint8_t> is_dense = DenseOf(run, V);
   const EmbreeScene embree(g);
   const SceneSurfaces surfaces(g);
   PathTraceOptions po;
@@ -350,12 +356,7 @@ TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
   const PathTraceReference reference(embree, surfaces, m, po);
   const PathTracedIndirect component(reference, 1);
   const SparsePlan plan = PlanFromSettings(scene.sparse, g.diagonal(), scene.cubemap_n);
-  SparseIndirectOptions io;
-  io.features = IndirectFeatures(plan.sparse.features, scene.cubemap_n, m);
-  io.lambda = plan.sparse.lambda;
-  io.min_neighbors = plan.sparse.min_neighbors;
-  io.min_normal_cos = plan.sparse.min_normal_cos;
-  io.max_residual = plan.sparse.max_residual;
+  const SparseIndirectOptions io = IndirectOptionsOf(plan, scene.cubemap_n, m);
   std::vector<float> want(V * component.cols());
   SparseIndirectStats st;
   RunSparseIndirect(component, samples, is_dense, plan.radius, plan.max_neighbors, io, want.data(),
@@ -402,11 +403,7 @@ TEST(InterreflectionMpiTest, SparseGatherFeaturesAreTheKernelsForAnyRankCount) {
   const SceneGeometry g = BuildSceneGeometry(scene);
   const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
   const uint64_t V = samples.size();
-  uint64_t slots = 0;
-  const std::vector<uint32_t> pairs =
-      ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
-  std::vector<uint8_t> is_dense(V);
-  for (uint64_t v = 0; v < V; ++v) is_dense[v] = CombinationOf(pairs, slots, v).empty();
+  const std::vector<uint8_t> is_dense = DenseOf(run, V);
   const CubemapLayout fine(scene.cubemap_n), coarse(scene.cubemap_n / 4);
   const std::size_t cols = coarse.texel_count();
   const std::vector<float> direct = Rows(run + "/transport.prtt");
@@ -423,12 +420,7 @@ TEST(InterreflectionMpiTest, SparseGatherFeaturesAreTheKernelsForAnyRankCount) {
   go.paths = 32;
   const BounceGatherer few(embree, surfaces, go);
   const SparsePlan plan = PlanFromSettings(scene.sparse, g.diagonal(), scene.cubemap_n);
-  SparseIndirectOptions io;
-  io.features = IndirectFeatures(plan.sparse.features, scene.cubemap_n, coarse.n());
-  io.lambda = plan.sparse.lambda;
-  io.min_neighbors = plan.sparse.min_neighbors;
-  io.min_normal_cos = plan.sparse.min_normal_cos;
-  io.max_residual = plan.sparse.max_residual;
+  const SparseIndirectOptions io = IndirectOptionsOf(plan, scene.cubemap_n, coarse.n());
   for (int k = 1; k <= 2; ++k) {
     const GatheredBounce dense_rows(all, k, 1, previous.data(), V, 1, cols);
     const GatheredBounce features(few, k, 1, previous.data(), V, 1, cols);

@@ -44,6 +44,16 @@ int IndirectFeatures(int direct_features, int cubemap_n, int indirect_n) {
   return std::max(8, static_cast<int>(std::lround(rate * 6.0 * indirect_n * indirect_n)));
 }
 
+SparseIndirectOptions IndirectOptionsOf(const SparsePlan& plan, int cubemap_n, int indirect_n) {
+  SparseIndirectOptions o;
+  o.features = IndirectFeatures(plan.sparse.features, cubemap_n, indirect_n);
+  o.lambda = plan.sparse.lambda;
+  o.min_neighbors = plan.sparse.min_neighbors;
+  o.min_normal_cos = plan.sparse.min_normal_cos;
+  o.max_residual = plan.sparse.max_residual;
+  return o;
+}
+
 SparseIndirectStats& SparseIndirectStats::operator+=(const SparseIndirectStats& o) {
   dense_rows += o.dense_rows;
   reconstructed += o.reconstructed;

@@ -32,6 +32,7 @@
 #include "worker/bounce_gather.h"
 #include "worker/l1_solver.h"
 #include "worker/path_trace_reference.h"
+#include "worker/sparse_precomputation.h"
 #include "worker/sparse_reconstruction.h"
 
 namespace prt {
@@ -112,6 +113,10 @@ struct SparseIndirectOptions {
 // The feature count for an indirect grid of m texels per face edge at the direct features'
 // rate: direct_features / (6·n²) of 6·m², at least 8.
 int IndirectFeatures(int direct_features, int cubemap_n, int indirect_n);
+
+// The options a sparse plan implies on the indirect grid: IndirectFeatures of its direct
+// features, its λ, neighbour and fit tests (direct_weights off).
+SparseIndirectOptions IndirectOptionsOf(const SparsePlan& plan, int cubemap_n, int indirect_n);
 
 struct SparseIndirectStats {
   uint64_t dense_rows = 0;  // dense vertices: whole rows
