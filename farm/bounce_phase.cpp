@@ -40,7 +40,6 @@
 #include "vocabulary/hash.h"
 #include "worker/bounce_gather.h"
 #include "worker/composed_transport.h"
-#include "worker/neighbor_index.h"
 #include "worker/path_trace_reference.h"
 #include "worker/sparse_indirect.h"
 
@@ -243,12 +242,11 @@ class BouncePhase final : public FarmPhase {
               std::copy_n(by_vertex.data() + v * per_vertex, per_vertex, row);
               return;
             }
-            std::vector<IndirectNeighbor> nbs;
-            for (uint32_t d : index->RadiusSearch(ctx.samples[v].position, ctx.plan.radius,
-                                                  ctx.plan.max_neighbors))
-              nbs.push_back({by_vertex.data() + d * per_vertex, ctx.samples[d].normal});
-            ReconstructIndirectRow(*component, ctx.samples[v], v, nbs, io, solvers.local(), row,
-                                   stats.local());
+            ReconstructIndirectAt(
+                *component, ctx.samples, static_cast<uint32_t>(v), *index, ctx.plan.radius,
+                ctx.plan.max_neighbors,
+                [&](uint32_t d) { return by_vertex.data() + d * per_vertex; }, io, solvers.local(),
+                row, stats.local());
           });
           for (std::size_t i = 0; i < floats; ++i)
             if (!std::isfinite(rows[i]))

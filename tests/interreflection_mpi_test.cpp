@@ -90,6 +90,16 @@ std::string FarmSparsePathTracing(const std::string& dir, const std::string& spa
   return scene_file;
 }
 
+// The farm's path tracing for a scene with 2 bounces and `paths` paths per vertex.
+PathTraceOptions FarmPathOptions(const SceneDescription& scene, int paths) {
+  PathTraceOptions po;
+  po.bounces = 2;
+  po.paths = paths;
+  po.rays_per_texel = scene.sampling.rays_per_texel;
+  po.seed = scene.sampling.seed;
+  return po;
+}
+
 // Per sample: 1 where the run's combination.bin gives no combination (a dense vertex).
 std::vector<uint8_t> DenseOf(const std::string& run, uint64_t V) {
   uint64_t slots = 0;
@@ -307,11 +317,7 @@ TEST(InterreflectionMpiTest, SparsePathTracingTracesDenseVerticesOnTheIndirectGr
       ReadCombinationFile(run + "/sparse/combination.bin", V, slots);
   const EmbreeScene embree(g);
   const SceneSurfaces surfaces(g);
-  PathTraceOptions po;
-  po.bounces = 2;
-  po.paths = 8;
-  po.rays_per_texel = scene.sampling.rays_per_texel;
-  po.seed = scene.sampling.seed;
+  const PathTraceOptions po = FarmPathOptions(scene, 8);
   const PathTraceReference reference(embree, surfaces, m, po);
   const std::size_t cols = reference.layout().texel_count();
   ASSERT_EQ(a.size(), V * cols);
@@ -347,11 +353,7 @@ TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
   const std::vector<uint8_t> is_dense = DenseOf(run, V);
   const EmbreeScene embree(g);
   const SceneSurfaces surfaces(g);
-  PathTraceOptions po;
-  po.bounces = 2;
-  po.paths = 8;
-  po.rays_per_texel = scene.sampling.rays_per_texel;
-  po.seed = scene.sampling.seed;
+  const PathTraceOptions po = FarmPathOptions(scene, 8);
   const int m = scene.cubemap_n / 4;
   const PathTraceReference reference(embree, surfaces, m, po);
   const PathTracedIndirect component(reference, 1);
@@ -463,11 +465,7 @@ TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCo
   const std::vector<SpatialSample> samples = SpatialSamplesOf(g);
   const EmbreeScene embree(g);
   const SceneSurfaces surfaces(g);
-  PathTraceOptions po;
-  po.bounces = 2;
-  po.paths = 16;
-  po.rays_per_texel = scene.sampling.rays_per_texel;
-  po.seed = scene.sampling.seed;
+  const PathTraceOptions po = FarmPathOptions(scene, 16);
   const PathTraceReference reference(embree, surfaces, scene.cubemap_n, po);
   const std::size_t cols = reference.layout().texel_count();
   std::vector<float> row(cols), bounces(3 * cols);

@@ -11,7 +11,6 @@
 #include <numeric>
 
 #include "worker/column_order.h"
-#include "worker/neighbor_index.h"
 
 namespace prt {
 
@@ -265,15 +264,13 @@ void RunSparseIndirect(const IndirectComponent& component, std::span<const Spati
       scatter(s, row.data());
       return;
     }
-    const std::vector<uint32_t> nb =
-        dense.empty() ? std::vector<uint32_t>{}
-                      : index.RadiusSearch(samples[s].position, radius, max_neighbors);
-    std::vector<IndirectNeighbor> nbs;
-    nbs.reserve(nb.size());
-    for (uint32_t d : nb)
-      nbs.push_back({dense_rows.data() + slot[d] * C * cols, samples[d].normal});
-    ReconstructIndirectRow(sparse_component != nullptr ? *sparse_component : component, samples[s],
-                           s, nbs, options, solvers.local(), row.data(), local.local());
+    ReconstructIndirectAt(
+        sparse_component != nullptr ? *sparse_component : component, samples, s, index, radius,
+        max_neighbors,
+        [&](uint32_t d) {
+          return dense_rows.data() + static_cast<std::size_t>(slot[d]) * C * cols;
+        },
+        options, solvers.local(), row.data(), local.local());
     scatter(s, row.data());
   });
   for (const SparseIndirectStats& l : local) stats += l;

@@ -31,6 +31,7 @@
 
 #include "worker/bounce_gather.h"
 #include "worker/l1_solver.h"
+#include "worker/neighbor_index.h"
 #include "worker/path_trace_reference.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/sparse_reconstruction.h"
@@ -155,6 +156,23 @@ SparseOutcome ReconstructIndirectRow(const IndirectComponent& component, const S
                                      uint64_t index, std::span<const IndirectNeighbor> neighbors,
                                      const SparseIndirectOptions& options, L1Solver& solver,
                                      float* row, SparseIndirectStats& stats);
+
+// A non-dense sample's row (§5): its dense neighbours within `radius` (at most max_neighbors,
+// nearest first, from `dense_index` over the dense samples), whose rows row_of(d) gives (channels
+// × cols each), then ReconstructIndirectRow. What RunSparseIndirect and the farm's -sparse phases
+// (farm/bounce_phase.cpp) do per vertex.
+template <class RowOf>
+SparseOutcome ReconstructIndirectAt(const IndirectComponent& component,
+                                    std::span<const SpatialSample> samples, uint32_t s,
+                                    const NeighborIndex& dense_index, double radius,
+                                    int max_neighbors, RowOf&& row_of,
+                                    const SparseIndirectOptions& options, L1Solver& solver,
+                                    float* row, SparseIndirectStats& stats) {
+  std::vector<IndirectNeighbor> nbs;
+  for (uint32_t d : dense_index.RadiusSearch(samples[s].position, radius, max_neighbors))
+    nbs.push_back({row_of(d), samples[d].normal});
+  return ReconstructIndirectRow(component, samples[s], s, nbs, options, solver, row, stats);
+}
 
 // Every sample's row of the component in this process (TBB threads): the dense samples'
 // (is_dense[s] = 1) whole rows first, then every other sample from its dense neighbours within

@@ -36,7 +36,8 @@ struct SparsePlan {
   // same round. Measured on the default scene and the dragon (docs/sparse-precomputation.md):
   // the round's largest rank gave more fallbacks and slightly larger ground errors.
   int empty_weight = 0;
-  // The dense budget driven by rank ("skip what a scene doesn't need"): a candidate with at
+  // The dense budget driven by rank (§4.1: dense vertices are added where the local rank of the
+  // neighbours' transport is high; here also *only* there): a candidate with at
   // least sparse.min_neighbors dense neighbours whose local rank is ≤ rank_floor is covered (a
   // combination of its neighbours already explains it) and is never picked, and each round picks
   // its share of the budget × the fraction of its candidates that are not covered, so flat,
