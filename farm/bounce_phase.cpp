@@ -667,7 +667,7 @@ class BouncePhase final : public FarmPhase {
         const std::vector<float> L = CoarsenLight(fine, coarse, ctx.estimate.lights[l].Channel(c));
         const int tc = C == 1 ? 0 : c;
         for (uint64_t v = 0; v < V; ++v) {
-          const double rho = ctx.geometry.meshes[ctx.geometry.MeshOfVertex(v)].albedo[c];
+          const double rho = ctx.RowAlbedo(v)[c];
           d += rho * Dot(direct.data() + v * cols, L.data(), cols);
           ind += rho * Dot(indirect.data() + (tc * V + v) * cols, L.data(), cols);
         }

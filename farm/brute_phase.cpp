@@ -30,8 +30,7 @@ struct BruteResultHeader {
 // Zero variance sums over the scene's meshes (every rank has the geometry).
 TransportVariance VarianceSumsShape(const FarmContext& ctx) {
   return MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
-                               static_cast<uint32_t>(ctx.params.rays_per_texel),
-                               ctx.geometry.MeshVertexCounts());
+                               static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups());
 }
 
 // Traces samples `range` into the result payload: the header, the rows, then their variance

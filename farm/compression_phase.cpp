@@ -256,8 +256,8 @@ void Compress(FarmContext& ctx) {
                    "MPI_Bcast lights");
         }
       }
-      norms = std::make_unique<RadianceNormAccumulator>(
-          std::move(lights), ctx.geometry.MeshVertexCounts(), ctx.params.channels);
+      norms = std::make_unique<RadianceNormAccumulator>(std::move(lights), ctx.RowGroups(),
+                                                        ctx.params.channels);
     }
     double row_energy = 0, row_dropped = 0;  // this rank's rows
     double column_error = 0;                 // this rank's columns

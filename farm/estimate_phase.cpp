@@ -73,7 +73,7 @@ CrossValidation ReadCrossValidation(const FarmContext& ctx, std::size_t meshes) 
     throw InputError(bin, "holds fewer records than cross_validation.json lists");
   cv.samples.assign(meshes, 0);
   for (std::size_t i = 0; i < ids.size(); ++i) {
-    const std::size_t m = ctx.geometry.MeshOfVertex(ids[i]);
+    const std::size_t m = ctx.GroupOfRow(ids[i]);
     if (m >= meshes) throw InputError(json, "names a vertex beyond the meshes");
     ++cv.samples[m];
     const char* rec = bytes.data() + i * record;
@@ -146,7 +146,7 @@ class EstimatePhase final : public FarmPhase {
     if (have_variance) {
       variance = DecodeTransportVariance(ReadWholeFile(f.variance), f.variance);
       if (variance.cubemap_n != static_cast<uint32_t>(n) ||
-          variance.sums.size() != ctx.geometry.meshes.size())
+          variance.sums.size() != ctx.RowGroups().size())
         throw InputError(f.variance, "does not describe this run's rows and meshes");
     }
 
@@ -157,7 +157,7 @@ class EstimatePhase final : public FarmPhase {
 
     // Σ B² per light, mesh and channel: accumulated by the compression phase as the rows passed
     // through it, else read here from the rows.
-    const std::vector<uint64_t> mesh_rows = ctx.geometry.MeshVertexCounts();
+    const std::vector<uint64_t> mesh_rows = ctx.RowGroups();
     RadianceNormAccumulator norms(lights, mesh_rows);
     if (ctx.estimate.have_norms) {
       norms.Set(ctx.estimate.norms);
@@ -191,7 +191,7 @@ class EstimatePhase final : public FarmPhase {
                        : "every texel";
     Json meshes = Json::array();
     for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
-      meshes.push_back({{"name", ctx.geometry.meshes[m].name},
+      meshes.push_back({{"name", ctx.GroupName(m)},
                         {"rows", mesh_rows[m]},
                         {"rows_covered", have_variance ? variance.rows_covered[m] : 0}});
     }
@@ -206,7 +206,7 @@ class EstimatePhase final : public FarmPhase {
         norm(lights.size());
     for (std::size_t l = 0; l < lights.size(); ++l) {
       for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
-        const Rgb& rho = ctx.geometry.meshes[m].albedo;
+        const Rgb rho = ctx.GroupAlbedo(m);
         const std::array<double, 3> v =
             estimable ? MeshRadianceVariance(variance, m, lights[l]) : std::array<double, 3>{};
         double var_m = 0, norm_m = 0;
@@ -223,7 +223,7 @@ class EstimatePhase final : public FarmPhase {
       // Σ |ΔB|² of each mesh's cross-validated vertices under this light.
       std::vector<double> sum(mesh_rows.size(), 0.0);
       for (const auto& [m, diff] : cv.rows) {
-        const Rgb& rho = ctx.geometry.meshes[m].albedo;
+        const Rgb rho = ctx.GroupAlbedo(m);
         for (int c = 0; c < 3; ++c) {
           double b = 0;
           const float* L = lights[l].Channel(c).data();
@@ -253,7 +253,7 @@ class EstimatePhase final : public FarmPhase {
           var_all += var_m;
           norm_all += norm[l][m];
           per_mesh.push_back(
-              {{"name", ctx.geometry.meshes[m].name},
+              {{"name", ctx.GroupName(m)},
                {"relative_rms", Ratio(var_m, norm[l][m])},
                {"rms_radiance", mesh_rows[m]
                                     ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m])))

@@ -27,6 +27,7 @@
 #include "farm/stage_plan.h"
 #include "farm/variance_accumulator.h"
 #include "farm/visibility_jobs.h"
+#include "formats/image_file.h"
 #include "formats/run_folder.h"
 #include "formats/transport_file.h"
 #include "vocabulary/envmap.h"
@@ -78,10 +79,21 @@ struct SetupParams {
   // [sparse] indirect = "features" with gathering: the directions a sparse vertex gathers its
   // feature texels with (0: gather_paths).
   int32_t sparse_feature_paths = 0;
+  // Image relighting (docs/image-relighting.md): 1 when the samples are the pixels of `camera`
+  // (rows = width·height in raster order), 0 for mesh vertices.
+  int32_t image = 0;
+  Camera camera;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
 };
+
+// The row groups the per-mesh figures are taken over (variance sums, the estimate's tables): each
+// mesh's vertices in scene order, or for an image run one group of all pixels (its meshes'
+// pixels interleave in raster order).
+inline std::vector<uint64_t> RowGroupsOf(const SetupParams& params, const SceneGeometry& geometry) {
+  return params.image ? std::vector<uint64_t>{params.rows} : geometry.MeshVertexCounts();
+}
 
 // All ranks stop the run with this exit code (they have agreed on it collectively).
 struct CollectiveStop {
@@ -118,6 +130,8 @@ struct FarmContext {
   std::string method = "brute";  // "brute", "sparse" or "visibility"
   SceneGeometry geometry;        // decoded from the bytes rank 0 broadcast
   std::vector<SpatialSample> samples;
+  // Image runs: per pixel, the mesh it sees or kImageBackground (worker/camera_samples.h).
+  std::vector<uint32_t> pixel_mesh;
   // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
@@ -151,6 +165,24 @@ struct FarmContext {
   std::vector<VisibilityChunkRef> visibility_chunks;
   FarmReport report;
 
+  std::vector<uint64_t> RowGroups() const { return RowGroupsOf(params, geometry); }
+  std::size_t GroupOfRow(uint64_t row) const {
+    return params.image ? 0 : geometry.MeshOfVertex(row);
+  }
+  std::string GroupName(std::size_t g) const {
+    return params.image ? std::string("image") : geometry.meshes[g].name;
+  }
+  // The albedo the per-group figures weigh radiance with: the mesh's; for an image run's one
+  // group 1 (its figures are those of the irradiance-like T·L, pixels of every material alike).
+  Rgb GroupAlbedo(std::size_t g) const {
+    return params.image ? Rgb{1.f, 1.f, 1.f} : geometry.meshes[g].albedo;
+  }
+  // The albedo of row `row`'s surface (0 for a background pixel).
+  Rgb RowAlbedo(uint64_t row) const {
+    if (!params.image) return geometry.meshes[geometry.MeshOfVertex(row)].albedo;
+    const uint32_t m = pixel_mesh[row];
+    return m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : geometry.meshes[m].albedo;
+  }
   bool computes_here() const { return rank != 0 || size == 1 || options.coordinator_works; }
   int computing_ranks() const {
     return size - 1 + ((size == 1 || options.coordinator_works) ? 1 : 0);

@@ -3,6 +3,7 @@
 // and the world-space geometry; every rank builds its Embree scene and sampler from those bytes.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -19,12 +20,15 @@
 #include "farm/stage_plan.h"
 #include "formats/compressed_transport.h"
 #include "formats/geometry_file.h"
+#include "formats/image_file.h"
 #include "formats/run_folder.h"
 #include "formats/transport_file.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
 #include "worker/bounce_gather.h"
+#include "worker/camera_samples.h"
+#include "worker/surface_hit.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
 #define PRT_DEFAULT_DATA_DIR ""
@@ -79,21 +83,38 @@ class SetupPhase final : public FarmPhase {
     int local = kExitOk;
     try {
       ctx.geometry = ParseSceneGeometry(geometry_bytes, kGeometryFileName);
-      ctx.samples = SpatialSamplesOf(ctx.geometry);
+      if (ctx.params.image) {
+        // Every rank traces the same primary rays (a few per pixel's worth of one texel).
+        ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
+        const SceneSurfaces surfaces(ctx.geometry);
+        CameraSamples pixels =
+            ComputeCameraSamples(*ctx.embree, surfaces, ctx.params.camera, "the scene's camera");
+        ctx.samples = std::move(pixels.samples);
+        ctx.pixel_mesh = std::move(pixels.pixel_mesh);
+        if (ctx.rank == 0) {
+          WriteImageSamplesFile(ctx.folder.image,
+                                ImageSamplesInfo{ctx.params.camera, ctx.pixel_mesh});
+          spdlog::info("image relighting: {} of {} pixels see the environment (background)",
+                       std::count(ctx.pixel_mesh.begin(), ctx.pixel_mesh.end(), kImageBackground),
+                       ctx.pixel_mesh.size());
+        }
+      } else {
+        ctx.samples = SpatialSamplesOf(ctx.geometry);
+      }
       if (ctx.samples.size() != ctx.params.rows) {
         throw std::logic_error("sample count " + std::to_string(ctx.samples.size()) +
                                " differs from the geometry's vertex count " +
                                std::to_string(ctx.params.rows));
       }
       if (ctx.computes_here() && ctx.params.visibility) {
-        ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
+        if (!ctx.embree) ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
         VisibilitySamplerOptions vo;
         vo.n = ctx.params.cubemap_n;
         vo.supersample = ctx.params.visibility_supersample;
         vo.bits = ctx.params.visibility_bits;
         ctx.visibility_sampler = std::make_unique<VisibilitySampler>(*ctx.embree, vo);
       } else if (ctx.computes_here()) {
-        ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
+        if (!ctx.embree) ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
         TransportSamplerOptions so;
         so.rays_per_texel = ctx.params.rays_per_texel;
         so.seed = ctx.params.seed;
@@ -142,10 +163,11 @@ class SetupPhase final : public FarmPhase {
     }
     const bool visibility = job == "visibility";
     if (visibility) ctx.method = kVisibilityPhaseName;
-    if (scene.samples != SpatialSamples::kVertices) {
+    const bool image = scene.samples == SpatialSamples::kCameraPixels;
+    if (image && visibility)
       throw InputError(scene.file,
-                       "samples = \"camera\" (image relighting) is not supported by prt-farm yet");
-    }
+                       "samples = \"camera\" needs job \"transport\" (visibility cubemaps are "
+                       "per vertex, for glossy meshes)");
     const VisibilitySettings& vis = scene.visibility;
     const int n = visibility ? vis.n : scene.cubemap_n;
     const int rays = visibility             ? vis.supersample * vis.supersample
@@ -163,6 +185,14 @@ class SetupPhase final : public FarmPhase {
     uint64_t rows = 0;
     for (const SceneMesh& m : geometry.meshes) rows += m.mesh.positions.size();
     if (rows == 0) throw InputError(scene.file, "the scene has no spatial samples");
+    if (image) {
+      // Image relighting (docs/image-relighting.md): one row per camera pixel, raster order.
+      ctx.params.image = 1;
+      ctx.params.camera = scene.camera;
+      rows = static_cast<uint64_t>(scene.camera.width) * scene.camera.height;
+      spdlog::info("image relighting: {}×{} camera pixels are the samples", scene.camera.width,
+                   scene.camera.height);
+    }
 
     ctx.params.rows = rows;
     ctx.params.geometry_bytes = geometry_bytes.size();
@@ -190,6 +220,12 @@ class SetupPhase final : public FarmPhase {
       throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
                                        " is larger than the cubemap's n " + std::to_string(n));
     ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
+    if (image && bounces > 0 && !ctx.params.path_estimator)
+      throw InputError(scene.file,
+                       "samples = \"camera\" with bounces = " + std::to_string(bounces) +
+                           " needs [sampling] estimator = \"path\": bounce gathering reads the "
+                           "previous bounce's rows at mesh vertices, which an image run does not "
+                           "compute (docs/image-relighting.md)");
     // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
     // 2 features.
     ctx.params.sparse_indirect = 0;
@@ -470,7 +506,8 @@ class SetupPhase final : public FarmPhase {
       ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
     }
     if (!ctx.params.visibility) {
-      ctx.variance = std::make_unique<VarianceAccumulator>(f, geometry, ctx.params.cubemap_n,
+      ctx.variance = std::make_unique<VarianceAccumulator>(f, RowGroupsOf(ctx.params, geometry),
+                                                           ctx.params.cubemap_n,
                                                            ctx.params.rays_per_texel, fresh);
     }
     ctx.journal = std::make_unique<CheckpointJournal>(

@@ -417,9 +417,9 @@ class FarmSparseSteps final : public SparseSteps {
     p.sync = [&] { file.Sync(); };
     RunStep(p);
     // Which vertices, and how many vertices of each mesh the pipeline reconstructed.
-    std::vector<uint64_t> reconstructed(ctx_.geometry.meshes.size(), 0);
+    std::vector<uint64_t> reconstructed(ctx_.RowGroups().size(), 0);
     for (std::size_t i = 0; i < order.size(); ++i)
-      if (outcome[i] == ok) ++reconstructed[ctx_.geometry.MeshOfVertex(order[i])];
+      if (outcome[i] == ok) ++reconstructed[ctx_.GroupOfRow(order[i])];
     const nlohmann::json summary = {{"texels", T_},
                                     {"record_bytes", record},
                                     {"vertices", cv},
@@ -575,8 +575,8 @@ class SparsePhase final : public FarmPhase {
   void Run(FarmContext& ctx) override {
     RunJobPhase(
         ctx,
-        [&ctx, mesh_rows = ctx.geometry.MeshVertexCounts()](
-            const RowRange&, std::string_view payload, std::string& out) {
+        [&ctx, mesh_rows = ctx.RowGroups()](const RowRange&, std::string_view payload,
+                                            std::string& out) {
           out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out),
                                  &mesh_rows);
         },

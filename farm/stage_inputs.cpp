@@ -55,7 +55,13 @@ CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeomet
     plan.options.scheme =
         ParseCompressionScheme(options.compression_scheme, "--compression-scheme");
   const auto c = static_cast<uint32_t>(channels);
-  const SpatialDomain domain = SpatialDomainOf(geometry, scene.compression.order_normal_weight, c);
+  // Image relighting: the pixels in raster order are one W×H grid, the 2D domain of the column
+  // transform (Cheslack-Postava et al. 2008 §4.1).
+  const SpatialDomain domain =
+      scene.samples == SpatialSamples::kCameraPixels
+          ? ImageDomain(static_cast<uint32_t>(scene.camera.width),
+                        static_cast<uint32_t>(scene.camera.height), c)
+          : SpatialDomainOf(geometry, scene.compression.order_normal_weight, c);
   plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain, c);
   return plan;
 }
@@ -91,6 +97,15 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
                {"cubemap_n", s.cubemap_n},
                {"rays_per_texel", s.rays_per_texel},
                {"seed", s.seed}};
+  if (scene.samples == SpatialSamples::kCameraPixels) {
+    const Camera& k = scene.camera;
+    rows["camera"] = {{"eye", {k.eye.x, k.eye.y, k.eye.z}},
+                      {"target", {k.target.x, k.target.y, k.target.z}},
+                      {"up", {k.up.x, k.up.y, k.up.z}},
+                      {"fov", k.fov_deg},
+                      {"width", k.width},
+                      {"height", k.height}};
+  }
   if (visibility) {
     rows["visibility_bits"] = scene.visibility.bits;
   } else {

@@ -11,12 +11,11 @@
 
 namespace prt {
 
-VarianceAccumulator::VarianceAccumulator(const RunFolder& folder, const SceneGeometry& geometry,
+VarianceAccumulator::VarianceAccumulator(const RunFolder& folder, std::vector<uint64_t> group_rows,
                                          int cubemap_n, int rays_per_texel, bool fresh)
     : log_path_(folder.variance_log), file_path_(folder.variance) {
-  total_ =
-      MakeTransportVariance(static_cast<uint32_t>(cubemap_n), static_cast<uint32_t>(rays_per_texel),
-                            geometry.MeshVertexCounts());
+  total_ = MakeTransportVariance(static_cast<uint32_t>(cubemap_n),
+                                 static_cast<uint32_t>(rays_per_texel), std::move(group_rows));
   std::string kept;
   if (!fresh && std::filesystem::exists(log_path_)) {
     const std::string bytes = ReadWholeFile(log_path_);

@@ -18,7 +18,7 @@ namespace prt {
 class VarianceAccumulator {
  public:
   // `fresh`: the log starts empty; else the records already in it are kept for Reuse().
-  VarianceAccumulator(const RunFolder& folder, const SceneGeometry& geometry, int cubemap_n,
+  VarianceAccumulator(const RunFolder& folder, std::vector<uint64_t> group_rows, int cubemap_n,
                       int rays_per_texel, bool fresh);
   ~VarianceAccumulator();
   VarianceAccumulator(const VarianceAccumulator&) = delete;

@@ -11,8 +11,10 @@ namespace prt {
 inline constexpr const char* kTransportFileName = "transport.prtt";  // raw T (.prtt)
 inline constexpr const char* kTransportPartialSuffix = ".partial";   // while sampling
 inline constexpr const char* kGeometryFileName = "geometry.prtg";    // the samples' geometry
-inline constexpr const char* kSceneCopyFileName = "scene.toml";      // the scene as given
-inline constexpr const char* kReportFileName = "report.json";        // what the run did
+// Image relighting: the camera and each pixel's mesh (formats/image_file.h).
+inline constexpr const char* kImageFileName = "image.prti";
+inline constexpr const char* kSceneCopyFileName = "scene.toml";                // the scene as given
+inline constexpr const char* kReportFileName = "report.json";                  // what the run did
 inline constexpr const char* kCompressedTransportFileName = "transport.prtc";  // compressed T
 inline constexpr const char* kVisibilityFileName = "visibility.prtv";          // visibility job
 inline constexpr const char* kVisibilityChunksFileName = "visibility.chunks";  // its job results
@@ -38,6 +40,7 @@ struct RunFolder {
     partial = transport + kTransportPartialSuffix;
     geometry = (p / kGeometryFileName).string();
     scene_copy = (p / kSceneCopyFileName).string();
+    image = (p / kImageFileName).string();
     report = (p / kReportFileName).string();
     checkpoints = (p / kCheckpointsDirName).string();
     manifest = (p / kCheckpointsDirName / kManifestFileName).string();
@@ -76,6 +79,7 @@ struct RunFolder {
     return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + ".prtt")).string();
   }
   std::string dir;
+  std::string image;              // image.prti (image-relighting runs only)
   std::string transport;          // transport.prtt (final, complete)
   std::string partial;            // transport.prtt.partial (rows written in place while running)
   std::string geometry;           // geometry.prtg

@@ -66,6 +66,23 @@ typedef struct prtpack_block_info {
   uint64_t raw_size; /* bytes prtpack_get_transport_block writes */
 } prtpack_block_info;
 
+/* Image relighting (.prtpack 1.2, the IMGE section): the rows of T are the pixels of a fixed
+ * camera, row-major from the top-left (V = width·height), instead of mesh vertices. A pixel's
+ * radiance is B_c(p) = albedo_c(pixel_mesh[p]) · Σ_j T[c·V + p][j]·L_c[j]; a pixel whose
+ * pixel_mesh is PRTPACK_BACKGROUND sees the environment itself (its row is 0): draw the
+ * environment map along the camera ray (pinhole at eye looking at target, vertical fov_deg,
+ * pixel centres at +½; docs/image-relighting.md). */
+#define PRTPACK_BACKGROUND 0xFFFFFFFFu
+typedef struct prtpack_image_info {
+  uint32_t width;
+  uint32_t height;
+  double eye[3];
+  double target[3];
+  double up[3];
+  double fov_deg;             /* vertical field of view */
+  const uint32_t* pixel_mesh; /* width·height mesh indices or PRTPACK_BACKGROUND (owned) */
+} prtpack_image_info;
+
 /* The last error on this thread, or "" if none. Valid until the next prtpack call on it. */
 const char* prtpack_last_error(void);
 
@@ -104,6 +121,13 @@ int prtpack_get_block_info(prtpack* pack, size_t block, prtpack_block_info* out)
  * raw_size). Verifies the block's checksum. Errors: out of range, wrong size, checksum mismatch,
  * decompression failure. */
 int prtpack_get_transport_block(prtpack* pack, size_t block, void* dst, size_t dst_size);
+
+/* 1 if the pack is an image-relighting pack (has an IMGE section), 0 if not or pack is NULL. */
+int prtpack_has_image(const prtpack* pack);
+/* The image's camera and per-pixel meshes (decoded on first use). Errors: no IMGE section,
+ * checksum or zstd failure, a pixel naming a mesh the pack lacks, a pixel count that does not
+ * match the transport's rows. */
+int prtpack_get_image(prtpack* pack, prtpack_image_info* out);
 
 /* Every checksum and structural rule (prt-pack verify). PRTPACK_OK if all hold. */
 int prtpack_verify(prtpack* pack);

@@ -17,6 +17,7 @@ struct prtpack {
   std::vector<std::unique_ptr<prt::pack::UnpackedMesh>> meshes;
   std::optional<std::string> metadata;
   std::optional<prt::pack::TransportIndex> transport;
+  std::optional<prt::ImageSamplesInfo> image;
 };
 
 namespace {
@@ -159,6 +160,28 @@ int prtpack_get_metadata(prtpack* pack, const char** json, size_t* length) {
     if (!pack->metadata) pack->metadata = pack->reader.ReadMetadata();
     *json = pack->metadata->c_str();
     if (length) *length = pack->metadata->size();
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_has_image(const prtpack* pack) {
+  return pack != nullptr && pack->reader.has_image() ? 1 : 0;
+}
+
+int prtpack_get_image(prtpack* pack, prtpack_image_info* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_image: NULL argument");
+    if (!pack->image) pack->image = pack->reader.ReadImage();
+    const prt::ImageSamplesInfo& im = *pack->image;
+    out->width = static_cast<uint32_t>(im.camera.width);
+    out->height = static_cast<uint32_t>(im.camera.height);
+    for (int i = 0; i < 3; ++i) {
+      out->eye[i] = im.camera.eye[i];
+      out->target[i] = im.camera.target[i];
+      out->up[i] = im.camera.up[i];
+    }
+    out->fov_deg = im.camera.fov_deg;
+    out->pixel_mesh = im.pixel_mesh.data();
     return PRTPACK_OK;
   });
 }

@@ -17,8 +17,10 @@ inline constexpr uint16_t kVersionMajor = 1;
 // The newest minor version this code reads and writes. 1.1 defines the TRNS channel count
 // (kTransportChannels); a pack that does not need it (no transport, or a one-channel transport)
 // is written as 1.0, byte-identical to what 1.0 writers wrote.
-inline constexpr uint16_t kVersionMinor = 1;
+// 1.2 adds the IMGE section (image relighting, kTypeImage), written only by packs that have one.
+inline constexpr uint16_t kVersionMinor = 2;
 inline constexpr uint16_t kVersionMinorChannels = 1;
+inline constexpr uint16_t kVersionMinorImage = 2;
 inline constexpr uint32_t kHeaderSize = 64;
 inline constexpr uint32_t kEntrySize = 64;
 inline constexpr uint32_t kDefaultAlignment = 64;
@@ -60,6 +62,9 @@ inline constexpr uint32_t kTypeMesh = FourCC("MESH");
 inline constexpr uint32_t kTypeMaterial = FourCC("MATL");
 inline constexpr uint32_t kTypeTransport = FourCC("TRNS");
 inline constexpr uint32_t kTypeVisibility = FourCC("VISB");
+// Image relighting (1.2): the camera and each pixel's mesh, formats/image_file.h's bytes; CRITICAL
+// (a reader that does not know it would take pixel rows for vertex rows).
+inline constexpr uint32_t kTypeImage = FourCC("IMGE");
 
 inline std::string FourCCString(uint32_t v) {
   std::string s(4, ' ');

@@ -68,7 +68,7 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
   if (type == kTypeMeta) return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   if (type == kTypeMesh) return codec == uint32_t(Codec::kDraco);
   if (type == kTypeMaterial || type == kTypeTransport) return codec == uint32_t(Codec::kNone);
-  if (type == kTypeVisibility) {
+  if (type == kTypeVisibility || type == kTypeImage) {
     return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   }
   return true;
@@ -76,7 +76,7 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
 
 bool IsKnownType(uint32_t type) {
   return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial ||
-         type == kTypeTransport || type == kTypeVisibility;
+         type == kTypeTransport || type == kTypeVisibility || type == kTypeImage;
 }
 
 }  // namespace
@@ -91,6 +91,8 @@ struct PackReader::Impl {
   std::vector<std::size_t> mesh_sections, material_sections, visibility_sections;
   bool has_transport = false;
   std::size_t transport = 0;
+  bool has_image = false;
+  std::size_t image = 0;
 
   [[noreturn]] void Fail(const std::string& what) const { throw InputError(name, what); }
   const uint8_t* data() const { return storage->data; }
@@ -111,6 +113,7 @@ struct PackReader::Impl {
   UnpackedMesh Mesh(std::size_t i) const;
   TransportIndex Transport() const;
   VisibilityBlocks Visibility(std::size_t i) const;
+  ImageSamplesInfo Image() const;
   void Block(const TransportIndex& index, std::size_t b, uint8_t* dst) const;
 };
 
@@ -163,7 +166,7 @@ void PackReader::Impl::Parse() {
          "): the header or section table is corrupted");
   }
   uint64_t previous_end = table_offset + table_size;
-  int metas = 0, transports = 0;
+  int metas = 0, transports = 0, images = 0;
   std::vector<int64_t> mesh_by_id, material_by_id, visibility_by_id;
   for (uint32_t i = 0; i < count; ++i) {
     const uint8_t* e = d + table_offset + uint64_t(i) * entry_size;
@@ -204,6 +207,9 @@ void PackReader::Impl::Parse() {
     } else if (s.type_code == kTypeTransport) {
       ++transports;
       transport = i;
+    } else if (s.type_code == kTypeImage) {
+      ++images;
+      image = i;
     } else {
       auto& by_id = s.type_code == kTypeMesh       ? mesh_by_id
                     : s.type_code == kTypeMaterial ? material_by_id
@@ -216,6 +222,8 @@ void PackReader::Impl::Parse() {
   }
   if (metas != 1) Fail("needs exactly one META section, has " + std::to_string(metas));
   if (transports > 1) Fail("has more than one TRNS section");
+  if (images > 1) Fail("has more than one IMGE section");
+  has_image = images == 1;
   has_transport = transports == 1;
   if (mesh_by_id.empty()) Fail("has no MESH section");
   if (mesh_by_id.size() != material_by_id.size()) Fail("MESH and MATL ids do not pair up");
@@ -454,6 +462,29 @@ VisibilityBlocks PackReader::Impl::Visibility(std::size_t i) const {
   return v;
 }
 
+ImageSamplesInfo PackReader::Impl::Image() const {
+  if (!has_image) Fail("has no IMGE (image) section");
+  const SectionInfo& s = sections[image];
+  const std::string where = SectionName(image);
+  const uint8_t* p = CheckedBytes(image);
+  std::string raw(s.raw_size, '\0');
+  if (s.codec == uint32_t(Codec::kZstd)) {
+    Unzstd(p, s.stored_size, reinterpret_cast<uint8_t*>(raw.data()), s.raw_size, where);
+  } else {
+    raw.assign(reinterpret_cast<const char*>(p), s.stored_size);
+  }
+  ImageSamplesInfo info =
+      ParseImageSamples(raw, name + ": " + where, static_cast<uint32_t>(mesh_sections.size()));
+  if (has_transport) {
+    const TransportIndex t = Transport();
+    if (t.row_count != info.pixels() * t.channels)
+      Fail(where + " has " + std::to_string(info.pixels()) + " pixels for " +
+           std::to_string(t.row_count) + " rows of " + std::to_string(t.channels) +
+           " channel(s) in TRNS");
+  }
+  return info;
+}
+
 PackReader::PackReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 PackReader::PackReader(PackReader&&) noexcept = default;
 PackReader& PackReader::operator=(PackReader&&) noexcept = default;
@@ -526,6 +557,14 @@ bool PackReader::has_transport() const {
 
 bool PackReader::has_visibility() const {
   return !impl_->visibility_sections.empty();
+}
+
+bool PackReader::has_image() const {
+  return impl_->has_image;
+}
+
+ImageSamplesInfo PackReader::ReadImage() const {
+  return impl_->Image();
 }
 
 VisibilityBlocks PackReader::ReadVisibility(std::size_t i) const {

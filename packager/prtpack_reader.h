@@ -16,8 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "vocabulary/mesh.h"
+#include "formats/image_file.h"
 #include "formats/visibility_blocks.h"
+#include "vocabulary/mesh.h"
 
 namespace prt::pack {
 
@@ -115,6 +116,13 @@ class PackReader {
   bool has_transport() const;
   // True when the pack has VISB sections (one per mesh: the reader refuses anything else).
   bool has_visibility() const;
+  // True for an image-relighting pack (an IMGE section, 1.2): its rows are pixels, not vertices.
+  bool has_image() const;
+  // The IMGE section: the camera, image size and each pixel's mesh. Throws InputError when
+  // there is none, on a checksum or zstd failure, or on content ParseImageSamples refuses (a
+  // pixel naming a mesh the pack does not have included), or a pixel count that is not the
+  // transport's rows / channels.
+  ImageSamplesInfo ReadImage() const;
 
   // The META section's JSON text. Verifies the section checksum and the decompressed size;
   // throws InputError if either fails or the text is not a JSON object.

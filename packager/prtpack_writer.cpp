@@ -70,6 +70,7 @@ nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
 // 1.1 only where the pack uses what 1.1 defines (a TRNS channel count other than 1), so that
 // every other pack keeps the bytes 1.0 writers gave it.
 uint16_t MinorVersionOf(const PackInput& input) {
+  if (input.image) return kVersionMinorImage;
   return input.transport && input.transport->channels != 1 ? kVersionMinorChannels : 0;
 }
 
@@ -118,7 +119,8 @@ PendingSection MaterialSection(const PackMeshInput& m, uint32_t id) {
 
 // TRNS: header, parameters, block index, then each block zstd-compressed on its own (or stored
 // as is when zstd does not shrink it), every block 64-byte aligned inside the section.
-PendingSection TransportSection(const TransportInput& t, const WriterOptions& o) {
+// minor: the pack's minor version (from 1.1 on the channel count is always written).
+PendingSection TransportSection(const TransportInput& t, const WriterOptions& o, uint16_t minor) {
   if (t.params.size() > kMaxTransportParams) {
     throw InputError("transport", "global parameters exceed 1 GiB");
   }
@@ -168,7 +170,7 @@ PendingSection TransportSection(const TransportInput& t, const WriterOptions& o)
   StoreU64(p + kTransportColumnCount, columns);
   StoreU32(p + kTransportParamsSize, static_cast<uint32_t>(t.params.size()));
   // 1.1: the channel count; a one-channel transport keeps 1.0's reserved 0 (and the pack 1.0).
-  StoreU32(p + kTransportChannels, t.channels == 1 ? 0u : t.channels);
+  StoreU32(p + kTransportChannels, minor < kVersionMinorChannels ? 0u : t.channels);
   std::copy(t.params.begin(), t.params.end(), p + kTransportHeaderSize);
   uint64_t first = 0;
   for (std::size_t b = 0; b < t.blocks.size(); ++b) {
@@ -216,7 +218,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     PendingSection s;
     s.type = LoadU32(reinterpret_cast<const uint8_t*>(x.type.data()));
     if (s.type == kTypeMeta || s.type == kTypeMesh || s.type == kTypeMaterial ||
-        s.type == kTypeTransport || s.type == kTypeVisibility) {
+        s.type == kTypeTransport || s.type == kTypeVisibility || s.type == kTypeImage) {
       throw InputError("extra section", "type " + x.type + " is reserved");
     }
     s.flags = x.flags;
@@ -254,7 +256,26 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
       sections.push_back(std::move(s));
     }
   }
-  if (input.transport) sections.push_back(TransportSection(*input.transport, options));
+  if (input.image) {
+    const ImageSamplesInfo& im = *input.image;
+    const std::string bytes = SerializeImageSamples(im);
+    // Round trip: what a reader would refuse is refused here, naming the input.
+    (void)ParseImageSamples(bytes, "image", static_cast<uint32_t>(input.meshes.size()));
+    if (input.transport && input.transport->row_count != im.pixels() * input.transport->channels)
+      throw InputError("image", std::to_string(im.pixels()) + " pixels do not match the " +
+                                    std::to_string(input.transport->row_count) +
+                                    " rows of the transport");
+    PendingSection s;
+    s.type = kTypeImage;
+    s.flags = kFlagCritical;
+    s.codec = Codec::kZstd;
+    s.raw_size = bytes.size();
+    s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
+                           options.zstd_level, "image");
+    sections.push_back(std::move(s));
+  }
+  if (input.transport)
+    sections.push_back(TransportSection(*input.transport, options, MinorVersionOf(input)));
 
   const uint64_t table_end = kHeaderSize + uint64_t(sections.size()) * kEntrySize;
   std::vector<uint64_t> offsets(sections.size());

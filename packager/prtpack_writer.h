@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/image_file.h"
 #include "vocabulary/mesh.h"
 #include "vocabulary/scene_geometry.h"
 
@@ -65,6 +66,9 @@ struct PackInput {
   std::optional<TransportInput> transport;
   std::optional<VisibilityInput> visibility;      // one entry per mesh when present
   std::vector<ExtraSectionInput> extra_sections;  // written after the materials, before TRNS
+  // Image relighting (the IMGE section, 1.2): the rows of T are this image's pixels in raster
+  // order, each naming the mesh (material) it sees or background.
+  std::optional<ImageSamplesInfo> image;
 };
 
 struct WriterOptions {

@@ -3,6 +3,7 @@
 
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cinttypes>
 #include <cstdio>
 #include <filesystem>
@@ -12,6 +13,7 @@
 
 #include "formats/compressed_transport.h"
 #include "formats/geometry_file.h"
+#include "formats/image_file.h"
 #include "formats/transport_file.h"
 #include "formats/visibility_blocks.h"
 #include "packager/prtpack_format.h"
@@ -248,6 +250,22 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
       meta["report"].contains("visibility") && meta["report"]["visibility"].is_object()) {
     meta["visibility"]["supersample"] = meta["report"]["visibility"].value("supersample", 1);
   }
+  // Image relighting: the farm's image.prti becomes the IMGE section.
+  const fs::path image_file = dir / kImageFileName;
+  if (fs::exists(image_file)) {
+    in.image =
+        ReadImageSamplesFile(image_file.string(), static_cast<uint32_t>(geometry.meshes.size()));
+    const Camera& k = in.image->camera;
+    meta["image"] = {
+        {"width", k.width},
+        {"height", k.height},
+        {"eye", {k.eye.x, k.eye.y, k.eye.z}},
+        {"target", {k.target.x, k.target.y, k.target.z}},
+        {"up", {k.up.x, k.up.y, k.up.z}},
+        {"fov", k.fov_deg},
+        {"background_pixels",
+         std::count(in.image->pixel_mesh.begin(), in.image->pixel_mesh.end(), kImageBackground)}};
+  }
   const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
                                                             : fs::path(options.transport_file);
   if (fs::exists(transport)) {
@@ -255,9 +273,17 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
     const CompressedTransport t = DecodeCompressedTransport(
         std::span(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
         transport.string());
-    // channels × V rows, channel-major (formats/compressed_transport.h).
-    if (static_cast<uint64_t>(t.header.sample_count) !=
-        uint64_t{t.header.channels} * geometry.vertex_count()) {
+    // channels × V rows, channel-major (formats/compressed_transport.h); V: the pixels of an
+    // image run, else the vertices.
+    if (in.image) {
+      if (static_cast<uint64_t>(t.header.sample_count) !=
+          uint64_t{t.header.channels} * in.image->pixels())
+        throw InputError(transport.string(),
+                         "transport has " + std::to_string(t.header.sample_count) +
+                             " rows but the image " + image_file.string() + " has " +
+                             std::to_string(in.image->pixels()) + " pixels");
+    } else if (static_cast<uint64_t>(t.header.sample_count) !=
+               uint64_t{t.header.channels} * geometry.vertex_count()) {
       throw InputError(transport.string(),
                        "transport has " + std::to_string(t.header.sample_count) + " rows (" +
                            std::to_string(t.header.channels) + " colour channel(s) × " +
@@ -352,6 +378,14 @@ std::string InspectPack(const PackReader& r) {
   } else {
     out << "transport: none\n";
   }
+  if (r.has_image()) {
+    const ImageSamplesInfo im = r.ReadImage();
+    const auto bg = std::count(im.pixel_mesh.begin(), im.pixel_mesh.end(), kImageBackground);
+    out << "image: " << im.camera.width << "x" << im.camera.height
+        << " pixels are the samples (image relighting), " << bg << " background; camera eye ("
+        << im.camera.eye.x << ", " << im.camera.eye.y << ", " << im.camera.eye.z << "), fov "
+        << im.camera.fov_deg << "\n";
+  }
   if (r.has_visibility()) {
     uint64_t vraw = 0, vstored = 0;
     for (const SectionInfo& s : r.sections()) {
@@ -414,6 +448,11 @@ std::string VerifyPack(const PackReader& r) {
   if (r.has_visibility()) {
     const VisibilityBlocks v = r.ReadAllVisibility();
     extra += ", " + std::to_string(v.vertex_count) + " visibility maps decoded";
+  }
+  if (r.has_image()) {
+    const ImageSamplesInfo im = r.ReadImage();
+    extra += ", a " + std::to_string(im.camera.width) + "×" + std::to_string(im.camera.height) +
+             " image";
   }
   return r.name() + ": OK (" + std::to_string(r.sections().size()) +
          " sections, every checksum and structural rule holds" + extra + ")";

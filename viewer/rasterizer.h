@@ -2,11 +2,7 @@
 // triangle with perspective-correct barycentrics, pixels not covered show the environment seen
 // through the camera (optional) or black.
 //
-// Camera model (prt::Camera, vocabulary/scene.h): a pinhole at `eye` looking at `target`, `up`
-// fixing the roll, vertical field of view `fov_deg`, square pixels. Pixel (x, y) counts from the
-// top-left; its centre is (x + ½, y + ½) and looks along
-//   d = forward + ((2(x + ½)/W − 1)·a·t)·right + ((1 − 2(y + ½)/H)·t)·up',  t = tan(fov/2), a =
-//   W/H.
+// Camera model: vocabulary/camera_projection.h (prt::Camera, a pinhole, pixel centres at +½).
 #pragma once
 
 #include <array>
@@ -16,6 +12,7 @@
 #include <span>
 #include <vector>
 
+#include "vocabulary/camera_projection.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/scene.h"
@@ -37,32 +34,6 @@ using BackgroundFunction = std::function<Rgb(const Vec3& direction)>;
 struct RasterOptions {
   double near = 1e-3;             // near clipping distance along the view axis
   BackgroundFunction background;  // empty: black
-};
-
-// The camera's orthonormal frame and projection, shared by the rasteriser and by tests.
-class CameraProjection {
- public:
-  // Throws std::invalid_argument for a degenerate camera (eye == target, up ∥ view, fov outside
-  // (0, 180), non-positive size).
-  explicit CameraProjection(const Camera& camera);
-
-  const Vec3& eye() const { return eye_; }
-  const Vec3& forward() const { return forward_; }
-  const Vec3& right() const { return right_; }
-  const Vec3& up() const { return up_; }
-  int width() const { return width_; }
-  int height() const { return height_; }
-  // Unit direction through continuous pixel coordinates (px, py) (pixel centres at +½).
-  Vec3 PixelDirection(double px, double py) const;
-  // View-space coordinates (x right, y up, z forward) of a world point.
-  Vec3 ToView(const Vec3& p) const;
-  // Continuous pixel coordinates of a view-space point with z > 0.
-  void ViewToPixel(const Vec3& v, double& px, double& py) const;
-
- private:
-  Vec3 eye_, forward_, right_, up_;
-  int width_, height_;
-  double tan_half_, aspect_;
 };
 
 // Rasterises triangles with per-vertex colours (3 floats per position, interleaved). Triangles

@@ -146,6 +146,10 @@ int Run(const Options& o) {
       throw std::invalid_argument("--reference/--paper-cosine apply to glossy assets only");
     session = prt::ViewerSession::FromReader(reader, o.pack);
   }
+  if (session->image() != nullptr && (!o.camera.empty() || o.width > 0 || o.height > 0))
+    throw std::invalid_argument(
+        "--camera/--width/--height: " + o.pack +
+        " is an image pack (its rows are the pixels of a fixed camera, docs/image-relighting.md)");
   prt::Camera camera = session->camera();
   if (!o.camera.empty()) camera = prt::ParseCameraSpec(o.camera, camera);
   if (o.width > 0) camera.width = o.width;

@@ -1,5 +1,7 @@
 #include "viewer/viewer_session.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -52,8 +54,20 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
     throw InputError(pack_path, "the pack has no transport (TRNS) section; nothing to relight");
   s->camera_from_metadata_ = CameraFromMetadata(reader.ReadMetadata(), pack_path, s->camera_);
 
+  if (reader.has_image()) {
+    // Image relighting: the samples are the pixels, each with its mesh's albedo.
+    s->image_ = reader.ReadImage();
+    s->camera_ = s->image_->camera;
+    s->camera_from_metadata_ = true;
+    std::vector<Rgb> mesh_albedo;
+    for (std::size_t m = 0; m < reader.mesh_count(); ++m)
+      mesh_albedo.push_back(reader.ReadMaterial(m).albedo);
+    s->albedo_.reserve(s->image_->pixels());
+    for (uint32_t m : s->image_->pixel_mesh)
+      s->albedo_.push_back(m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : mesh_albedo[m]);
+  }
   std::size_t offset = 0;
-  for (std::size_t m = 0; m < reader.mesh_count(); ++m) {
+  for (std::size_t m = 0; !s->image_ && m < reader.mesh_count(); ++m) {
     const pack::UnpackedMesh mesh = reader.ReadMesh(m);
     const std::size_t nv = mesh.vertex_count();
     for (std::size_t v = 0; v < nv; ++v) {
@@ -73,9 +87,10 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
   if (static_cast<uint64_t>(h.sample_count) != uint64_t{h.channels} * s->albedo_.size())
     throw InputError(pack_path, "the transport has " + std::to_string(h.sample_count) + " rows (" +
                                     std::to_string(h.channels) + " colour channel(s) × " +
-                                    std::to_string(h.spatial_count()) +
-                                    " samples) but the meshes have " +
-                                    std::to_string(s->albedo_.size()) + " vertices");
+                                    std::to_string(h.spatial_count()) + " samples) but the " +
+                                    (s->image_ ? "image has " : "meshes have ") +
+                                    std::to_string(s->albedo_.size()) +
+                                    (s->image_ ? " pixels" : " vertices"));
   if (h.row_wavelet != RowWavelet::kHaar)
     throw InputError(pack_path, std::string("the transport's row wavelet is ") +
                                     ToString(h.row_wavelet) +
@@ -96,7 +111,7 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
     for (std::size_t p = 0; p < ns; ++p) values[p] = pack_order[s->pack_sample_[p]];
   };
   to_session(s->albedo_);
-  to_session(s->positions_);
+  if (!s->image_) to_session(s->positions_);
   for (auto& t : s->triangles_)
     for (uint32_t& v : t) v = coefficient[v];
   return s;
@@ -155,11 +170,49 @@ ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> samp
 
 ImageRgb ViewerSession::Render(const Camera& camera, std::span<const float> sample_rgb,
                                const BackgroundFunction& background) const {
+  if (image_) {
+    const Camera& k = image_->camera;
+    if (camera.width != k.width || camera.height != k.height || !(camera.eye == k.eye) ||
+        !(camera.target == k.target) || !(camera.up == k.up) || camera.fov_deg != k.fov_deg)
+      throw std::invalid_argument("ViewerSession::Render: an image pack's view is fixed (" + path_ +
+                                  ")");
+    return RenderImage(sample_rgb, background);
+  }
   RasterOptions options;
   options.background = background;
   RasterImage r = RasterizeTriangles(camera, positions_, triangles_, sample_rgb, options);
   ImageRgb image(r.width, r.height);
   image.pixels = std::move(r.rgb);
+  return image;
+}
+
+ImageRgb ViewerSession::RenderImage(std::span<const float> sample_rgb,
+                                    const BackgroundFunction& background) const {
+  const std::size_t ns = sample_count();
+  if (sample_rgb.size() != 3 * ns)
+    throw std::invalid_argument("ViewerSession::Render: " + std::to_string(sample_rgb.size()) +
+                                " colour values for " + std::to_string(ns) + " pixels");
+  const Camera& k = image_->camera;
+  const CameraProjection cam(k);
+  ImageRgb image(k.width, k.height);
+  const std::span<const uint32_t> coefficient = relighter_->coefficient_of_sample();
+  tbb::parallel_for(0, k.height, [&](int y) {
+    for (int x = 0; x < k.width; ++x) {
+      const std::size_t p = static_cast<std::size_t>(y) * k.width + x;
+      float* out = image.pixels.data() + 3 * p;
+      if (image_->pixel_mesh[p] == kImageBackground) {
+        const Rgb c = background ? background(cam.PixelDirection(x + 0.5, y + 0.5)) : Rgb{};
+        for (int i = 0; i < 3; ++i) {
+          if (!std::isfinite(c[i]))
+            throw NumericalError("background pixel (" + std::to_string(x) + ", " +
+                                 std::to_string(y) + ") is not finite");
+          out[i] = c[i];
+        }
+        continue;
+      }
+      std::copy_n(sample_rgb.data() + 3 * static_cast<std::size_t>(coefficient[p]), 3, out);
+    }
+  });
   return image;
 }
 

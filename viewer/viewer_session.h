@@ -16,10 +16,12 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "formats/image_file.h"
 #include "viewer/compressed_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/rasterizer.h"
@@ -63,6 +65,11 @@ class ViewerSession {
   // The same from a pack the caller already opened (`pack_path` names it in errors).
   static std::unique_ptr<ViewerSession> FromReader(const pack::PackReader& reader,
                                                    const std::string& pack_path);
+  //
+  // Image packs (an IMGE section, docs/image-relighting.md): the samples are the pixels of the
+  // pack's camera (camera() is it), albedo() is each pixel's mesh's (0 for background), there
+  // are no positions or triangles, and Render writes the relit image straight from the pixel
+  // rows (no rasteriser) at the pack's fixed view.
 
   ViewerSession(const ViewerSession&) = delete;
   ViewerSession& operator=(const ViewerSession&) = delete;
@@ -74,6 +81,8 @@ class ViewerSession {
   // The scene's [camera] from the pack's metadata ("scene" → "camera"), else Camera{}.
   const Camera& camera() const { return camera_; }
   bool camera_from_metadata() const { return camera_from_metadata_; }
+  // The image of an image pack (nullptr for a vertex pack).
+  const ImageSamplesInfo* image() const { return image_ ? &*image_ : nullptr; }
   const CompressedTransportHeader& transport_header() const;
   std::size_t transport_terms() const { return transport_terms_; }
   const CompressedRelighter& relighter() const { return *relighter_; }
@@ -96,8 +105,11 @@ class ViewerSession {
   // finite float.
   std::vector<float> Shade(const SampleRadiance& radiance) const;
   // Rasterises the meshes with per-sample colours (3 floats per sample, the session's order)
-  // from `camera`, over `background` (an empty function: black). prt-view's background is the
-  // environment image at its own resolution (EnvironmentBackground, environment_background.h).
+  // from `camera`, over `background` (an empty function: black). An image pack's image instead:
+  // pixel p shows its row's colour, a background pixel `background` along its camera ray; its
+  // view is fixed, so `camera` must be the pack's (std::invalid_argument otherwise). prt-view's
+  // background is the environment image at its own resolution (EnvironmentBackground,
+  // environment_background.h).
   ImageRgb Render(const Camera& camera, std::span<const float> sample_rgb,
                   const BackgroundFunction& background) const;
   // The same over the lighting cubemap (nearest texel, 6·n² texels: blocky) when `background`
@@ -107,6 +119,8 @@ class ViewerSession {
 
  private:
   ViewerSession() = default;
+  ImageRgb RenderImage(std::span<const float> sample_rgb,
+                       const BackgroundFunction& background) const;
   std::string path_;
   Camera camera_;
   bool camera_from_metadata_ = false;
@@ -118,6 +132,7 @@ class ViewerSession {
   std::vector<Vec3> positions_;
   std::vector<std::array<uint32_t, 3>> triangles_;
   std::vector<uint32_t> pack_sample_;  // session position → pack sample
+  std::optional<ImageSamplesInfo> image_;
 };
 
 // ‖b − ref‖ / ‖ref‖ over all entries (double); 0 when both are zero, 1 when only ref is.

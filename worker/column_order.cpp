@@ -134,10 +134,10 @@ SpatialDomain SpatialDomainOf(const SceneGeometry& geometry, double order_normal
   return PerChannelDomain(d, channels);
 }
 
-SpatialDomain ImageDomain(uint32_t width, uint32_t height) {
+SpatialDomain ImageDomain(uint32_t width, uint32_t height, uint32_t channels) {
   SpatialDomain d;
   d.segments.push_back(GridSegment(width, height));
-  return d;
+  return PerChannelDomain(d, channels);
 }
 
 }  // namespace prt

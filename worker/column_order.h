@@ -50,7 +50,8 @@ SpatialSegment GridSegment(uint32_t width, uint32_t height);  // 2D, row-major x
 SpatialDomain SpatialDomainOf(
     const SceneGeometry& geometry,
     double order_normal_weight = CompressionSettings{}.order_normal_weight, uint32_t channels = 1);
-// Image relighting: one width×height grid.
-SpatialDomain ImageDomain(uint32_t width, uint32_t height);
+// Image relighting: one width×height grid (pixels row-major from the top-left), `channels` times
+// (PerChannelDomain).
+SpatialDomain ImageDomain(uint32_t width, uint32_t height, uint32_t channels = 1);
 
 }  // namespace prt

@@ -139,6 +139,7 @@ struct PathTraceReference::Impl {
   template <class Visit>
   void Walk(const SpatialSample& sample, uint64_t sample_index, PathTraceStats& stats,
             Visit&& visit) const {
+    if (sample.background) return;  // a camera pixel on the environment: no paths leave it
     const int k_max = options.bounces;
     const int paths = options.paths;
     // The frame at x as TransportSampler's (unit shading normal; geometric normal unit and in

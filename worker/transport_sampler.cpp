@@ -345,6 +345,11 @@ struct TransportSampler::Impl {
 
   SampleStats Row(const SpatialSample& sample, uint64_t sample_index, float* row,
                   const Tracer& trace, float* variance = nullptr) const {
+    if (sample.background) {  // no surface: T = 0, nothing traced
+      if (row != nullptr) std::fill(row, row + layout.texel_count(), 0.0f);
+      if (variance != nullptr) std::fill(variance, variance + layout.texel_count(), 0.0f);
+      return {};
+    }
     const ScopedFlushDenormals ftz;
     const SampleFrame f = Frame(sample, sample_index);
     SampleStats stats;
@@ -388,6 +393,12 @@ struct TransportSampler::Impl {
         throw std::out_of_range("TransportSampler: texel " + std::to_string(j) +
                                 " >= " + std::to_string(count));
       }
+    }
+    if (sample.background) {  // no surface: T = 0, nothing traced
+      std::fill(values, values + texels.size(), 0.0f);
+      if (unoccluded != nullptr) std::fill(unoccluded, unoccluded + texels.size(), 0.0f);
+      if (variance != nullptr) std::fill(variance, variance + texels.size(), 0.0f);
+      return {};
     }
     const ScopedFlushDenormals ftz;
     const SampleFrame f = Frame(sample, sample_index);

@@ -29,6 +29,10 @@ struct SpatialSample {
   Vec3 position;
   Vec3 normal;            // unit shading normal (the cosine term and the horizon use it)
   Vec3 geometric_normal;  // unit, same hemisphere as normal
+  // A camera pixel that sees the environment directly (worker/camera_samples.h): no surface, so
+  // its row of T is 0 (every kernel returns zeros without tracing); the viewer draws the
+  // environment there.
+  bool background = false;
 };
 
 // Samples of a scene in prtfarm's global order (scene.h): meshes in file order, ground last;

@@ -1,0 +1,90 @@
+// run/image.prti (see image_file.h and docs/transport-format.md, "image.prti").
+#include "formats/image_file.h"
+
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+#include "vocabulary/bytes.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
+
+namespace prt {
+
+namespace {
+
+constexpr char kImageMagic[8] = {'P', 'R', 'T', 'I', 'M', 'G', '0', '1'};
+
+}  // namespace
+
+std::string SerializeImageSamples(const ImageSamplesInfo& info) {
+  ByteWriter w;
+  w.PutBytes(kImageMagic, 8);
+  w.Put<uint32_t>(static_cast<uint32_t>(info.camera.width));
+  w.Put<uint32_t>(static_cast<uint32_t>(info.camera.height));
+  for (const Vec3& v : {info.camera.eye, info.camera.target, info.camera.up}) {
+    w.Put(v.x);
+    w.Put(v.y);
+    w.Put(v.z);
+  }
+  w.Put(info.camera.fov_deg);
+  w.PutBytes(info.pixel_mesh.data(), info.pixel_mesh.size() * sizeof(uint32_t));
+  std::string& out = w.bytes();
+  w.Put<uint64_t>(Checksum64(out.data(), out.size()));
+  return std::move(out);
+}
+
+ImageSamplesInfo ParseImageSamples(std::string_view bytes, const std::string& name,
+                                   uint32_t mesh_count) {
+  if (bytes.size() < 16 || std::memcmp(bytes.data(), kImageMagic, 8) != 0)
+    throw InputError(name, "not a prtfarm image file (bad magic)");
+  const std::size_t body = bytes.size() - 8;
+  uint64_t stored;
+  std::memcpy(&stored, bytes.data() + body, 8);
+  if (Checksum64(bytes.data(), body) != stored)
+    throw InputError(name, "image file checksum mismatch: the file is damaged");
+  ByteReader in(bytes.substr(0, body), [&name](const char* what, std::size_t) {
+    throw InputError(name, std::string("truncated image file in ") + what);
+  });
+  in.Take(8, "magic");
+  ImageSamplesInfo info;
+  const auto w = in.Get<uint32_t>("size"), h = in.Get<uint32_t>("size");
+  if (w == 0 || h == 0 || w > kMaxImageSide || h > kMaxImageSide)
+    throw InputError(name, "image size " + std::to_string(w) + "×" + std::to_string(h) +
+                               " is outside 1…" + std::to_string(kMaxImageSide));
+  info.camera.width = static_cast<int>(w);
+  info.camera.height = static_cast<int>(h);
+  for (Vec3* v : {&info.camera.eye, &info.camera.target, &info.camera.up}) {
+    v->x = in.Get<double>("camera");
+    v->y = in.Get<double>("camera");
+    v->z = in.Get<double>("camera");
+    if (!IsFinite(*v)) throw InputError(name, "non-finite camera vector");
+  }
+  info.camera.fov_deg = in.Get<double>("camera");
+  if (!(info.camera.fov_deg > 0 && info.camera.fov_deg < 180))
+    throw InputError(name, "camera fov outside (0, 180) degrees");
+  if (in.remaining() != info.pixels() * sizeof(uint32_t))
+    throw InputError(name, "holds " + std::to_string(in.remaining()) + " bytes of pixels for a " +
+                               std::to_string(w) + "×" + std::to_string(h) + " image");
+  info.pixel_mesh.resize(info.pixels());
+  std::memcpy(info.pixel_mesh.data(), in.Take(in.remaining(), "pixels").data(),
+              info.pixel_mesh.size() * sizeof(uint32_t));
+  for (std::size_t p = 0; p < info.pixel_mesh.size(); ++p) {
+    const uint32_t m = info.pixel_mesh[p];
+    if (m != kImageBackground && m >= mesh_count)
+      throw InputError(name, "pixel " + std::to_string(p) + " names mesh " + std::to_string(m) +
+                                 " of " + std::to_string(mesh_count));
+  }
+  return info;
+}
+
+void WriteImageSamplesFile(const std::string& path, const ImageSamplesInfo& info) {
+  WriteFileDurably(path, SerializeImageSamples(info));
+}
+
+ImageSamplesInfo ReadImageSamplesFile(const std::string& path, uint32_t mesh_count) {
+  return ParseImageSamples(ReadWholeFile(path), path, mesh_count);
+}
+
+}  // namespace prt
