@@ -630,6 +630,7 @@ void PackReader::VerifyAll() const {
   impl_->Metadata();
   for (std::size_t m = 0; m < mesh_count(); ++m) impl_->Mesh(m);
   if (has_visibility()) ReadAllVisibility();
+  if (impl_->has_image) impl_->Image();
   if (impl_->has_transport) {
     const TransportIndex t = impl_->Transport();
     std::vector<uint8_t> buffer;

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include "packager/prtpack.h"
 #include "packager/prtpack_format.h"
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_test_util.h"
@@ -418,6 +419,91 @@ TEST(PrtpackRoundTrip, WriterRejectsBadInputs) {
   WriterOptions o;
   o.alignment = 100;
   EXPECT_THROW(WritePack(MakeSmallInput(), o), InputError);
+}
+
+}  // namespace
+}  // namespace prt::pack
+
+namespace prt::pack {
+namespace {
+
+// An image pack (IMGE, 1.2): a 4×3 image over the small input's two meshes, 12 rows of T.
+PackInput MakeImageInput() {
+  PackInput in = MakeSmallInput();
+  ImageSamplesInfo im;
+  im.camera.eye = {0, 1, 4};
+  im.camera.target = {0, 0.5, 0};
+  im.camera.width = 4;
+  im.camera.height = 3;
+  im.camera.fov_deg = 35;
+  im.pixel_mesh = {0, 0, 1, kImageBackground, 1, 1, 0, 0, 1, kImageBackground, 1, 0};
+  in.image = im;
+  return in;
+}
+
+TEST(PrtpackRoundTrip, ImagePacksCarryTheirPixelsAsACriticalSection) {
+  const PackInput in = MakeImageInput();
+  ASSERT_EQ(in.transport->row_count, 12u);
+  const std::vector<uint8_t> bytes = WritePack(in);
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+  EXPECT_EQ(r.version_minor(), 2);
+  EXPECT_EQ(nlohmann::json::parse(r.ReadMetadata())["format_version"], "1.2");
+  ASSERT_TRUE(r.has_image());
+  const ImageSamplesInfo back = r.ReadImage();
+  EXPECT_EQ(back.pixel_mesh, in.image->pixel_mesh);
+  EXPECT_EQ(back.camera.eye, in.image->camera.eye);
+  EXPECT_EQ(back.camera.fov_deg, 35.0);
+  EXPECT_EQ(r.ReadTransportIndex().channels, 1u);  // written explicitly from 1.1 on
+  bool critical = false;
+  for (const SectionInfo& s : r.sections())
+    if (s.type == "IMGE") critical = (s.flags & kFlagCritical) != 0;
+  EXPECT_TRUE(critical);
+  EXPECT_NO_THROW(r.VerifyAll());
+  EXPECT_FALSE(
+      PackReader::OpenMemory(WritePack(MakeSmallInput()).data(), WritePack(MakeSmallInput()).size())
+          .has_image());
+
+  // The C API sees the same.
+  prtpack* c = prtpack_open_memory(bytes.data(), bytes.size());
+  ASSERT_NE(c, nullptr) << prtpack_last_error();
+  EXPECT_EQ(prtpack_has_image(c), 1);
+  prtpack_image_info info{};
+  ASSERT_EQ(prtpack_get_image(c, &info), PRTPACK_OK) << prtpack_last_error();
+  EXPECT_EQ(info.width, 4u);
+  EXPECT_EQ(info.height, 3u);
+  EXPECT_EQ(info.eye[2], 4.0);
+  EXPECT_EQ(info.pixel_mesh[3], PRTPACK_BACKGROUND);
+  EXPECT_EQ(info.pixel_mesh[2], 1u);
+  prtpack_close(c);
+}
+
+TEST(PrtpackRoundTrip, ImagePacksThatDisagreeWithTheirTransportAreRefused) {
+  // The writer: 12 pixels for 12 rows is right; 6 is not, nor a pixel naming a third mesh.
+  PackInput in = MakeImageInput();
+  in.image->camera.width = 2;
+  in.image->pixel_mesh.resize(6);
+  EXPECT_THROW(WritePack(in), InputError);
+  in = MakeImageInput();
+  in.image->pixel_mesh[0] = 2;
+  EXPECT_THROW(WritePack(in), InputError);
+  // The reader, behind valid checksums: an image of 6 pixels over 12 rows.
+  in = MakeImageInput();
+  in.transport.reset();
+  in.image->camera.width = 2;
+  in.image->pixel_mesh.resize(6);
+  PackInput with = MakeSmallInput();
+  std::vector<uint8_t> image_only = WritePack(in);
+  const PackReader r = PackReader::OpenMemory(image_only.data(), image_only.size());
+  EXPECT_NO_THROW(r.ReadImage());  // no transport to disagree with
+  in.transport = with.transport;
+  in.transport->row_count = 6;  // the writer's check passes; then the TRNS is made 12 rows
+  std::vector<uint8_t> b = WritePack(in);
+  const std::size_t at = TransportOffset(b) + kTransportRowCount;
+  StoreU64(b.data() + at, 12);
+  ResealChecksums(b);
+  const std::string e = ErrorOf(b);
+  EXPECT_NE(e.find("IMGE"), std::string::npos) << e;
+  EXPECT_NE(e.find("6 pixels"), std::string::npos) << e;
 }
 
 }  // namespace

@@ -209,8 +209,14 @@ std::vector<Entry> Catalogue() {
             "[[mesh]]\nname = \"box\"\npath = \"box.off\"\n\n[ground]",
             {"line 11", "'box' is used by an earlier [[mesh]]"}),
       Scene("scene_method_unknown", "method = \"brute\"", "method = \"fast\"", {"line 18", "fast"}),
-      Scene("scene_camera_samples", "n = 8", "n = 8\nsamples = \"camera\"",
-            {"not supported by prt-farm"}),
+      // An image run's bounces need the path estimator (gathering reads vertex rows).
+      {"scene_camera_samples_gather",
+       Tool::kFarm,
+       "{SCENE} --out {K}/run --force --quiet --bounces 1",
+       kFarmInput,
+       {"{SCENE}", "estimator = \"path\""},
+       "n = 8",
+       "n = 8\nsamples = \"camera\""},
       // ---- scene files: out-of-range parameters
       Scene("scene_n_zero", "n = 8", "n = 0", {"line 3", "n", "0"}),
       Scene("scene_n_negative", "n = 8", "n = -8", {"line 3", "-8"}),

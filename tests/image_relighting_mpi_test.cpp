@@ -1,0 +1,196 @@
+// Image relighting in prt-farm end to end under mpirun (docs/image-relighting.md): the tiny
+// scene seen by a 32×16 camera. Rows are the kernels' rows of the camera samples, byte-identical
+// for any rank count, by brute force, by the sparse method and with path-traced bounces; a run
+// killed mid-way resumes to the same bytes; the pack carries the image and prt-view writes it;
+// gathering is refused with a clear error.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "formats/compressed_transport.h"
+#include "formats/image_file.h"
+#include "formats/transport_file.h"
+#include "tests/run_prt_farm.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/envmap.h"
+#include "vocabulary/scene.h"
+#include "worker/camera_samples.h"
+#include "worker/embree_scene.h"
+#include "worker/surface_hit.h"
+#include "worker/transport_sampler.h"
+
+namespace prt {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kSmallJobs = " --max-job-rows 37 --rows-per-block 64 --log-interval 0.2";
+// 2:1, so that the relit EXR reads back through the environment reader as a lat-long image.
+constexpr int kWidth = 32, kHeight = 16;
+
+std::string WorkDir(const std::string& name) {
+  const fs::path dir = fs::path(PRT_TEST_WORK_DIR) / ("image_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+// tests/data/<base> seen by a camera; `sampling` is appended to its [sampling] table.
+std::string ImageScene(const std::string& dir, const std::string& base,
+                       const std::string& sampling = "") {
+  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/" + base);
+  text.replace(text.find("path = \"box.off\""), 16,
+               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  text.replace(text.find("[scene]\n"), 8, "[scene]\nsamples = \"camera\"\n");
+  text.replace(text.find("[sampling]\n"), 11,
+               "[camera]\neye = [0.4, 1.6, 3.2]\ntarget = [0.0, 0.2, 0.0]\nfov = 30.0\nwidth = " +
+                   std::to_string(kWidth) + "\nheight = " + std::to_string(kHeight) +
+                   "\n\n[sampling]\n" + sampling);
+  const std::string file = dir + "/" + base;
+  std::ofstream(file) << text;
+  return file;
+}
+
+std::vector<float> Rows(const std::string& path) {
+  const TransportFileReader r(path);
+  std::vector<float> rows(static_cast<std::size_t>(r.info().rows * r.info().cols()));
+  r.ReadRows(0, r.info().rows, rows.data());
+  return rows;
+}
+
+TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePackDrawsThem) {
+  const std::string dir = WorkDir("brute");
+  const std::string scene_file = ImageScene(dir, "tiny.toml");
+  // The kernels in one process: the camera's samples and their rows.
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const EmbreeScene embree(g);
+  const CameraSamples pixels = ComputeCameraSamples(embree, SceneSurfaces(g), scene.camera);
+  TransportSamplerOptions so;
+  so.rays_per_texel = scene.sampling.rays_per_texel;
+  so.seed = scene.sampling.seed;
+  const TransportSampler sampler(embree, scene.cubemap_n, so);
+  std::vector<float> kernel(pixels.samples.size() * sampler.layout().texel_count());
+  sampler.ComputeRows(pixels.samples, 0, kernel.data());
+  const std::size_t background = pixels.background_count();
+  ASSERT_GT(background, 20u);
+  ASSERT_LT(background, pixels.samples.size() / 2);
+
+  std::string compressed;
+  for (int ranks : {1, 2, 3}) {
+    const std::string run = dir + "/np" + std::to_string(ranks);
+    const auto r = testing::RunPrtFarm(ranks, scene_file + " --out " + run + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const std::vector<float> rows = Rows(run + "/transport.prtt");
+    ASSERT_EQ(rows.size(), kernel.size());
+    EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0) << ranks;
+    const ImageSamplesInfo info =
+        ReadImageSamplesFile(run + "/image.prti", static_cast<uint32_t>(g.meshes.size()));
+    EXPECT_EQ(info.pixel_mesh, pixels.pixel_mesh);
+    EXPECT_EQ(info.camera.width, kWidth);
+    const std::string c = ReadWholeFile(run + "/transport.prtc");
+    if (compressed.empty()) compressed = c;
+    EXPECT_TRUE(c == compressed) << ranks << " rank(s): transport.prtc differs";
+  }
+  // The compressed transport's domain is the image: one 32×16 grid.
+  const CompressedTransportHeader h = ReadCompressedTransportHeader(dir + "/np2/transport.prtc");
+  ASSERT_EQ(h.domain.segments.size(), 1u);
+  EXPECT_EQ(h.domain.segments[0].kind, SpatialSegment::Kind::kGrid2D);
+  EXPECT_EQ(h.domain.segments[0].width, static_cast<uint32_t>(kWidth));
+  EXPECT_EQ(h.domain.segments[0].height, static_cast<uint32_t>(kHeight));
+
+  // prt-pack carries the image, prt-view writes it: a background pixel shows the environment
+  // (a uniform sky of 1 here), a lit ground pixel albedo·Σ T.
+  const std::string pack = dir + "/tiny-image.prtpack";
+  ASSERT_EQ(std::system((std::string(PRT_PACK_EXE) + " pack " + dir + "/np2 --out " + pack + " > " +
+                         dir + "/pack.log 2>&1")
+                            .c_str()),
+            0);
+  const std::string sky = dir + "/sky.exr", exr = dir + "/relit.exr";
+  EnvironmentImage uniform = EnvironmentImage::Zero(EnvmapLayout::kLatLong, 64, 32);
+  for (int c = 0; c < 3; ++c) std::fill(uniform.Channel(c).begin(), uniform.Channel(c).end(), 1.f);
+  WriteEnvironmentExr(uniform, sky);
+  ASSERT_EQ(std::system((std::string(PRT_VIEW_EXE) + " " + pack + " --env " + sky + " --exact" +
+                         " --exr " + exr + " > " + dir + "/view.log 2>&1")
+                            .c_str()),
+            0)
+      << ReadWholeFile(dir + "/view.log");
+  const EnvironmentImage image = ReadEnvironment(exr);
+  ASSERT_EQ(image.width, kWidth);
+  ASSERT_EQ(image.height, kHeight);
+  std::size_t checked = 0;
+  double err2 = 0, ref2 = 0, worst = 0;
+  for (std::size_t p = 0; p < pixels.samples.size(); ++p) {
+    if (pixels.pixel_mesh[p] == kImageBackground) {
+      EXPECT_NEAR(image.r[p], 1.0f, 1e-6f);
+      continue;
+    }
+    double sum = 0;
+    for (std::size_t j = 0; j < sampler.layout().texel_count(); ++j)
+      sum += kernel[p * sampler.layout().texel_count() + j];
+    const float rho = g.meshes[pixels.pixel_mesh[p]].albedo[0];
+    // Compression's error only (exact lighting through the compressed T).
+    const double d = image.r[p] - rho * sum;
+    err2 += d * d;
+    ref2 += rho * sum * rho * sum;
+    worst = std::max(worst, std::abs(d));
+    ++checked;
+  }
+  EXPECT_GT(checked, 200u);
+  // Keep 5 %, 9 bits: about a percent of relative RMS error, the worst pixel on a silhouette.
+  EXPECT_LT(std::sqrt(err2 / ref2), 0.02);
+  EXPECT_LT(worst, 0.05);
+}
+
+TEST(ImageRelightingMpiTest, SparseRunsAreByteIdenticalAndKilledRunsResumeToTheSameBytes) {
+  const std::string dir = WorkDir("sparse");
+  const std::string scene_file = ImageScene(dir, "sparse_tiny.toml");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  EXPECT_TRUE(ReadWholeFile(dir + "/np1/transport.prtt") ==
+              ReadWholeFile(dir + "/np2/transport.prtt"));
+  const nlohmann::json rep = nlohmann::json::parse(ReadWholeFile(dir + "/np2/report.json"));
+  EXPECT_GT(rep["sparse"]["sparse"].get<int>(), 0);  // some pixels were reconstructed
+  const auto killed = testing::RunPrtFarm(
+      2, scene_file + " --out " + dir + "/kill" + kSmallJobs + " --fail-after-jobs 3");
+  EXPECT_NE(killed.exit_code, 0);
+  const auto resumed =
+      testing::RunPrtFarm(2, scene_file + " --out " + dir + "/kill" + kSmallJobs + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  for (const char* f : {"/transport.prtt", "/transport.prtc", "/image.prti"})
+    EXPECT_TRUE(ReadWholeFile(dir + "/np1" + f) == ReadWholeFile(dir + "/kill" + f)) << f;
+}
+
+TEST(ImageRelightingMpiTest, PathTracedBouncesAreByteIdenticalAndGatheringIsRefused) {
+  const std::string dir = WorkDir("bounces");
+  const std::string scene_file =
+      ImageScene(dir, "tiny.toml", "bounces = 1\nestimator = \"path\"\ngather_paths = 4\n");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::vector<float> a = Rows(dir + "/np1/indirect/path-traced.prtt");
+  EXPECT_TRUE(a == Rows(dir + "/np2/indirect/path-traced.prtt"));
+  double bounce = 0;
+  for (float x : a) bounce += x;
+  EXPECT_GT(bounce, 0.0);  // the box and the ground light each other
+  const std::string gather = ImageScene(dir, "tiny.toml", "bounces = 1\n");
+  const auto refused = testing::RunPrtFarm(1, gather + " --out " + dir + "/gather");
+  EXPECT_EQ(refused.exit_code, 2) << refused.output;
+  EXPECT_NE(refused.output.find("estimator = \"path\""), std::string::npos) << refused.output;
+}
+
+}  // namespace
+}  // namespace prt
