@@ -39,16 +39,17 @@
 #include <vector>
 
 #include "bench/bench_scene.h"
-#include "viewer/compressed_relight.h"
 #include "formats/compressed_transport.h"
-#include "vocabulary/envmap.h"
-#include "vocabulary/environment_io.h"
-#include "vocabulary/cubemap_resample.h"
+#include "formats/geometry_file.h"
+#include "formats/image_file.h"
 #include "formats/run_folder.h"
+#include "formats/transport_file.h"
+#include "viewer/compressed_relight.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/envmap.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "formats/transport_file.h"
-#include "formats/geometry_file.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/row_transform.h"
@@ -137,10 +138,25 @@ Transport ReadRun(const std::string& dir, double order_normal_weight) {
   t.T.resize(t.S * reader.info().cols());
   reader.ReadRows(0, t.S, t.T.data());
   const prt::SceneGeometry g = prt::ReadSceneGeometryFile(dir + "/" + prt::kGeometryFileName);
-  t.domain = prt::SpatialDomainOf(g, order_normal_weight);
   t.order_normal_weight = order_normal_weight;
-  t.albedo = AlbedoPerSample(g);
   t.name = "run";
+  const std::string image = dir + "/" + prt::kImageFileName;
+  if (std::filesystem::exists(image)) {
+    // An image run (docs/image-relighting.md): the pixels' W×H grid, each pixel's albedo.
+    const prt::ImageSamplesInfo info =
+        prt::ReadImageSamplesFile(image, static_cast<uint32_t>(g.meshes.size()));
+    if (info.pixels() != t.S)
+      throw prt::InputError(image, "does not describe the run's " + std::to_string(t.S) + " rows");
+    t.domain = prt::ImageDomain(static_cast<uint32_t>(info.camera.width),
+                                static_cast<uint32_t>(info.camera.height));
+    for (uint32_t m : info.pixel_mesh)
+      for (int c = 0; c < 3; ++c)
+        t.albedo.push_back(m == prt::kImageBackground ? 0.f : g.meshes[m].albedo[c]);
+    t.name = "image";
+  } else {
+    t.domain = prt::SpatialDomainOf(g, order_normal_weight);
+    t.albedo = AlbedoPerSample(g);
+  }
   t.source = dir;
   return t;
 }

@@ -31,11 +31,15 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "bench/bench_scenes.h"
+#include "formats/geometry_file.h"
+#include "formats/image_file.h"
+#include "formats/run_folder.h"
 #include "formats/transport_file.h"
 #include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
@@ -111,6 +115,33 @@ struct Traced {
   prt::SceneGeometry geometry;
   std::vector<float> rows;
   double trace_s = 0;
+  // An image run's pixels (docs/image-relighting.md): then the rows are pixels, the column
+  // transform's domain is the image and each pixel has its mesh's albedo.
+  std::optional<prt::ImageSamplesInfo> image;
+  std::size_t samples() const { return image ? image->pixels() : geometry.vertex_count(); }
+  prt::SpatialDomain Domain() const {
+    return image ? prt::ImageDomain(static_cast<uint32_t>(image->camera.width),
+                                    static_cast<uint32_t>(image->camera.height))
+                 : prt::SpatialDomainOf(geometry, scene.compression.order_normal_weight);
+  }
+  // albedo ⊙ (rows · light) per sample, interleaved RGB, in the rows' order.
+  std::vector<float> Relit(const prt::CubemapRgb& light) const {
+    if (!image) return prt::bench::RelitRadiance(geometry, rows, light);
+    const std::size_t T = light.TexelCount();
+    std::vector<float> out(3 * samples(), 0.f);
+    for (std::size_t p = 0; p < samples(); ++p) {
+      const uint32_t m = image->pixel_mesh[p];
+      if (m == prt::kImageBackground) continue;
+      const float* row = rows.data() + p * T;
+      for (int c = 0; c < 3; ++c) {
+        const std::vector<float>& l = light.Channel(c);
+        double acc = 0;
+        for (std::size_t j = 0; j < T; ++j) acc += static_cast<double>(row[j]) * l[j];
+        out[3 * p + c] = static_cast<float>(geometry.meshes[m].albedo[c] * acc);
+      }
+    }
+    return out;
+  }
 };
 
 Traced TraceDefaultScene(int n, int rays) {
@@ -129,17 +160,26 @@ Traced TraceDefaultScene(int n, int rays) {
 
 // The default scene's rows as a farm run wrote them (`prt-farm --keep-raw`: RUN/transport.prtt),
 // so that table 2 measures the transport prtfarm actually ships (its sampling method and rays per
-// texel) instead of the in-process trace.
+// texel) instead of the in-process trace. An image run's (RUN/image.prti next to it): its pixels,
+// geometry and camera, compressed with the default scene's [compression] settings.
 Traced ReadDefaultSceneRaw(const std::string& path) {
   Traced t;
   const prt::TransportFileReader reader(path);
   const prt::TransportFileInfo& info = reader.info();
   t.scene = prt::bench::BenchScene("default", static_cast<int>(info.cubemap_n));
-  t.geometry = prt::BuildSceneGeometry(t.scene);
-  if (info.rows != t.geometry.vertex_count())
-    throw prt::InputError(path, "holds " + std::to_string(info.rows) +
-                                    " rows, the default scene has " +
-                                    std::to_string(t.geometry.vertex_count()) + " samples");
+  const fs::path run = fs::path(path).parent_path();
+  if (fs::exists(run / prt::kImageFileName)) {
+    t.geometry = prt::ReadSceneGeometryFile((run / prt::kGeometryFileName).string());
+    t.image = prt::ReadImageSamplesFile((run / prt::kImageFileName).string(),
+                                        static_cast<uint32_t>(t.geometry.meshes.size()));
+    t.scene.name = "image";
+    t.scene.camera = t.image->camera;
+  } else {
+    t.geometry = prt::BuildSceneGeometry(t.scene);
+  }
+  if (info.rows != t.samples())
+    throw prt::InputError(path, "holds " + std::to_string(info.rows) + " rows, the scene has " +
+                                    std::to_string(t.samples()) + " samples");
   t.rows.resize(info.rows * info.cols());
   const auto t0 = Clock::now();
   reader.ReadRows(0, info.rows, t.rows.data());
@@ -162,6 +202,7 @@ void WritePackOf(const Traced& t, const prt::CompressedTransport& ct, const std:
   in.metadata_json = R"({"scene": {"scene": {"name": ")" + t.scene.name + R"("}, "camera": )" +
                      CameraJson(t.scene.camera) + "}}";
   in.meshes = prt::pack::PackMeshesOf(t.geometry);
+  in.image = t.image;
   in.transport = prt::pack::MakeTransportInput(ct, 256);
   prt::pack::WriterOptions wo;
   wo.zstd_level = 3;
@@ -259,18 +300,19 @@ int Run(int argc, char** argv) {
     }
     if (raw_path.empty())
       std::printf("default scene traced in-process: %zu samples, n = %d, %d ray(s)/texel, %.1f s\n",
-                  traced.geometry.vertex_count(), n, rays, traced.trace_s);
+                  traced.samples(), n, rays, traced.trace_s);
     else
-      std::printf("default scene's rows read from %s: %zu samples, n = %d, %.1f s\n",
-                  raw_path.c_str(), traced.geometry.vertex_count(), n, traced.trace_s);
+      std::printf("%s's rows read from %s: %zu samples, n = %d, %.1f s\n",
+                  traced.image ? "an image run" : "the default scene", raw_path.c_str(),
+                  traced.samples(), n, traced.trace_s);
     prt::CompressionOptions o = prt::CompressionOptionsFrom(traced.scene.compression, "default");
     if (pack_keep > 0) o.keep_fraction = pack_keep;
     if (!pack_scheme.empty()) o.scheme = prt::ParseCompressionScheme(pack_scheme, "--scheme");
     const auto t0 = Clock::now();
-    const prt::CompressedTransport ct = prt::CompressTransport(
-        traced.rows.data(), n,
-        prt::SpatialDomainOf(traced.geometry, traced.scene.compression.order_normal_weight), o);
-    pack_path = (fs::path(out_dir) / "default_scene.prtpack").string();
+    const prt::CompressedTransport ct =
+        prt::CompressTransport(traced.rows.data(), n, traced.Domain(), o);
+    pack_path =
+        (fs::path(out_dir) / (traced.image ? "image.prtpack" : "default_scene.prtpack")).string();
     WritePackOf(traced, ct, pack_path);
     std::printf("compressed (%s, keep %.3g, %d bits) and packed in %.1f s: %s\n",
                 prt::ToString(o.scheme), o.keep_fraction, o.bits, Seconds(t0), pack_path.c_str());
@@ -351,7 +393,7 @@ int Run(int argc, char** argv) {
     // Relit samples of uncompressed rows (texel basis) under lighting q, in the pack's order
     // (the traced rows', the scene's global order) with the scene's albedo.
     const auto relit = [&](const Traced& t, std::size_t q) {
-      return prt::bench::RelitRadiance(t.geometry, t.rows, prt::ReconstructLighting(n, lights[q]));
+      return t.Relit(prt::ReconstructLighting(n, lights[q]));
     };
     for (std::size_t terms : term_counts) {
       lights.push_back(prt::NonlinearLightingApproximation(sunrise, basis, terms));
@@ -398,18 +440,16 @@ int Run(int argc, char** argv) {
       std::vector<Timing> best;         // per N
     };
     std::vector<Config> configs;
-    for (prt::CompressionScheme scheme :
-         {prt::CompressionScheme::k2D, prt::CompressionScheme::kAdaptive4D}) {
+    for (prt::CompressionScheme scheme : {prt::CompressionScheme::k2D, prt::CompressionScheme::k4D,
+                                          prt::CompressionScheme::kAdaptive4D}) {
       for (double keep : scheme == prt::CompressionScheme::k2D ? keeps_2d : keeps) {
         prt::CompressionOptions o =
             prt::CompressionOptionsFrom(traced.scene.compression, "default");
         o.scheme = scheme;
         o.keep_fraction = keep;
         Config c{scheme, keep, nullptr, nullptr, nullptr, {}, {}, {}};
-        c.ct = std::make_unique<prt::CompressedTransport>(prt::CompressTransport(
-            traced.rows.data(), n,
-            prt::SpatialDomainOf(traced.geometry, traced.scene.compression.order_normal_weight),
-            o));
+        c.ct = std::make_unique<prt::CompressedTransport>(
+            prt::CompressTransport(traced.rows.data(), n, traced.Domain(), o));
         c.relighter = std::make_unique<prt::CompressedRelighter>(*c.ct);
         c.fast = std::make_unique<prt::CompressedTransportOperator>(
             *c.relighter, prt::SampleOrder::kCoefficients);
@@ -483,6 +523,23 @@ int Run(int argc, char** argv) {
         "(times: the lesser of wall and CPU time, fastest of %d interleaved rounds of 3\n"
         " repetitions; rows appear only where 2D's measured errors bracket the 4D point)\n",
         rounds);
+    // An image run: the relit image of the uncompressed T, the pack's, and their difference
+    // (×10), under sunrise with every lighting coefficient.
+    if (traced.image) {
+      const int w = traced.image->camera.width, h = traced.image->camera.height;
+      const std::vector<float> ref = traced.Relit(envs[0].cube);
+      const std::vector<float> got =
+          session->ToPackOrder(session->Shade(session->RelightExact(sunrise)));
+      prt::ImageRgb a(w, h), b(w, h);
+      a.pixels = ref;
+      b.pixels = got;
+      const std::string png = (fs::path(out_dir) / "image_error_sunrise.png").string();
+      prt::WritePng(prt::SideBySide(a, b, true, 10.0), png);
+      std::printf(
+          "\nimage error under sunrise, exact lighting: %.4g relative RMS (uncompressed | pack | "
+          "10 × difference: %s)\n",
+          prt::RelativeRmsError(got, ref), png.c_str());
+    }
   } else {
     std::printf("\n## 2. skipped: the 2D/4D sweep needs the uncompressed T (run without a pack)\n");
   }

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -125,6 +125,40 @@ run_mc_error() {
 # path-traced reference on the default scene and two more real meshes, K = 1 and 2, n = 32, four
 # lights, model and ground apart, with images and the per-bounce energy plot; the colour-bleeding
 # scene (a red ground); then prt-farm's wall time with K = 2 against K = 0 on the same 2 ranks.
+# Image relighting (docs/image-relighting.md): each image scene farmed once (sparse, 2 ranks, raw
+# T kept), then bytes against relit error for 2D, 4D and adaptive 4D on the image domain
+# (compression_bench), relighting time at N = 30, 100, 300 at equal error (viewer_bench's
+# Figure 9), the rotation run, the error image against the uncompressed T, and the image relit
+# under four real environments plus a 36-frame rotation by prt-view. The teapot needs the shared
+# data (PRT_SHARED_DATA, default ../shared/data); without it only the bunny runs.
+run_image() {
+  local shared="${PRT_SHARED_DATA:-$ROOT/../shared/data}" scenes=(bunny-image)
+  [ -f "$shared/meshes/utah_teapot_24x24.obj" ] && scenes=(teapot bunny-image)
+  for scene in "${scenes[@]}"; do
+    local dir="$OUT/image/$scene" run="$OUT/image/$scene/run"
+    mkdir -p "$dir"
+    if [ ! -f "$run/transport.prtt" ] || [ ! -f "$run/image.prti" ]; then
+      echo "== prt-farm $scene.toml, 2 ranks =="
+      PRT_DATA_PATH="$PRT_DATA_PATH:$shared" mpirun -np 2 --bind-to none \
+        "$BUILD_DIR/farm/prt-farm" "$ROOT/scenes/$scene.toml" --out "$run" --force --keep-raw -q
+    fi
+    echo "== $scene: bytes against relit error, 2D / 4D / adaptive 4D on the image =="
+    "$BUILD_DIR/bench/compression_bench" --run "$run" --budget global \
+      --keep 0.0025,0.005,0.01,0.02,0.04,0.08 --out "$dir/compression" 2>&1 | grep -v '\[warning\]'
+    echo "== $scene: relighting time at equal error (Figure 9), rotation, error image =="
+    "$BUILD_DIR/bench/viewer_bench" --raw "$run/transport.prtt" --deg 1 --frames 60 --hold 30 \
+      --sweep-4d 0.003,0.01,0.03 --sweep-2d 0.003,0.01,0.03,0.1,0.25 --out-dir "$dir/viewer" $QUICK \
+      2>&1 | grep -v '\[warning\]'
+    "$BUILD_DIR/packager/prt-pack" pack "$run" --out "$dir/$scene.prtpack" > /dev/null
+    for env in sunrise city studio interior; do
+      "$BUILD_DIR/viewer/prt-view" "$dir/$scene.prtpack" --env "$BUILD_DIR/data/envmaps/$env.exr" \
+        --exact --out "$dir/$env.png" --quiet 2>/dev/null
+    done
+    "$BUILD_DIR/viewer/prt-view" "$dir/$scene.prtpack" --env "$BUILD_DIR/data/envmaps/sunrise.exr" \
+      --rotate 10 --frames 36 --out-dir "$dir/rotation" --quiet 2>/dev/null
+    echo "images: $dir/{sunrise,city,studio,interior}.png, $dir/rotation/, $dir/viewer/"
+  done
+}
 run_sparse_gi() {
   # Sparse precomputation with interreflection against brute force of the same estimator
   # (docs/sparse-precomputation.md, "With interreflection"), one run per case.
@@ -207,5 +241,6 @@ case "$WHAT" in
   mc-error) run_mc_error ;;
   gi) run_gi ;;
   sparse-gi) run_sparse_gi ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi] [--quick]" >&2; exit 1 ;;
+  image) run_image ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
 esac
