@@ -193,6 +193,10 @@ std::string FarmReport::ToJsonText() const {
       }
     }
   }
+  if (!image_json.empty()) {
+    const Json im = Json::parse(image_json, nullptr, false);
+    if (!im.is_discarded()) j["image"] = im;
+  }
   if (!interreflection_json.empty()) {
     const Json ir = Json::parse(interreflection_json, nullptr, false);
     if (!ir.is_discarded()) j["interreflection"] = ir;

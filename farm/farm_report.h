@@ -132,6 +132,9 @@ struct FarmReport {
   // settings, per bounce its energy, rays and wall time, and the indirect share of B under each
   // scene environment; "" when the run has no bounces.
   std::string interreflection_json;
+  // report.json "image" (image-relighting runs, docs/image-relighting.md): width, height and
+  // background_pixels, as JSON text; empty for vertex runs.
+  std::string image_json;
   std::vector<EtaReport> eta;
   double wall_seconds = 0;
   double sampling_seconds = 0;  // wall time of the sampling phase (for rays/s)

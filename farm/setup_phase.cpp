@@ -94,9 +94,15 @@ class SetupPhase final : public FarmPhase {
         if (ctx.rank == 0) {
           WriteImageSamplesFile(ctx.folder.image,
                                 ImageSamplesInfo{ctx.params.camera, ctx.pixel_mesh});
+          const auto background =
+              std::count(ctx.pixel_mesh.begin(), ctx.pixel_mesh.end(), kImageBackground);
           spdlog::info("image relighting: {} of {} pixels see the environment (background)",
-                       std::count(ctx.pixel_mesh.begin(), ctx.pixel_mesh.end(), kImageBackground),
-                       ctx.pixel_mesh.size());
+                       background, ctx.pixel_mesh.size());
+          ctx.report.image_json = nlohmann::json{
+              {"width", ctx.params.camera.width},
+              {"height", ctx.params.camera.height},
+              {"background_pixels",
+               background}}.dump();
         }
       } else {
         ctx.samples = SpatialSamplesOf(ctx.geometry);

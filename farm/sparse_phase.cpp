@@ -584,7 +584,10 @@ class SparsePhase final : public FarmPhase {
           FarmReport& rep = ctx.report;
           rep.sparse.enabled = true;
           FarmSparseSteps steps(ctx, loop);
-          const SparseScheduleCounts c = RunSparseSchedule(ctx.samples.size(), ctx.plan, steps);
+          // An image's background pixels take no part (their rows stay the zeros the partial
+          // file was created with).
+          const SparseScheduleCounts c =
+              RunSparseSchedule(ctx.samples.size(), ctx.plan, steps, SparseSkipOf(ctx.samples));
           rep.sparse.dense_initial = c.dense_initial;
           rep.sparse.candidates_ranked += c.candidates_ranked;
           rep.sparse.dense_by_rank += c.dense_by_rank;

@@ -144,7 +144,7 @@ run_image() {
     fi
     echo "== $scene: bytes against relit error, 2D / 4D / adaptive 4D on the image =="
     "$BUILD_DIR/bench/compression_bench" --run "$run" --budget global \
-      --keep 0.0025,0.005,0.01,0.02,0.04,0.08 --out "$dir/compression" 2>&1 | grep -v '\[warning\]'
+      --keep 0.0003,0.0006,0.00125,0.0025,0.005,0.01,0.02,0.04,0.08 --out "$dir/compression" 2>&1 | grep -v '\[warning\]'
     echo "== $scene: relighting time at equal error (Figure 9), rotation, error image =="
     "$BUILD_DIR/bench/viewer_bench" --raw "$run/transport.prtt" --deg 1 --frames 60 --hold 30 \
       --sweep-4d 0.003,0.01,0.03 --sweep-2d 0.003,0.01,0.03,0.1,0.25 --out-dir "$dir/viewer" $QUICK \

@@ -24,6 +24,7 @@
 #include "vocabulary/scene.h"
 #include "worker/camera_samples.h"
 #include "worker/embree_scene.h"
+#include "worker/sparse_precomputation.h"
 #include "worker/surface_hit.h"
 #include "worker/transport_sampler.h"
 
@@ -162,6 +163,39 @@ TEST(ImageRelightingMpiTest, SparseRunsAreByteIdenticalAndKilledRunsResumeToTheS
               ReadWholeFile(dir + "/np2/transport.prtt"));
   const nlohmann::json rep = nlohmann::json::parse(ReadWholeFile(dir + "/np2/report.json"));
   EXPECT_GT(rep["sparse"]["sparse"].get<int>(), 0);  // some pixels were reconstructed
+
+  // The in-process driver on the camera's samples gives the farm's bytes; background pixels
+  // take no part (RunSparseSchedule's skip): zero rows, never dense, never reconstructed.
+  const SceneDescription scene = LoadSceneFile(scene_file);
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const EmbreeScene embree(g);
+  const CameraSamples pixels = ComputeCameraSamples(embree, SceneSurfaces(g), scene.camera);
+  TransportSamplerOptions so;
+  so.rays_per_texel = scene.sampling.rays_per_texel;
+  so.seed = scene.sampling.seed;
+  const TransportSampler sampler(embree, scene.cubemap_n, so);
+  SparseReport report;
+  const std::vector<float> kernel = RunSparsePrecomputation(
+      sampler, pixels.samples, PlanFromSettings(scene.sparse, g.diagonal(), scene.cubemap_n),
+      report);
+  const std::vector<float> rows = Rows(dir + "/np2/transport.prtt");
+  ASSERT_EQ(rows.size(), kernel.size());
+  EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0);
+  const std::size_t T = sampler.layout().texel_count();
+  const std::size_t background = pixels.background_count();
+  ASSERT_GT(background, 0u);
+  std::size_t surface_dense = 0;
+  for (std::size_t p = 0; p < pixels.samples.size(); ++p) {
+    if (pixels.pixel_mesh[p] != kImageBackground) {
+      surface_dense += report.is_dense[p];
+      continue;
+    }
+    EXPECT_EQ(report.is_dense[p], 0) << p;
+    for (std::size_t j = 0; j < T; ++j) ASSERT_EQ(rows[p * T + j], 0.0f) << p;
+  }
+  EXPECT_EQ(report.dense_initial + report.dense_by_rank + report.dense_fallback, surface_dense);
+  EXPECT_EQ(surface_dense + report.sparse, pixels.samples.size() - background);
+  EXPECT_EQ(rep["sparse"]["dense_total"].get<std::size_t>(), surface_dense);
   const auto killed = testing::RunPrtFarm(
       2, scene_file + " --out " + dir + "/kill" + kSmallJobs + " --fail-after-jobs 3");
   EXPECT_NE(killed.exit_code, 0);

@@ -182,7 +182,9 @@ int RunViewerWindow(const prt::ViewerSession& session,
       radiance = pbi->Radiance();
     }
     const prt::ImageRgb image =
-        session.Render(Orbit(camera, st.orbit_deg), session.Shade(radiance), background);
+        // An image pack's view is fixed (its rows are the camera's pixels): no orbit.
+        session.Render(session.image() != nullptr ? camera : Orbit(camera, st.orbit_deg),
+                       session.Shade(radiance), background);
     for (std::size_t i = 0; i < rgb8.size(); ++i) rgb8[i] = prt::ToSrgb8(image.pixels[i], tone);
     SDL_UpdateTexture(texture, nullptr, rgb8.data(), 3 * camera.width);
     SDL_RenderClear(renderer);

@@ -134,23 +134,53 @@ std::vector<float> RunSparsePrecomputation(
   return out;
 }
 
-SparseScheduleCounts RunSparseSchedule(std::size_t N, const SparsePlan& plan, SparseSteps& steps) {
+std::vector<uint8_t> SparseSkipOf(std::span<const SpatialSample> samples) {
+  std::vector<uint8_t> skip(samples.size(), 0);
+  bool any = false;
+  for (std::size_t s = 0; s < samples.size(); ++s) any |= (skip[s] = samples[s].background) != 0;
+  return any ? skip : std::vector<uint8_t>{};
+}
+
+SparseScheduleCounts RunSparseSchedule(std::size_t N, const SparsePlan& plan, SparseSteps& steps,
+                                       std::span<const uint8_t> skip) {
   SparseScheduleCounts c;
   c.is_dense.assign(N, 0);
   if (N == 0) return c;
+  if (!skip.empty() && skip.size() != N)
+    throw std::invalid_argument("RunSparseSchedule: skip has " + std::to_string(skip.size()) +
+                                " flags for " + std::to_string(N) + " samples");
+  // The samples that take part, in order: the schedule picks among their indices 0 … M−1 and
+  // hands the steps global ids (the identity without a skipped sample).
+  std::vector<uint32_t> part, local(N, 0);
+  for (uint32_t s = 0; s < N; ++s)
+    if (skip.empty() || !skip[s]) {
+      local[s] = static_cast<uint32_t>(part.size());
+      part.push_back(s);
+    }
+  const std::size_t M = part.size();
+  if (M == 0) return c;
+  const auto global = [&](std::vector<uint32_t> ids) {
+    for (uint32_t& s : ids) s = part[s];
+    return ids;
+  };
+  std::vector<uint8_t> local_dense(M, 0);  // SparseRankCandidates' view
   auto mark = [&](std::span<const uint32_t> ids) {
-    for (uint32_t s : ids) c.is_dense[s] = 1;
+    for (uint32_t s : ids) {
+      c.is_dense[s] = 1;
+      local_dense[local[s]] = 1;
+    }
   };
   // §4.1: the initial random dense set, then rank-weighted rounds.
-  const std::size_t budget = SparseDenseBudget(N, plan);
-  std::vector<uint32_t> dense = InitialDenseSet(N, SparseInitialDenseCount(N, plan), plan.seed);
+  const std::size_t budget = SparseDenseBudget(M, plan);
+  std::vector<uint32_t> dense =
+      global(InitialDenseSet(M, SparseInitialDenseCount(M, plan), plan.seed));
   c.dense_initial = dense.size();
   steps.Dense("dense-initial", dense);
   mark(dense);
   const int rounds = SparseRounds(plan);
   for (int it = 0; it < rounds && dense.size() < budget; ++it) {
     const std::size_t picks = SparsePicksForRound(budget, dense.size(), rounds, it);
-    const std::vector<uint32_t> cand = SparseRankCandidates(c.is_dense, picks, plan, it);
+    const std::vector<uint32_t> cand = global(SparseRankCandidates(local_dense, picks, plan, it));
     const std::string k = std::to_string(it + 1);
     const std::vector<double> weight = steps.Rank("rank-" + k, it, dense, cand);
     const std::vector<uint32_t> next = SparsePickByRank(cand, weight, picks, plan, it);
@@ -160,9 +190,13 @@ SparseScheduleCounts RunSparseSchedule(std::size_t N, const SparsePlan& plan, Sp
     mark(next);
     dense.insert(dense.end(), next.begin(), next.end());
   }
-  // §5: every other sample from its dense neighbours; fallbacks become dense.
+  // §5: every other sample from its dense neighbours; fallbacks become dense. A skipped sample
+  // is not reconstructed (it is passed as if dense, and is in nobody's neighbour set).
   std::sort(dense.begin(), dense.end());
-  const std::vector<uint32_t> fallback = steps.Reconstruct("sparse-reconstruct", dense, c.is_dense);
+  std::vector<uint8_t> settled = c.is_dense;
+  for (uint32_t s = 0; s < N; ++s)
+    if (!skip.empty() && skip[s]) settled[s] = 1;
+  const std::vector<uint32_t> fallback = steps.Reconstruct("sparse-reconstruct", dense, settled);
   c.dense_fallback = fallback.size();
   steps.Dense("dense-fallback", fallback);
   mark(fallback);
@@ -191,6 +225,8 @@ class InProcessSteps final : public SparseSteps {
         vis_(samples.size()),
         low_(samples.size()),
         feat_(samples.size()) {}
+
+  std::size_t texel_count() const { return T_; }
 
   void Dense(const std::string& step, std::span<const uint32_t> ids) override {
     const double t0 = Now();
@@ -324,7 +360,12 @@ void RunSparsePrecomputation(
   report.combination.assign(N, {});
   if (N == 0) return;
   InProcessSteps steps(sampler, samples, plan, report, out, progress);
-  SparseScheduleCounts counts = RunSparseSchedule(N, plan, steps);
+  // Background pixels take no part; their rows are 0 (worker/camera_samples.h).
+  const std::vector<uint8_t> skip = SparseSkipOf(samples);
+  for (std::size_t s = 0; s < skip.size(); ++s)
+    if (skip[s])
+      std::fill(out + s * steps.texel_count(), out + (s + 1) * steps.texel_count(), 0.0f);
+  SparseScheduleCounts counts = RunSparseSchedule(N, plan, steps, skip);
   report.dense_initial = counts.dense_initial;
   report.dense_by_rank = counts.dense_by_rank;
   report.dense_fallback = counts.dense_fallback;

@@ -141,8 +141,17 @@ struct SparseScheduleCounts {
 };
 
 // Runs the method's steps for `sample_count` samples in order; deterministic in plan.seed.
+// skip (empty, or one flag per sample): samples with a 1 take no part — never dense, never a
+// candidate or a neighbour, not reconstructed, their rows left as the caller has them (zero).
+// An image's background pixels (SpatialSample::background: no surface, a zero row) are skipped,
+// so that the method's budget and steps are spent on the surface pixels alone. The schedule
+// runs on the remaining samples' indices in order, so without a skipped sample it is exactly
+// the schedule without `skip`.
 SparseScheduleCounts RunSparseSchedule(std::size_t sample_count, const SparsePlan& plan,
-                                       SparseSteps& steps);
+                                       SparseSteps& steps, std::span<const uint8_t> skip = {});
+// The skip flags of RunSparseSchedule for `samples`: 1 for a background sample; empty when there
+// is none.
+std::vector<uint8_t> SparseSkipOf(std::span<const SpatialSample> samples);
 
 // Runs every phase in this process (TBB threads). Returns T as sample_count rows of
 // texel_count floats. `progress` (may be empty) receives (phase name, done, total).
