@@ -90,6 +90,13 @@ static void check_pack(prtpack* p) {
   CHECK(prtpack_get_transport_info(p, &t) == PRTPACK_OK);
   CHECK(t.encoding == 7 && t.row_count == 12 && t.column_count == 9 && t.block_count == 3);
   CHECK(t.channels == 1); /* a 1.0 pack */
+  {
+    /* A vertex pack: no image (IMGE is for image-relighting packs, .prtpack 1.2). */
+    prtpack_image_info im;
+    CHECK(prtpack_has_image(p) == 0);
+    CHECK(prtpack_get_image(p, &im) == PRTPACK_ERROR && strstr(prtpack_last_error(), "IMGE"));
+    CHECK(prtpack_has_image(NULL) == 0);
+  }
   CHECK(t.params_size == 5 && t.params[0] == 1 && t.params[4] == 5);
   for (b = 0; b < 3; ++b) {
     CHECK(prtpack_get_block_info(p, b, &bi) == PRTPACK_OK);
