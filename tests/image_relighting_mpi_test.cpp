@@ -60,6 +60,28 @@ std::string ImageScene(const std::string& dir, const std::string& base,
   return file;
 }
 
+// The kernels in one process: an image scene's geometry, camera samples and transport sampler
+// with the scene's rays per texel and seed.
+struct KernelScene {
+  explicit KernelScene(const std::string& file)
+      : scene(LoadSceneFile(file)),
+        g(BuildSceneGeometry(scene)),
+        embree(g),
+        pixels(ComputeCameraSamples(embree, SceneSurfaces(g), scene.camera)),
+        sampler(embree, scene.cubemap_n, Options(scene)) {}
+  static TransportSamplerOptions Options(const SceneDescription& s) {
+    TransportSamplerOptions so;
+    so.rays_per_texel = s.sampling.rays_per_texel;
+    so.seed = s.sampling.seed;
+    return so;
+  }
+  SceneDescription scene;
+  SceneGeometry g;
+  EmbreeScene embree;
+  CameraSamples pixels;
+  TransportSampler sampler;
+};
+
 std::vector<float> Rows(const std::string& path) {
   const TransportFileReader r(path);
   std::vector<float> rows(static_cast<std::size_t>(r.info().rows * r.info().cols()));
@@ -71,14 +93,10 @@ TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePack
   const std::string dir = WorkDir("brute");
   const std::string scene_file = ImageScene(dir, "tiny.toml");
   // The kernels in one process: the camera's samples and their rows.
-  const SceneDescription scene = LoadSceneFile(scene_file);
-  const SceneGeometry g = BuildSceneGeometry(scene);
-  const EmbreeScene embree(g);
-  const CameraSamples pixels = ComputeCameraSamples(embree, SceneSurfaces(g), scene.camera);
-  TransportSamplerOptions so;
-  so.rays_per_texel = scene.sampling.rays_per_texel;
-  so.seed = scene.sampling.seed;
-  const TransportSampler sampler(embree, scene.cubemap_n, so);
+  const KernelScene k(scene_file);
+  const SceneGeometry& g = k.g;
+  const CameraSamples& pixels = k.pixels;
+  const TransportSampler& sampler = k.sampler;
   std::vector<float> kernel(pixels.samples.size() * sampler.layout().texel_count());
   sampler.ComputeRows(pixels.samples, 0, kernel.data());
   const std::size_t background = pixels.background_count();
@@ -166,17 +184,12 @@ TEST(ImageRelightingMpiTest, SparseRunsAreByteIdenticalAndKilledRunsResumeToTheS
 
   // The in-process driver on the camera's samples gives the farm's bytes; background pixels
   // take no part (RunSparseSchedule's skip): zero rows, never dense, never reconstructed.
-  const SceneDescription scene = LoadSceneFile(scene_file);
-  const SceneGeometry g = BuildSceneGeometry(scene);
-  const EmbreeScene embree(g);
-  const CameraSamples pixels = ComputeCameraSamples(embree, SceneSurfaces(g), scene.camera);
-  TransportSamplerOptions so;
-  so.rays_per_texel = scene.sampling.rays_per_texel;
-  so.seed = scene.sampling.seed;
-  const TransportSampler sampler(embree, scene.cubemap_n, so);
+  const KernelScene k(scene_file);
+  const CameraSamples& pixels = k.pixels;
+  const TransportSampler& sampler = k.sampler;
   SparseReport report;
   const std::vector<float> kernel = RunSparsePrecomputation(
-      sampler, pixels.samples, PlanFromSettings(scene.sparse, g.diagonal(), scene.cubemap_n),
+      sampler, pixels.samples, PlanFromSettings(k.scene.sparse, k.g.diagonal(), k.scene.cubemap_n),
       report);
   const std::vector<float> rows = Rows(dir + "/np2/transport.prtt");
   ASSERT_EQ(rows.size(), kernel.size());
