@@ -402,6 +402,8 @@ class SetupPhase final : public FarmPhase {
                      d.reason.empty() ? "" : d.reason + ")");
       }
     }
+    // A vertex run leaves no image.prti behind (prt-pack would take its rows for pixels).
+    if (!ctx.params.image) fs::remove(f.image, ec);
     const StageAction rows_action = plan.Get(kStageRows).action;
     ctx.params.run_rows = rows_action == StageAction::kReuse ? 0 : 1;
     ctx.params.run_compression = plan.Runs(kStageCompression) ? 1 : 0;

@@ -167,6 +167,11 @@ TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePack
   // Keep 5 %, 9 bits: about a percent of relative RMS error, the worst pixel on a silhouette.
   EXPECT_LT(std::sqrt(err2 / ref2), 0.02);
   EXPECT_LT(worst, 0.05);
+
+  // A vertex run forced into the folder leaves no image.prti behind.
+  const std::string vertex_scene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
+  ASSERT_EQ(testing::RunPrtFarm(1, vertex_scene + " --out " + dir + "/np3 --force").exit_code, 0);
+  EXPECT_FALSE(fs::exists(dir + "/np3/image.prti"));
 }
 
 TEST(ImageRelightingMpiTest, SparseRunsAreByteIdenticalAndKilledRunsResumeToTheSameBytes) {
