@@ -109,7 +109,7 @@ class SetupPhase final : public FarmPhase {
       }
       if (ctx.samples.size() != ctx.params.rows) {
         throw std::logic_error("sample count " + std::to_string(ctx.samples.size()) +
-                               " differs from the geometry's vertex count " +
+                               " differs from the run's row count " +
                                std::to_string(ctx.params.rows));
       }
       if (ctx.computes_here() && ctx.params.visibility) {

@@ -11,7 +11,9 @@
 // map there at its own resolution.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "formats/image_file.h"
