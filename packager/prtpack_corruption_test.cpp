@@ -210,6 +210,7 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
   seeds.emplace_back("compressed_transport.prtpack", WritePack(in));
   seeds.emplace_back("visibility.prtpack", WritePack(testing::MakeSmallGlossyInput()));
   seeds.emplace_back("compressed_transport_rgb.prtpack", WritePack(SmallThreeChannelInput()));
+  seeds.emplace_back("image.prtpack", WritePack(testing::MakeImageInput()));
   PackInput real;
   // A real mesh from the Debian data package the build extracts (always present, unlike
   // ../shared/data); the committed corpus also holds bunny_lowres.prtpack from an earlier run.

@@ -427,19 +427,7 @@ TEST(PrtpackRoundTrip, WriterRejectsBadInputs) {
 namespace prt::pack {
 namespace {
 
-// An image pack (IMGE, 1.2): a 4×3 image over the small input's two meshes, 12 rows of T.
-PackInput MakeImageInput() {
-  PackInput in = MakeSmallInput();
-  ImageSamplesInfo im;
-  im.camera.eye = {0, 1, 4};
-  im.camera.target = {0, 0.5, 0};
-  im.camera.width = 4;
-  im.camera.height = 3;
-  im.camera.fov_deg = 35;
-  im.pixel_mesh = {0, 0, 1, kImageBackground, 1, 1, 0, 0, 1, kImageBackground, 1, 0};
-  in.image = im;
-  return in;
-}
+using testing::MakeImageInput;
 
 TEST(PrtpackRoundTrip, ImagePacksCarryTheirPixelsAsACriticalSection) {
   const PackInput in = MakeImageInput();

@@ -63,6 +63,20 @@ inline PackInput MakeSmallInput() {
   return in;
 }
 
+// An image pack (IMGE, 1.2): a 4×3 image over the small input's two meshes and its 12 rows of T.
+inline PackInput MakeImageInput() {
+  PackInput in = MakeSmallInput();
+  ImageSamplesInfo im;
+  im.camera.eye = {0, 1, 4};
+  im.camera.target = {0, 0.5, 0};
+  im.camera.width = 4;
+  im.camera.height = 3;
+  im.camera.fov_deg = 35;
+  im.pixel_mesh = {0, 0, 1, kImageBackground, 1, 1, 0, 0, 1, kImageBackground, 1, 0};
+  in.image = im;
+  return in;
+}
+
 // Visibility maps at n = 16 for `vertices` vertices with every block kind: face 0 all visible,
 // face 1 occluded, the other faces a vertex-dependent pattern (mixed blocks).
 inline std::vector<uint8_t> MakeSmallVisibility(std::size_t vertices, uint32_t seed) {
