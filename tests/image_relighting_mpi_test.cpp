@@ -18,6 +18,11 @@
 #include "formats/image_file.h"
 #include "formats/transport_file.h"
 #include "tests/run_prt_farm.h"
+#include "viewer/environment_background.h"
+#include "viewer/lighting.h"
+#include "viewer/viewer_session.h"
+#include "viewer/window_test_support.h"
+#include "vocabulary/cubemap_resample.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/envmap.h"
@@ -167,6 +172,29 @@ TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePack
   // Keep 5 %, 9 bits: about a percent of relative RMS error, the worst pixel on a silhouette.
   EXPECT_LT(std::sqrt(err2 / ref2), 0.02);
   EXPECT_LT(worst, 0.05);
+
+#ifdef PRT_VIEW_HAS_SDL2
+  // The window shows the image pack's fixed view, as the headless render does (PBI under still
+  // lighting is exact from frame 0), to one 8-bit code per channel.
+  if (std::system("command -v xvfb-run >/dev/null 2>&1") == 0) {
+    const std::string shot = testing::RunWindowScreenshot(
+        PRT_VIEW_EXE, pack, sky, dir, "--window-frames 5 --lighting pbi --terms 50");
+    ASSERT_FALSE(shot.empty()) << ReadWholeFile(dir + "/log.txt");
+    const std::string npy = ReadWholeFile(shot);
+    ASSERT_GT(npy.size(), 10u);
+    const std::size_t header =
+        10 + (static_cast<unsigned char>(npy[8]) | (static_cast<unsigned char>(npy[9]) << 8));
+    std::vector<float> codes((npy.size() - header) / 4);
+    std::memcpy(codes.data(), npy.data() + header, 4 * codes.size());
+    const auto s = ViewerSession::Open(pack);
+    const ImageRgb want = s->Render(
+        s->camera(),
+        s->Shade(s->RelightExact(ProjectLighting(ResampleToCubemap(uniform, k.scene.cubemap_n)))),
+        EnvironmentBackground(std::make_shared<const EnvironmentLookup>(uniform)));
+    ASSERT_EQ(codes.size(), want.pixels.size());
+    EXPECT_LE(testing::LargestCodeDifference(codes, want), 1.0);
+  }
+#endif
 
   // A vertex run forced into the folder leaves no image.prti behind.
   const std::string vertex_scene = std::string(PRT_TESTS_DATA_DIR) + "/tiny.toml";
