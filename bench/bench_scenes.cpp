@@ -23,25 +23,30 @@ std::vector<NamedEnvironment> BenchEnvironments(int n, const std::vector<std::st
   return out;
 }
 
-std::vector<float> RelitRadiance(const SceneGeometry& geometry, const std::vector<float>& rows,
+std::vector<float> RelitRadiance(std::span<const Rgb> albedo, const std::vector<float>& rows,
                                  const CubemapRgb& light) {
   const std::size_t T = light.TexelCount();
   const std::size_t N = rows.size() / T;
   std::vector<float> out(N * 3);
-  std::size_t s = 0;
-  for (const SceneMesh& m : geometry.meshes) {
-    for (std::size_t v = 0; v < m.mesh.positions.size() && s < N; ++v, ++s) {
-      const float* row = rows.data() + s * T;
-      double acc[3] = {0, 0, 0};
-      for (std::size_t j = 0; j < T; ++j) {
-        acc[0] += static_cast<double>(row[j]) * light.r[j];
-        acc[1] += static_cast<double>(row[j]) * light.g[j];
-        acc[2] += static_cast<double>(row[j]) * light.b[j];
-      }
-      for (int c = 0; c < 3; ++c) out[s * 3 + c] = static_cast<float>(m.albedo[c] * acc[c]);
+  for (std::size_t s = 0; s < N && s < albedo.size(); ++s) {
+    const float* row = rows.data() + s * T;
+    double acc[3] = {0, 0, 0};
+    for (std::size_t j = 0; j < T; ++j) {
+      acc[0] += static_cast<double>(row[j]) * light.r[j];
+      acc[1] += static_cast<double>(row[j]) * light.g[j];
+      acc[2] += static_cast<double>(row[j]) * light.b[j];
     }
+    for (int c = 0; c < 3; ++c) out[s * 3 + c] = static_cast<float>(albedo[s][c] * acc[c]);
   }
   return out;
+}
+
+std::vector<float> RelitRadiance(const SceneGeometry& geometry, const std::vector<float>& rows,
+                                 const CubemapRgb& light) {
+  std::vector<Rgb> albedo;  // the meshes' vertices in order
+  for (const SceneMesh& m : geometry.meshes)
+    albedo.insert(albedo.end(), m.mesh.positions.size(), m.albedo);
+  return RelitRadiance(albedo, rows, light);
 }
 
 double RelativeRmsError(const std::vector<float>& b, const std::vector<float>& ref,

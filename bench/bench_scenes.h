@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,9 @@ std::vector<NamedEnvironment> BenchEnvironments(int n,
 // Relit radiance per sample (3 floats per sample): B_s = albedo_s ⊙ Σ_j T[s][j]·L_j, in double.
 // `rows` is samples × texels, row-major.
 std::vector<float> RelitRadiance(const SceneGeometry& geometry, const std::vector<float>& rows,
+                                 const CubemapRgb& light);
+// The same with one albedo per sample (an image run's pixels: their meshes', 0 for background).
+std::vector<float> RelitRadiance(std::span<const Rgb> albedo, const std::vector<float>& rows,
                                  const CubemapRgb& light);
 
 // Relative RMS error ‖B − B_ref‖ / ‖B_ref‖ over samples [first, last) and all three channels.

@@ -149,9 +149,10 @@ Transport ReadRun(const std::string& dir, double order_normal_weight) {
       throw prt::InputError(image, "does not describe the run's " + std::to_string(t.S) + " rows");
     t.domain = prt::ImageDomain(static_cast<uint32_t>(info.camera.width),
                                 static_cast<uint32_t>(info.camera.height));
-    for (uint32_t m : info.pixel_mesh)
-      for (int c = 0; c < 3; ++c)
-        t.albedo.push_back(m == prt::kImageBackground ? 0.f : g.meshes[m].albedo[c]);
+    std::vector<prt::Rgb> mesh_albedo;
+    for (const prt::SceneMesh& m : g.meshes) mesh_albedo.push_back(m.albedo);
+    for (const prt::Rgb& a : prt::PixelAlbedo(info, mesh_albedo))
+      t.albedo.insert(t.albedo.end(), a.begin(), a.end());
     t.name = "image";
   } else {
     t.domain = prt::SpatialDomainOf(g, order_normal_weight);

@@ -127,20 +127,9 @@ struct Traced {
   // albedo ⊙ (rows · light) per sample, interleaved RGB, in the rows' order.
   std::vector<float> Relit(const prt::CubemapRgb& light) const {
     if (!image) return prt::bench::RelitRadiance(geometry, rows, light);
-    const std::size_t T = light.TexelCount();
-    std::vector<float> out(3 * samples(), 0.f);
-    for (std::size_t p = 0; p < samples(); ++p) {
-      const uint32_t m = image->pixel_mesh[p];
-      if (m == prt::kImageBackground) continue;
-      const float* row = rows.data() + p * T;
-      for (int c = 0; c < 3; ++c) {
-        const std::vector<float>& l = light.Channel(c);
-        double acc = 0;
-        for (std::size_t j = 0; j < T; ++j) acc += static_cast<double>(row[j]) * l[j];
-        out[3 * p + c] = static_cast<float>(geometry.meshes[m].albedo[c] * acc);
-      }
-    }
-    return out;
+    std::vector<prt::Rgb> mesh_albedo;
+    for (const prt::SceneMesh& m : geometry.meshes) mesh_albedo.push_back(m.albedo);
+    return prt::bench::RelitRadiance(prt::PixelAlbedo(*image, mesh_albedo), rows, light);
   }
 };
 

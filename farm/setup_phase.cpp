@@ -94,8 +94,7 @@ class SetupPhase final : public FarmPhase {
         if (ctx.rank == 0) {
           WriteImageSamplesFile(ctx.folder.image,
                                 ImageSamplesInfo{ctx.params.camera, ctx.pixel_mesh});
-          const auto background =
-              std::count(ctx.pixel_mesh.begin(), ctx.pixel_mesh.end(), kImageBackground);
+          const std::size_t background = BackgroundPixels(ctx.pixel_mesh);
           spdlog::info("image relighting: {} of {} pixels see the environment (background)",
                        background, ctx.pixel_mesh.size());
           ctx.report.image_json = nlohmann::json{

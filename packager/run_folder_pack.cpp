@@ -256,15 +256,13 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
     in.image =
         ReadImageSamplesFile(image_file.string(), static_cast<uint32_t>(geometry.meshes.size()));
     const Camera& k = in.image->camera;
-    meta["image"] = {
-        {"width", k.width},
-        {"height", k.height},
-        {"eye", {k.eye.x, k.eye.y, k.eye.z}},
-        {"target", {k.target.x, k.target.y, k.target.z}},
-        {"up", {k.up.x, k.up.y, k.up.z}},
-        {"fov", k.fov_deg},
-        {"background_pixels",
-         std::count(in.image->pixel_mesh.begin(), in.image->pixel_mesh.end(), kImageBackground)}};
+    meta["image"] = {{"width", k.width},
+                     {"height", k.height},
+                     {"eye", {k.eye.x, k.eye.y, k.eye.z}},
+                     {"target", {k.target.x, k.target.y, k.target.z}},
+                     {"up", {k.up.x, k.up.y, k.up.z}},
+                     {"fov", k.fov_deg},
+                     {"background_pixels", in.image->background_pixels()}};
   }
   const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
                                                             : fs::path(options.transport_file);
@@ -380,7 +378,7 @@ std::string InspectPack(const PackReader& r) {
   }
   if (r.has_image()) {
     const ImageSamplesInfo im = r.ReadImage();
-    const auto bg = std::count(im.pixel_mesh.begin(), im.pixel_mesh.end(), kImageBackground);
+    const std::size_t bg = im.background_pixels();
     out << "image: " << im.camera.width << "x" << im.camera.height
         << " pixels are the samples (image relighting), " << bg << " background; camera eye ("
         << im.camera.eye.x << ", " << im.camera.eye.y << ", " << im.camera.eye.z << "), fov "

@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -53,16 +52,13 @@ std::string WorkDir(const std::string& name) {
 std::string ImageScene(const std::string& dir, const std::string& base,
                        const std::string& sampling = "") {
   std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/" + base);
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
-  text.replace(text.find("[scene]\n"), 8, "[scene]\nsamples = \"camera\"\n");
-  text.replace(text.find("[sampling]\n"), 11,
-               "[camera]\neye = [0.4, 1.6, 3.2]\ntarget = [0.0, 0.2, 0.0]\nfov = 30.0\nwidth = " +
-                   std::to_string(kWidth) + "\nheight = " + std::to_string(kHeight) +
-                   "\n\n[sampling]\n" + sampling);
-  const std::string file = dir + "/" + base;
-  std::ofstream(file) << text;
-  return file;
+  testing::ReplaceOnce(text, "[scene]\n", "[scene]\nsamples = \"camera\"\n");
+  testing::ReplaceOnce(
+      text, "[sampling]\n",
+      "[camera]\neye = [0.4, 1.6, 3.2]\ntarget = [0.0, 0.2, 0.0]\nfov = 30.0\nwidth = " +
+          std::to_string(kWidth) + "\nheight = " + std::to_string(kHeight) + "\n\n[sampling]\n" +
+          sampling);
+  return testing::WriteTestScene(text, dir + "/" + base);
 }
 
 // The kernels in one process: an image scene's geometry, camera samples and transport sampler

@@ -7,7 +7,6 @@
 
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -73,13 +72,11 @@ std::vector<SampleWeight> CombinationOf(const std::vector<uint32_t>& pairs, uint
 // must be the same; returns the scene file.
 std::string FarmSparsePathTracing(const std::string& dir, const std::string& sparse_extra) {
   std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
   text.replace(text.find("method = \"sparse\""), 17,
                "method = \"sparse\"\nbounces = 2\nestimator = \"path\"\ngather_paths = 8");
   text += sparse_extra;  // the file ends in [sparse]
   const std::string scene_file = dir + "/path.toml";
-  std::ofstream(scene_file) << text;
+  testing::WriteTestScene(text, scene_file);
   for (int ranks : {1, 2}) {
     const auto r =
         Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
@@ -208,10 +205,8 @@ TEST(InterreflectionMpiTest, AnAlbedoEditReRunsTheBouncesNotTheRows) {
   const std::string from = "albedo = [0.5, 0.5, 0.5]";
   ASSERT_NE(text.find(from), std::string::npos);
   text.replace(text.find(from), from.size(), "albedo = [0.7, 0.7, 0.7]");
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
   const std::string edited = dir + "/edited.toml";
-  std::ofstream(edited) << text;
+  testing::WriteTestScene(text, edited);
   const auto r = Farm(2, edited + " --out " + run + kSmallJobs + " --bounces 1 --resume");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const nlohmann::json rep = Report(run);
@@ -388,13 +383,11 @@ TEST(InterreflectionMpiTest, SparsePathFeaturesAreTheKernelsForAnyRankCount) {
 TEST(InterreflectionMpiTest, SparseGatherFeaturesAreTheKernelsForAnyRankCount) {
   const std::string dir = WorkDir("sparse_gather_features");
   std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
   text.replace(text.find("method = \"sparse\""), 17,
                "method = \"sparse\"\nbounces = 2\ngather_paths = 256");
   text += "indirect = \"features\"\nfeature_paths = 32\n";  // the file ends in [sparse]
   const std::string scene_file = dir + "/gather.toml";
-  std::ofstream(scene_file) << text;
+  testing::WriteTestScene(text, scene_file);
   for (int ranks : {1, 2}) {
     const auto r =
         Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
@@ -448,11 +441,9 @@ TEST(InterreflectionMpiTest, SparseGatherFeaturesAreTheKernelsForAnyRankCount) {
 TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCount) {
   const std::string dir = WorkDir("path");
   std::string text = ReadWholeFile(kScene);
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
   text += "bounces = 2\nestimator = \"path\"\ngather_paths = 16\n";
   const std::string scene_file = dir + "/path.toml";
-  std::ofstream(scene_file) << text;
+  testing::WriteTestScene(text, scene_file);
   for (int ranks : {1, 2}) {
     const auto r =
         Farm(ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
@@ -489,12 +480,10 @@ TEST(InterreflectionMpiTest, PathTracedIndirectIsTheReferenceKernelsForAnyRankCo
 TEST(InterreflectionMpiTest, ColouredAlbedosGiveOneRowPerChannelThroughTheCompression) {
   const std::string dir = WorkDir("colour");
   std::string text = ReadWholeFile(kScene);
-  text.replace(text.find("path = \"box.off\""), 16,
-               "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
   const std::string from = "albedo = [0.5, 0.5, 0.5]";
   text.replace(text.find(from), from.size(), "albedo = [0.8, 0.2, 0.1]");
   const std::string scene_file = dir + "/red.toml";
-  std::ofstream(scene_file) << text;
+  testing::WriteTestScene(text, scene_file);
   const std::string run = dir + "/run";
   const auto r = Farm(2, scene_file + " --out " + run + kSmallJobs + " --bounces 1");
   ASSERT_EQ(r.exit_code, 0) << r.output;

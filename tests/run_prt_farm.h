@@ -1,14 +1,16 @@
 // Runs the prt-farm executable under mpirun for the MPI integration tests (farm_mpi_test.cpp,
-// compression_phase_mpi_test.cpp). The including target defines PRT_MPIEXEC,
-// PRT_MPIEXEC_NUMPROC_FLAG, PRT_MPIEXEC_PREFLAGS, PRT_MPIEXEC_POSTFLAGS, PRT_FARM_EXE and
-// PRT_MPI_TEST_ENV_LIST (tests/CMakeLists.txt).
+// compression_phase_mpi_test.cpp, …), and writes the edited test scenes they farm. The including
+// target defines PRT_MPIEXEC, PRT_MPIEXEC_NUMPROC_FLAG, PRT_MPIEXEC_PREFLAGS,
+// PRT_MPIEXEC_POSTFLAGS, PRT_FARM_EXE and PRT_MPI_TEST_ENV_LIST (tests/CMakeLists.txt).
 #pragma once
 
 #include <sys/wait.h>
 
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 namespace prt::testing {
@@ -47,6 +49,22 @@ inline RunResult RunPrtFarm(int ranks, const std::string& args) {
   const int status = ::pclose(pipe);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   return r;
+}
+
+// Replaces the first `from` in `text` with `to` (`from` must be there: a test edits a known file).
+inline void ReplaceOnce(std::string& text, const std::string& from, const std::string& to) {
+  const std::size_t at = text.find(from);
+  if (at == std::string::npos) throw std::invalid_argument("ReplaceOnce: no '" + from + "'");
+  text.replace(at, from.size(), to);
+}
+
+// An edited copy of a tests/data scene that may live anywhere: `text` with its mesh path
+// "box.off" made absolute, written to `file`; returns `file`.
+inline std::string WriteTestScene(std::string text, const std::string& file) {
+  ReplaceOnce(text, "path = \"box.off\"",
+              "path = \"" + std::string(PRT_TESTS_DATA_DIR) + "/box.off\"");
+  std::ofstream(file) << text;
+  return file;
 }
 
 }  // namespace prt::testing

@@ -62,9 +62,7 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
     std::vector<Rgb> mesh_albedo;
     for (std::size_t m = 0; m < reader.mesh_count(); ++m)
       mesh_albedo.push_back(reader.ReadMaterial(m).albedo);
-    s->albedo_.reserve(s->image_->pixels());
-    for (uint32_t m : s->image_->pixel_mesh)
-      s->albedo_.push_back(m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : mesh_albedo[m]);
+    s->albedo_ = PixelAlbedo(*s->image_, mesh_albedo);
   }
   std::size_t offset = 0;
   for (std::size_t m = 0; !s->image_ && m < reader.mesh_count(); ++m) {

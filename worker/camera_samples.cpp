@@ -13,12 +13,6 @@
 
 namespace prt {
 
-std::size_t CameraSamples::background_count() const {
-  std::size_t n = 0;
-  for (uint32_t m : pixel_mesh) n += m == kImageBackground ? 1 : 0;
-  return n;
-}
-
 CameraSamples ComputeCameraSamples(const EmbreeScene& scene, const SceneSurfaces& surfaces,
                                    const Camera& camera, const std::string& name) {
   if (!IsFinite(camera.eye) || !IsFinite(camera.target) || !IsFinite(camera.up))

@@ -32,7 +32,7 @@ struct CameraSamples {
   // Per pixel: the index of the mesh it sees (SceneGeometry::meshes, its albedo), or
   // kImageBackground.
   std::vector<uint32_t> pixel_mesh;
-  std::size_t background_count() const;
+  std::size_t background_count() const { return BackgroundPixels(pixel_mesh); }
 };
 
 // Traces the primary rays of `camera` (parallel over rows, TBB). A background pixel's sample
