@@ -1,11 +1,14 @@
 // prt-farm's brute-force sampling phase (docs/farm.md, "Job queue"): every texel of every spatial
-// sample, contiguous ranges of samples per job. A worker returns the rows with their XXH64; rank 0
-// checks it, writes the rows in place into transport.prtt.partial, and the job loop fdatasyncs
-// and journals them.
+// sample, contiguous ranges of samples per job. Where every rank sees the run folder
+// (ctx.rows_in_place) the worker writes its rows into transport.prtt.partial itself, fdatasyncs
+// them and returns only their XXH64 and counters; otherwise it returns the rows, rank 0 checks
+// them against the XXH64 and writes them. Either way the job loop journals the job once its rows
+// are durable (docs/farm.md, "Where the rows go").
 #include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <string>
 
 #include "farm/farm_context.h"
@@ -21,6 +24,7 @@ namespace {
 // What a worker returns before the rows (count × cols floats).
 struct BruteResultHeader {
   uint64_t rows_checksum = 0;
+  uint64_t in_place = 0;  // 1: the worker wrote and synced the rows; they do not follow
   uint64_t rays_traced = 0;
   uint64_t texels_traced = 0;
   uint64_t texels_below_horizon = 0;
@@ -33,14 +37,24 @@ TransportVariance VarianceSumsShape(const FarmContext& ctx) {
                                static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups());
 }
 
-// Traces samples `range` into the result payload: the header, the rows, then their variance
-// sums (an encoded TransportVariance).
-void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string& out) {
+// Traces samples `range` into the result payload: the header, the rows (unless `in_place`: then
+// they go into its file, durably, before the result leaves), then their variance sums (an encoded
+// TransportVariance).
+void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string& out,
+                     TransportFileWriter* in_place) {
   const uint64_t cols = ctx.sampler->layout().texel_count();
   const std::size_t at = out.size();
   const std::size_t floats = static_cast<std::size_t>(range.count * cols);
-  out.resize(at + sizeof(BruteResultHeader) + floats * sizeof(float));
-  float* rows = reinterpret_cast<float*>(out.data() + at + sizeof(BruteResultHeader));
+  thread_local std::vector<float> own_rows;
+  float* rows = nullptr;
+  if (in_place) {
+    own_rows.resize(floats);
+    rows = own_rows.data();
+    out.resize(at + sizeof(BruteResultHeader));
+  } else {
+    out.resize(at + sizeof(BruteResultHeader) + floats * sizeof(float));
+    rows = reinterpret_cast<float*>(out.data() + at + sizeof(BruteResultHeader));
+  }
   // The rows' per-texel Monte-Carlo variance, summed per mesh (formats/transport_variance.h).
   thread_local std::vector<float> variance;
   const bool with_variance = ctx.sampler->VarianceEstimable();
@@ -61,12 +75,22 @@ void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string&
   h.texels_traced = stats.texels_traced;
   h.texels_below_horizon = stats.texels_below_horizon;
   h.rays_below_horizon = stats.rays_below_horizon;
-  std::memcpy(out.data() + at, &h, sizeof h);
   TransportVariance sums = VarianceSumsShape(ctx);
   if (with_variance) {
     for (uint64_t r = 0; r < range.count; ++r)
       sums.AddRow(range.first + r, variance.data() + r * cols);
   }
+  if (in_place) {
+    // Rows and variance record durable before the result that lets rank 0 journal them.
+    in_place->WriteRows(range.first, range.count, rows);
+    ctx.rank_variance->Record(ctx.method, range.first, range.count, sums);
+    in_place->Sync();
+    ctx.rank_variance->Sync();
+    h.in_place = 1;
+    std::memcpy(out.data() + at, &h, sizeof h);
+    return;
+  }
+  std::memcpy(out.data() + at, &h, sizeof h);
   out += EncodeTransportVariance(sums);
 }
 
@@ -75,10 +99,18 @@ class BrutePhase final : public FarmPhase {
   const char* name() const override { return "brute"; }
 
   void Run(FarmContext& ctx) override {
+    // This rank's own handle on transport.prtt.partial (rank 0's worker thread has its own, apart
+    // from the coordinator's), opened at the first job: setup created the file.
+    std::optional<TransportFileWriter> rows_out;
     RunJobPhase(
         ctx,
-        [&ctx](const RowRange& range, std::string_view, std::string& out) {
-          ComputeBruteJob(ctx, range, out);
+        [&ctx, &rows_out](const RowRange& range, std::string_view, std::string& out) {
+          if (ctx.rows_in_place && !rows_out) {
+            rows_out.emplace(TransportFileWriter::OpenRows(ctx.folder.partial, ctx.RowsFileInfo()));
+            ctx.rank_variance =
+                std::make_unique<RankVarianceLog>(ctx.folder, ctx.rank, VarianceSumsShape(ctx));
+          }
+          ComputeBruteJob(ctx, range, out, rows_out ? &*rows_out : nullptr);
         },
         [&ctx](JobLoop& loop) { Coordinate(ctx, loop); });
   }
@@ -112,25 +144,32 @@ class BrutePhase final : public FarmPhase {
     batch.max_items = std::max<uint64_t>(1, kMaxJobBytes / row_bytes);
     batch.accept = [&ctx, row_bytes](int rank, const RowRange& range, std::string_view payload) {
       BruteResultHeader h;
-      if (payload.size() < sizeof h + range.count * row_bytes)
+      if (payload.size() >= sizeof h) std::memcpy(&h, payload.data(), sizeof h);
+      const uint64_t rows_bytes = h.in_place ? 0 : range.count * row_bytes;
+      if (payload.size() < sizeof h + rows_bytes)
         throw RankFailure("rank " + std::to_string(rank) + " returned " +
                           std::to_string(payload.size()) + " bytes for " +
                           std::to_string(range.count) + " rows");
-      std::memcpy(&h, payload.data(), sizeof h);
       const char* rows = payload.data() + sizeof h;
-      if (Checksum64(rows, range.count * row_bytes) != h.rows_checksum) {
+      if (!h.in_place && Checksum64(rows, rows_bytes) != h.rows_checksum) {
         throw RankFailure("rows from rank " + std::to_string(rank) +
                           " arrived damaged (checksum mismatch)");
       }
-      TransportVariance sums;
-      try {
-        sums = DecodeTransportVariance(payload.substr(sizeof h + range.count * row_bytes),
-                                       "variance sums from rank " + std::to_string(rank));
-      } catch (const InputError& e) {
-        throw RankFailure(e.what());
+      if (!h.in_place) {
+        // The rows and their variance sums came with the result: rank 0 writes both.
+        TransportVariance sums;
+        try {
+          sums = DecodeTransportVariance(payload.substr(sizeof h + rows_bytes),
+                                         "variance sums from rank " + std::to_string(rank));
+        } catch (const InputError& e) {
+          throw RankFailure(e.what());
+        }
+        ctx.writer->WriteRows(range.first, range.count, reinterpret_cast<const float*>(rows));
+        ctx.variance->Record(ctx.method, range.first, range.count, sums);
+      } else if (payload.size() != sizeof h) {
+        throw RankFailure("rank " + std::to_string(rank) + " returned " +
+                          std::to_string(payload.size()) + " bytes for rows it wrote itself");
       }
-      ctx.writer->WriteRows(range.first, range.count, reinterpret_cast<const float*>(rows));
-      ctx.variance->Record(ctx.method, range.first, range.count, sums);
       JournalEntry e;
       e.rows = range;
       e.rows_checksum = h.rows_checksum;

@@ -225,9 +225,26 @@ void Compress(FarmContext& ctx) {
     }
     spill.spill_dir = spill_dir.string();
 
-    const uint64_t chunk =
-        ChunkRows(uint64_t{cols} * sizeof(float), static_cast<uint32_t>(setup[1]),
-                  options.memory_budget_bytes, rows);
+    // Where every rank sees the run folder, each reads its own share of the rows (no row passes
+    // through rank 0) and a chunk is every rank's share of the budget; else rank 0 reads each
+    // chunk and scatters it.
+    TransposeReading reading;
+    reading.every_rank_reads = ctx.rows_in_place && size > 1;
+    reading.align = reading.every_rank_reads ? setup[1] : 1;  // whole blocks when ranks read
+    if (reading.every_rank_reads && rank != 0) {
+      reader = std::make_unique<ComposedTransport>(
+          folder.transport,
+          IndirectFiles(folder, ctx.params.bounces, ctx.params.path_estimator != 0),
+          ctx.params.channels);
+      if (reader->rows() != rows)
+        throw InputError(folder.transport, "rank " + std::to_string(rank) + " reads " +
+                                               std::to_string(reader->rows()) + " rows, rank 0 " +
+                                               std::to_string(rows));
+    }
+    const uint64_t chunk = std::min<uint64_t>(
+        rows, ChunkRows(uint64_t{cols} * sizeof(float), static_cast<uint32_t>(setup[1]),
+                        options.memory_budget_bytes, rows) *
+                  (reading.every_rank_reads ? static_cast<uint64_t>(size) : 1));
     ProgressOptions po = FarmProgressOptions(ctx, "rows", false);
     if (rank == 0) ctx.run_eta.StepStarted("compress");
     Progress progress("transpose", rows, po);
@@ -311,7 +328,7 @@ void Compress(FarmContext& ctx) {
           }
           col_progress->Advance(count);
         },
-        rank == 0 ? &progress : nullptr);
+        rank == 0 ? &progress : nullptr, reading);
     progress.Finish();
     if (col_progress) col_progress->Finish();
     if (global) {
@@ -415,6 +432,9 @@ void Compress(FarmContext& ctx) {
                        std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
       rep.write_seconds = FarmNow() - tw;
       rep.bytes_moved = total[0];
+      rep.every_rank_reads = reading.every_rank_reads;
+      rep.rank0_bytes_read = st.bytes_read;
+      rep.rank0_bytes_sent = st.bytes_sent;
       rep.spill_bytes = total[1];
       rep.spill_runs = total[2];
       rep.terms = total[3];

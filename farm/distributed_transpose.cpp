@@ -48,9 +48,13 @@ std::pair<uint32_t, uint32_t> OwnedColumns(uint32_t cols, int rank, int ranks) {
   return {static_cast<uint32_t>(c * r / p), static_cast<uint32_t>(c * (r + 1) / p)};
 }
 
-std::pair<uint64_t, uint64_t> ChunkShare(uint64_t first, uint64_t count, int rank, int ranks) {
+std::pair<uint64_t, uint64_t> ChunkShare(uint64_t first, uint64_t count, int rank, int ranks,
+                                         uint64_t align) {
   const uint64_t r = static_cast<uint64_t>(rank), p = static_cast<uint64_t>(ranks);
-  const uint64_t a = count * r / p, b = count * (r + 1) / p;
+  const uint64_t unit = std::max<uint64_t>(1, align);
+  const uint64_t units = (count + unit - 1) / unit;
+  const uint64_t a = std::min(count, units * r / p * unit);
+  const uint64_t b = std::min(count, units * (r + 1) / p * unit);
   return {first + a, b - a};
 }
 
@@ -72,12 +76,19 @@ uint64_t ChunkRows(uint64_t row_bytes, uint32_t rows_per_block, uint64_t memory_
 TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
                                     uint64_t chunk_rows, const RowReader& read,
                                     const RowPreparer& prepare, const BlockSpillOptions& spill,
-                                    const ColumnBlockSink& sink, Progress* progress) {
+                                    const ColumnBlockSink& sink, Progress* progress,
+                                    const TransposeReading& reading) {
   int rank = 0, size = 1;
   CheckMpi(MPI_Comm_rank(comm, &rank), "MPI_Comm_rank");
   CheckMpi(MPI_Comm_size(comm, &size), "MPI_Comm_size");
   if (chunk_rows == 0) throw std::invalid_argument("DistributedTranspose: chunk_rows is 0");
-  if (chunk_rows * cols > static_cast<uint64_t>(std::numeric_limits<int>::max()))
+  const bool own_reads = reading.every_rank_reads && size > 1;
+  const uint64_t align = reading.align;
+  // MPI counts: the scatter's (the whole chunk) or, reading shares, the largest share.
+  const uint64_t counted =
+      own_reads ? ChunkShare(0, chunk_rows, 0, size, align).second + std::max<uint64_t>(1, align)
+                : chunk_rows;
+  if (counted * cols > static_cast<uint64_t>(std::numeric_limits<int>::max()))
     throw std::invalid_argument("DistributedTranspose: chunk exceeds 2^31 floats");
   TransposeStats st;
   const auto [cb, ce] = OwnedColumns(cols, rank, size);
@@ -102,15 +113,36 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
   std::vector<int> counts(P), displs(P), scounts(P), sdispls(P), rcounts(P), rdispls(P);
   for (uint64_t first = 0; first < rows; first += chunk_rows) {
     const uint64_t count = std::min(chunk_rows, rows - first);
-    // Rank 0 reads the chunk; a failure is broadcast so that no rank waits forever.
+    const auto [my_first, my_count] = ChunkShare(first, count, rank, size, align);
+    // Rank 0 reads the chunk (or every rank its share); a failure is shared so that no rank
+    // waits forever.
     int ok = 1;
     std::exception_ptr failure;
-    if (rank == 0) {
+    if (own_reads) {
+      const double t = Now();
+      try {
+        ReserveFreshHuge(mine, my_count * cols);
+        mine.resize(my_count * cols);
+        if (my_count > 0) read(my_first, my_count, mine.data());
+        st.bytes_read += my_count * cols * sizeof(float);
+      } catch (...) {
+        ok = 0;
+        failure = std::current_exception();
+      }
+      st.read_seconds += Now() - t;
+      int all = 0;
+      CheckMpi(MPI_Allreduce(&ok, &all, 1, MPI_INT, MPI_MIN, comm), "MPI_Allreduce");
+      if (!all) {
+        if (failure) std::rethrow_exception(failure);
+        throw RankFailure("another rank could not read rows " + std::to_string(first) + "..");
+      }
+    } else if (rank == 0) {
       const double t = Now();
       try {
         ReserveFreshHuge(chunk, count * cols);
         chunk.resize(count * cols);
         read(first, count, chunk.data());
+        st.bytes_read += count * cols * sizeof(float);
       } catch (...) {
         ok = 0;
         failure = std::current_exception();
@@ -118,22 +150,25 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
       st.read_seconds += Now() - t;
     }
     double t = Now();
-    CheckMpi(MPI_Bcast(&ok, 1, MPI_INT, 0, comm), "MPI_Bcast");
-    if (!ok) {
-      if (failure) std::rethrow_exception(failure);
-      throw RankFailure("rank 0 could not read rows " + std::to_string(first) + "..");
+    if (!own_reads) {
+      CheckMpi(MPI_Bcast(&ok, 1, MPI_INT, 0, comm), "MPI_Bcast");
+      if (!ok) {
+        if (failure) std::rethrow_exception(failure);
+        throw RankFailure("rank 0 could not read rows " + std::to_string(first) + "..");
+      }
+      // Scatter: rank r gets rows ChunkShare(r) of the chunk.
+      for (std::size_t r = 0; r < P; ++r) {
+        const auto [f, c] = ChunkShare(first, count, static_cast<int>(r), size, align);
+        counts[r] = static_cast<int>(c * cols);
+        displs[r] = static_cast<int>((f - first) * cols);
+        if (rank == 0 && static_cast<int>(r) != 0) st.bytes_sent += c * cols * sizeof(float);
+      }
+      ReserveFreshHuge(mine, my_count * cols);
+      mine.resize(my_count * cols);
     }
-    // Scatter: rank r gets rows ChunkShare(r) of the chunk.
-    for (std::size_t r = 0; r < P; ++r) {
-      const auto [f, c] = ChunkShare(first, count, static_cast<int>(r), size);
-      counts[r] = static_cast<int>(c * cols);
-      displs[r] = static_cast<int>((f - first) * cols);
-      if (rank == 0 && static_cast<int>(r) != 0) st.bytes_sent += c * cols * sizeof(float);
-    }
-    const auto [my_first, my_count] = ChunkShare(first, count, rank, size);
-    ReserveFreshHuge(mine, my_count * cols);
-    mine.resize(my_count * cols);
-    if (size == 1) {
+    if (own_reads) {
+      // Each rank read its own share above.
+    } else if (size == 1) {
       mine.swap(chunk);
     } else {
       CheckMpi(MPI_Scatterv(chunk.data(), counts.data(), displs.data(), MPI_FLOAT, mine.data(),
@@ -157,7 +192,7 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
         so += scounts[j];
         if (static_cast<int>(j) != rank)
           st.bytes_sent += static_cast<uint64_t>(scounts[j]) * sizeof(float);
-        const uint64_t ci = ChunkShare(first, count, static_cast<int>(j), size).second;
+        const uint64_t ci = ChunkShare(first, count, static_cast<int>(j), size, align).second;
         rcounts[j] = static_cast<int>(ci * width);
         rdispls[j] = ro;
         ro += rcounts[j];
@@ -182,7 +217,7 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
     if (tr) {
       SpillIo io(spill.spill_dir);
       for (std::size_t i = 0; i < P; ++i) {
-        const auto [f, c] = ChunkShare(first, count, static_cast<int>(i), size);
+        const auto [f, c] = ChunkShare(first, count, static_cast<int>(i), size, align);
         if (c == 0) continue;
         io([&] {
           tr->AddRows(f, c, size == 1 ? slabs : slabs + rdispls[i], size == 1 ? cols : width);
@@ -190,7 +225,7 @@ TransposeStats DistributedTranspose(MPI_Comm comm, uint64_t rows, uint32_t cols,
       }
     }
     st.buffer_seconds += Now() - t;
-    if (size == 1) mine.swap(chunk);
+    if (size == 1 && !own_reads) mine.swap(chunk);
     if (progress) progress->Advance(count);
   }
   if (tr) {

@@ -137,6 +137,13 @@ struct FarmContext {
   std::unique_ptr<TransportSampler> sampler;
   std::unique_ptr<VisibilitySampler> visibility_sampler;
   SparsePlan plan;  // method sparse: every rank has rank 0's plan
+  // Every rank sees the run folder (setup checked it with a probe file) and --rows-via-rank0 is
+  // off: a computing rank writes the rows it computes into the run's files itself and sends
+  // rank 0 only their checksums and counters; finalize and the compression's transpose read
+  // each rank's share of the rows where it runs (docs/farm.md, "Where the rows go").
+  bool rows_in_place = false;
+  // rows_in_place brute force: this computing rank's variance records and their sum.
+  std::unique_ptr<RankVarianceLog> rank_variance;
 
   // ---- rank 0 only
   bool folder_ready = false;  // the run folder is this run's (a report can be written)
@@ -182,6 +189,12 @@ struct FarmContext {
     if (!params.image) return geometry.meshes[geometry.MeshOfVertex(row)].albedo;
     const uint32_t m = pixel_mesh[row];
     return m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : geometry.meshes[m].albedo;
+  }
+  // transport.prtt.partial's dimensions (as setup created it).
+  TransportFileInfo RowsFileInfo() const {
+    return TransportFileInfo{params.rows, static_cast<uint32_t>(params.cubemap_n),
+                             options.rows_per_block, static_cast<uint32_t>(params.rays_per_texel),
+                             params.seed};
   }
   bool computes_here() const { return rank != 0 || size == 1 || options.coordinator_works; }
   int computing_ranks() const {

@@ -72,6 +72,10 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   bool coordinator_only = false;
   app.add_flag("--coordinator-only", coordinator_only,
                "Rank 0 only plans and writes (by default it also computes jobs)");
+  app.add_flag("--rows-via-rank0", o.rows_via_rank0,
+               "Send every row to rank 0, which alone writes the run folder (for an --out only "
+               "rank 0's node can reach; by default each rank writes its own rows when every "
+               "rank sees the folder)");
   app.add_flag("-q,--quiet", o.quiet, "Only warnings and errors");
   // Hidden debugging and test options (an empty group hides them from --help).
   app.add_option("--fail-after-jobs", o.fail_after_jobs)->group("");

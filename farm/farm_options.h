@@ -48,7 +48,11 @@ struct FarmOptions {
   double log_interval_s = 5.0;         // progress line interval on rank 0
   double rank_timeout_s = 0;           // 0: auto (max(300 s, 50 × job_seconds))
   bool coordinator_works = true;       // rank 0 also computes jobs on a worker thread
-  bool quiet = false;                  // warnings and errors only
+  // Every row travels to rank 0, which writes it (a run folder only rank 0 can reach). By default
+  // the ranks write and read their rows in the run folder themselves when every rank sees it
+  // (docs/farm.md, "Where the rows go").
+  bool rows_via_rank0 = false;
+  bool quiet = false;  // warnings and errors only
 
   // Hidden, for tests and debugging.
   int fail_after_jobs = -1;  // the rank fail_rank dies after this many jobs

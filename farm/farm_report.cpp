@@ -98,6 +98,23 @@ std::string FarmReport::ToJsonText() const {
       {"load_imbalance", LoadImbalance()},
       {"rank_details", ranks_json},
   };
+  {
+    Json batches = Json::array();
+    for (const CoordinatorReport& c : coordinator) {
+      const double items = static_cast<double>(std::max<uint64_t>(1, c.items));
+      batches.push_back(
+          {{"batch", c.batch},
+           {"items", c.items},
+           {"jobs", c.jobs},
+           {"bytes_in", c.bytes_in},
+           {"bytes_out", c.bytes_out},
+           {"bytes_per_item", static_cast<double>(c.bytes_in + c.bytes_out) / items},
+           {"cpu_seconds", c.cpu_seconds},
+           {"cpu_ms_per_job", c.jobs > 0 ? 1e3 * c.cpu_seconds / static_cast<double>(c.jobs) : 0.0},
+           {"wall_seconds", c.wall_seconds}});
+    }
+    j["coordinator"] = {{"rows_in_place", rows_in_place}, {"batches", batches}};
+  }
   if (sparse.enabled) {
     Json sp = Json::array();
     for (const SparsePhaseReport& p : sparse.phases) {
@@ -164,6 +181,9 @@ std::string FarmReport::ToJsonText() const {
     c["memory_budget_bytes"] = r.memory_budget_bytes;
     c["raw_bytes"] = r.raw_bytes;
     c["bytes_moved"] = r.bytes_moved;
+    c["every_rank_reads"] = r.every_rank_reads;
+    c["rank0_bytes_read"] = r.rank0_bytes_read;
+    c["rank0_bytes_sent"] = r.rank0_bytes_sent;
     c["spill_bytes"] = r.spill_bytes;
     c["spill_runs"] = r.spill_runs;
     c["transpose_seconds"] = r.transpose_seconds;

@@ -20,6 +20,19 @@ struct RankReport {
   double busy_seconds = 0;  // time inside the worker kernels
 };
 
+// Rank 0's side of one batch of jobs (report.json "coordinator"; docs/farm.md, "Where the rows
+// go"): the bytes of the job and result messages it exchanged with the other ranks, and the CPU
+// time of its main thread (planning, encoding, accepting, journaling) while the batch ran.
+struct CoordinatorReport {
+  std::string batch;
+  uint64_t items = 0;
+  uint64_t jobs = 0;
+  uint64_t bytes_in = 0;   // results received from other ranks
+  uint64_t bytes_out = 0;  // jobs sent to other ranks
+  double cpu_seconds = 0;
+  double wall_seconds = 0;
+};
+
 struct PhaseReport {
   std::string name;
   double wall_seconds = 0;
@@ -81,6 +94,10 @@ struct CompressionFarmReport {
   uint64_t memory_budget_bytes = 0;
   uint64_t raw_bytes = 0;    // rows × cols × 4
   uint64_t bytes_moved = 0;  // between ranks, all ranks
+  // Rank 0's own row traffic: rows it read from transport.prtt and row data it sent to other
+  // ranks (the whole T when it reads and scatters; its share when every rank reads its own).
+  bool every_rank_reads = false;
+  uint64_t rank0_bytes_read = 0, rank0_bytes_sent = 0;
   uint64_t spill_bytes = 0;  // all ranks
   uint64_t spill_runs = 0;
   double transpose_seconds = 0;  // max over ranks of exchange + buffer + merge
@@ -157,6 +174,10 @@ struct FarmReport {
   uint64_t checkpoints_rejected = 0;  // journaled jobs whose rows did not verify
 
   std::vector<RankReport> rank_reports;
+  // Whether the ranks wrote their rows themselves (FarmContext::rows_in_place), and rank 0's
+  // traffic per batch of jobs.
+  bool rows_in_place = false;
+  std::vector<CoordinatorReport> coordinator;
   SparseFarmReport sparse;
   VisibilityFarmReport visibility;
   CompressionFarmReport compression;  // last in report.json

@@ -1,37 +1,84 @@
-// prt-farm's finalize phase (docs/farm.md, "Phases"): rank 0 makes the sampled rows the run's
-// transport.prtt. It reads every block of transport.prtt.partial once, checksums it and
-// compresses it (one zstd frame per block, TBB over blocks), writes the packed file
-// (formats/transport_file.h, version 2: ~4× smaller than the float32 rows), renames it into place
-// and removes the partial file. The packed file is what later stages read, and what a re-run
-// with other compression settings or environments re-uses without tracing.
+// prt-farm's finalize phase (docs/farm.md, "Phases"): the sampled rows become the run's
+// transport.prtt. Every block of transport.prtt.partial is read once, checksummed and compressed
+// (one zstd frame per block, TBB over blocks) into the packed file (formats/transport_file.h,
+// version 2: ~4× smaller than the float32 rows), which is renamed into place; the partial file
+// is removed. The packed file is what later stages read, and what a re-run with other
+// compression settings or environments re-uses without tracing.
+//
+// Where every rank sees the run folder (ctx.rows_in_place; docs/farm.md, "Where the rows go")
+// the ranks pack the blocks together, in rounds: in each round rank r reads and compresses
+// `group` blocks of its own, the frame sizes are all-gathered (8 bytes per block), and every rank
+// writes its frames at their offsets in the packed file; rank 0 gathers the blocks' checksums
+// (8 bytes each) and writes the header. Otherwise rank 0 packs every block itself. The bytes of
+// transport.prtt are the same either way.
+#include <fcntl.h>
+#include <mpi.h>
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "farm/farm_context.h"
+#include "farm/mpi_support.h"
 #include "farm/progress.h"
 #include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 
 namespace prt {
 
 namespace {
 
+// Rank 0: the sum of every rank's RankVarianceLog (rows_in_place brute force) is added to the
+// run's variance sums. Collective.
+void ReduceRankVariance(FarmContext& ctx) {
+  TransportVariance mine =
+      MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
+                            static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups());
+  if (ctx.rank_variance) mine = ctx.rank_variance->total();
+  ctx.rank_variance.reset();
+  std::vector<double> flat;
+  for (const std::vector<double>& s : mine.sums) flat.insert(flat.end(), s.begin(), s.end());
+  std::vector<double> flat_all(ctx.rank == 0 ? flat.size() : 0);
+  std::vector<uint64_t> covered_all(ctx.rank == 0 ? mine.rows_covered.size() : 0);
+  CheckMpi(MPI_Reduce(flat.data(), flat_all.data(), static_cast<int>(flat.size()), MPI_DOUBLE,
+                      MPI_SUM, 0, ctx.comm),
+           "MPI_Reduce variance sums");
+  CheckMpi(
+      MPI_Reduce(mine.rows_covered.data(), covered_all.data(),
+                 static_cast<int>(mine.rows_covered.size()), MPI_UINT64_T, MPI_SUM, 0, ctx.comm),
+      "MPI_Reduce variance rows");
+  if (ctx.rank != 0 || !ctx.variance) return;
+  std::size_t at = 0;
+  for (std::size_t g = 0; g < mine.sums.size(); ++g) {
+    std::copy_n(flat_all.begin() + static_cast<std::ptrdiff_t>(at), mine.sums[g].size(),
+                mine.sums[g].begin());
+    at += mine.sums[g].size();
+    mine.rows_covered[g] = covered_all[g];
+  }
+  ctx.variance->AddTotal(mine);
+}
+
 class FinalizePhase final : public FarmPhase {
  public:
   const char* name() const override { return "finalize"; }
   void Run(FarmContext& ctx) override {
-    if (ctx.rank != 0) return;
-    const TransportFileInfo info = ctx.writer->info();
-    ctx.writer->Sync();
-    // The rows' Monte-Carlo variance sums, for the estimate stage.
-    if (ctx.variance) {
-      ctx.variance->WriteFile();
-      ctx.variance.reset();
+    if (ctx.rows_in_place && ctx.method == "brute") ReduceRankVariance(ctx);
+    if (ctx.rank != 0 && !ctx.rows_in_place) return;
+    const TransportFileInfo info = ctx.RowsFileInfo();
+    if (ctx.rank == 0) {
+      if (!(ctx.writer->info() == info)) throw std::logic_error("finalize: rows file differs");
+      ctx.writer->Sync();
+      // The rows' Monte-Carlo variance sums, for the estimate stage.
+      if (ctx.variance) {
+        ctx.variance->WriteFile();
+        ctx.variance.reset();
+      }
     }
     // Blocks are read, checksummed and compressed a group at a time: enough blocks for every
     // thread, at most a quarter of --memory-budget of rows in memory.
@@ -40,39 +87,99 @@ class FinalizePhase final : public FarmPhase {
         1, ctx.options.memory_budget_bytes / 4 / std::max<uint64_t>(1, block_bytes));
     const uint64_t group = std::min<uint64_t>(by_memory, 2 * static_cast<uint64_t>(ctx.threads));
     const uint64_t blocks = info.block_count();
-    PackedTransportWriter packed(ctx.folder.transport, info);
-    ProgressOptions po = FarmProgressOptions(ctx, "blocks");
-    ctx.run_eta.StepStarted("pack");
-    Progress progress("pack", blocks, po);
+    const int ranks = ctx.rows_in_place ? ctx.size : 1;
+    std::optional<PackedTransportWriter> packed;
+    if (ctx.rank == 0) packed.emplace(ctx.folder.transport, info);
+    std::optional<Progress> progress;
+    if (ctx.rank == 0) {
+      ctx.run_eta.StepStarted("pack");
+      progress.emplace("pack", blocks, FarmProgressOptions(ctx, "blocks"));
+    }
+    // The other ranks' handles: the partial file to read, the packed file to write (rank 0
+    // created it before they open it).
+    std::optional<TransportFileWriter> rows_in;
+    int out_fd = -1;
+    if (ranks > 1) {
+      CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
+      if (ctx.rank != 0) {
+        rows_in.emplace(TransportFileWriter::OpenRows(ctx.folder.partial, info));
+        const std::string tmp = ctx.folder.transport + ".tmp";
+        out_fd = ::open(tmp.c_str(), O_WRONLY | O_CLOEXEC);
+        if (out_fd < 0) throw FileIoError(tmp, SystemReason("cannot open"));
+      }
+    }
+    const TransportFileWriter& source = ctx.rank == 0 ? *ctx.writer : *rows_in;
+    const std::string out_path = ctx.folder.transport + ".tmp";
     std::vector<std::vector<float>> rows(static_cast<std::size_t>(group));
     std::vector<std::string> frames(static_cast<std::size_t>(group));
-    std::vector<uint64_t> sums(static_cast<std::size_t>(group));
-    for (uint64_t b0 = 0; b0 < blocks; b0 += group) {
+    std::vector<uint64_t> sums(static_cast<std::size_t>(group)), sizes(group);
+    std::vector<uint64_t> all_sizes(group * static_cast<uint64_t>(ranks)),
+        all_sums(ctx.rank == 0 ? all_sizes.size() : 0);
+    const uint64_t per_round = group * static_cast<uint64_t>(ranks);
+    uint64_t at = PackedTransportWriter::FirstFrameOffset(info);
+    for (uint64_t r0 = 0; r0 < blocks; r0 += per_round) {
+      // This rank's blocks of the round: [b0, b0 + count).
+      const uint64_t b0 = std::min(blocks, r0 + static_cast<uint64_t>(ctx.rank) * group);
       const uint64_t count = std::min(group, blocks - b0);
       for (uint64_t i = 0; i < count; ++i) {
         rows[i].resize(static_cast<std::size_t>(info.RowsInBlock(b0 + i) * info.cols()));
-        ctx.writer->ReadRows(info.FirstRowOfBlock(b0 + i), info.RowsInBlock(b0 + i),
-                             rows[i].data());
+        source.ReadRows(info.FirstRowOfBlock(b0 + i), info.RowsInBlock(b0 + i), rows[i].data());
       }
       tbb::parallel_for(uint64_t{0}, count, [&](uint64_t i) {
         sums[i] = Checksum64(rows[i].data(), rows[i].size() * sizeof(float));
         frames[i] = CompressTransportBlock(rows[i].data(), rows[i].size());
       });
-      for (uint64_t i = 0; i < count; ++i) packed.Append(b0 + i, frames[i], sums[i]);
-      progress.Advance(count);
+      std::fill(sizes.begin(), sizes.end(), 0);
+      for (uint64_t i = 0; i < count; ++i) sizes[i] = frames[i].size();
+      if (ranks > 1) {
+        CheckMpi(MPI_Allgather(sizes.data(), static_cast<int>(group), MPI_UINT64_T,
+                               all_sizes.data(), static_cast<int>(group), MPI_UINT64_T, ctx.comm),
+                 "MPI_Allgather frame sizes");
+        CheckMpi(MPI_Gather(sums.data(), static_cast<int>(group), MPI_UINT64_T, all_sums.data(),
+                            static_cast<int>(group), MPI_UINT64_T, 0, ctx.comm),
+                 "MPI_Gather block checksums");
+      } else {
+        all_sizes.assign(sizes.begin(), sizes.end());
+        all_sums.assign(sums.begin(), sums.end());
+      }
+      // Frames in block order: rank r's g-th block of the round is block r0 + r·group + g.
+      const uint64_t round_blocks = std::min(per_round, blocks - r0);
+      for (uint64_t k = 0; k < round_blocks; ++k) {
+        const uint64_t b = r0 + k;
+        const uint64_t owner = k / group, g = k % group;
+        const uint64_t bytes = all_sizes[owner * group + g];
+        if (owner == static_cast<uint64_t>(ctx.rank)) {
+          const std::string& frame = frames[g];
+          if (ctx.rank == 0) {
+            PwriteAll(packed->fd(), frame.data(), frame.size(), at, out_path);
+          } else {
+            PwriteAll(out_fd, frame.data(), frame.size(), at, out_path);
+          }
+        }
+        if (ctx.rank == 0) packed->Place(b, bytes, all_sums[owner * group + g]);
+        at += bytes;
+      }
+      if (progress) progress->Advance(round_blocks);
     }
+    if (out_fd >= 0) {
+      const bool synced = ::fsync(out_fd) == 0;
+      ::close(out_fd);
+      if (!synced) throw FileIoError(out_path, SystemReason("fsync failed"));
+    }
+    if (ranks > 1) CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
+    if (ctx.rank != 0) return;
     if (ctx.options.fail_in == "finalize" && ctx.options.fail_rank == 0)
       ExitAbruptly(0, "before renaming " + ctx.folder.transport);
-    const uint64_t bytes = packed.Finish();
-    progress.Finish();
+    const uint64_t bytes = packed->Finish();
+    progress->Finish();
     ctx.run_eta.StepFinished("pack");
     ctx.writer.reset();
     std::filesystem::remove(ctx.folder.partial);
     SyncDirectory(ctx.folder.dir);
     spdlog::info(
-        "wrote {} ({} rows x {} texels, {} blocks of {} rows; {:.1f} MB packed, {:.1f}% "
-        "of the {:.1f} MB of float32 rows)",
-        ctx.folder.transport, info.rows, info.cols(), blocks, info.rows_per_block,
+        "wrote {} ({} rows x {} texels, {} blocks of {} rows, packed by {} rank(s); {:.1f} MB "
+        "packed, {:.1f}% of the {:.1f} MB of float32 rows)",
+        ctx.folder.transport, info.rows, info.cols(), blocks, info.rows_per_block, ranks,
         static_cast<double>(bytes) / 1e6,
         100.0 * static_cast<double>(bytes) / static_cast<double>(info.rows * info.row_bytes()),
         static_cast<double>(info.rows * info.row_bytes()) / 1e6);

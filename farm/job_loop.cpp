@@ -3,6 +3,7 @@
 
 #include <mpi.h>
 #include <spdlog/spdlog.h>
+#include <time.h>
 
 #include <algorithm>
 #include <chrono>
@@ -23,6 +24,13 @@
 namespace prt {
 
 namespace {
+
+// CPU seconds of the calling thread (rank 0's main thread: the coordinator's own cost).
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 enum Tag : int {
   kTagReady = 1,
@@ -338,6 +346,10 @@ void JobLoop::Run(JobBatch& batch) {
 
   const double timeout = ctx.rank_timeout();
   const uint32_t number = st.batch_number;
+  CoordinatorReport traffic;
+  traffic.batch = batch.name;
+  traffic.items = batch.items - po.already_done;
+  const double cpu0 = ThreadCpuSeconds(), wall0 = FarmNow();
   double last_commit = FarmNow();
   std::vector<JournalEntry> pending;
 
@@ -403,9 +415,11 @@ void JobLoop::Run(JobBatch& batch) {
         e.first = range.first;
         e.count = range.count;
         std::memcpy(message.data(), &e, sizeof e);
+        ++traffic.jobs;
         if (s.local) {
           st.local->Give(e, std::move(message));
         } else {
+          traffic.bytes_out += message.size();
           s.sends.Send(std::move(message), s.rank, kTagJob, ctx.comm,
                        "MPI_Isend job to rank " + std::to_string(s.rank));
         }
@@ -441,6 +455,7 @@ void JobLoop::Run(JobBatch& batch) {
         st.SlotOf(src).ready = true;
       } else if (ms.MPI_TAG == kTagResult) {
         ReceiveBytes(ctx.comm, ms, st.incoming, "MPI_Recv result from rank " + std::to_string(src));
+        traffic.bytes_in += st.incoming.size();
         accept(src, st.incoming);
       } else if (ms.MPI_TAG == kTagFailed) {
         std::string message;
@@ -485,6 +500,20 @@ void JobLoop::Run(JobBatch& batch) {
   }
   progress.Finish();
   ctx.run_eta.StepFinished(batch.name);
+  traffic.cpu_seconds = ThreadCpuSeconds() - cpu0;
+  traffic.wall_seconds = FarmNow() - wall0;
+  if (ctx.size > 1 && traffic.jobs > 0) {
+    spdlog::info(
+        "[{}] rank 0 exchanged {:.1f} B per {} with the other ranks ({:.1f} MB in, {:.1f} MB "
+        "out) and spent {:.2f} ms of CPU per job",
+        batch.name,
+        static_cast<double>(traffic.bytes_in + traffic.bytes_out) /
+            static_cast<double>(std::max<uint64_t>(1, traffic.items)),
+        batch.unit == "samples" ? "row" : batch.unit, 1e-6 * static_cast<double>(traffic.bytes_in),
+        1e-6 * static_cast<double>(traffic.bytes_out),
+        1e3 * traffic.cpu_seconds / static_cast<double>(traffic.jobs));
+  }
+  rep.coordinator.push_back(std::move(traffic));
   ++st.batch_number;
 }
 

@@ -4,10 +4,13 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -48,6 +51,61 @@ void BroadcastBytes(FarmContext& ctx, std::string& bytes, uint64_t size) {
   for (uint64_t at = 0; at < size; at += kMaxBroadcastBytes) {
     const auto n = static_cast<int>(std::min(kMaxBroadcastBytes, size - at));
     CheckMpi(MPI_Bcast(bytes.data() + at, n, MPI_BYTE, 0, ctx.comm), "MPI_Bcast geometry");
+  }
+}
+
+// Whether every rank sees rank 0's run folder (docs/farm.md, "Where the rows go"): rank 0 writes a
+// probe file holding a fresh random token, every rank reads it back. A folder on node-local
+// disks at the same path holds another token (or none) on the other nodes, so a rank that reads
+// the right token sees the same file system. Collective; sets ctx.rows_in_place on every rank.
+void AgreeOnSharedFolder(FarmContext& ctx) {
+  ctx.rows_in_place = false;
+  if (ctx.size == 1 || ctx.params.visibility) return;
+  int want = ctx.options.rows_via_rank0 ? 0 : 1;
+  CheckMpi(MPI_Bcast(&want, 1, MPI_INT, 0, ctx.comm), "MPI_Bcast rows in place");
+  if (!want) {
+    if (ctx.rank == 0)
+      spdlog::info("--rows-via-rank0: every row travels to rank 0, which writes it");
+    return;
+  }
+  const std::string probe = (fs::path(ctx.folder.dir) / ".shared-folder-probe").string();
+  uint64_t token = 0;
+  int local = 1;
+  if (ctx.rank == 0) {
+    std::random_device rd;
+    token = (static_cast<uint64_t>(rd()) << 32) ^ rd() ^
+            static_cast<uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
+    try {
+      WriteFileDurably(probe, std::to_string(token));
+    } catch (const std::exception& e) {
+      spdlog::warn("cannot write the shared-folder probe: {}", e.what());
+      local = 0;
+    }
+  }
+  CheckMpi(MPI_Bcast(&token, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast probe token");
+  if (ctx.rank != 0) {
+    std::ifstream in(probe);
+    std::string text;
+    local = (in >> text) && text == std::to_string(token) ? 1 : 0;
+  }
+  int all = 0, first_blind = ctx.size;
+  const int mine = local ? ctx.size : ctx.rank;
+  CheckMpi(MPI_Allreduce(&local, &all, 1, MPI_INT, MPI_MIN, ctx.comm), "MPI_Allreduce probe");
+  CheckMpi(MPI_Allreduce(&mine, &first_blind, 1, MPI_INT, MPI_MIN, ctx.comm),
+           "MPI_Allreduce probe");
+  ctx.rows_in_place = all == 1;
+  if (ctx.rank == 0) {
+    std::error_code ec;
+    fs::remove(probe, ec);
+    ctx.report.rows_in_place = ctx.rows_in_place;
+    if (ctx.rows_in_place) {
+      spdlog::info("every rank sees {}: ranks write and read their own rows there", ctx.folder.dir);
+    } else {
+      spdlog::warn(
+          "rank {} does not see the run folder {} that rank 0 writes (not a shared file "
+          "system?): every row travels to rank 0 over MPI",
+          first_blind, ctx.folder.dir);
+    }
   }
 }
 
@@ -132,6 +190,7 @@ class SetupPhase final : public FarmPhase {
       if (ctx.rank == 0) ctx.report.error = message;
     }
     AgreeOrStop(ctx, local);
+    AgreeOnSharedFolder(ctx);
   }
 
  private:

@@ -2,6 +2,13 @@
 // new job's record is appended to checkpoints/variance.log (made durable with the rows, before
 // the job's journal line); a resumed run adds the logged records of the jobs it re-uses; the
 // finalize phase writes the total as run/transport.variance.
+//
+// Where the ranks write their own rows (docs/farm.md, "Where the rows go") the records do not
+// travel to rank 0 either: each computing rank appends its jobs' records to its own
+// checkpoints/variance.rank-<r>.log (RankVarianceLog), durably before its result leaves, and
+// keeps their running sum, which the finalize phase reduces onto rank 0. The next run's
+// VarianceAccumulator merges the rank logs into variance.log, so that a resume finds every
+// journaled job's record wherever it was computed.
 #pragma once
 
 #include <map>
@@ -36,6 +43,8 @@ class VarianceAccumulator {
   // run/transport.variance, durably.
   void WriteFile() const;
   const TransportVariance& total() const { return total_; }
+  // Adds sums recorded elsewhere (the ranks' RankVarianceLog totals, reduced).
+  void AddTotal(const TransportVariance& sums) { total_.Add(sums); }
 
  private:
   std::string log_path_, file_path_;
@@ -45,5 +54,30 @@ class VarianceAccumulator {
   uint64_t end_ = 0;
   bool dirty_ = false;
 };
+
+// A computing rank's own variance records (see above). Not thread-safe: one per rank, used by the
+// thread that computes its jobs.
+class RankVarianceLog {
+ public:
+  RankVarianceLog(const RunFolder& folder, int rank, TransportVariance empty);
+  ~RankVarianceLog();
+  RankVarianceLog(const RankVarianceLog&) = delete;
+  RankVarianceLog& operator=(const RankVarianceLog&) = delete;
+
+  // Appends the job's record (durable after Sync()) and adds it to total().
+  void Record(const std::string& phase, uint64_t first, uint64_t count,
+              const TransportVariance& sums);
+  void Sync();
+  const TransportVariance& total() const { return total_; }
+
+ private:
+  std::string path_;
+  TransportVariance total_;
+  int fd_ = -1;
+  bool dirty_ = false;
+};
+
+// checkpoints/variance.rank-<rank>.log
+std::string RankVarianceLogPath(const RunFolder& folder, int rank);
 
 }  // namespace prt

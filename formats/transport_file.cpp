@@ -274,6 +274,18 @@ TransportFileWriter TransportFileWriter::Reopen(const std::string& path,
   return writer;
 }
 
+TransportFileWriter TransportFileWriter::OpenRows(const std::string& path,
+                                                  const TransportFileInfo& info) {
+  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+  if (fd < 0) throw FileIoError(path, SystemReason("cannot open"));
+  TransportFileWriter writer(path, info, fd);
+  const DecodedHeader d = DecodeHeader(fd, path);
+  if (!d.offsets.empty()) throw InputError(path, "a packed transport file cannot be written to");
+  if (!(d.info == info)) throw InputError(path, "transport file dimensions do not match this run");
+  if (d.complete) throw InputError(path, "is complete: no rows may be written into it");
+  return writer;
+}
+
 void TransportFileWriter::WriteHeader(bool complete, std::span<const uint64_t> checksums) {
   const auto h = EncodeHeader(info_, complete, checksums);
   PwriteAll(fd_, h.data(), h.size(), 0, path_);
@@ -481,6 +493,19 @@ void PackedTransportWriter::Append(uint64_t block, std::string_view frame, uint6
   PwriteAll(fd_, frame.data(), frame.size(), offsets_.back(), tmp_);
   checksums_.push_back(checksum);
   offsets_.push_back(offsets_.back() + frame.size());
+}
+
+void PackedTransportWriter::Place(uint64_t block, uint64_t frame_bytes, uint64_t checksum) {
+  if (block != checksums_.size() || block >= info_.block_count()) {
+    throw std::logic_error("PackedTransportWriter: block " + std::to_string(block) +
+                           " out of order");
+  }
+  checksums_.push_back(checksum);
+  offsets_.push_back(offsets_.back() + frame_bytes);
+}
+
+uint64_t PackedTransportWriter::FirstFrameOffset(const TransportFileInfo& info) {
+  return PackedDataOffset(info);
 }
 
 uint64_t PackedTransportWriter::Finish() {

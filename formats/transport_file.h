@@ -59,6 +59,11 @@ class TransportFileWriter {
   // Opens an existing file (complete or not) to write more rows; it is marked incomplete again.
   // Throws InputError when its header is damaged or does not describe `info`.
   static TransportFileWriter Reopen(const std::string& path, const TransportFileInfo& info);
+  // Opens a file another process is writing (the farm's ranks writing their own rows into the one
+  // working file) to write and read rows only: it must be incomplete and describe `info`, and
+  // its header is never written. Finalize() must not be called on it. Throws InputError
+  // otherwise (naming the file), FileIoError when it cannot be opened.
+  static TransportFileWriter OpenRows(const std::string& path, const TransportFileInfo& info);
 
   TransportFileWriter(TransportFileWriter&& other) noexcept;
   TransportFileWriter& operator=(TransportFileWriter&& other) noexcept;
@@ -99,6 +104,14 @@ class PackedTransportWriter {
 
   // Block `block` (blocks must come in order 0, 1, …): its zstd frame and its rows' XXH64.
   void Append(uint64_t block, std::string_view frame, uint64_t checksum);
+  // Block `block` (in order, as Append) whose frame of `frame_bytes` another process wrote into
+  // temp_path() at next_offset() (the farm's ranks packing their own blocks).
+  void Place(uint64_t block, uint64_t frame_bytes, uint64_t checksum);
+  uint64_t next_offset() const { return offsets_.back(); }
+  const std::string& temp_path() const { return tmp_; }
+  int fd() const { return fd_; }  // temp_path()'s descriptor (frames written by Place's caller)
+  // Where block 0's frame starts in a packed file of `info`.
+  static uint64_t FirstFrameOffset(const TransportFileInfo& info);
   // Writes the tables and the header, fsyncs, renames into place. Returns the file's size.
   uint64_t Finish();
 

@@ -112,8 +112,14 @@ TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
   EXPECT_EQ(c["compressed_bytes"], got.size());
   EXPECT_GT(c["spill_bytes"].get<uint64_t>(), 0u);
   EXPECT_GT(c["spill_runs"].get<uint64_t>(), 2u);
-  // 2 ranks: rank 0 scatters half the rows, then each rank sends the other half its slab.
-  EXPECT_EQ(c["bytes_moved"], 72u * 384u * 4u);
+  // 2 ranks sharing the run folder: each reads its own share of the rows in whole file blocks
+  // and sends the other rank its share's slab of the other's 192 columns; no row passes through
+  // rank 0. With a 4 KiB budget a chunk is one 16-row block per rank: rank 0 reads rows 0–15
+  // and 32–47, rank 1 rows 16–31, 48–63 and the last chunk's 8 rows.
+  EXPECT_TRUE(c["every_rank_reads"].get<bool>());
+  EXPECT_EQ(c["bytes_moved"], 72u * 192u * 4u);
+  EXPECT_EQ(c["rank0_bytes_read"], 32u * 384u * 4u);
+  EXPECT_EQ(c["rank0_bytes_sent"], 32u * 192u * 4u);
   EXPECT_EQ(c["terms"],
             DecodeCompressedTransport(
                 std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(got.data()), got.size()),
@@ -141,6 +147,19 @@ TEST(CompressionPhase, ByteIdenticalToInProcessForAnyRanksAndBudget) {
     EXPECT_TRUE(fs::exists(run + "/transport.prtt"));
     EXPECT_TRUE(Report(run)["compression"]["raw_kept"].get<bool>());
   }
+  // --rows-via-rank0 (a run folder only rank 0 reaches): rank 0 reads every row and scatters
+  // half of each chunk to rank 1, then each rank sends the other its slab: the same bytes.
+  const std::string funnel = WorkDir("np2_via_rank0");
+  ASSERT_EQ(Farm(2, kScene + " --out " + funnel + kArgs + " --memory-budget 4k --rows-via-rank0")
+                .exit_code,
+            0);
+  EXPECT_TRUE(ReadWholeFile(funnel + "/transport.prtc") == expected);
+  EXPECT_TRUE(ReadWholeFile(funnel + "/transport.prtt") ==
+              ReadWholeFile(first + "/transport.prtt"));
+  const nlohmann::json cf = Report(funnel)["compression"];
+  EXPECT_FALSE(cf["every_rank_reads"].get<bool>());
+  EXPECT_EQ(cf["bytes_moved"], 36u * 384u * 4u + 72u * 192u * 4u);
+  EXPECT_EQ(cf["rank0_bytes_read"], 72u * 384u * 4u);
   const std::string discard = WorkDir("discard");
   ASSERT_EQ(Farm(2, kScene + " --out " + discard + kArgs + " --discard-raw").exit_code, 0);
   EXPECT_TRUE(ReadWholeFile(discard + "/transport.prtc") == expected);
@@ -307,10 +326,13 @@ TEST(CompressionPhase, EveryEditReRunsOnlyWhatItTouchesAndNeverLeavesAStaleAsset
        "# An edited tiny scene",
        {"reused", "reused", "reused", "updated"}},
       {"camera", "fov = 35.0", "fov = 50.0", {"reused", "reused", "reused", "updated"}},
-      {"material", "albedo = [0.5, 0.5, 0.5]",
+      {"material",
+       "albedo = [0.5, 0.5, 0.5]",
        "albedo = [0.5, 0.5, 0.5]\nbrdf = \"phong\"\nspecular = [0.2, 0.2, 0.2]\nexponent = 20",
        {"reused", "reused", "reused", "updated"}},
-      {"environments", "/envmaps/sunrise.exr\"]", "/envmaps/studio.exr\"]",
+      {"environments",
+       "/envmaps/sunrise.exr\"]",
+       "/envmaps/studio.exr\"]",
        {"reused", "reused", "ran", "updated"}},
       {"albedo",
        "albedo = [0.5, 0.5, 0.5]",

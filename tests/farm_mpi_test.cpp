@@ -19,6 +19,7 @@
 #include "farm/farm_options.h"
 #include "formats/geometry_file.h"
 #include "formats/transport_file.h"
+#include "formats/transport_variance.h"
 #include "tests/run_prt_farm.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
@@ -162,6 +163,65 @@ TEST(FarmMpiTest, OneTwoAndThreeRanksGiveByteIdenticalFilesEqualToTheKernels) {
     EXPECT_EQ(g.meshes[m].mesh.triangles, ref.meshes[m].mesh.triangles);
     EXPECT_EQ(g.meshes[m].albedo, ref.meshes[m].albedo);
   }
+}
+
+// The variance sums of two runs: the same rows covered, the same sums up to the order they were
+// added in (jobs finish in any order).
+void ExpectSameVariance(const std::string& a, const std::string& b) {
+  const TransportVariance va = DecodeTransportVariance(ReadWholeFile(a), a);
+  const TransportVariance vb = DecodeTransportVariance(ReadWholeFile(b), b);
+  ASSERT_EQ(va.rows_covered, vb.rows_covered);
+  ASSERT_EQ(va.sums.size(), vb.sums.size());
+  double largest = 0;
+  for (const auto& s : va.sums)
+    for (double x : s) largest = std::max(largest, x);
+  ASSERT_GT(largest, 0.0);
+  for (std::size_t m = 0; m < va.sums.size(); ++m)
+    for (std::size_t t = 0; t < va.sums[m].size(); ++t)
+      ASSERT_NEAR(va.sums[m][t], vb.sums[m][t], 1e-12 * largest) << "mesh " << m << " texel " << t;
+}
+
+// Rows stay where they are computed (docs/farm.md, "Where the rows go"): with 3 ranks sharing the
+// run folder every computing rank writes its own rows and variance records, and rank 0 exchanges
+// only bookkeeping with the others (envelopes, checksums, counters: at most 64 B per row);
+// --rows-via-rank0 sends every row through rank 0. Both give the same transport, compressed
+// transport and variance sums, and so does a run whose worker was killed, then resumed (its
+// re-used jobs' records come from the killed run's rank logs).
+TEST(FarmMpiTest, RanksWriteTheirOwnRowsAndRankZeroSeesOnlyBookkeeping) {
+  const std::string dir = WorkDir("in_place");
+  const std::string own = dir + "/own", funnel = dir + "/funnel", killed = dir + "/killed";
+  ASSERT_EQ(Farm(3, kScene + " --out " + own + kSmallJobs).exit_code, 0);
+  ASSERT_EQ(Farm(3, kScene + " --out " + funnel + kSmallJobs + " --rows-via-rank0").exit_code, 0);
+  for (const char* file : {"/transport.prtt", "/transport.prtc"})
+    EXPECT_TRUE(ReadWholeFile(own + file) == ReadWholeFile(funnel + file)) << file;
+  ExpectSameVariance(own + "/transport.variance", funnel + "/transport.variance");
+  ExpectEqualsKernels(own + "/transport.prtt");
+
+  const nlohmann::json a = ReadReport(own)["coordinator"];
+  EXPECT_TRUE(a["rows_in_place"].get<bool>());
+  ASSERT_EQ(a["batches"].size(), 1u);
+  const nlohmann::json& brute = a["batches"][0];
+  EXPECT_EQ(brute["batch"], "brute");
+  EXPECT_EQ(brute["items"], 72);
+  EXPECT_GT(brute["bytes_in"].get<uint64_t>(), 0u);
+  EXPECT_LE(brute["bytes_per_item"].get<double>(), 64.0);
+  // The workers wrote rows (rank 0 computes too) and logged their variance records themselves.
+  const nlohmann::json ranks = ReadReport(own)["rank_details"];
+  EXPECT_GT(ranks[1]["rows"].get<uint64_t>(), 0u);
+  EXPECT_TRUE(fs::exists(own + "/checkpoints/variance.rank-1.log"));
+
+  const nlohmann::json f = ReadReport(funnel)["coordinator"];
+  EXPECT_FALSE(f["rows_in_place"].get<bool>());
+  EXPECT_GT(f["batches"][0]["bytes_in"].get<uint64_t>(),
+            ranks[1]["rows"].get<uint64_t>() * 384u * 4u);  // rank 1's rows at least
+
+  const RunResult k =
+      Farm(3, kScene + " --out " + killed + kSmallJobs + " --fail-after-jobs 3 --fail-rank 1");
+  EXPECT_NE(k.exit_code, 0) << k.output;
+  ASSERT_EQ(Farm(3, kScene + " --out " + killed + kSmallJobs + " --resume").exit_code, 0);
+  EXPECT_GT(ReadReport(killed)["jobs"]["reused_from_checkpoints"].get<int>(), 0);
+  EXPECT_TRUE(ReadWholeFile(killed + "/transport.prtt") == ReadWholeFile(own + "/transport.prtt"));
+  ExpectSameVariance(killed + "/transport.variance", own + "/transport.variance");
 }
 
 // Kill, then --resume: the file is the same, and exactly the journaled jobs are re-used.
