@@ -214,6 +214,12 @@ void Compress(FarmContext& ctx) {
     // or same-named local folder), else the system's temporary folder.
     BlockSpillOptions spill;
     spill.memory_budget_bytes = std::max<uint64_t>(1, options.memory_budget_bytes / 2);
+    // A column block leaves the transposer as columns × rows floats and the column compression
+    // holds a transformed copy of it: both within a quarter of the budget (at least one column,
+    // at most 256; columns are compressed independently, so the width changes no byte). A
+    // million rows at n = 32 would otherwise hold 2 × 1 GiB whatever the budget.
+    spill.columns_per_block = static_cast<uint32_t>(std::clamp<uint64_t>(
+        options.memory_budget_bytes / 4 / std::max<uint64_t>(1, 2 * rows * sizeof(float)), 1, 256));
     fs::path spill_dir = fs::path(folder.dir) / ("compress-spill-rank" + std::to_string(rank));
     std::error_code ec;
     fs::remove_all(spill_dir, ec);  // what a killed run left there

@@ -42,6 +42,7 @@ std::string FarmReport::ToJsonText() const {
          {"rows", r.rows},
          {"rays_traced", r.rays_traced},
          {"busy_seconds", r.busy_seconds},
+         {"peak_rss_bytes", r.peak_rss_bytes},
          {"rays_per_second",
           r.busy_seconds > 0 ? static_cast<double>(r.rays_traced) / r.busy_seconds : 0.0}});
   }

@@ -17,7 +17,8 @@ struct RankReport {
   uint64_t jobs = 0;
   uint64_t rows = 0;
   uint64_t rays_traced = 0;
-  double busy_seconds = 0;  // time inside the worker kernels
+  double busy_seconds = 0;      // time inside the worker kernels
+  uint64_t peak_rss_bytes = 0;  // the rank's peak resident memory over the whole run
 };
 
 // Rank 0's side of one batch of jobs (report.json "coordinator"; docs/farm.md, "Where the rows

@@ -3,6 +3,7 @@
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
 
@@ -414,6 +415,17 @@ int RunFarm(const FarmOptions& options) {
   rep.status = exit_code == kExitOk ? "ok" : "failed";
   rep.exit_code = exit_code;
   rep.cols = 6ull * rep.cubemap_n * rep.cubemap_n;
+  {
+    // Every rank's peak resident memory (docs/farm.md, "Memory"), for the report.
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    const uint64_t peak = static_cast<uint64_t>(usage.ru_maxrss) * 1024;  // Linux: KiB
+    std::vector<uint64_t> peaks(static_cast<std::size_t>(ctx.size));
+    CheckMpi(MPI_Gather(&peak, 1, MPI_UINT64_T, peaks.data(), 1, MPI_UINT64_T, 0, ctx.comm),
+             "MPI_Gather peak memory");
+    if (ctx.rank == 0)
+      for (int r = 0; r < ctx.size; ++r) rep.rank_reports[r].peak_rss_bytes = peaks[r];
+  }
   if (ctx.rank == 0) ReportStages(ctx);
   const bool reported = WriteReport(ctx);
   // The compressed file and the report being durable, the raw matrix goes if asked to.

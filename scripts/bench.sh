@@ -20,26 +20,54 @@ run_transport() {
   "$BUILD_DIR/bench/transport_bench"
 }
 
-# The farm's 1 → 2 rank speed-up on the default scene (brute force, one thread per rank), from
-# the wall time of the sampling phase in each run's report.json.
+# The farm's scaling (docs/farm.md, "Scaling"): the default scene, brute force, one thread per
+# rank, with mpirun -np 1 2 4 8 16 (PRT_SCALING_NP; beyond the cores the ranks share them, so the
+# wall time measures the overhead of more ranks, not a speed-up). Prints per rank count the wall
+# times, the coordinator's CPU per job, rank 0's bytes per row (job traffic and the compression's
+# reads), every rank's peak memory and the checksums of transport.prtt and transport.prtc, which
+# must be the same for every rank count. PRT_SCALING_ARGS adds prt-farm options (e.g.
+# --rows-via-rank0 to measure the old funnel).
 run_scaling() {
-  echo "== prt-farm scaling: mpirun -np 1 and -np 2, one thread per rank =="
+  local nps="${PRT_SCALING_NP:-1 2 4 8 16}"
   local rpt="${PRT_SCALING_RAYS_PER_TEXEL:-1}"
-  for np in 1 2; do
-    mpirun -np "$np" --bind-to none "$BUILD_DIR/farm/prt-farm" --out "$OUT/scaling-np$np" --force \
-      --threads 1 --method brute --rays-per-texel "$rpt" --no-compress -q
+  echo "== prt-farm scaling: mpirun -np ${nps// /, }, one thread per rank, ${rpt} ray(s) per texel =="
+  for np in $nps; do
+    mpirun -np "$np" --oversubscribe --bind-to none "$BUILD_DIR/farm/prt-farm" \
+      --out "$OUT/scaling-np$np" --force --threads 1 --method brute --rays-per-texel "$rpt" \
+      ${PRT_SCALING_ARGS:-} -q
   done
-  python3 - "$OUT" <<'PY'
-import json, sys
-out = sys.argv[1]
+  python3 - "$OUT" $nps <<'PY'
+import hashlib, json, sys
+out, nps = sys.argv[1], [int(x) for x in sys.argv[2:]]
 def phase(d, name):
-    return next(p["wall_seconds"] for p in d["phases"] if p["name"] == name)
-r = {np: json.load(open(f"{out}/scaling-np{np}/report.json")) for np in (1, 2)}
-t1, t2 = phase(r[1], "brute"), phase(r[2], "brute")
-print(f"rays traced            {r[1]['rays_traced']:.4g}")
-print(f"np 1: brute phase {t1:8.2f} s  {r[1]['rays_per_second']/1e6:6.2f} Mrays/s (1 core)")
-print(f"np 2: brute phase {t2:8.2f} s  {r[2]['rays_per_second']/1e6:6.2f} Mrays/s, load imbalance {r[2]['load_imbalance']:.3f}")
-print(f"speed-up 1 -> 2 ranks  {t1/t2:.3f}")
+    return next((p["wall_seconds"] for p in d["phases"] if p["name"] == name), 0.0)
+def md5(path):
+    h = hashlib.md5()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()[:12]
+print(f"{'ranks':>5} {'wall s':>7} {'brute s':>8} {'pack s':>7} {'compress s':>10} "
+      f"{'jobs':>5} {'coord ms/job':>12} {'r0 B/row jobs':>13} {'r0 B/row compress':>17} "
+      f"{'peak MiB max':>12} {'transport.prtt':>14} {'transport.prtc':>14}")
+base = None
+for np in nps:
+    run = f"{out}/scaling-np{np}"
+    d = json.load(open(f"{run}/report.json"))
+    b = next(x for x in d["coordinator"]["batches"] if x["batch"] == "brute") \
+        if d["coordinator"]["batches"] else {"jobs": 0, "cpu_ms_per_job": 0, "bytes_per_item": 0}
+    c = d["compression"]
+    rows = d["rows"]
+    r0c = (c.get("rank0_bytes_read", 0) + c.get("rank0_bytes_sent", 0)) / rows
+    peak = max(x["peak_rss_bytes"] for x in d["rank_details"]) / 2**20
+    sums = (md5(f"{run}/transport.prtt"), md5(f"{run}/transport.prtc"))
+    base = base or sums
+    print(f"{np:>5} {d['wall_seconds']:>7.1f} {phase(d, 'brute'):>8.1f} {phase(d, 'finalize'):>7.1f} "
+          f"{phase(d, 'compress'):>10.1f} {b['jobs']:>5} {b['cpu_ms_per_job']:>12.3f} "
+          f"{b['bytes_per_item']:>13.2f} {r0c:>17.0f} {peak:>12.0f} {sums[0]:>14} {sums[1]:>14}"
+          + ("" if sums == base else "  DIFFERS"))
+print(f"rows {rows}, row bytes {4 * d['cols']}; r0 B/row compress = rank 0's reads + sends in the "
+      f"transpose per row of T (its own share once every rank reads its rows)")
 PY
 }
 

@@ -12,6 +12,7 @@ PACKAGES=(
   libpng-dev libsdl2-dev
   clang libclang-rt-14-dev gnuplot-nox xvfb
   libcgal-demo blender-data
+  slurm-wlm munge
 )
 
 missing=()
