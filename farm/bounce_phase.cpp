@@ -28,6 +28,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -54,6 +55,9 @@ struct BounceResultHeader {
   uint64_t rays_traced = 0;
   uint64_t rays_escaped = 0;
   uint64_t back_face_hits = 0;
+  // 1: the worker wrote the rows into the phase's partial file itself and they do not follow
+  // (docs/farm.md, "Where the rows go").
+  uint64_t in_place = 0;
 };
 
 // Broadcasts rank 0's vector to every rank, in pieces an int count can address.
@@ -106,7 +110,9 @@ class BouncePhase final : public FarmPhase {
     // features step this bounce's dense rows.
     std::vector<float> previous, dense;
     uint64_t status = kExitOk;
-    if (ctx.rank == 0) {
+    // Rows in place: every rank reads them from the run folder itself; else rank 0 reads and
+    // broadcasts them.
+    if (ctx.rank == 0 || ctx.rows_in_place) {
       try {
         const uint64_t bytes = (k_ > 0 ? uint64_t(prev_channels) : 0) * V * cols * sizeof(float) +
                                (step_ ? uint64_t(C) : 0) * V * cols * sizeof(float);
@@ -117,20 +123,24 @@ class BouncePhase final : public FarmPhase {
                            " MiB in all) on every rank, more than " + "--memory-budget (" +
                            std::to_string(ctx.options.memory_budget_bytes >> 20) +
                            " MiB): raise it or lower [sampling] indirect_n");
-        ctx.run_eta.StepStarted(name_);
+        if (ctx.rank == 0) ctx.run_eta.StepStarted(name_);
         if (k_ > 0) previous = LoadPrevious(ctx, fine, coarse, prev_channels);
         if (step_) dense = LoadDense(ctx, coarse);
       } catch (...) {
         std::string message;
         status = static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, name_));
-        spdlog::error("{}: {}", name_, message);
-        ctx.report.error = message;
+        spdlog::error("rank {}: {}: {}", ctx.rank, name_, message);
+        if (ctx.rank == 0) ctx.report.error = message;
       }
     }
-    CheckMpi(MPI_Bcast(&status, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast bounce status");
-    if (status != kExitOk) throw CollectiveStop{static_cast<int>(status)};
-    BroadcastVector(ctx.comm, previous, MPI_FLOAT, "MPI_Bcast bounce rows");
-    BroadcastVector(ctx.comm, dense, MPI_FLOAT, "MPI_Bcast dense rows");
+    uint64_t any = 0;
+    CheckMpi(MPI_Allreduce(&status, &any, 1, MPI_UINT64_T, MPI_MAX, ctx.comm),
+             "MPI_Allreduce bounce status");
+    if (any != kExitOk) throw CollectiveStop{static_cast<int>(any)};
+    if (!ctx.rows_in_place) {
+      BroadcastVector(ctx.comm, previous, MPI_FLOAT, "MPI_Bcast bounce rows");
+      BroadcastVector(ctx.comm, dense, MPI_FLOAT, "MPI_Bcast dense rows");
+    }
     LoadCombination(ctx);
     if (step_) {
       RunFeatures(ctx, previous, prev_channels, dense, cols, start);
@@ -147,12 +157,60 @@ class BouncePhase final : public FarmPhase {
     RunJobPhase(
         ctx,
         [&](const RowRange& range, std::string_view, std::string& out) {
+          const std::size_t at = out.size();
           Compute(ctx, *gatherer, previous, prev_channels, cols, range, out);
+          WriteInPlace(ctx, cols, range, out, at);
         },
         [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
   }
 
  private:
+  // The file this phase writes (its partial file while the jobs run) and its dimensions.
+  std::string FinalPath(const FarmContext& ctx) const {
+    const RunFolder& f = ctx.folder;
+    // With features: the dense rows first (bounce-k, path-trace), then every row (-sparse).
+    const bool features = ctx.params.sparse_indirect == 2;
+    return features && !step_ ? (k_ > 0 ? f.BounceDenseFile(k_) : f.PathTracedDenseFile())
+                              : (k_ > 0 ? f.BounceFile(k_) : f.PathTracedFile());
+  }
+  TransportFileInfo FileInfo(const FarmContext& ctx) const {
+    const bool on_grid = k_ > 0 || ctx.params.sparse_indirect;
+    return TransportFileInfo{
+        static_cast<uint64_t>(ctx.params.channels) * ctx.params.rows,
+        static_cast<uint32_t>(on_grid ? ctx.params.indirect_n : ctx.params.cubemap_n),
+        ctx.options.rows_per_block, static_cast<uint32_t>(ctx.params.gather_paths),
+        ctx.params.seed};
+  }
+
+  // Rows in place (docs/farm.md, "Where the rows go"): the job's rows, vertex-major after the
+  // header at `at` of `out`, go into the phase's partial file by channel (row c·V + v), durably;
+  // `out` keeps the header (in_place = 1) and what followed the rows (path tracing's energies).
+  void WriteInPlace(const FarmContext& ctx, std::size_t cols, const RowRange& range,
+                    std::string& out, std::size_t at) {
+    if (!ctx.rows_in_place) return;
+    if (!rows_out_)
+      rows_out_.emplace(TransportFileWriter::OpenRows(FinalPath(ctx) + ".partial", FileInfo(ctx)));
+    const int C = ctx.params.channels;
+    const uint64_t V = ctx.params.rows;
+    const std::size_t floats = static_cast<std::size_t>(range.count) * C * cols;
+    if (out.size() < at + sizeof(BounceResultHeader) + floats * sizeof(float))
+      throw std::logic_error(name_ + ": a job's result is shorter than its rows");
+    const float* rows =
+        reinterpret_cast<const float*>(out.data() + at + sizeof(BounceResultHeader));
+    std::vector<float> channel(static_cast<std::size_t>(range.count) * cols);
+    for (int c = 0; c < C; ++c) {
+      for (uint64_t i = 0; i < range.count; ++i)
+        std::copy_n(rows + (i * C + c) * cols, cols, channel.data() + i * cols);
+      rows_out_->WriteRows(c * V + range.first, range.count, channel.data());
+    }
+    rows_out_->Sync();
+    BounceResultHeader h;
+    std::memcpy(&h, out.data() + at, sizeof h);
+    h.in_place = 1;
+    std::memcpy(out.data() + at, &h, sizeof h);
+    out.erase(at + sizeof h, floats * sizeof(float));
+  }
+
   // The path-traced estimator: one phase, every bounce at once; a job's payload holds each
   // vertex's Σ_k Tᵏ (channels rows at n) and then, per bounce and channel, the energy of its
   // vertices.
@@ -171,7 +229,9 @@ class BouncePhase final : public FarmPhase {
     RunJobPhase(
         ctx,
         [&](const RowRange& range, std::string_view, std::string& out) {
+          const std::size_t at = out.size();
           ComputePaths(ctx, *reference, cols, range, out);
+          WriteInPlace(ctx, cols, range, out, at);
         },
         [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
   }
@@ -260,6 +320,7 @@ class BouncePhase final : public FarmPhase {
           }
           h.rows_checksum = Checksum64(rows, floats * sizeof(float));
           std::memcpy(out.data() + at, &h, sizeof h);
+          WriteInPlace(ctx, cols, range, out, at);
         },
         [&](JobLoop& loop) { Coordinate(ctx, loop, cols, start); });
   }
@@ -351,7 +412,8 @@ class BouncePhase final : public FarmPhase {
                 energies * sizeof(double));
   }
 
-  // Rank 0: T⁰ coarsened to the indirect grid (k = 1) or bounce k − 1's rows.
+  // T⁰ coarsened to the indirect grid (k = 1) or bounce k − 1's rows (rank 0, or every rank with
+  // rows in place).
   std::vector<float> LoadPrevious(FarmContext& ctx, const CubemapLayout& fine,
                                   const CubemapLayout& coarse, int prev_channels) const {
     const std::size_t cols = coarse.texel_count();
@@ -373,7 +435,8 @@ class BouncePhase final : public FarmPhase {
     return previous;
   }
 
-  // Rank 0, in a features step: the dense vertices' rows of this bounce (or path tracing's).
+  // In a features step (rank 0, or every rank with rows in place): the dense vertices' rows of
+  // this bounce (or path tracing's).
   std::vector<float> LoadDense(FarmContext& ctx, const CubemapLayout& coarse) const {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
@@ -446,11 +509,8 @@ class BouncePhase final : public FarmPhase {
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const RunFolder& f = ctx.folder;
-    // With features: the dense rows first (bounce-k, path-trace), then every row (-sparse).
     const bool features = ctx.params.sparse_indirect == 2;
-    const std::string final_path = features && !step_
-                                       ? (k_ > 0 ? f.BounceDenseFile(k_) : f.PathTracedDenseFile())
-                                       : (k_ > 0 ? f.BounceFile(k_) : f.PathTracedFile());
+    const std::string final_path = FinalPath(ctx);
     const int K = ctx.params.bounces;
     // Path tracing: each job's per-bounce energies (journaled as its counters, bit-cast).
     const std::size_t energies = k_ == 0 && !step_ ? static_cast<std::size_t>(K) * C : 0;
@@ -462,11 +522,7 @@ class BouncePhase final : public FarmPhase {
     const std::string partial = final_path + ".partial";
     std::error_code ec;
     fs::create_directories(f.indirect, ec);
-    const bool on_grid = k_ > 0 || ctx.params.sparse_indirect;
-    const TransportFileInfo info{
-        C * V, static_cast<uint32_t>(on_grid ? ctx.params.indirect_n : ctx.params.cubemap_n),
-        ctx.options.rows_per_block, static_cast<uint32_t>(ctx.params.gather_paths),
-        ctx.params.seed};
+    const TransportFileInfo info = FileInfo(ctx);
     nlohmann::ordered_json bounce = nlohmann::ordered_json::object();
     if (k_ > 0) bounce["bounce"] = k_;
     JobBatch batch;
@@ -539,18 +595,20 @@ class BouncePhase final : public FarmPhase {
     const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
     batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
       BounceResultHeader h;
-      const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
+      if (payload.size() >= sizeof h) std::memcpy(&h, payload.data(), sizeof h);
+      // Rows in place: the worker wrote them; only the header and the energies came.
+      const std::size_t floats =
+          h.in_place ? 0 : static_cast<std::size_t>(range.count) * per_vertex;
       if (payload.size() != sizeof h + floats * sizeof(float) + energies * sizeof(double))
         throw RankFailure("rank " + std::to_string(rank) + " returned " +
                           std::to_string(payload.size()) + " bytes for " +
                           std::to_string(range.count) + " samples of " + name_);
-      std::memcpy(&h, payload.data(), sizeof h);
       const float* rows = reinterpret_cast<const float*>(payload.data() + sizeof h);
-      if (Checksum64(rows, floats * sizeof(float)) != h.rows_checksum)
+      if (!h.in_place && Checksum64(rows, floats * sizeof(float)) != h.rows_checksum)
         throw RankFailure("rows of " + name_ + " from rank " + std::to_string(rank) +
                           " arrived damaged (checksum mismatch)");
       std::vector<float> channel(static_cast<std::size_t>(range.count) * cols);
-      for (int c = 0; c < C; ++c) {
+      for (int c = 0; c < C && !h.in_place; ++c) {
         for (uint64_t i = 0; i < range.count; ++i)
           std::copy_n(rows + (i * C + c) * cols, cols, channel.data() + i * cols);
         writer->WriteRows(c * V + range.first, range.count, channel.data());
@@ -747,6 +805,8 @@ class BouncePhase final : public FarmPhase {
   int k_;
   bool step_;
   std::string name_;
+  // This rank's handle on the phase's partial file (rows in place), opened at its first job.
+  std::optional<TransportFileWriter> rows_out_;
   std::vector<uint8_t> mask_;    // per vertex: 1 = combined (every rank)
   std::vector<uint32_t> pairs_;  // rank 0: combination.bin's pairs
   uint64_t slots_ = 0;

@@ -68,7 +68,7 @@ class FinalizePhase final : public FarmPhase {
  public:
   const char* name() const override { return "finalize"; }
   void Run(FarmContext& ctx) override {
-    if (ctx.rows_in_place && ctx.method == "brute") ReduceRankVariance(ctx);
+    if (ctx.rows_in_place) ReduceRankVariance(ctx);
     if (ctx.rank != 0 && !ctx.rows_in_place) return;
     const TransportFileInfo info = ctx.RowsFileInfo();
     if (ctx.rank == 0) {
@@ -167,11 +167,18 @@ class FinalizePhase final : public FarmPhase {
       if (!synced) throw FileIoError(out_path, SystemReason("fsync failed"));
     }
     if (ranks > 1) CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
-    if (ctx.rank != 0) return;
+    if (ctx.rank == 0) Finish(ctx, *packed, *progress, info, blocks, ranks);
+    // The next phases read transport.prtt on every rank: not before it is in place.
+    if (ranks > 1) CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
+  }
+
+ private:
+  static void Finish(FarmContext& ctx, PackedTransportWriter& packed, Progress& progress,
+                     const TransportFileInfo& info, uint64_t blocks, int ranks) {
     if (ctx.options.fail_in == "finalize" && ctx.options.fail_rank == 0)
       ExitAbruptly(0, "before renaming " + ctx.folder.transport);
-    const uint64_t bytes = packed->Finish();
-    progress->Finish();
+    const uint64_t bytes = packed.Finish();
+    progress.Finish();
     ctx.run_eta.StepFinished("pack");
     ctx.writer.reset();
     std::filesystem::remove(ctx.folder.partial);

@@ -19,6 +19,7 @@
 #include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
+#include "worker/local_rank.h"
 
 namespace prt {
 
@@ -74,6 +75,40 @@ void CheckFinite(const float* v, std::size_t count, const char* what, uint32_t s
                            std::to_string(sample));
 }
 
+// The combination records of a result, compactly (a record's used pairs come first and the
+// unused ones are (kNoSample, 0): 40 pairs a vertex were 320 bytes, most of them unused): the
+// pairs per record, the record count, then per record the number of pairs up to its last used
+// one and those pairs. Decoding restores the records exactly.
+void PutCombination(ByteWriter& w, const std::vector<uint32_t>& records, uint64_t slots) {
+  w.Put(slots);
+  const uint64_t count = slots == 0 ? 0 : records.size() / (2 * slots);
+  w.Put(count);
+  for (uint64_t i = 0; i < count; ++i) {
+    const uint32_t* rec = records.data() + i * 2 * slots;
+    uint32_t used = static_cast<uint32_t>(slots);
+    while (used > 0 && rec[2 * (used - 1)] == kNoSample && rec[2 * (used - 1) + 1] == 0) --used;
+    w.Put(used);
+    w.PutBytes(rec, used * 2 * sizeof(uint32_t));
+  }
+}
+
+std::vector<uint32_t> GetCombination(ByteReader& r) {
+  const auto slots = r.Get<uint64_t>("message");
+  const auto count = r.Get<uint64_t>("message");
+  if (slots > 4096 || count > r.remaining() / sizeof(uint32_t))
+    throw std::runtime_error("malformed combination records");
+  std::vector<uint32_t> records(static_cast<std::size_t>(count * slots * 2), 0);
+  for (uint64_t i = 0; i < count; ++i) {
+    uint32_t* rec = records.data() + i * 2 * slots;
+    for (uint64_t k = 0; k < slots; ++k) rec[2 * k] = kNoSample;
+    const auto used = r.Get<uint32_t>("message");
+    if (used > slots) throw std::runtime_error("malformed combination records");
+    const std::string_view pairs = r.Take(used * 2 * sizeof(uint32_t), "message");
+    std::memcpy(rec, pairs.data(), pairs.size());
+  }
+  return records;
+}
+
 }  // namespace
 
 std::vector<uint64_t> SparseJobCounters::ToVector() const {
@@ -122,6 +157,8 @@ std::string EncodeDenseJob(const SparseJobHeader& h, const DenseJob& job, std::s
   ByteWriter w(std::move(prefix));
   PutHeader(w, kJobMagic, h);
   w.PutVector(job.ids);
+  w.Put(job.in_place);
+  w.PutVector(std::vector<char>(job.step.begin(), job.step.end()));
   return std::move(w.bytes());
 }
 
@@ -132,6 +169,8 @@ std::string EncodeRankJob(const SparseJobHeader& h, const RankJob& job, std::str
   w.PutVector(job.offsets);
   w.PutVector(job.neighbors);
   w.PutVector(job.low_rows);
+  w.Put(job.in_place);
+  w.PutVector(job.union_ids);
   return std::move(w.bytes());
 }
 
@@ -140,7 +179,7 @@ std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job, std:
   w.Reserve(w.bytes().size() + sizeof(uint32_t) + sizeof h + sizeof job.texels +
             VectorBytes(job.vertices) + VectorBytes(job.offsets) + VectorBytes(job.neighbors) +
             VectorBytes(job.transport) + VectorBytes(job.visibility) + VectorBytes(job.feature) +
-            VectorBytes(job.union_ids));
+            VectorBytes(job.union_ids) + sizeof job.in_place + sizeof(uint64_t) + job.step.size());
   PutHeader(w, kJobMagic, h);
   w.Put(job.texels);
   w.PutVector(job.vertices);
@@ -150,6 +189,8 @@ std::string EncodeSparseJob(const SparseJobHeader& h, const SparseJob& job, std:
   w.PutVector(job.visibility);
   w.PutVector(job.feature);
   w.PutVector(job.union_ids);
+  w.Put(job.in_place);
+  w.PutVector(std::vector<char>(job.step.begin(), job.step.end()));
   return std::move(w.bytes());
 }
 
@@ -165,7 +206,8 @@ std::string EncodeSparseJobResult(const SparseJobResult& res, std::string prefix
   w.Reserve(start + sizeof(uint32_t) + sizeof res.header + sizeof res.busy_seconds +
             VectorBytes(counters) + VectorBytes(res.transport) + VectorBytes(res.visibility) +
             VectorBytes(res.feature) + VectorBytes(res.weights) + VectorBytes(res.outcomes) +
-            VectorBytes(res.combination) + sizeof(uint64_t));
+            VectorBytes(res.combination) + sizeof res.in_place + sizeof res.checksum +
+            sizeof(uint64_t));
   PutHeader(w, kResultMagic, res.header);
   w.Put(res.busy_seconds);
   w.PutVector(counters);
@@ -175,7 +217,10 @@ std::string EncodeSparseJobResult(const SparseJobResult& res, std::string prefix
   w.PutVector(res.weights);
   w.PutVector(res.outcomes);
   w.PutVector(std::vector<char>(res.variance.begin(), res.variance.end()));
-  w.PutVector(res.combination);
+  PutCombination(w, res.combination,
+                 res.outcomes.empty() ? 0 : res.combination.size() / (2 * res.outcomes.size()));
+  w.Put(res.in_place);
+  w.Put(res.checksum);
   std::string& b = w.bytes();
   const uint64_t sum = Checksum64(b.data() + start, b.size() - start);
   b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
@@ -202,15 +247,29 @@ SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
   res.outcomes = r.GetVector<uint8_t>("message");
   const std::vector<char> variance = r.GetVector<char>("message");
   res.variance.assign(variance.begin(), variance.end());
-  res.combination = r.GetVector<uint32_t>("message");
+  res.combination = GetCombination(r);
+  res.in_place = r.Get<uint32_t>("message");
+  res.checksum = r.Get<uint64_t>("message");
   return res;
 }
 
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
                              std::string_view job_bytes, std::string prefix,
-                             const std::vector<uint64_t>* mesh_rows) {
+                             const std::vector<uint64_t>* mesh_rows, SparseRowFiles* files) {
   ByteReader r = MessageReader(job_bytes);
+  // The job's in-place flags and step name, after its kind's fields.
+  auto in_place_of = [&](uint32_t flags) {
+    if (flags != 0 && files == nullptr)
+      throw std::runtime_error("a sparse job asks for rows in place, and this rank has no files");
+    return flags;
+  };
+  auto step_of = [&] {
+    const std::vector<char> name = r.GetVector<char>("message");
+    return std::string(name.begin(), name.end());
+  };
+  uint32_t in_place = 0;
+  std::string step;
   const bool with_variance = mesh_rows != nullptr;
   TransportVariance sums;
   if (with_variance) {
@@ -226,6 +285,8 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
   switch (static_cast<SparseJobKind>(res.header.kind)) {
     case SparseJobKind::kDense: {
       const std::vector<uint32_t> ids = r.GetVector<uint32_t>("message");
+      in_place = in_place_of(r.Get<uint32_t>("message"));
+      step = step_of();
       for (uint32_t s : ids)
         if (s >= samples.size()) throw std::runtime_error("dense job names a missing sample");
       res.transport.resize(ids.size() * T);
@@ -250,6 +311,22 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
         CheckFinite(res.visibility.data() + i * T, T, "visibility", ids[i]);
         if (with_variance) sums.AddRow(ids[i], variance.data() + i * T);
       }
+      if (in_place & kWriteRowsInPlace) {
+        // The rows go into the run's files here; the journal's checksum comes back instead.
+        const int n = sampler.layout().n(), m = files->low_resolution();
+        std::vector<float> low(static_cast<std::size_t>(6 * m * m));
+        for (std::size_t i = 0; i < ids.size(); ++i) {
+          DownsampleRow(res.transport.data() + i * T, n, m, low.data());
+          files->WriteDense(ids[i], res.transport.data() + i * T, res.visibility.data() + i * T,
+                            res.feature.data() + i * T, low.data());
+        }
+        res.checksum = DenseResultChecksum(ids.size(), T, res.transport.data(),
+                                           res.visibility.data(), res.feature.data());
+        res.in_place = 1;
+        res.transport = {};
+        res.visibility = {};
+        res.feature = {};
+      }
       SparseJobCounters& c = res.counters;
       c.rays_traced = total.trace.rays_traced;
       c.texels_traced = total.trace.texels_traced;
@@ -265,7 +342,22 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       const auto low_dim = r.Get<uint32_t>("message");
       const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
       const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
-      const std::vector<float> low = r.GetVector<float>("message");
+      std::vector<float> low = r.GetVector<float>("message");
+      in_place = in_place_of(r.Get<uint32_t>("message"));
+      const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
+      if (in_place & kReadRowsInPlace) {
+        // The union's downsampled rows, from the run's files.
+        const int m = files->low_resolution();
+        if (low_dim != static_cast<uint32_t>(6 * m * m) || !low.empty())
+          throw std::runtime_error("malformed rank job rows");
+        low.resize(union_ids.size() * low_dim);
+        for (std::size_t k = 0; k < union_ids.size(); ++k) {
+          if (union_ids[k] >= samples.size())
+            throw std::runtime_error("rank job names a missing sample");
+          files->ReadLow(union_ids[k], low.data() + k * low_dim);
+        }
+        in_place = 0;  // nothing is written
+      }
       if (low_dim == 0 || low.size() % low_dim != 0)
         throw std::runtime_error("malformed rank job rows");
       if (offsets.empty()) throw std::runtime_error("malformed rank job");
@@ -286,10 +378,27 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
       const std::vector<uint32_t> vertices = r.GetVector<uint32_t>("message");
       const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
       const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
-      const std::vector<float> tr = r.GetVector<float>("message");
-      const std::vector<float> vis = r.GetVector<float>("message");
-      const std::vector<uint8_t> feat = r.GetVector<uint8_t>("message");
+      std::vector<float> tr = r.GetVector<float>("message");
+      std::vector<float> vis = r.GetVector<float>("message");
+      std::vector<uint8_t> feat = r.GetVector<uint8_t>("message");
       const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
+      in_place = in_place_of(r.Get<uint32_t>("message"));
+      step = step_of();
+      if (in_place & kReadRowsInPlace) {
+        // The dense neighbours' rows, from the run's files.
+        if (!tr.empty() || !vis.empty() || !feat.empty())
+          throw std::runtime_error("malformed sparse job rows");
+        const std::size_t u = union_ids.size();
+        tr.resize(u * T);
+        vis.resize(u * T);
+        feat.resize(u * T);
+        for (std::size_t k = 0; k < u; ++k) {
+          if (union_ids[k] >= samples.size())
+            throw std::runtime_error("sparse job names a missing sample");
+          files->ReadDense(union_ids[k], tr.data() + k * T, vis.data() + k * T,
+                           feat.data() + k * T);
+        }
+      }
       const std::size_t rows = tr.size() / T;
       if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T ||
           union_ids.size() != rows)
@@ -340,6 +449,12 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
         if (with_variance) sums.AddRow(vertices[i], variance.data() + i * T);
         res.transport.insert(res.transport.end(), out.begin() + static_cast<std::ptrdiff_t>(i * T),
                              out.begin() + static_cast<std::ptrdiff_t>((i + 1) * T));
+        if (in_place & kWriteRowsInPlace) files->WriteRow(vertices[i], out.data() + i * T);
+      }
+      if (in_place & kWriteRowsInPlace) {
+        res.checksum = SparseResultChecksum(res.outcomes, res.transport, res.combination);
+        res.in_place = 1;
+        res.transport = {};
       }
       SparseJobCounters& c = res.counters;
       c.rays_traced = total.trace.rays_traced;
@@ -360,9 +475,17 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
     default:
       throw std::runtime_error("unknown sparse job kind " + std::to_string(res.header.kind));
   }
+  if (with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank)) {
+    if (res.in_place) {
+      files->RecordVariance(step, res.header.first, res.header.count,
+                            EncodeTransportVariance(sums));
+    } else {
+      res.variance = EncodeTransportVariance(sums);
+    }
+  }
+  // Rows and variance record durable before the result that lets rank 0 journal them.
+  if (res.in_place) files->Sync();
   res.busy_seconds = Now() - t0;
-  if (with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank))
-    res.variance = EncodeTransportVariance(sums);
   return EncodeSparseJobResult(res, std::move(prefix));
 }
 

@@ -59,15 +59,47 @@ struct SparseJobHeader {
   uint64_t count = 0;
 };
 
+// Where the rows stay where they are computed (docs/farm.md, "Where the rows go"): the worker
+// reads the rows a job needs from the run folder and writes the rows it computes there itself,
+// through this interface (farm/sparse_phase.cpp implements it on the run's files); the messages
+// then carry sample ids, checksums and counters instead of rows. Calls may come from several
+// threads at once.
+class SparseRowFiles {
+ public:
+  virtual ~SparseRowFiles() = default;
+  // A dense sample's T, visibility and feature rows (texels each) and its downsampled row.
+  virtual void ReadDense(uint32_t sample, float* transport, float* visibility,
+                         uint8_t* feature) = 0;
+  virtual void ReadLow(uint32_t sample, float* low) = 0;
+  virtual void WriteDense(uint32_t sample, const float* transport, const float* visibility,
+                          const uint8_t* feature, const float* low) = 0;
+  // A reconstructed row of T.
+  virtual void WriteRow(uint32_t sample, const float* transport) = 0;
+  // The job's variance sums, under the step's name and the job's item range.
+  virtual void RecordVariance(const std::string& step, uint64_t first, uint64_t count,
+                              const std::string& encoded_sums) = 0;
+  // Makes everything written durable (before the result leaves the worker).
+  virtual void Sync() = 0;
+  virtual int low_resolution() const = 0;  // m of the downsampled rows (6·m·m floats)
+};
+
+// A job's in-place flags (the trailer of every job message; 0: rows travel in the messages).
+inline constexpr uint32_t kReadRowsInPlace = 1;   // read the rows the job needs from the files
+inline constexpr uint32_t kWriteRowsInPlace = 2;  // write the rows it computes into the files
+
 // ---- jobs (rank 0 → worker)
 struct DenseJob {
   std::vector<uint32_t> ids;  // samples to sample densely
+  uint32_t in_place = 0;      // kWriteRowsInPlace: T, aux and low rows go into the files
+  std::string step;           // the step's name (the variance records' key)
 };
 struct RankJob {
   uint32_t low_dim = 0;             // 6·m·m
   std::vector<uint32_t> offsets;    // candidate c's neighbours: nb[offsets[c] .. offsets[c+1])
   std::vector<uint32_t> neighbors;  // indices into the union below, nearest first
   std::vector<float> low_rows;      // union of downsampled dense rows, low_dim each
+  uint32_t in_place = 0;            // kReadRowsInPlace: low_rows is empty, read union_ids' rows
+  std::vector<uint32_t> union_ids;  // with kReadRowsInPlace: the union's sample ids
 };
 struct SparseJob {
   uint32_t texels = 0;              // texel_count
@@ -78,6 +110,10 @@ struct SparseJob {
   std::vector<float> visibility;    // union rows
   std::vector<uint8_t> feature;     // union rows
   std::vector<uint32_t> union_ids;  // the union rows' sample ids (their normals)
+  // kReadRowsInPlace: transport, visibility and feature are empty (read from the files);
+  // kWriteRowsInPlace: the reconstructed rows go into the files.
+  uint32_t in_place = 0;
+  std::string step;
 };
 
 // ---- results (worker → rank 0)
@@ -100,6 +136,11 @@ struct SparseJobResult {
   // dense and sparse: the traced texels' Monte-Carlo variance summed per mesh (an encoded
   // TransportVariance, formats/transport_variance.h; empty when not asked for)
   std::string variance;
+  // 1: the worker wrote the job's rows (and variance record) into the files itself; `transport`,
+  // `visibility`, `feature` and `variance` are empty and `checksum` is the journal's checksum of
+  // what it wrote (DenseResultChecksum or SparseResultChecksum).
+  uint32_t in_place = 0;
+  uint64_t checksum = 0;
 };
 
 // Each encoder appends its message to `prefix` (moved in: the job loop's envelope, so that a job
@@ -117,10 +158,13 @@ SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes);
 // NumericalError for a non-finite value, std::runtime_error for a malformed job.
 // `mesh_rows` (optional): the scene's vertex count per mesh; with it, dense and sparse results
 // carry their traced texels' variance sums (SparseJobResult::variance).
+// `files` (optional): the run's files, for jobs with in-place flags (a job with flags and no files
+// is a std::runtime_error).
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
                              std::string_view job_bytes, std::string prefix = {},
-                             const std::vector<uint64_t>* mesh_rows = nullptr);
+                             const std::vector<uint64_t>* mesh_rows = nullptr,
+                             SparseRowFiles* files = nullptr);
 
 // XXH64 of what a dense job leaves on disk, per sample in order: T row, visibility row, feature
 // row. `rows` samples, `texels` each.

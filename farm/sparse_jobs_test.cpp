@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 
 #include "farm/checkpoint_journal.h"
 #include "vocabulary/errors.h"
@@ -64,7 +65,7 @@ class SparseJobsTest : public ::testing::Test {
 
 TEST_F(SparseJobsTest, DenseJobEqualsTheAdaptiveSamplerAndSurvivesEncoding) {
   SparseJobHeader h{static_cast<uint32_t>(SparseJobKind::kDense), 3, 10, 3};
-  const DenseJob job{{5, 17, 30}};
+  const DenseJob job{{5, 17, 30}, 0, ""};
   const SparseJobResult r =
       DecodeSparseJobResult(ComputeSparseJob(sampler_, samples_, plan_, EncodeDenseJob(h, job)));
   EXPECT_EQ(r.header.phase, 3u);
@@ -188,10 +189,149 @@ TEST_F(SparseJobsTest, RankAndSparseJobsEqualTheKernelsCalledDirectly) {
   EXPECT_EQ(st.fallback_too_few_neighbors, 1u);
 }
 
+// The run's files in memory (farm/sparse_phase.cpp keeps them in the run folder).
+class MemoryRowFiles final : public SparseRowFiles {
+ public:
+  MemoryRowFiles(std::size_t texels, int m) : T_(texels), m_(m) {}
+  void ReadDense(uint32_t s, float* t, float* v, uint8_t* f) override {
+    const Dense& d = dense.at(s);
+    std::copy(d.t.begin(), d.t.end(), t);
+    std::copy(d.v.begin(), d.v.end(), v);
+    std::copy(d.f.begin(), d.f.end(), f);
+  }
+  void ReadLow(uint32_t s, float* low) override {
+    std::copy(dense.at(s).low.begin(), dense.at(s).low.end(), low);
+  }
+  void WriteDense(uint32_t s, const float* t, const float* v, const uint8_t* f,
+                  const float* low) override {
+    dense[s] = {{t, t + T_}, {v, v + T_}, {f, f + T_}, {low, low + 6 * m_ * m_}};
+  }
+  void WriteRow(uint32_t s, const float* t) override { rows[s].assign(t, t + T_); }
+  void RecordVariance(const std::string& step, uint64_t, uint64_t,
+                      const std::string& sums) override {
+    variance_steps.push_back(step);
+    EXPECT_FALSE(sums.empty());
+  }
+  void Sync() override { ++syncs; }
+  int low_resolution() const override { return m_; }
+
+  struct Dense {
+    std::vector<float> t, v;
+    std::vector<uint8_t> f;
+    std::vector<float> low;
+  };
+  std::map<uint32_t, Dense> dense;
+  std::map<uint32_t, std::vector<float>> rows;
+  std::vector<std::string> variance_steps;
+  int syncs = 0;
+
+ private:
+  std::size_t T_;
+  int m_;
+};
+
+// Rows in place (docs/farm.md, "Where the rows go"): a dense job writes its rows and their
+// downsampled rows into the files and returns the checksum of what it wrote; a rank job reads the
+// downsampled rows, a sparse job its neighbours' rows from the files, and writes its
+// reconstructed rows there: every value and checksum as when the rows travel in the messages.
+TEST_F(SparseJobsTest, JobsWithRowsInPlaceEqualJobsWithRowsInTheMessages) {
+  plan_.sparse.max_residual = 0;
+  const int m = SparseRankResolution(plan_, 8);
+  MemoryRowFiles files(T(), m);
+  const std::vector<uint64_t> mesh_rows = {4, 36};
+  const std::vector<uint32_t> dense = {4, 6, 8, 16, 18, 20, 28, 30, 32};
+  const SparseJobHeader dh{static_cast<uint32_t>(SparseJobKind::kDense), 1, 0, dense.size()};
+  const SparseJobResult plain = DecodeSparseJobResult(
+      ComputeSparseJob(sampler_, samples_, plan_,
+                       EncodeDenseJob(dh, DenseJob{dense, 0, "dense-initial"}), {}, &mesh_rows));
+  EXPECT_THROW(ComputeSparseJob(sampler_, samples_, plan_,
+                                EncodeDenseJob(dh, DenseJob{dense, kWriteRowsInPlace, "d"})),
+               std::runtime_error);  // no files to write to
+  const SparseJobResult kept = DecodeSparseJobResult(
+      ComputeSparseJob(sampler_, samples_, plan_,
+                       EncodeDenseJob(dh, DenseJob{dense, kWriteRowsInPlace, "dense-initial"}), {},
+                       &mesh_rows, &files));
+  EXPECT_EQ(kept.in_place, 1u);
+  EXPECT_TRUE(kept.transport.empty() && kept.visibility.empty() && kept.variance.empty());
+  EXPECT_FALSE(plain.variance.empty());
+  EXPECT_EQ(kept.checksum, DenseResultChecksum(dense.size(), T(), plain.transport.data(),
+                                               plain.visibility.data(), plain.feature.data()));
+  EXPECT_EQ(kept.counters.ToVector(), plain.counters.ToVector());
+  EXPECT_EQ(files.variance_steps, std::vector<std::string>{"dense-initial"});
+  EXPECT_GE(files.syncs, 1);
+  const std::size_t low_dim = 6u * m * m;
+  std::vector<float> low(dense.size() * low_dim);
+  for (std::size_t k = 0; k < dense.size(); ++k) {
+    const MemoryRowFiles::Dense& d = files.dense.at(dense[k]);
+    EXPECT_EQ(std::memcmp(d.t.data(), plain.transport.data() + k * T(), T() * 4), 0);
+    EXPECT_EQ(std::memcmp(d.v.data(), plain.visibility.data() + k * T(), T() * 4), 0);
+    EXPECT_EQ(std::memcmp(d.f.data(), plain.feature.data() + k * T(), T()), 0);
+    DownsampleRow(plain.transport.data() + k * T(), 8, m, low.data() + k * low_dim);
+    EXPECT_EQ(std::memcmp(d.low.data(), low.data() + k * low_dim, low_dim * 4), 0);
+  }
+
+  // A rank job: the same weights from the files' downsampled rows.
+  RankJob rj;
+  rj.low_dim = static_cast<uint32_t>(low_dim);
+  rj.offsets = {0, 4, 9};
+  rj.neighbors = {0, 1, 3, 4, 4, 5, 7, 8, 2};
+  RankJob rk = rj;
+  rj.low_rows = low;
+  rk.in_place = kReadRowsInPlace;
+  rk.union_ids = dense;
+  const SparseJobHeader rh{static_cast<uint32_t>(SparseJobKind::kRank), 2, 0, 2};
+  EXPECT_EQ(
+      DecodeSparseJobResult(
+          ComputeSparseJob(sampler_, samples_, plan_, EncodeRankJob(rh, rk), {}, nullptr, &files))
+          .weights,
+      DecodeSparseJobResult(ComputeSparseJob(sampler_, samples_, plan_, EncodeRankJob(rh, rj)))
+          .weights);
+
+  // A sparse job: the same outcomes, combinations and rows, the rows in the files.
+  SparseJob sj;
+  sj.texels = static_cast<uint32_t>(T());
+  sj.vertices = {5, 17, 25};
+  sj.offsets = {0, 4, 8, 10};
+  sj.neighbors = {0, 1, 3, 4, 3, 4, 6, 7, 7, 8};
+  sj.union_ids = dense;
+  sj.step = "sparse-reconstruct";
+  SparseJob sk = sj;
+  sj.transport = plain.transport;
+  sj.visibility = plain.visibility;
+  sj.feature = plain.feature;
+  sk.in_place = kReadRowsInPlace | kWriteRowsInPlace;
+  const SparseJobHeader sh{static_cast<uint32_t>(SparseJobKind::kSparse), 3, 0, 3};
+  const SparseJobResult a = DecodeSparseJobResult(
+      ComputeSparseJob(sampler_, samples_, plan_, EncodeSparseJob(sh, sj), {}, &mesh_rows));
+  const SparseJobResult b = DecodeSparseJobResult(
+      ComputeSparseJob(sampler_, samples_, plan_, EncodeSparseJob(sh, sk), {}, &mesh_rows, &files));
+  EXPECT_EQ(b.in_place, 1u);
+  EXPECT_TRUE(b.transport.empty());
+  EXPECT_EQ(a.outcomes, b.outcomes);
+  EXPECT_EQ(a.combination, b.combination);  // the compact records decode to the same pairs
+  ASSERT_EQ(a.combination.size(), 3u * 2 * plan_.max_neighbors);
+  EXPECT_NE(a.combination[0], kNoSample);
+  EXPECT_EQ(b.checksum, SparseResultChecksum(a.outcomes, a.transport, a.combination));
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (a.outcomes[i] != static_cast<uint8_t>(SparseOutcome::kReconstructed)) {
+      EXPECT_EQ(files.rows.count(sj.vertices[i]), 0u);
+      continue;
+    }
+    ASSERT_EQ(files.rows.count(sj.vertices[i]), 1u);
+    EXPECT_EQ(std::memcmp(files.rows[sj.vertices[i]].data(), a.transport.data() + k * T(), T() * 4),
+              0);
+    ++k;
+  }
+  EXPECT_EQ(k, 2u);
+  EXPECT_EQ(files.variance_steps.back(), "sparse-reconstruct");
+}
+
 TEST_F(SparseJobsTest, DamagedOrMalformedMessagesAreRejected) {
-  const std::string ok = ComputeSparseJob(
-      sampler_, samples_, plan_,
-      EncodeDenseJob({static_cast<uint32_t>(SparseJobKind::kDense), 0, 0, 1}, DenseJob{{3}}));
+  const std::string ok =
+      ComputeSparseJob(sampler_, samples_, plan_,
+                       EncodeDenseJob({static_cast<uint32_t>(SparseJobKind::kDense), 0, 0, 1},
+                                      DenseJob{{3}, 0, ""}));
   std::string damaged = ok;
   damaged[damaged.size() / 2] ^= 0x10;
   EXPECT_THROW(DecodeSparseJobResult(damaged), std::runtime_error);
@@ -209,7 +349,7 @@ TEST_F(SparseJobsTest, DamagedOrMalformedMessagesAreRejected) {
   EXPECT_THROW(
       ComputeSparseJob(sampler_, samples_, plan_,
                        EncodeDenseJob({static_cast<uint32_t>(SparseJobKind::kDense), 0, 0, 1},
-                                      DenseJob{{9999}})),
+                                      DenseJob{{9999}, 0, ""})),
       std::runtime_error);
 }
 

@@ -21,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <unordered_map>
@@ -58,6 +59,79 @@ constexpr std::size_t kJobsAhead = 2;
 // a 27 s 2-rank run.
 constexpr double kCommitIntervalSeconds = 0.5;
 
+// The run's files as a worker's SparseRowFiles (docs/farm.md, "Where the rows go"): T rows in
+// transport.prtt.partial, visibility and feature rows in sparse/dense_aux.bin, downsampled rows in
+// sparse/dense_low.bin (6·m·m floats per sample at the sample's offset), variance records in the
+// rank's own log. Opened by each computing rank at its first job.
+class FarmSparseRowFiles final : public SparseRowFiles {
+ public:
+  explicit FarmSparseRowFiles(FarmContext& ctx)
+      : T_(6ull * ctx.params.cubemap_n * ctx.params.cubemap_n),
+        m_(SparseRankResolution(ctx.plan, ctx.params.cubemap_n)),
+        rows_(TransportFileWriter::OpenRows(ctx.folder.partial, ctx.RowsFileInfo())),
+        aux_((fs::path(ctx.folder.sparse) / "dense_aux.bin").string()),
+        low_((fs::path(ctx.folder.sparse) / "dense_low.bin").string()) {
+    if (!ctx.rank_variance) {
+      ctx.rank_variance = std::make_unique<RankVarianceLog>(
+          ctx.folder, ctx.rank,
+          MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
+                                static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups()));
+    }
+    variance_ = ctx.rank_variance.get();
+  }
+  void ReadDense(uint32_t s, float* transport, float* visibility, uint8_t* feature) override {
+    rows_.ReadRows(s, 1, transport);
+    std::vector<char> buf(5 * T_);
+    if (!aux_.Read(buf.data(), buf.size(), s * 5 * T_))
+      throw FileIoError(aux_.path(), "lacks dense sample " + std::to_string(s));
+    std::memcpy(visibility, buf.data(), T_ * sizeof(float));
+    std::memcpy(feature, buf.data() + T_ * sizeof(float), T_);
+  }
+  void ReadLow(uint32_t s, float* low) override {
+    const std::size_t bytes = LowFloats() * sizeof(float);
+    if (!low_.Read(low, bytes, s * bytes))
+      throw FileIoError(low_.path(), "lacks dense sample " + std::to_string(s));
+  }
+  void WriteDense(uint32_t s, const float* transport, const float* visibility,
+                  const uint8_t* feature, const float* low) override {
+    std::vector<char> buf(5 * T_);
+    std::memcpy(buf.data(), visibility, T_ * sizeof(float));
+    std::memcpy(buf.data() + T_ * sizeof(float), feature, T_);
+    const std::size_t low_bytes = LowFloats() * sizeof(float);
+    std::lock_guard lock(mutex_);
+    rows_.WriteRows(s, 1, transport);
+    aux_.Write(buf.data(), buf.size(), s * 5 * T_);
+    low_.Write(low, low_bytes, s * low_bytes);
+  }
+  void WriteRow(uint32_t s, const float* transport) override {
+    std::lock_guard lock(mutex_);
+    rows_.WriteRows(s, 1, transport);
+  }
+  void RecordVariance(const std::string& step, uint64_t first, uint64_t count,
+                      const std::string& encoded) override {
+    const TransportVariance sums = DecodeTransportVariance(encoded, "a job's variance sums");
+    std::lock_guard lock(mutex_);
+    variance_->Record(step, first, count, sums);
+  }
+  void Sync() override {
+    std::lock_guard lock(mutex_);
+    rows_.Sync();
+    aux_.Sync();
+    low_.Sync();
+    variance_->Sync();
+  }
+  int low_resolution() const override { return m_; }
+
+ private:
+  std::size_t LowFloats() const { return static_cast<std::size_t>(6 * m_ * m_); }
+  const std::size_t T_;
+  const int m_;
+  TransportFileWriter rows_;
+  SideFile aux_, low_;
+  RankVarianceLog* variance_ = nullptr;
+  std::mutex mutex_;
+};
+
 // One step's jobs: what differs between the kinds.
 struct StepJobs {
   std::string name;
@@ -92,6 +166,9 @@ class FarmSparseSteps final : public SparseSteps {
         low_(N_) {
     fs::create_directories(ctx.folder.sparse);
     aux_ = std::make_unique<SideFile>((fs::path(ctx.folder.sparse) / "dense_aux.bin").string());
+    if (ctx.rows_in_place)
+      low_file_ =
+          std::make_unique<SideFile>((fs::path(ctx.folder.sparse) / "dense_low.bin").string());
   }
 
   // ---- dense rows (§4.2): T into the transport file, visibility + features into dense_aux.bin
@@ -101,7 +178,15 @@ class FarmSparseSteps final : public SparseSteps {
     p.kind = SparseJobKind::kDense;
     p.items = ids.size();
     const uint64_t aux_row = 5 * T_;
+    // A dense row's downsampled row, for the rank steps: kept here, or (rows in place, where the
+    // workers write it themselves) written into dense_low.bin for re-used jobs.
     auto apply = [&](uint32_t s, const float* row) {
+      if (low_file_) {
+        std::vector<float> low(Tm_);
+        DownsampleRow(row, n_, m_, low.data());
+        low_file_->Write(low.data(), Tm_ * sizeof(float), s * Tm_ * sizeof(float));
+        return;
+      }
       low_[s].resize(Tm_);
       DownsampleRow(row, n_, m_, low_[s].data());
     };
@@ -126,10 +211,19 @@ class FarmSparseSteps final : public SparseSteps {
       DenseJob job;
       job.ids.assign(ids.begin() + static_cast<std::ptrdiff_t>(h.first),
                      ids.begin() + static_cast<std::ptrdiff_t>(h.first + h.count));
+      job.in_place = ctx_.rows_in_place ? kWriteRowsInPlace : 0;
+      job.step = name;
       return EncodeDenseJob(h, job, std::move(prefix));
     };
     p.accept = [&, aux_row](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
+      if (r.in_place) {
+        // The worker wrote T, aux and downsampled rows itself.
+        if (!r.transport.empty() || !ctx_.rows_in_place)
+          throw RankFailure("a dense job came back with rows it was to write itself");
+        rows_written = c;
+        return r.checksum;
+      }
       if (r.transport.size() != c * T_ || r.visibility.size() != c * T_ ||
           r.feature.size() != c * T_)
         throw RankFailure("a dense job came back with the wrong number of rows");
@@ -148,6 +242,7 @@ class FarmSparseSteps final : public SparseSteps {
     p.sync = [&] {
       ctx_.writer->Sync();
       aux_->Sync();
+      if (low_file_) low_file_->Sync();
     };
     RunStep(p);
   }
@@ -179,11 +274,15 @@ class FarmSparseSteps final : public SparseSteps {
       job.low_dim = static_cast<uint32_t>(Tm_);
       std::unordered_map<uint32_t, uint32_t> local;
       job.offsets.push_back(0);
+      // Rows in place: the worker reads the union's downsampled rows from dense_low.bin.
+      job.in_place = ctx_.rows_in_place ? kReadRowsInPlace : 0;
       for (uint64_t i = h.first; i < h.first + h.count; ++i) {
         for (uint32_t d : index.RadiusSearch(ctx_.samples[cand[i]].position, ctx_.plan.radius,
                                              ctx_.plan.max_neighbors)) {
           auto [at, added] = local.emplace(d, static_cast<uint32_t>(local.size()));
-          if (added) job.low_rows.insert(job.low_rows.end(), low_[d].begin(), low_[d].end());
+          if (added && job.in_place) job.union_ids.push_back(d);
+          if (added && !job.in_place)
+            job.low_rows.insert(job.low_rows.end(), low_[d].begin(), low_[d].end());
           job.neighbors.push_back(at->second);
         }
         job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
@@ -260,7 +359,7 @@ class FarmSparseSteps final : public SparseSteps {
       return true;
     };
     p.make_job = [&](SparseJobHeader& h, std::string prefix) {
-      return MakeSparseJob(h, std::move(prefix), index, order, false);
+      return MakeSparseJob(h, std::move(prefix), index, order, false, name);
     };
     p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
@@ -268,12 +367,16 @@ class FarmSparseSteps final : public SparseSteps {
       std::size_t k = 0;
       for (std::size_t i = 0; i < c; ++i) {
         if (r.outcomes[i] != ok) continue;
+        if (r.in_place) {  // the worker wrote the row itself
+          ++k;
+          continue;
+        }
         if ((k + 1) * T_ > r.transport.size())
           throw RankFailure("a sparse job came back with too few rows");
         ctx_.writer->WriteRows(order[r.header.first + i], 1, r.transport.data() + k * T_);
         ++k;
       }
-      if (k * T_ != r.transport.size())
+      if (r.in_place ? !r.transport.empty() || !ctx_.rows_in_place : k * T_ != r.transport.size())
         throw RankFailure("a sparse job came back with too many rows");
       if (r.combination.size() != c * rec)
         throw RankFailure("a sparse job came back without its combinations");
@@ -287,7 +390,7 @@ class FarmSparseSteps final : public SparseSteps {
                 outcome.begin() + static_cast<std::ptrdiff_t>(r.header.first));
       keep_combination(r.header.first, c, r.combination.data());
       rows_written = k;
-      return SparseResultChecksum(r.outcomes, r.transport, r.combination);
+      return r.in_place ? r.checksum : SparseResultChecksum(r.outcomes, r.transport, r.combination);
     };
     p.sync = [&] {
       ctx_.writer->Sync();
@@ -310,9 +413,15 @@ class FarmSparseSteps final : public SparseSteps {
   // rows, read back from the run folder. `exclude_self`: the vertices are dense and their own
   // row is left out (cross-validation).
   std::string MakeSparseJob(SparseJobHeader& h, std::string prefix, const NeighborIndex& index,
-                            std::span<const uint32_t> order, bool exclude_self) {
+                            std::span<const uint32_t> order, bool exclude_self,
+                            const std::string& step) {
     SparseJob job;
     job.texels = static_cast<uint32_t>(T_);
+    job.step = step;
+    // Rows in place: the worker reads the union's rows from the run folder, and writes the
+    // reconstructed rows there (not a cross-validation's: rank 0 compares them).
+    if (ctx_.rows_in_place)
+      job.in_place = kReadRowsInPlace | (exclude_self ? 0 : kWriteRowsInPlace);
     std::unordered_map<uint32_t, uint32_t> local;
     std::vector<uint32_t> union_ids;
     job.offsets.push_back(0);
@@ -340,6 +449,10 @@ class FarmSparseSteps final : public SparseSteps {
         job.neighbors.push_back(at->second);
       }
       job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
+    }
+    if (job.in_place) {
+      job.union_ids = std::move(union_ids);
+      return EncodeSparseJob(h, job, std::move(prefix));
     }
     // The dense neighbours' rows, read back from the run folder.
     const std::size_t u = union_ids.size();
@@ -389,7 +502,7 @@ class FarmSparseSteps final : public SparseSteps {
              Checksum64(bytes.data(), bytes.size()) == e.rows_checksum;
     };
     p.make_job = [&](SparseJobHeader& h, std::string prefix) {
-      return MakeSparseJob(h, std::move(prefix), index, cv, true);
+      return MakeSparseJob(h, std::move(prefix), index, cv, true, "cross-validate");
     };
     p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
@@ -517,7 +630,7 @@ class FarmSparseSteps final : public SparseSteps {
       e.phase = p.name;
       e.rows = range;
       e.rows_checksum = p.accept(r, rows_written);
-      if (p.kind != SparseJobKind::kRank && !p.cross_validation) {
+      if (p.kind != SparseJobKind::kRank && !p.cross_validation && !r.in_place) {
         try {
           ctx_.variance->Record(p.name, range.first, range.count,
                                 DecodeTransportVariance(
@@ -553,7 +666,8 @@ class FarmSparseSteps final : public SparseSteps {
   const int m_;
   const std::size_t Tm_;
   std::unique_ptr<SideFile> aux_;
-  std::vector<std::vector<float>> low_;  // downsampled rows of the dense vertices
+  std::unique_ptr<SideFile> low_file_;   // rows in place: sparse/dense_low.bin
+  std::vector<std::vector<float>> low_;  // downsampled rows of the dense vertices (else)
 
  public:
   // Per sample, CombinationSlots pairs (sparse_jobs.h): filled by the sparse-reconstruct step.
@@ -573,12 +687,16 @@ class SparsePhase final : public FarmPhase {
   const char* name() const override { return "sparse"; }
 
   void Run(FarmContext& ctx) override {
+    // This rank's handles on the run's files (rows in place), opened at its first job: rank 0
+    // created them before it sends one.
+    std::unique_ptr<FarmSparseRowFiles> files;
     RunJobPhase(
         ctx,
-        [&ctx, mesh_rows = ctx.RowGroups()](const RowRange&, std::string_view payload,
-                                            std::string& out) {
+        [&ctx, &files, mesh_rows = ctx.RowGroups()](const RowRange&, std::string_view payload,
+                                                    std::string& out) {
+          if (ctx.rows_in_place && !files) files = std::make_unique<FarmSparseRowFiles>(ctx);
           out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out),
-                                 &mesh_rows);
+                                 &mesh_rows, files.get());
         },
         [&ctx](JobLoop& loop) {
           FarmReport& rep = ctx.report;

@@ -536,6 +536,40 @@ int SingleRankJobsBefore(const std::string& phase, int offset) {
   return static_cast<int>(at - phases.begin()) + offset;
 }
 
+// Rows in place with the sparse method (docs/farm.md, "Where the rows go"): with 3 ranks the
+// workers write dense rows (T, visibility and features, downsampled rows) and reconstructed rows
+// themselves and read the rows their jobs need from the run folder; rank 0's jobs carry sample
+// ids and its results checksums, counters and compact combination records. The files are those
+// of --rows-via-rank0, where every row passes through rank 0.
+TEST(FarmMpiSparseTest, RowsInPlaceGiveTheBytesOfRowsThroughRankZero) {
+  const std::string dir = WorkDir("sparse_in_place");
+  const std::string own = dir + "/own", funnel = dir + "/funnel";
+  ASSERT_EQ(Farm(3, kSparseScene + " --out " + own + kSparseJobs).exit_code, 0);
+  ASSERT_EQ(
+      Farm(3, kSparseScene + " --out " + funnel + kSparseJobs + " --rows-via-rank0").exit_code, 0);
+  ExpectEqualsSparseReference(own);
+  for (const char* file : {"/transport.prtt", "/transport.prtc", "/sparse/combination.bin"})
+    EXPECT_TRUE(ReadWholeFile(own + file) == ReadWholeFile(funnel + file)) << file;
+  ExpectSameVariance(own + "/transport.variance", funnel + "/transport.variance");
+  const nlohmann::json a = ReadReport(own), f = ReadReport(funnel);
+  EXPECT_EQ(a["sparse"]["dense_rows_shipped"], 0);
+  EXPECT_GT(f["sparse"]["dense_rows_shipped"].get<uint64_t>(), 0u);
+  const std::size_t row_bytes = 384 * 4;
+  for (const auto& batch : a["coordinator"]["batches"]) {
+    // Ids, neighbour lists, checksums, counters, combinations: far below a row per item. (The
+    // cross-validation's reconstructions come back to rank 0, which compares them with the
+    // traced rows: at most 400 rows.)
+    if (batch["batch"] == "cross-validate") continue;
+    EXPECT_LT(batch["bytes_per_item"].get<double>(), 0.5 * row_bytes) << batch.dump();
+  }
+  uint64_t in_place = 0, through = 0;
+  for (const auto& b : a["coordinator"]["batches"])
+    in_place += b["bytes_in"].get<uint64_t>() + b["bytes_out"].get<uint64_t>();
+  for (const auto& b : f["coordinator"]["batches"])
+    through += b["bytes_in"].get<uint64_t>() + b["bytes_out"].get<uint64_t>();
+  EXPECT_LT(10 * in_place, through) << in_place << " vs " << through;
+}
+
 TEST(FarmMpiSparseTest, SingleRankKilledInTheDenseAndRankPhasesThenResume) {
   SparseKillAndResume("sparse_kill_initial", 1, 0, 1, "dense-initial");
   SparseKillAndResume("sparse_kill_rank", 1, 0, SingleRankJobsBefore("rank-2", 2), "rank-2");

@@ -156,6 +156,27 @@ TEST(InterreflectionMpiTest, BouncesAreByteIdenticalForOneTwoAndThreeRanksAndEqu
   }
 }
 
+// Rows in place (docs/farm.md, "Where the rows go"): every rank reads the previous bounce from
+// the run folder and writes its bounce rows there; rank 0 sees checksums and counters only. The
+// files equal those of --rows-via-rank0 (rank 0 broadcasts the previous bounce and writes every
+// row), for gathering and for path tracing.
+TEST(InterreflectionMpiTest, BounceRowsInPlaceEqualRowsThroughRankZero) {
+  const std::string dir = WorkDir("in_place");
+  const std::string args = kSmallJobs + " --bounces 2";
+  ASSERT_EQ(Farm(3, kScene + " --out " + dir + "/own" + args).exit_code, 0);
+  ASSERT_EQ(Farm(3, kScene + " --out " + dir + "/funnel" + args + " --rows-via-rank0").exit_code,
+            0);
+  for (const char* f : {"/indirect/bounce-1.prtt", "/indirect/bounce-2.prtt", "/transport.prtc"})
+    EXPECT_TRUE(ReadWholeFile(dir + "/own" + f) == ReadWholeFile(dir + "/funnel" + f)) << f;
+  const nlohmann::json batches = Report(dir + "/own")["coordinator"]["batches"];
+  ASSERT_EQ(batches.size(), 3u);  // brute, bounce-1, bounce-2
+  for (const auto& b : batches) EXPECT_LE(b["bytes_per_item"].get<double>(), 64.0) << b.dump();
+  const nlohmann::json through = Report(dir + "/funnel")["coordinator"]["batches"];
+  // Bounce rows here are small (24 texels at the indirect n = 2: 96 bytes), so the rows that
+  // come through rank 0 are only a few times its bookkeeping.
+  EXPECT_GT(through[1]["bytes_in"].get<uint64_t>(), 3 * batches[1]["bytes_in"].get<uint64_t>());
+}
+
 TEST(InterreflectionMpiTest, ZeroBouncesKeepsTheDirectOnlyBytes) {
   const std::string dir = WorkDir("zero");
   ASSERT_EQ(Farm(2, kScene + " --out " + dir + "/a" + kSmallJobs).exit_code, 0);
