@@ -455,6 +455,12 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
         res.checksum = SparseResultChecksum(res.outcomes, res.transport, res.combination);
         res.in_place = 1;
         res.transport = {};
+      } else if (in_place & kCrossValidateInPlace) {
+        res.checksum = files->WriteCrossValidation(res.header.first, vertices, res.outcomes,
+                                                   res.transport.data());
+        res.in_place = 1;
+        res.transport = {};
+        res.combination = {};
       }
       SparseJobCounters& c = res.counters;
       c.rays_traced = total.trace.rays_traced;
@@ -475,7 +481,9 @@ std::string ComputeSparseJob(const TransportSampler& sampler,
     default:
       throw std::runtime_error("unknown sparse job kind " + std::to_string(res.header.kind));
   }
-  if (with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank)) {
+  // A cross-validation's rays are not T's: its sums are never recorded (rank 0 ignores them).
+  if (with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank) &&
+      !(in_place & kCrossValidateInPlace)) {
     if (res.in_place) {
       files->RecordVariance(step, res.header.first, res.header.count,
                             EncodeTransportVariance(sums));

@@ -78,6 +78,12 @@ class SparseRowFiles {
   // The job's variance sums, under the step's name and the job's item range.
   virtual void RecordVariance(const std::string& step, uint64_t first, uint64_t count,
                               const std::string& encoded_sums) = 0;
+  // A cross-validation job's records (farm/sparse_phase.cpp, CrossValidate): for items
+  // first… of its list, each vertex's outcome and reconstruction minus its traced row, written
+  // at their place; `rows` holds the reconstructed rows in order. Returns the XXH64 of the
+  // records' bytes (the journal's checksum).
+  virtual uint64_t WriteCrossValidation(uint64_t first, std::span<const uint32_t> vertices,
+                                        std::span<const uint8_t> outcomes, const float* rows) = 0;
   // Makes everything written durable (before the result leaves the worker).
   virtual void Sync() = 0;
   virtual int low_resolution() const = 0;  // m of the downsampled rows (6·m·m floats)
@@ -86,6 +92,9 @@ class SparseRowFiles {
 // A job's in-place flags (the trailer of every job message; 0: rows travel in the messages).
 inline constexpr uint32_t kReadRowsInPlace = 1;   // read the rows the job needs from the files
 inline constexpr uint32_t kWriteRowsInPlace = 2;  // write the rows it computes into the files
+// A cross-validation job: write its records (reconstruction − traced row) into the files instead
+// of returning the reconstructions.
+inline constexpr uint32_t kCrossValidateInPlace = 4;
 
 // ---- jobs (rank 0 → worker)
 struct DenseJob {

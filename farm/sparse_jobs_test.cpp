@@ -212,6 +212,11 @@ class MemoryRowFiles final : public SparseRowFiles {
     variance_steps.push_back(step);
     EXPECT_FALSE(sums.empty());
   }
+  uint64_t WriteCrossValidation(uint64_t first, std::span<const uint32_t>,
+                                std::span<const uint8_t> outcomes, const float*) override {
+    cross_validated.push_back(first);
+    return outcomes.size();
+  }
   void Sync() override { ++syncs; }
   int low_resolution() const override { return m_; }
 
@@ -223,6 +228,7 @@ class MemoryRowFiles final : public SparseRowFiles {
   std::map<uint32_t, Dense> dense;
   std::map<uint32_t, std::vector<float>> rows;
   std::vector<std::string> variance_steps;
+  std::vector<uint64_t> cross_validated;
   int syncs = 0;
 
  private:

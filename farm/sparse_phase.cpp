@@ -23,6 +23,8 @@
 #include <functional>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -59,6 +61,30 @@ constexpr std::size_t kJobsAhead = 2;
 // a 27 s 2-rank run.
 constexpr double kCommitIntervalSeconds = 0.5;
 
+// A cross-validation job's records (run/sparse/cross_validation.bin, see CrossValidate): per
+// vertex the outcome byte, 3 zero bytes, then reconstruction − traced row as float32 (zeros where
+// the reconstruction fell back). `rows`: the reconstructed rows in order; traced(i, out) reads
+// vertex i's traced row.
+std::vector<char> CrossValidationRecords(std::size_t T, std::span<const uint8_t> outcomes,
+                                         const float* rows,
+                                         const std::function<void(std::size_t, float*)>& traced) {
+  const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
+  const std::size_t record = 4 + 4 * T;
+  std::vector<char> bytes(outcomes.size() * record, 0);
+  std::vector<float> row(T);
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < outcomes.size(); ++i) {
+    char* rec = bytes.data() + i * record;
+    rec[0] = static_cast<char>(outcomes[i]);
+    if (outcomes[i] != ok) continue;
+    traced(i, row.data());
+    float* diff = reinterpret_cast<float*>(rec + 4);
+    for (std::size_t j = 0; j < T; ++j) diff[j] = rows[k * T + j] - row[j];
+    ++k;
+  }
+  return bytes;
+}
+
 // The run's files as a worker's SparseRowFiles (docs/farm.md, "Where the rows go"): T rows in
 // transport.prtt.partial, visibility and feature rows in sparse/dense_aux.bin, downsampled rows in
 // sparse/dense_low.bin (6·m·m floats per sample at the sample's offset), variance records in the
@@ -70,7 +96,8 @@ class FarmSparseRowFiles final : public SparseRowFiles {
         m_(SparseRankResolution(ctx.plan, ctx.params.cubemap_n)),
         rows_(TransportFileWriter::OpenRows(ctx.folder.partial, ctx.RowsFileInfo())),
         aux_((fs::path(ctx.folder.sparse) / "dense_aux.bin").string()),
-        low_((fs::path(ctx.folder.sparse) / "dense_low.bin").string()) {
+        low_((fs::path(ctx.folder.sparse) / "dense_low.bin").string()),
+        cross_path_((fs::path(ctx.folder.sparse) / "cross_validation.bin").string()) {
     if (!ctx.rank_variance) {
       ctx.rank_variance = std::make_unique<RankVarianceLog>(
           ctx.folder, ctx.rank,
@@ -113,8 +140,19 @@ class FarmSparseRowFiles final : public SparseRowFiles {
     std::lock_guard lock(mutex_);
     variance_->Record(step, first, count, sums);
   }
+  uint64_t WriteCrossValidation(uint64_t first, std::span<const uint32_t> vertices,
+                                std::span<const uint8_t> outcomes, const float* rows) override {
+    std::vector<char> bytes = CrossValidationRecords(
+        T_, outcomes, rows,
+        [&](std::size_t i, float* traced) { rows_.ReadRows(vertices[i], 1, traced); });
+    std::lock_guard lock(mutex_);
+    if (!cross_) cross_.emplace(cross_path_);
+    cross_->Write(bytes.data(), bytes.size(), first * (4 + 4 * T_));
+    return Checksum64(bytes.data(), bytes.size());
+  }
   void Sync() override {
     std::lock_guard lock(mutex_);
+    if (cross_) cross_->Sync();
     rows_.Sync();
     aux_.Sync();
     low_.Sync();
@@ -128,6 +166,8 @@ class FarmSparseRowFiles final : public SparseRowFiles {
   const int m_;
   TransportFileWriter rows_;
   SideFile aux_, low_;
+  std::string cross_path_;
+  std::optional<SideFile> cross_;  // opened at the first cross-validation job
   RankVarianceLog* variance_ = nullptr;
   std::mutex mutex_;
 };
@@ -421,7 +461,7 @@ class FarmSparseSteps final : public SparseSteps {
     // Rows in place: the worker reads the union's rows from the run folder, and writes the
     // reconstructed rows there (not a cross-validation's: rank 0 compares them).
     if (ctx_.rows_in_place)
-      job.in_place = kReadRowsInPlace | (exclude_self ? 0 : kWriteRowsInPlace);
+      job.in_place = kReadRowsInPlace | (exclude_self ? kCrossValidateInPlace : kWriteRowsInPlace);
     std::unordered_map<uint32_t, uint32_t> local;
     std::vector<uint32_t> union_ids;
     job.offsets.push_back(0);
@@ -507,24 +547,21 @@ class FarmSparseSteps final : public SparseSteps {
     p.accept = [&](const SparseJobResult& r, uint64_t& rows_written) {
       const std::size_t c = static_cast<std::size_t>(r.header.count);
       if (r.outcomes.size() != c) throw RankFailure("a cross-validation job came back incomplete");
-      std::vector<char> bytes(c * record, 0);
-      std::vector<float> traced(T_);
-      std::size_t k = 0;
-      for (std::size_t i = 0; i < c; ++i) {
-        char* rec = bytes.data() + i * record;
-        rec[0] = static_cast<char>(r.outcomes[i]);
-        if (r.outcomes[i] != ok) continue;
-        if ((k + 1) * T_ > r.transport.size())
-          throw RankFailure("a cross-validation job came back with too few rows");
-        ctx_.writer->ReadRows(cv[r.header.first + i], 1, traced.data());
-        float* diff = reinterpret_cast<float*>(rec + 4);
-        for (std::size_t j = 0; j < T_; ++j) diff[j] = r.transport[k * T_ + j] - traced[j];
-        ++k;
-      }
-      if (k * T_ != r.transport.size())
-        throw RankFailure("a cross-validation job came back with too many rows");
-      file.Write(bytes.data(), bytes.size(), r.header.first * record);
       rows_written = 0;
+      if (r.in_place) {  // the worker wrote the records itself
+        if (!r.transport.empty() || !ctx_.rows_in_place)
+          throw RankFailure("a cross-validation job came back with rows it was to write itself");
+        return r.checksum;
+      }
+      const std::size_t k =
+          static_cast<std::size_t>(std::count(r.outcomes.begin(), r.outcomes.end(), ok));
+      if (k * T_ != r.transport.size())
+        throw RankFailure("a cross-validation job came back with the wrong number of rows");
+      const std::vector<char> bytes = CrossValidationRecords(
+          T_, r.outcomes, r.transport.data(), [&](std::size_t i, float* traced) {
+            ctx_.writer->ReadRows(cv[r.header.first + i], 1, traced);
+          });
+      file.Write(bytes.data(), bytes.size(), r.header.first * record);
       return Checksum64(bytes.data(), bytes.size());
     };
     p.sync = [&] { file.Sync(); };

@@ -20,55 +20,63 @@ run_transport() {
   "$BUILD_DIR/bench/transport_bench"
 }
 
-# The farm's scaling (docs/farm.md, "Scaling"): the default scene, brute force, one thread per
-# rank, with mpirun -np 1 2 4 8 16 (PRT_SCALING_NP; beyond the cores the ranks share them, so the
-# wall time measures the overhead of more ranks, not a speed-up). Prints per rank count the wall
-# times, the coordinator's CPU per job, rank 0's bytes per row (job traffic and the compression's
-# reads), every rank's peak memory and the checksums of transport.prtt and transport.prtc, which
-# must be the same for every rank count. PRT_SCALING_ARGS adds prt-farm options (e.g.
-# --rows-via-rank0 to measure the old funnel).
+# The farm's scaling (docs/farm.md, "Scaling"): the demo scene (sparse method and two bounces)
+# and the same scene by brute force, one thread per rank, with mpirun -np 1 2 4 8 16
+# (PRT_SCALING_NP; PRT_SCALING_METHODS="sparse brute"; beyond the cores the ranks share them, so
+# the wall time measures the overhead of more ranks, not a speed-up). Prints per rank count the
+# wall times, the coordinator's CPU per job, rank 0's bytes per row (all job traffic, and the
+# compression's reads and sends), every rank's peak memory and the checksums of transport.prtt
+# and transport.prtc, which must be the same for every rank count. PRT_SCALING_ARGS adds
+# prt-farm options (e.g. --rows-via-rank0 to measure the old funnel).
 run_scaling() {
   local nps="${PRT_SCALING_NP:-1 2 4 8 16}"
   local rpt="${PRT_SCALING_RAYS_PER_TEXEL:-1}"
-  echo "== prt-farm scaling: mpirun -np ${nps// /, }, one thread per rank, ${rpt} ray(s) per texel =="
-  for np in $nps; do
-    mpirun -np "$np" --oversubscribe --bind-to none "$BUILD_DIR/farm/prt-farm" \
-      --out "$OUT/scaling-np$np" --force --threads 1 --method brute --rays-per-texel "$rpt" \
-      ${PRT_SCALING_ARGS:-} -q
-  done
-  python3 - "$OUT" $nps <<'PY'
+  for method in ${PRT_SCALING_METHODS:-sparse brute}; do
+    echo "== prt-farm scaling, method $method: mpirun -np ${nps// /, }, one thread per rank, ${rpt} ray(s) per texel =="
+    for np in $nps; do
+      mpirun -np "$np" --oversubscribe --bind-to none "$BUILD_DIR/farm/prt-farm" \
+        --out "$OUT/scaling-$method-np$np" --force --threads 1 --method "$method" \
+        --rays-per-texel "$rpt" ${PRT_SCALING_ARGS:-} -q
+    done
+    python3 - "$OUT/scaling-$method" $nps <<'PY'
 import hashlib, json, sys
 out, nps = sys.argv[1], [int(x) for x in sys.argv[2:]]
 def phase(d, name):
-    return next((p["wall_seconds"] for p in d["phases"] if p["name"] == name), 0.0)
+    return sum(p["wall_seconds"] for p in d["phases"] if p["name"] == name)
 def md5(path):
     h = hashlib.md5()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()[:12]
-print(f"{'ranks':>5} {'wall s':>7} {'brute s':>8} {'pack s':>7} {'compress s':>10} "
+print(f"{'ranks':>5} {'wall s':>7} {'rows s':>7} {'bounces s':>9} {'compress s':>10} "
       f"{'jobs':>5} {'coord ms/job':>12} {'r0 B/row jobs':>13} {'r0 B/row compress':>17} "
       f"{'peak MiB max':>12} {'transport.prtt':>14} {'transport.prtc':>14}")
 base = None
 for np in nps:
-    run = f"{out}/scaling-np{np}"
+    run = f"{out}-np{np}"
     d = json.load(open(f"{run}/report.json"))
-    b = next(x for x in d["coordinator"]["batches"] if x["batch"] == "brute") \
-        if d["coordinator"]["batches"] else {"jobs": 0, "cpu_ms_per_job": 0, "bytes_per_item": 0}
+    batches = d["coordinator"]["batches"]
+    jobs = sum(b["jobs"] for b in batches)
+    cpu = sum(b["cpu_seconds"] for b in batches)
+    traffic = sum(b["bytes_in"] + b["bytes_out"] for b in batches)
     c = d["compression"]
     rows = d["rows"]
     r0c = (c.get("rank0_bytes_read", 0) + c.get("rank0_bytes_sent", 0)) / rows
     peak = max(x["peak_rss_bytes"] for x in d["rank_details"]) / 2**20
     sums = (md5(f"{run}/transport.prtt"), md5(f"{run}/transport.prtc"))
     base = base or sums
-    print(f"{np:>5} {d['wall_seconds']:>7.1f} {phase(d, 'brute'):>8.1f} {phase(d, 'finalize'):>7.1f} "
-          f"{phase(d, 'compress'):>10.1f} {b['jobs']:>5} {b['cpu_ms_per_job']:>12.3f} "
-          f"{b['bytes_per_item']:>13.2f} {r0c:>17.0f} {peak:>12.0f} {sums[0]:>14} {sums[1]:>14}"
+    rows_s = phase(d, d["method"]) + phase(d, "finalize")
+    bounce_s = sum(p["wall_seconds"] for p in d["phases"] if p["name"].startswith(("bounce", "path-trace")))
+    print(f"{np:>5} {d['wall_seconds']:>7.1f} {rows_s:>7.1f} {bounce_s:>9.1f} "
+          f"{phase(d, 'compress'):>10.1f} {jobs:>5} {1e3 * cpu / max(1, jobs):>12.3f} "
+          f"{traffic / rows:>13.2f} {r0c:>17.0f} {peak:>12.0f} {sums[0]:>14} {sums[1]:>14}"
           + ("" if sums == base else "  DIFFERS"))
-print(f"rows {rows}, row bytes {4 * d['cols']}; r0 B/row compress = rank 0's reads + sends in the "
-      f"transpose per row of T (its own share once every rank reads its rows)")
+print(f"rows {rows}, row bytes {4 * d['cols']}; r0 B/row jobs = rank 0's job and result bytes "
+      f"with the other ranks per row, all batches; r0 B/row compress = rank 0's reads + sends in "
+      f"the transpose per row of T (its own share once every rank reads its rows)")
 PY
+  done
 }
 
 run_sparse() { "$BUILD_DIR/bench/prt-sparse-bench" --out "$OUT/sparse" $QUICK; }
