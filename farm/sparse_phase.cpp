@@ -34,6 +34,7 @@
 #include "farm/side_file.h"
 #include "farm/sparse_jobs.h"
 #include "formats/transport_variance.h"
+#include "vocabulary/bytes.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -60,6 +61,158 @@ constexpr std::size_t kJobsAhead = 2;
 // Results become durable every 0.5 s and when no job is out: an fdatasync per result cost 2 s of
 // a 27 s 2-rank run.
 constexpr double kCommitIntervalSeconds = 0.5;
+
+// Neighbour lists of items [first, first + count) of `items` (sample ids): each item's dense
+// neighbours within the plan's radius, nearest first, at most max_neighbors (`exclude_self`: the
+// item, dense itself, left out — cross-validation), as indices into the union of their sample ids
+// in first-seen order. `max_union` > 0: the items stop before the union would exceed it (at
+// least one item). Returns the items taken. Rank 0 and, with rows in place, the worker build the
+// same lists from the same index (an exact search on one FLANN k-d tree over the same points in
+// the same order).
+struct NeighbourLists {
+  std::vector<uint32_t> offsets{0}, neighbors, union_ids;
+};
+uint64_t ListNeighbours(const NeighborIndex& index, std::span<const SpatialSample> samples,
+                        const SparsePlan& plan, std::span<const uint32_t> items, uint64_t first,
+                        uint64_t count, bool exclude_self, uint64_t max_union,
+                        NeighbourLists& out) {
+  std::unordered_map<uint32_t, uint32_t> local;
+  std::vector<uint32_t> nbs;
+  for (uint64_t i = first; i < first + count; ++i) {
+    nbs = index.RadiusSearch(samples[items[i]].position, plan.radius,
+                             plan.max_neighbors + (exclude_self ? 1 : 0));
+    if (exclude_self) {
+      nbs.erase(std::remove(nbs.begin(), nbs.end(), items[i]), nbs.end());
+      if (nbs.size() > static_cast<std::size_t>(plan.max_neighbors))
+        nbs.resize(static_cast<std::size_t>(plan.max_neighbors));
+    }
+    std::size_t added = 0;
+    for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
+    if (max_union > 0 && i > first && out.union_ids.size() + added > max_union) return i - first;
+    for (uint32_t d : nbs) {
+      auto [at, is_new] = local.emplace(d, static_cast<uint32_t>(out.union_ids.size()));
+      if (is_new) out.union_ids.push_back(d);
+      out.neighbors.push_back(at->second);
+    }
+    out.offsets.push_back(static_cast<uint32_t>(out.neighbors.size()));
+  }
+  return count;
+}
+
+// A step's lists with rows in place (run/sparse/lists-<step number>.bin, written durably by rank 0
+// before the step's first job): the dense samples its index is built over, in order, and its
+// items (candidates, sparse vertices in Morton order, or the cross-validated vertices). The
+// magic "PRTSLS1\0", uint64 dense count, uint64 item count, the uint32 ids, then the XXH64 of
+// everything before it.
+constexpr char kListsMagic[8] = {'P', 'R', 'T', 'S', 'L', 'S', '1', '\0'};
+std::string StepListsPath(const RunFolder& f, uint32_t step) {
+  return (fs::path(f.sparse) / ("lists-" + std::to_string(step) + ".bin")).string();
+}
+void WriteStepLists(const std::string& path, std::span<const uint32_t> dense,
+                    std::span<const uint32_t> items) {
+  std::string b(kListsMagic, sizeof kListsMagic);
+  const uint64_t counts[2] = {dense.size(), items.size()};
+  b.append(reinterpret_cast<const char*>(counts), sizeof counts);
+  b.append(reinterpret_cast<const char*>(dense.data()), dense.size_bytes());
+  b.append(reinterpret_cast<const char*>(items.data()), items.size_bytes());
+  const uint64_t sum = Checksum64(b.data(), b.size());
+  b.append(reinterpret_cast<const char*>(&sum), sizeof sum);
+  WriteFileDurably(path, b);
+}
+void ReadStepLists(const std::string& path, uint64_t samples, std::vector<uint32_t>& dense,
+                   std::vector<uint32_t>& items) {
+  const std::string b = ReadWholeFile(path);
+  constexpr std::size_t kHead = sizeof kListsMagic + 2 * sizeof(uint64_t);
+  uint64_t counts[2] = {0, 0}, sum = 0;
+  if (b.size() < kHead + sizeof sum || std::memcmp(b.data(), kListsMagic, sizeof kListsMagic) != 0)
+    throw InputError(path, "is not a sparse step's lists");
+  std::memcpy(counts, b.data() + sizeof kListsMagic, sizeof counts);
+  std::memcpy(&sum, b.data() + b.size() - sizeof sum, sizeof sum);
+  if (Checksum64(b.data(), b.size() - sizeof sum) != sum || counts[0] > b.size() / 4 ||
+      counts[1] > b.size() / 4 || b.size() != kHead + 4 * (counts[0] + counts[1]) + sizeof sum)
+    throw InputError(path, "is damaged");
+  dense.resize(counts[0]);
+  items.resize(counts[1]);
+  std::memcpy(dense.data(), b.data() + kHead, 4 * dense.size());
+  std::memcpy(items.data(), b.data() + kHead + 4 * dense.size(), 4 * items.size());
+  for (uint32_t id : dense)
+    if (id >= samples) throw InputError(path, "names a sample beyond the run's");
+  for (uint32_t id : items)
+    if (id >= samples) throw InputError(path, "names a sample beyond the run's");
+}
+
+// A job without its neighbour lists (rows in place): the worker builds them from its step's
+// lists file. [magic "PRSC"][SparseJobHeader][uint32 exclude_self][step name].
+constexpr uint32_t kCompactJobMagic = 0x43535250u;
+std::string EncodeCompactJob(const SparseJobHeader& h, bool exclude_self, const std::string& step,
+                             std::string prefix) {
+  ByteWriter w(std::move(prefix));
+  w.Put(kCompactJobMagic);
+  w.Put(h);
+  w.Put(static_cast<uint32_t>(exclude_self ? 1 : 0));
+  w.PutVector(std::vector<char>(step.begin(), step.end()));
+  return std::move(w.bytes());
+}
+
+// A worker's side of compact jobs: the full job (neighbour lists, union ids, in-place flags) from
+// the step's lists file and an index over its dense samples, both loaded once per step.
+class CompactJobExpander {
+ public:
+  // `payload` is a compact job (IsCompact) of the run in `ctx`.
+  std::string Expand(const FarmContext& ctx, std::string_view payload) {
+    ByteReader r(payload, [](const char*, std::size_t) {
+      throw std::runtime_error("truncated compact sparse job");
+    });
+    if (r.Get<uint32_t>("job") != kCompactJobMagic) throw std::runtime_error("not a compact job");
+    const auto h = r.Get<SparseJobHeader>("job");
+    const bool exclude_self = r.Get<uint32_t>("job") != 0;
+    const std::vector<char> name = r.GetVector<char>("job");
+    if (!index_ || h.phase != step_) {
+      index_.reset();
+      ReadStepLists(StepListsPath(ctx.folder, h.phase), ctx.samples.size(), dense_, items_);
+      std::vector<Vec3> pts;
+      pts.reserve(dense_.size());
+      for (uint32_t d : dense_) pts.push_back(ctx.samples[d].position);
+      index_ = std::make_unique<NeighborIndex>(pts, dense_);
+      step_ = h.phase;
+    }
+    if (h.first + h.count > items_.size() || h.count == 0)
+      throw std::runtime_error("a compact job beyond its step's items");
+    NeighbourLists lists;
+    ListNeighbours(*index_, ctx.samples, ctx.plan, items_, h.first, h.count, exclude_self, 0,
+                   lists);
+    if (h.kind == static_cast<uint32_t>(SparseJobKind::kRank)) {
+      const int m = SparseRankResolution(ctx.plan, ctx.params.cubemap_n);
+      RankJob job;
+      job.low_dim = static_cast<uint32_t>(6 * m * m);
+      job.offsets = std::move(lists.offsets);
+      job.neighbors = std::move(lists.neighbors);
+      job.in_place = kReadRowsInPlace;
+      job.union_ids = std::move(lists.union_ids);
+      return EncodeRankJob(h, job);
+    }
+    SparseJob job;
+    job.texels = static_cast<uint32_t>(6 * ctx.params.cubemap_n * ctx.params.cubemap_n);
+    job.vertices.assign(items_.begin() + static_cast<std::ptrdiff_t>(h.first),
+                        items_.begin() + static_cast<std::ptrdiff_t>(h.first + h.count));
+    job.offsets = std::move(lists.offsets);
+    job.neighbors = std::move(lists.neighbors);
+    job.union_ids = std::move(lists.union_ids);
+    job.in_place = kReadRowsInPlace | (exclude_self ? kCrossValidateInPlace : kWriteRowsInPlace);
+    job.step.assign(name.begin(), name.end());
+    return EncodeSparseJob(h, job);
+  }
+  static bool IsCompact(std::string_view payload) {
+    uint32_t magic = 0;
+    if (payload.size() >= sizeof magic) std::memcpy(&magic, payload.data(), sizeof magic);
+    return magic == kCompactJobMagic;
+  }
+
+ private:
+  uint32_t step_ = 0;
+  std::vector<uint32_t> dense_, items_;
+  std::unique_ptr<NeighborIndex> index_;
+};
 
 // A cross-validation job's records (run/sparse/cross_validation.bin, see CrossValidate): per
 // vertex the outcome byte, 3 zero bytes, then reconstruction − traced row as float32 (zeros where
@@ -309,7 +462,10 @@ class FarmSparseSteps final : public SparseSteps {
       for (std::size_t i = 0; i < w.size(); ++i) weight[e.rows.first + i] = w[i];
       return true;
     };
+    if (ctx_.rows_in_place) WriteStepLists(StepListsPath(ctx_.folder, step_number_), dense, cand);
     p.make_job = [&](SparseJobHeader& h, std::string prefix) {
+      // Rows in place: the worker lists the neighbours itself and reads their downsampled rows.
+      if (ctx_.rows_in_place) return EncodeCompactJob(h, false, name, std::move(prefix));
       RankJob job;
       job.low_dim = static_cast<uint32_t>(Tm_);
       std::unordered_map<uint32_t, uint32_t> local;
@@ -376,6 +532,7 @@ class FarmSparseSteps final : public SparseSteps {
     };
     const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
 
+    if (ctx_.rows_in_place) WriteStepLists(StepListsPath(ctx_.folder, step_number_), dense, order);
     StepJobs p;
     p.name = name;
     p.kind = SparseJobKind::kSparse;
@@ -438,7 +595,7 @@ class FarmSparseSteps final : public SparseSteps {
       comb_file.Sync();
     };
     RunStep(p, t0);
-    CrossValidate(index, order, outcome);
+    CrossValidate(index, dense, order, outcome);
     ctx_.report.sparse.dense_rows_shipped = rows_shipped_;
     ctx_.report.sparse.index_seconds = index_seconds_;
     std::vector<uint32_t> fb;
@@ -455,45 +612,21 @@ class FarmSparseSteps final : public SparseSteps {
   std::string MakeSparseJob(SparseJobHeader& h, std::string prefix, const NeighborIndex& index,
                             std::span<const uint32_t> order, bool exclude_self,
                             const std::string& step) {
+    // A job's rows stay within the job byte limit (at least one vertex per job).
+    NeighbourLists lists;
+    h.count = ListNeighbours(index, ctx_.samples, ctx_.plan, order, h.first, h.count, exclude_self,
+                             kMaxSparseJobBytes / (9 * T_), lists);
+    // Rows in place: the worker lists the neighbours itself (the same lists, from the step's
+    // lists file), reads their rows from the run folder and writes its results there.
+    if (ctx_.rows_in_place) return EncodeCompactJob(h, exclude_self, step, std::move(prefix));
     SparseJob job;
     job.texels = static_cast<uint32_t>(T_);
     job.step = step;
-    // Rows in place: the worker reads the union's rows from the run folder, and writes the
-    // reconstructed rows there (not a cross-validation's: rank 0 compares them).
-    if (ctx_.rows_in_place)
-      job.in_place = kReadRowsInPlace | (exclude_self ? kCrossValidateInPlace : kWriteRowsInPlace);
-    std::unordered_map<uint32_t, uint32_t> local;
-    std::vector<uint32_t> union_ids;
-    job.offsets.push_back(0);
-    std::vector<uint32_t> nbs;
-    for (uint64_t i = h.first; i < h.first + h.count; ++i) {
-      nbs = index.RadiusSearch(ctx_.samples[order[i]].position, ctx_.plan.radius,
-                               ctx_.plan.max_neighbors + (exclude_self ? 1 : 0));
-      if (exclude_self) {
-        // Cross-validation: the vertex is dense itself; its reconstruction uses the others.
-        nbs.erase(std::remove(nbs.begin(), nbs.end(), order[i]), nbs.end());
-        if (nbs.size() > static_cast<std::size_t>(ctx_.plan.max_neighbors))
-          nbs.resize(static_cast<std::size_t>(ctx_.plan.max_neighbors));
-      }
-      std::size_t added = 0;
-      for (uint32_t d : nbs) added += local.count(d) ? 0 : 1;
-      // A job's rows stay within the job byte limit (at least one vertex per job).
-      if (i > h.first && (union_ids.size() + added) * 9 * T_ > kMaxSparseJobBytes) {
-        h.count = i - h.first;
-        break;
-      }
-      job.vertices.push_back(order[i]);
-      for (uint32_t d : nbs) {
-        auto [at, is_new] = local.emplace(d, static_cast<uint32_t>(union_ids.size()));
-        if (is_new) union_ids.push_back(d);
-        job.neighbors.push_back(at->second);
-      }
-      job.offsets.push_back(static_cast<uint32_t>(job.neighbors.size()));
-    }
-    if (job.in_place) {
-      job.union_ids = std::move(union_ids);
-      return EncodeSparseJob(h, job, std::move(prefix));
-    }
+    job.vertices.assign(order.begin() + static_cast<std::ptrdiff_t>(h.first),
+                        order.begin() + static_cast<std::ptrdiff_t>(h.first + h.count));
+    job.offsets = std::move(lists.offsets);
+    job.neighbors = std::move(lists.neighbors);
+    std::vector<uint32_t> union_ids = std::move(lists.union_ids);
     // The dense neighbours' rows, read back from the run folder.
     const std::size_t u = union_ids.size();
     job.transport.resize(u * T_);
@@ -521,8 +654,8 @@ class FarmSparseSteps final : public SparseSteps {
   // the texels' differences as float32; 0 where the reconstruction fell back, as the pipeline
   // then traces the vertex). run/sparse/cross_validation.json lists the vertices and, per mesh,
   // how many vertices were reconstructed. Nothing here changes a row of T.
-  void CrossValidate(const NeighborIndex& index, std::span<const uint32_t> order,
-                     std::span<const uint8_t> outcome) {
+  void CrossValidate(const NeighborIndex& index, std::span<const uint32_t> dense,
+                     std::span<const uint32_t> order, std::span<const uint8_t> outcome) {
     const uint8_t ok = static_cast<uint8_t>(SparseOutcome::kReconstructed);
     const std::vector<uint32_t> initial =
         InitialDenseSet(N_, SparseInitialDenseCount(N_, ctx_.plan), ctx_.plan.seed);
@@ -531,6 +664,7 @@ class FarmSparseSteps final : public SparseSteps {
     for (std::size_t i = 0; i < K; ++i) cv.push_back(initial[i * initial.size() / K]);
     const std::size_t record = 4 + 4 * T_;
     SideFile file((fs::path(ctx_.folder.sparse) / "cross_validation.bin").string());
+    if (ctx_.rows_in_place) WriteStepLists(StepListsPath(ctx_.folder, step_number_), dense, cv);
     StepJobs p;
     p.name = "cross-validate";
     p.kind = SparseJobKind::kSparse;
@@ -727,11 +861,17 @@ class SparsePhase final : public FarmPhase {
     // This rank's handles on the run's files (rows in place), opened at its first job: rank 0
     // created them before it sends one.
     std::unique_ptr<FarmSparseRowFiles> files;
+    CompactJobExpander expander;
     RunJobPhase(
         ctx,
-        [&ctx, &files, mesh_rows = ctx.RowGroups()](const RowRange&, std::string_view payload,
-                                                    std::string& out) {
+        [&ctx, &files, &expander, mesh_rows = ctx.RowGroups()](
+            const RowRange&, std::string_view payload, std::string& out) {
           if (ctx.rows_in_place && !files) files = std::make_unique<FarmSparseRowFiles>(ctx);
+          std::string expanded;
+          if (CompactJobExpander::IsCompact(payload)) {
+            expanded = expander.Expand(ctx, payload);
+            payload = expanded;
+          }
           out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out),
                                  &mesh_rows, files.get());
         },

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -77,6 +77,35 @@ print(f"rows {rows}, row bytes {4 * d['cols']}; r0 B/row jobs = rank 0's job and
       f"the transpose per row of T (its own share once every rank reads its rows)")
 PY
   done
+}
+
+# The million-vertex memory case (docs/farm.md, "Memory"): scenes/million.toml with 2 ranks and
+# --memory-budget 16M, 64M, 256M (PRT_MILLION_BUDGETS), and once without the compression; prints
+# each rank's peak resident memory, peak − budget, the bytes spilled and the compression's time.
+run_million() {
+  local budgets="${PRT_MILLION_BUDGETS:-16M 64M 256M}"
+  echo "== prt-farm on 1,026,002 vertices (scenes/million.toml), 2 ranks =="
+  mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" "$ROOT/scenes/million.toml" \
+    --out "$OUT/million-none" --force --no-compress -q
+  for b in $budgets; do
+    mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" "$ROOT/scenes/million.toml" \
+      --out "$OUT/million-$b" --force --memory-budget "$b" -q
+  done
+  python3 - "$OUT" none $budgets <<'PY'
+import json, sys
+out, budgets = sys.argv[1], sys.argv[2:]
+mult = {"k": 2**10, "M": 2**20, "G": 2**30}
+print(f"{'budget':>7} {'rank 0 MiB':>10} {'rank 1 MiB':>10} {'peak-budget MiB':>15} {'spilled MiB':>11} {'compress s':>10}")
+for b in budgets:
+    d = json.load(open(f"{out}/million-{b}/report.json"))
+    peaks = [x["peak_rss_bytes"] / 2**20 for x in d["rank_details"]]
+    c = d.get("compression", {})
+    budget = 0 if b == "none" else int(b[:-1]) * mult[b[-1]] / 2**20
+    comp = next((p["wall_seconds"] for p in d["phases"] if p["name"] == "compress"), 0.0)
+    print(f"{b:>7} {peaks[0]:>10.0f} {peaks[1]:>10.0f} {max(peaks) - budget:>15.0f} "
+          f"{c.get('spill_bytes', 0) / 2**20:>11.0f} {comp:>10.1f}")
+print(f"rows {d['rows']}, n {d['cubemap_n']}")
+PY
 }
 
 run_sparse() { "$BUILD_DIR/bench/prt-sparse-bench" --out "$OUT/sparse" $QUICK; }
@@ -273,10 +302,10 @@ run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/gloss
 
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_figure9; run_viewer; run_relight; run_glossy ;;
-  transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
+  transport|scaling|million|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
   mc-error) run_mc_error ;;
   gi) run_gi ;;
   sparse-gi) run_sparse_gi ;;
   image) run_image ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
 esac
