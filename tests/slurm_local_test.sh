@@ -6,7 +6,12 @@
 # prt-farm's exit status in the job's log. Whatever happens, the daemons are stopped and the state
 # folder removed on the way out (its logs are copied to WORK first).
 #
-#   slurm_local_test.sh PRT_FARM BUILD_DIR WORK_DIR
+#   slurm_local_test.sh PRT_FARM BUILD_DIR WORK_DIR [requeue]
+#
+# With `requeue` (CTest slurm_requeue) it runs `slurm-local.sh requeue-test` instead: an
+# uninterrupted reference job, then the same job sent USR1 (what Slurm sends before the time
+# limit) after 10 journaled jobs, which must requeue itself, resume from its checkpoints,
+# complete and give the reference's transport.prtt and transport.prtc byte for byte.
 #
 # Exit 77 (CTest SKIP_RETURN_CODE) when not root and sudo needs a password: slurmd must be root.
 set -euo pipefail
@@ -14,6 +19,7 @@ set -euo pipefail
 PRT_FARM=${1:?usage: slurm_local_test.sh PRT_FARM BUILD_DIR WORK_DIR}
 BUILD_DIR=${2:?usage: slurm_local_test.sh PRT_FARM BUILD_DIR WORK_DIR}
 WORK=${3:?usage: slurm_local_test.sh PRT_FARM BUILD_DIR WORK_DIR}
+MODE=${4:-run}
 SRC=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 LOCAL=$SRC/cluster-configs/slurm-local.sh
 
@@ -56,6 +62,15 @@ export PRT_SLURM_TIME=5
 
 echo "== up"
 timeout 90 "$LOCAL" up
+
+if [ "$MODE" = requeue ]; then
+  echo "== requeue-test"
+  timeout 300 "$LOCAL" requeue-test | tee "$WORK/requeue.txt"
+  grep -q 'requeue test passed' "$WORK/requeue.txt"
+  grep -q 'transport.prtc identical to the reference' "$WORK/requeue.txt"
+  echo "slurm_local_test: ok"
+  exit 0
+fi
 
 echo "== run tests/data/tiny.toml"
 timeout 150 "$LOCAL" run "$SRC/tests/data/tiny.toml" "$WORK/tiny" | tee "$WORK/run.txt"
