@@ -260,29 +260,34 @@ TransportFileWriter TransportFileWriter::Create(const std::string& path,
   return writer;
 }
 
-TransportFileWriter TransportFileWriter::Reopen(const std::string& path,
-                                                const TransportFileInfo& info) {
-  const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
-  if (fd < 0) throw FileIoError(path, SystemReason("cannot open"));
-  TransportFileWriter writer(path, info, fd);
-  const DecodedHeader d = DecodeHeader(fd, path);
-  if (!d.offsets.empty()) throw InputError(path, "a packed transport file cannot be written to");
-  if (!(d.info == info)) {
-    throw InputError(path, "transport file dimensions do not match this run");
-  }
-  if (d.complete) writer.WriteHeader(false, std::vector<uint64_t>(info.block_count(), 0));
-  return writer;
-}
-
-TransportFileWriter TransportFileWriter::OpenRows(const std::string& path,
-                                                  const TransportFileInfo& info) {
+// An existing plain transport file of `info`, opened to write rows; `complete` says whether its
+// header is marked complete.
+TransportFileWriter TransportFileWriter::OpenExisting(const std::string& path,
+                                                      const TransportFileInfo& info,
+                                                      bool& complete) {
   const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0) throw FileIoError(path, SystemReason("cannot open"));
   TransportFileWriter writer(path, info, fd);
   const DecodedHeader d = DecodeHeader(fd, path);
   if (!d.offsets.empty()) throw InputError(path, "a packed transport file cannot be written to");
   if (!(d.info == info)) throw InputError(path, "transport file dimensions do not match this run");
-  if (d.complete) throw InputError(path, "is complete: no rows may be written into it");
+  complete = d.complete;
+  return writer;
+}
+
+TransportFileWriter TransportFileWriter::Reopen(const std::string& path,
+                                                const TransportFileInfo& info) {
+  bool complete = false;
+  TransportFileWriter writer = OpenExisting(path, info, complete);
+  if (complete) writer.WriteHeader(false, std::vector<uint64_t>(info.block_count(), 0));
+  return writer;
+}
+
+TransportFileWriter TransportFileWriter::OpenRows(const std::string& path,
+                                                  const TransportFileInfo& info) {
+  bool complete = false;
+  TransportFileWriter writer = OpenExisting(path, info, complete);
+  if (complete) throw InputError(path, "is complete: no rows may be written into it");
   return writer;
 }
 

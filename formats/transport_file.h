@@ -84,6 +84,8 @@ class TransportFileWriter {
 
  private:
   TransportFileWriter(std::string path, TransportFileInfo info, int fd);
+  static TransportFileWriter OpenExisting(const std::string& path, const TransportFileInfo& info,
+                                          bool& complete);
   void WriteHeader(bool complete, std::span<const uint64_t> checksums);
 
   std::string path_;
