@@ -509,8 +509,11 @@ void JobLoop::Run(JobBatch& batch) {
         batch.name,
         static_cast<double>(traffic.bytes_in + traffic.bytes_out) /
             static_cast<double>(std::max<uint64_t>(1, traffic.items)),
-        batch.unit == "samples" ? "row" : batch.unit, 1e-6 * static_cast<double>(traffic.bytes_in),
-        1e-6 * static_cast<double>(traffic.bytes_out),
+        batch.unit == "samples" ? std::string("row")
+        : !batch.unit.empty() && batch.unit.back() == 's'
+            ? batch.unit.substr(0, batch.unit.size() - 1)
+            : batch.unit,
+        1e-6 * static_cast<double>(traffic.bytes_in), 1e-6 * static_cast<double>(traffic.bytes_out),
         1e3 * traffic.cpu_seconds / static_cast<double>(traffic.jobs));
   }
   rep.coordinator.push_back(std::move(traffic));
