@@ -10,11 +10,14 @@
 //   dense-rank-k        SparsePickByRank, on rank 0 only       jobs: chunks of sample ids
 //   sparse-reconstruct  non-dense samples in Morton order      jobs: chunks of that order
 //   dense-fallback      the vertices whose reconstruction fell back
-// Dense T rows and reconstructed rows go into transport.prtt.partial as they arrive; dense
-// visibility and feature rows into run/sparse/dense_aux.bin (5·texels bytes per sample, at the
-// sample's offset: a sparse file), candidate weights into run/sparse/rank-k.bin (int32 per
-// candidate), sparse outcomes into run/sparse/sparse_outcome.bin (a byte per Morton position).
-// Every job is journaled after its results are durable ("sjob <step> …").
+// Dense T rows and reconstructed rows go into transport.prtt.partial; dense visibility and
+// feature rows into run/sparse/dense_aux.bin (5·texels bytes per sample, at the sample's offset:
+// a sparse file) — written by the worker that computed them where every rank sees the run folder
+// (FarmSparseRowFiles, with the downsampled rows in dense_low.bin and each step's lists in
+// lists-<step>.bin; docs/farm.md, "Where the rows go"), else by rank 0 as they arrive. Candidate
+// weights go into run/sparse/rank-k.bin (int32 per candidate), sparse outcomes into
+// run/sparse/sparse_outcome.bin (a byte per Morton position), by rank 0. Every job is journaled
+// after its results are durable ("sjob <step> …").
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
