@@ -31,12 +31,6 @@ struct BruteResultHeader {
   uint64_t rays_below_horizon = 0;
 };
 
-// Zero variance sums over the scene's meshes (every rank has the geometry).
-TransportVariance VarianceSumsShape(const FarmContext& ctx) {
-  return MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
-                               static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups());
-}
-
 // Traces samples `range` into the result payload: the header, the rows (unless `in_place`: then
 // they go into its file, durably, before the result leaves), then their variance sums (an encoded
 // TransportVariance).
@@ -75,7 +69,7 @@ void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string&
   h.texels_traced = stats.texels_traced;
   h.texels_below_horizon = stats.texels_below_horizon;
   h.rays_below_horizon = stats.rays_below_horizon;
-  TransportVariance sums = VarianceSumsShape(ctx);
+  TransportVariance sums = ctx.EmptyVarianceSums();
   if (with_variance) {
     for (uint64_t r = 0; r < range.count; ++r)
       sums.AddRow(range.first + r, variance.data() + r * cols);
@@ -108,7 +102,7 @@ class BrutePhase final : public FarmPhase {
           if (ctx.rows_in_place && !rows_out) {
             rows_out.emplace(TransportFileWriter::OpenRows(ctx.folder.partial, ctx.RowsFileInfo()));
             ctx.rank_variance =
-                std::make_unique<RankVarianceLog>(ctx.folder, ctx.rank, VarianceSumsShape(ctx));
+                std::make_unique<RankVarianceLog>(ctx.folder, ctx.rank, ctx.EmptyVarianceSums());
           }
           ComputeBruteJob(ctx, range, out, rows_out ? &*rows_out : nullptr);
         },

@@ -30,6 +30,7 @@
 #include "formats/image_file.h"
 #include "formats/run_folder.h"
 #include "formats/transport_file.h"
+#include "formats/transport_variance.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/scene.h"
 #include "worker/embree_scene.h"
@@ -195,6 +196,12 @@ struct FarmContext {
     return TransportFileInfo{params.rows, static_cast<uint32_t>(params.cubemap_n),
                              options.rows_per_block, static_cast<uint32_t>(params.rays_per_texel),
                              params.seed};
+  }
+  // Zero variance sums of this run's shape (n, rays per texel, row groups): what a rank's
+  // RankVarianceLog starts from and what a job's sums are added to.
+  TransportVariance EmptyVarianceSums() const {
+    return MakeTransportVariance(static_cast<uint32_t>(params.cubemap_n),
+                                 static_cast<uint32_t>(params.rays_per_texel), RowGroups());
   }
   bool computes_here() const { return rank != 0 || size == 1 || options.coordinator_works; }
   int computing_ranks() const {

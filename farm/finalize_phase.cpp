@@ -34,13 +34,10 @@ namespace prt {
 
 namespace {
 
-// Rank 0: the sum of every rank's RankVarianceLog (rows_in_place brute force) is added to the
-// run's variance sums. Collective.
+// Rank 0: the sum of every rank's RankVarianceLog (rows in place: brute force, sparse) is added to
+// the run's variance sums. Collective.
 void ReduceRankVariance(FarmContext& ctx) {
-  TransportVariance mine =
-      MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
-                            static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups());
-  if (ctx.rank_variance) mine = ctx.rank_variance->total();
+  TransportVariance mine = ctx.rank_variance ? ctx.rank_variance->total() : ctx.EmptyVarianceSums();
   ctx.rank_variance.reset();
   std::vector<double> flat;
   for (const std::vector<double>& s : mine.sums) flat.insert(flat.end(), s.begin(), s.end());

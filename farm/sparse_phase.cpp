@@ -65,10 +65,22 @@ constexpr std::size_t kJobsAhead = 2;
 // a 27 s 2-rank run.
 constexpr double kCommitIntervalSeconds = 0.5;
 
-// Neighbour lists of items [first, first + count) of `items` (sample ids): each item's dense
-// neighbours within the plan's radius, nearest first, at most max_neighbors (`exclude_self`: the
-// item, dense itself, left out — cross-validation), as indices into the union of their sample ids
-// in first-seen order. `max_union` > 0: the items stop before the union would exceed it (at
+// The points a step's NeighborIndex is built over: the dense samples' positions in the dense
+// list's order (rank 0 and, with rows in place, every worker build the same index from them).
+std::vector<Vec3> DenseIndexPoints(std::span<const SpatialSample> samples,
+                                   std::span<const uint32_t> dense) {
+  std::vector<Vec3> pts;
+  pts.reserve(dense.size());
+  for (uint32_t d : dense) pts.push_back(samples[d].position);
+  return pts;
+}
+
+// Huang & Ramamoorthi 2010 §4.1 (a candidate's local rank over its dense neighbours) and §5.3
+// (a sparse vertex's reconstruction from "dense vertices within some spatial radius", capped at
+// k): the neighbour lists of items [first, first + count) of `items` (sample ids): each item's
+// dense neighbours within the plan's radius, nearest first, at most max_neighbors (`exclude_self`:
+// the item, dense itself, left out — cross-validation), as indices into the union of their sample
+// ids in first-seen order. `max_union` > 0: the items stop before the union would exceed it (at
 // least one item). Returns the items taken. Rank 0 and, with rows in place, the worker build the
 // same lists from the same index (an exact search on one FLANN k-d tree over the same points in
 // the same order).
@@ -173,10 +185,7 @@ class CompactJobExpander {
     if (!index_ || h.phase != step_) {
       index_.reset();
       ReadStepLists(StepListsPath(ctx.folder, h.phase), ctx.samples.size(), dense_, items_);
-      std::vector<Vec3> pts;
-      pts.reserve(dense_.size());
-      for (uint32_t d : dense_) pts.push_back(ctx.samples[d].position);
-      index_ = std::make_unique<NeighborIndex>(pts, dense_);
+      index_ = std::make_unique<NeighborIndex>(DenseIndexPoints(ctx.samples, dense_), dense_);
       step_ = h.phase;
     }
     if (h.first + h.count > items_.size() || h.count == 0)
@@ -255,10 +264,8 @@ class FarmSparseRowFiles final : public SparseRowFiles {
         low_((fs::path(ctx.folder.sparse) / "dense_low.bin").string()),
         cross_path_((fs::path(ctx.folder.sparse) / "cross_validation.bin").string()) {
     if (!ctx.rank_variance) {
-      ctx.rank_variance = std::make_unique<RankVarianceLog>(
-          ctx.folder, ctx.rank,
-          MakeTransportVariance(static_cast<uint32_t>(ctx.params.cubemap_n),
-                                static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.RowGroups()));
+      ctx.rank_variance =
+          std::make_unique<RankVarianceLog>(ctx.folder, ctx.rank, ctx.EmptyVarianceSums());
     }
     variance_ = ctx.rank_variance.get();
   }
@@ -717,10 +724,7 @@ class FarmSparseSteps final : public SparseSteps {
 
  private:
   NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
-    std::vector<Vec3> pts;
-    pts.reserve(dense.size());
-    for (uint32_t d : dense) pts.push_back(ctx_.samples[d].position);
-    return NeighborIndex(pts, dense);
+    return NeighborIndex(DenseIndexPoints(ctx_.samples, dense), dense);
   }
 
   void Count(const SparseJobCounters& c, bool this_run, bool cross_validation) {
