@@ -10,6 +10,7 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "vocabulary/errors.h"
@@ -25,6 +26,8 @@ constexpr char kFileMagic[8] = {'P', 'R', 'T', 'C', 'T', 'F', 'L', '1'};
 // keeps version 2's bytes; 1 (varint indices, column budget) and 2 are still read, as 1 channel.
 constexpr uint32_t kFormatVersion = 2;
 constexpr uint32_t kChannelsVersion = 3;
+// Version 4 adds the CPCA fields and is written only for scheme kCpca.
+constexpr uint32_t kCpcaVersion = 4;
 constexpr uint32_t kMaxSamples = 1u << 28;  // consumers allocate O(samples)
 
 class Writer {
@@ -307,7 +310,9 @@ CompressionScheme ParseCompressionScheme(const std::string& s, const std::string
   if (s == "2d") return CompressionScheme::k2D;
   if (s == "4d") return CompressionScheme::k4D;
   if (s == "adaptive4d") return CompressionScheme::kAdaptive4D;
-  throw InputError(file, "unknown compression scheme '" + s + "' (expected 2d, 4d or adaptive4d)");
+  if (s == "cpca") return CompressionScheme::kCpca;
+  throw InputError(file,
+                   "unknown compression scheme '" + s + "' (expected 2d, 4d, adaptive4d or cpca)");
 }
 CompressionBudget ParseCompressionBudget(const std::string& s, const std::string& file) {
   if (s == "column") return CompressionBudget::kColumn;
@@ -331,6 +336,8 @@ const char* ToString(CompressionScheme s) {
       return "4d";
     case CompressionScheme::kAdaptive4D:
       return "adaptive4d";
+    case CompressionScheme::kCpca:
+      return "cpca";
   }
   return "?";
 }
@@ -383,7 +390,19 @@ void ValidateHeader(const CompressedTransportHeader& h, const std::string& name)
   if (static_cast<uint8_t>(h.row_wavelet) > 1) throw InputError(name, "unknown row wavelet id");
   if (static_cast<uint8_t>(h.column_wavelet) > 1)
     throw InputError(name, "unknown column wavelet id");
-  if (static_cast<uint8_t>(h.scheme) > 2) throw InputError(name, "unknown compression scheme id");
+  if (static_cast<uint8_t>(h.scheme) > 3) throw InputError(name, "unknown compression scheme id");
+  if (h.scheme == CompressionScheme::kCpca) {
+    if (h.cpca_clusters == 0 || h.cpca_clusters > h.sample_count)
+      throw InputError(name, "CPCA cluster count " + std::to_string(h.cpca_clusters) +
+                                 " not in [1, rows " + std::to_string(h.sample_count) + "]");
+    if (h.cpca_bases > kMaxCpcaBases || h.cpca_bases > h.column_count())
+      throw InputError(name, "CPCA basis count " + std::to_string(h.cpca_bases) + " not in [0, " +
+                                 std::to_string(kMaxCpcaBases) + "]");
+    if (h.cpca_coefficient_bits < 2 || h.cpca_coefficient_bits > 24)
+      throw InputError(name, "CPCA coefficient bits " + std::to_string(h.cpca_coefficient_bits) +
+                                 " not in [2,24]");
+    if (static_cast<uint8_t>(h.cpca_method) > 1) throw InputError(name, "unknown CPCA method id");
+  }
   if (static_cast<uint8_t>(h.budget) > 1) throw InputError(name, "unknown compression budget id");
   if (static_cast<uint8_t>(h.index_coding) > 1) throw InputError(name, "unknown index coding id");
   if (h.light_weight > 16) throw InputError(name, "light weight exponent > 16");
@@ -466,12 +485,13 @@ void ValidateColumn(const CompressedTransportHeader& h, const CompressedColumn& 
 // [count × u32 order]. Version 3 stores channel 0's segments only (the others are copies).
 std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   ValidateHeader(h, "EncodeHeader");
-  const bool v3 = h.channels != 1;
+  const bool v4 = h.scheme == CompressionScheme::kCpca;
+  const bool v3 = h.channels != 1 || v4;
   const SpatialDomain stored = v3 ? SpatialDomainOfChannel(h.domain, h.channels) : SpatialDomain{};
   const SpatialDomain& domain = v3 ? stored : h.domain;
   Writer w;
   w.Bytes(kHeaderMagic, 8);
-  w.U32(v3 ? kChannelsVersion : kFormatVersion);
+  w.U32(v4 ? kCpcaVersion : v3 ? kChannelsVersion : kFormatVersion);
   w.U32(h.cubemap_n);
   w.U32(h.sample_count);
   w.U8(static_cast<uint8_t>(h.row_wavelet));
@@ -485,6 +505,12 @@ std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   w.U8(static_cast<uint8_t>(h.index_coding));
   w.U8(h.light_weight);
   if (v3) w.U8(static_cast<uint8_t>(h.channels));
+  if (v4) {
+    w.U32(h.cpca_clusters);
+    w.U32(h.cpca_bases);
+    w.U8(h.cpca_coefficient_bits);
+    w.U8(static_cast<uint8_t>(h.cpca_method));
+  }
   w.U32(static_cast<uint32_t>(domain.segments.size()));
   for (const auto& s : domain.segments) {
     w.U8(static_cast<uint8_t>(s.kind));
@@ -502,7 +528,8 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
   CompressedTransportHeader h;
   r.Magic(kHeaderMagic, 8, "header magic");
   const uint32_t version = r.U32("version");
-  if (version != kChannelsVersion && version != kFormatVersion && version != 1)
+  if (version != kCpcaVersion && version != kChannelsVersion && version != kFormatVersion &&
+      version != 1)
     r.Fail("unsupported compressed-transport version " + std::to_string(version));
   h.cubemap_n = r.U32("cubemap size");
   h.sample_count = r.U32("sample count");
@@ -511,7 +538,7 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
   const uint8_t sc = r.U8("scheme");
   if (rw > 1) r.Fail("unknown row wavelet id " + std::to_string(rw));
   if (cw > 1) r.Fail("unknown column wavelet id " + std::to_string(cw));
-  if (sc > 2) r.Fail("unknown scheme id " + std::to_string(sc));
+  if (sc > (version >= kCpcaVersion ? 3 : 2)) r.Fail("unknown scheme id " + std::to_string(sc));
   h.row_wavelet = static_cast<RowWavelet>(rw);
   h.column_wavelet = static_cast<ColumnWavelet>(cw);
   h.scheme = static_cast<CompressionScheme>(sc);
@@ -538,6 +565,16 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
       r.Fail("sample count " + std::to_string(h.sample_count) +
              " is not a multiple of the channel count " + std::to_string(ch));
     h.channels = ch;
+  }
+  if (version >= kCpcaVersion) {
+    h.cpca_clusters = r.U32("CPCA clusters");
+    h.cpca_bases = r.U32("CPCA bases");
+    h.cpca_coefficient_bits = r.U8("CPCA coefficient bits");
+    const uint8_t m = r.U8("CPCA method");
+    if (m > 1) r.Fail("unknown CPCA method id " + std::to_string(m));
+    h.cpca_method = static_cast<CpcaMethod>(m);
+    if (h.scheme != CompressionScheme::kCpca)
+      r.Fail("version 4 header of a scheme other than cpca");
   }
   const uint32_t nseg = r.U32("segment count");
   // Every segment takes at least 14 bytes: bound the count before allocating.
@@ -707,14 +744,37 @@ CompressedColumnBlock DecodeColumnBlock(const CompressedTransportHeader& h,
 
 // File layout: magic "PRTCTFL1", u32 header bytes, header, u32 block count, then per block
 // u32 block bytes and the block.
-std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
-                                               uint32_t columns_per_block) {
-  if (columns_per_block == 0) columns_per_block = 1;
-  const std::vector<uint8_t> head = EncodeHeader(t.header);
+std::vector<uint8_t> EncodeCompressedFileStart(const CompressedTransportHeader& h) {
+  const std::vector<uint8_t> head = EncodeHeader(h);
   Writer w;
   w.Bytes(kFileMagic, 8);
   w.U32(static_cast<uint32_t>(head.size()));
   w.Bytes(head.data(), head.size());
+  return std::move(w.out());
+}
+
+CompressedTransportHeader DecodeCompressedFileStart(std::span<const uint8_t> bytes,
+                                                    const std::string& name,
+                                                    std::size_t& body_offset) {
+  Reader r(bytes, name);
+  r.Magic(kFileMagic, 8, "file magic");
+  const uint32_t hsize = r.U32("header size");
+  r.Need(hsize, "header");
+  CompressedTransportHeader h = DecodeHeader(bytes.subspan(r.pos(), hsize), name);
+  body_offset = r.pos() + hsize;
+  return h;
+}
+
+std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
+                                               uint32_t columns_per_block) {
+  if (columns_per_block == 0) columns_per_block = 1;
+  if (t.header.scheme == CompressionScheme::kCpca)
+    throw std::invalid_argument("EncodeCompressedTransport: a cpca header has no columns");
+  Writer w;
+  {
+    std::vector<uint8_t> start = EncodeCompressedFileStart(t.header);
+    w.Bytes(start.data(), start.size());
+  }
   const uint32_t ncol = t.header.column_count();
   const uint32_t nblocks = (ncol + columns_per_block - 1) / columns_per_block;
   w.U32(nblocks);
@@ -738,16 +798,16 @@ std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
 CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
                                               const std::string& name) {
   Reader r(bytes, name);
-  r.Magic(kFileMagic, 8, "file magic");
-  const uint32_t hsize = r.U32("header size");
-  r.Need(hsize, "header");
   CompressedTransport t;
-  t.header = DecodeHeader(bytes.subspan(r.pos(), hsize), name);
-  Reader r2(bytes.subspan(r.pos() + hsize), name);
+  std::size_t body = 0;
+  t.header = DecodeCompressedFileStart(bytes, name, body);
+  if (t.header.scheme == CompressionScheme::kCpca)
+    throw InputError(name, "holds a CPCA transport (scheme cpca), not compressed columns");
+  Reader r2(bytes.subspan(body), name);
   const uint32_t nblocks = r2.U32("block count");
   if (nblocks > t.header.column_count() || nblocks > r2.remaining() / 16)
     r2.Fail("block count " + std::to_string(nblocks) + " impossible");
-  std::size_t off = r.pos() + hsize + 4;
+  std::size_t off = body + 4;
   uint64_t next_column = 0;
   for (uint32_t b = 0; b < nblocks; ++b) {
     Reader rs(bytes.subspan(off), name);

@@ -34,7 +34,13 @@ enum class RowWavelet : uint8_t { kHaar = 0, kD4 = 1 };
 enum class ColumnWavelet : uint8_t { kLeGall53 = 0, kCdf97 = 1 };
 // k2D: row transform only, per-row non-linear approximation (Ng et al. 2003).
 // k4D: every column transformed to full depth. kAdaptive4D: per-column depth (§4.2).
-enum class CompressionScheme : uint8_t { k2D = 0, k4D = 1, kAdaptive4D = 2 };
+// kCpca: clustered PCA of the transformed rows (Sloan et al. 2003; issue #24): not columns at
+// all, formats/cpca_transport.h holds its body (a file of this scheme has a CPCA body where the
+// others have column blocks; header version 4).
+enum class CompressionScheme : uint8_t { k2D = 0, k4D = 1, kAdaptive4D = 2, kCpca = 3 };
+// How kCpca was computed (recorded, not needed to decode): Sloan 2003 on every row, or Huang &
+// Ramamoorthi 2010 §6's dense pass on the dense vertices and a re-clustering pass on all.
+enum class CpcaMethod : uint8_t { kStandard = 0, kDenseRecluster = 1 };
 // Which coefficients the non-linear approximation keeps: kColumn, the paper's N terms per
 // column (2D: per row); kGlobal, those above one magnitude threshold over the whole matrix.
 enum class CompressionBudget : uint8_t { kColumn = 0, kGlobal = 1 };
@@ -43,8 +49,8 @@ enum class CompressionBudget : uint8_t { kColumn = 0, kGlobal = 1 };
 // value magnitudes, and sign bits (version 2; docs/compression.md).
 enum class IndexCoding : uint8_t { kVarint = 0, kAdaptiveRice = 1 };
 
-// Parses "haar"|"d4", "legall53"|"cdf97", "2d"|"4d"|"adaptive4d" (scene.h CompressionSettings);
-// throws prt::InputError(file, ...) on anything else.
+// Parses "haar"|"d4", "legall53"|"cdf97", "2d"|"4d"|"adaptive4d"|"cpca" (scene.h
+// CompressionSettings); throws prt::InputError(file, ...) on anything else.
 RowWavelet ParseRowWavelet(const std::string& s, const std::string& file);
 ColumnWavelet ParseColumnWavelet(const std::string& s, const std::string& file);
 CompressionScheme ParseCompressionScheme(const std::string& s, const std::string& file);
@@ -80,6 +86,9 @@ SpatialDomain PerChannelDomain(const SpatialDomain& spatial, uint32_t channels);
 // PerChannelDomain; the caller has validated the header).
 SpatialDomain SpatialDomainOfChannel(const SpatialDomain& domain, uint32_t channels);
 
+// Largest PCA basis count per cluster a header may declare.
+inline constexpr uint32_t kMaxCpcaBases = 256;
+
 // Everything a decoder needs besides the columns.
 struct CompressedTransportHeader {
   uint32_t cubemap_n = 32;
@@ -100,6 +109,14 @@ struct CompressedTransportHeader {
   // |c|·2^(−light_weight·l/2) (docs/compression.md); [0, 16]. Recorded, not needed to decode.
   uint8_t light_weight = 0;
   IndexCoding index_coding = IndexCoding::kAdaptiveRice;
+  // Scheme kCpca only (format version 4; formats/cpca_transport.h): clusters K, PCA basis
+  // vectors S per cluster, the per-row coefficients' quantiser bits [2, 24] and how the
+  // clustering was computed. The basis vectors use `bits` and keep `keep_fraction` of the 6n²
+  // terms each; dither_seed seeds the clustering.
+  uint32_t cpca_clusters = 0;
+  uint32_t cpca_bases = 0;
+  uint8_t cpca_coefficient_bits = 16;
+  CpcaMethod cpca_method = CpcaMethod::kStandard;
   SpatialDomain domain;
 
   uint32_t column_count() const { return 6u * cubemap_n * cubemap_n; }
@@ -149,6 +166,13 @@ std::vector<uint8_t> EncodeColumnBlock(const CompressedTransportHeader& h,
                                        const CompressedColumnBlock& block);
 CompressedColumnBlock DecodeColumnBlock(const CompressedTransportHeader& h,
                                         std::span<const uint8_t> bytes, const std::string& name);
+
+// The start every .prtc file has: magic "PRTCTFL1", u32 header bytes, the header. Decode returns
+// the header and sets body_offset to the first byte after it (column blocks, or a CPCA body).
+std::vector<uint8_t> EncodeCompressedFileStart(const CompressedTransportHeader& h);
+CompressedTransportHeader DecodeCompressedFileStart(std::span<const uint8_t> bytes,
+                                                    const std::string& name,
+                                                    std::size_t& body_offset);
 
 // Whole compressed transport: header, then blocks of `columns_per_block` columns each.
 std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,

@@ -439,12 +439,15 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     CompressionSettings& p = scene.compression;
     p.row_wavelet = s.Choice("row_wavelet", p.row_wavelet, {"haar", "d4"});
     p.column_wavelet = s.Choice("column_wavelet", p.column_wavelet, {"legall53", "cdf97"});
-    p.scheme = s.Choice("scheme", p.scheme, {"2d", "4d", "adaptive4d"});
+    p.scheme = s.Choice("scheme", p.scheme, {"2d", "4d", "adaptive4d", "cpca"});
     p.bits = static_cast<int>(s.Integer("bits", p.bits, 1, 16));
     p.keep_fraction = s.Number("keep_fraction", p.keep_fraction, 0, 1, true);
     p.budget = s.Choice("budget", p.budget, {"column", "global"});
     p.light_weight = static_cast<int>(s.Integer("light_weight", p.light_weight, 0, 16));
     p.order_normal_weight = s.Number("order_normal_weight", p.order_normal_weight, 0, 100);
+    p.clusters = static_cast<int>(s.Integer("clusters", p.clusters, 1, 1 << 20));
+    p.bases = static_cast<int>(s.Integer("bases", p.bases, 0, 256));
+    p.coefficient_bits = static_cast<int>(s.Integer("coefficient_bits", p.coefficient_bits, 2, 24));
     s.RejectUnknown();
   }
   {

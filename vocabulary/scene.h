@@ -139,7 +139,7 @@ struct SparseSettings {
 struct CompressionSettings {
   std::string row_wavelet = "haar";         // haar | d4
   std::string column_wavelet = "legall53";  // legall53 | cdf97
-  std::string scheme = "adaptive4d";        // 2d | 4d | adaptive4d
+  std::string scheme = "adaptive4d";        // 2d | 4d | adaptive4d | cpca
   int bits = 9;
   double keep_fraction = 0.05;  // non-linear approximation budget (fraction of T)
   std::string budget =
@@ -148,6 +148,12 @@ struct CompressionSettings {
   // A mesh's column order: a 6D Hilbert curve through (position, normal), the normal's axes
   // spanning this times the mesh's largest extent; 0 = position only (worker/column_order.h).
   double order_normal_weight = 2.0;
+  // scheme = "cpca" (docs/cpca.md): clusters K, PCA basis vectors S per cluster, and the bits of
+  // the per-row coefficients' quantiser. The basis vectors keep keep_fraction of the 6n² terms
+  // each, quantised with `bits`.
+  int clusters = 64;
+  int bases = 16;
+  int coefficient_bits = 16;
 };
 
 struct SceneDescription {

@@ -32,6 +32,9 @@ CompressionOptions CompressionOptionsFrom(const CompressionSettings& s, const st
   if (s.light_weight < 0 || s.light_weight > 16)
     throw InputError(file, "compression.light_weight must be in [0, 16]");
   o.light_weight = s.light_weight;
+  o.cpca_clusters = static_cast<uint32_t>(std::max(1, s.clusters));
+  o.cpca_bases = static_cast<uint32_t>(std::max(0, s.bases));
+  o.cpca_coefficient_bits = s.coefficient_bits;
   return o;
 }
 
@@ -58,12 +61,21 @@ CompressedTransportHeader MakeCompressedHeader(const CompressionOptions& o, int 
   h.scheme = o.scheme;
   h.bits = static_cast<uint8_t>(o.bits);
   h.keep_fraction = o.keep_fraction;
-  h.terms_per_column = o.scheme == CompressionScheme::k2D ? 0 : ColumnTermBudget(o, h.sample_count);
+  h.terms_per_column = o.scheme == CompressionScheme::k2D || o.scheme == CompressionScheme::kCpca
+                           ? 0
+                           : ColumnTermBudget(o, h.sample_count);
   h.dither_seed = o.dither_seed;
   h.budget = o.budget;
   h.light_weight =
       o.budget == CompressionBudget::kGlobal ? static_cast<uint8_t>(o.light_weight) : 0;
   h.domain = domain;
+  if (o.scheme == CompressionScheme::kCpca) {
+    // More clusters than rows would leave clusters that can never have a member.
+    h.cpca_clusters = std::min<uint32_t>(o.cpca_clusters, h.sample_count);
+    h.cpca_bases = std::min<uint32_t>(o.cpca_bases, h.column_count());
+    h.cpca_coefficient_bits = static_cast<uint8_t>(o.cpca_coefficient_bits);
+    h.cpca_method = o.cpca_method;
+  }
   ValidateHeader(h, "compression options");
   return h;
 }
@@ -99,6 +111,8 @@ int TransformOneColumn(const CompressedTransportHeader& h, float* c) {
     case CompressionScheme::kAdaptive4D:
       depth = TransformColumnAdaptive(h.domain, h.column_wavelet, h.terms_per_column, c);
       break;
+    case CompressionScheme::kCpca:
+      throw std::invalid_argument("the column stage does not apply to scheme cpca (worker/cpca.h)");
   }
   for (std::size_t i = 0; i < S; ++i)
     if (!std::isfinite(c[i])) throw NumericalError("CompressColumnBlock: non-finite coefficient");

@@ -37,6 +37,11 @@ struct CompressionOptions {
   // the coarse row-wavelet columns that carry most of the relit radiance under natural lighting.
   int light_weight = 0;
   uint64_t dither_seed = 1;
+  // scheme kCpca (worker/cpca.h): clusters, bases per cluster, coefficient bits, method.
+  uint32_t cpca_clusters = 64;
+  uint32_t cpca_bases = 16;
+  int cpca_coefficient_bits = 16;
+  CpcaMethod cpca_method = CpcaMethod::kStandard;
 };
 
 // From the scene file's [compression] table; throws InputError(file, ...) on bad names/values.
