@@ -1,0 +1,229 @@
+// Relighting from a clustered-PCA transport (Overbeck et al. 2006 §6.3, Eq. 7, 8, 10); see
+// viewer/cpca_relight.h and docs/cpca.md.
+#include "viewer/cpca_relight.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "vocabulary/errors.h"
+
+namespace prt {
+
+namespace {
+
+void CheckTermIndices(std::span<const LightingTerm> terms, std::size_t columns, const char* who) {
+  for (const LightingTerm& t : terms)
+    if (t.index >= columns)
+      throw std::out_of_range(std::string(who) + ": lighting term " + std::to_string(t.index) +
+                              " out of range (" + std::to_string(columns) + " coefficients)");
+}
+
+}  // namespace
+
+CpcaProjection::CpcaProjection(const CpcaTransport& t) {
+  const std::size_t S = t.bases();
+  vectors_ = t.clusters.size() * (S + 1);
+  columns_ = t.header.column_count();
+  column_begin_.assign(columns_ + 1, 0);
+  const auto each = [&](auto&& f) {
+    for (std::size_t c = 0; c < t.clusters.size(); ++c) {
+      const CpcaCluster& k = t.clusters[c];
+      for (std::size_t i = 0; i <= S; ++i) {
+        const CpcaVector& v = i == 0 ? k.mean : k.basis[i - 1];
+        for (std::size_t e = 0; e < v.term_count(); ++e)
+          f(static_cast<uint32_t>(c * (S + 1) + i), v.index[e], t.Value(v, e));
+      }
+    }
+  };
+  each([&](uint32_t, uint32_t j, float) { ++column_begin_[j + 1]; });
+  for (std::size_t j = 0; j < columns_; ++j) column_begin_[j + 1] += column_begin_[j];
+  entry_vector_.resize(column_begin_[columns_]);
+  entry_value_.resize(column_begin_[columns_]);
+  std::vector<uint32_t> at(column_begin_.begin(), column_begin_.end() - 1);
+  each([&](uint32_t k, uint32_t j, float v) {
+    entry_vector_[at[j]] = k;
+    entry_value_[at[j]++] = v;
+  });
+}
+
+// Eq. 7: P_k += Σ_terms u_k[j]·L̂_j per channel, walking only the lighting's terms' columns.
+void CpcaProjection::Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const {
+  if (out.size() != vectors_)
+    throw std::invalid_argument("CpcaProjection: output has " + std::to_string(out.size()) +
+                                " entries, expected " + std::to_string(vectors_));
+  CheckTermIndices(terms, columns_, "CpcaProjection");
+  double* o0 = out.channel[0].data();
+  double* o1 = out.channel[1].data();
+  double* o2 = out.channel[2].data();
+  for (const LightingTerm& t : terms) {
+    const double l0 = t.value[0], l1 = t.value[1], l2 = t.value[2];
+    for (uint32_t e = column_begin_[t.index]; e < column_begin_[t.index + 1]; ++e) {
+      const double v = entry_value_[e];
+      const uint32_t k = entry_vector_[e];
+      o0[k] += v * l0;
+      o1[k] += v * l1;
+      o2[k] += v * l2;
+    }
+  }
+}
+
+CpcaRelighter::CpcaRelighter(const CpcaTransport& t, std::string name)
+    : name_(std::move(name)),
+      channels_(t.header.channels),
+      clusters_(static_cast<uint32_t>(t.clusters.size())),
+      bases_(t.bases()),
+      spatial_(t.header.spatial_count()),
+      projection_(t) {
+  ValidateCpcaTransport(t, name_);
+  const std::size_t rows = t.row_count(), S = bases_;
+  cluster_of_ = t.cluster_of;
+  weights_.assign(rows * (S + 1), 0.0f);
+  for (std::size_t r = 0; r < rows; ++r) {
+    weights_[r * (S + 1)] = 1.0f;
+    for (std::size_t i = 0; i < S; ++i) {
+      const float w = t.Coefficient(r, i);
+      if (!std::isfinite(w))
+        throw InputError(name_, "row " + std::to_string(r) + ": coefficient " + std::to_string(i) +
+                                    " is not a finite float");
+      weights_[r * (S + 1) + 1 + i] = w;
+    }
+  }
+  cluster_begin_.assign(clusters_ + 1, 0);
+  for (uint32_t c : cluster_of_) ++cluster_begin_[c + 1];
+  for (uint32_t c = 0; c < clusters_; ++c) cluster_begin_[c + 1] += cluster_begin_[c];
+  rows_of_cluster_.resize(rows);
+  std::vector<uint32_t> at(cluster_begin_.begin(), cluster_begin_.end() - 1);
+  for (std::size_t r = 0; r < rows; ++r)
+    rows_of_cluster_[at[cluster_of_[r]]++] = static_cast<uint32_t>(r);
+}
+
+// Eq. 8: U_r = Σ_{i≤S} w_{r,i} P_{c(r),i} (i = 0 the mean, w = 1), per sample and channel.
+void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
+  if (P.size() != projection_.sample_count())
+    throw std::invalid_argument("CpcaRelighter::Blend: projection of the wrong size");
+  for (auto& c : out.channel) c.resize(spatial_);
+  const std::size_t S1 = bases_ + 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, spatial_, 4096), [&](const auto& range) {
+    for (std::size_t s = range.begin(); s < range.end(); ++s) {
+      for (int ch = 0; ch < 3; ++ch) {
+        const std::size_t r = channels_ == 1 ? s : static_cast<std::size_t>(ch) * spatial_ + s;
+        const float* w = weights_.data() + r * S1;
+        const double* p = P.channel[ch].data() + static_cast<std::size_t>(cluster_of_[r]) * S1;
+        double acc = 0;
+        for (std::size_t i = 0; i < S1; ++i) acc += w[i] * p[i];
+        out.channel[ch][s] = acc;
+      }
+    }
+  });
+  for (int ch = 0; ch < 3; ++ch)
+    for (std::size_t s = 0; s < spatial_; ++s)
+      if (!std::isfinite(out.channel[ch][s]))
+        throw NumericalError(name_ + ": relit radiance of sample " + std::to_string(s) +
+                             " is not finite");
+}
+
+// Eq. 10 for a few entries: B += W[:, k]·ΔP_k over the rows of k's cluster.
+void CpcaRelighter::BlendDelta(std::span<const uint32_t> vectors,
+                               std::span<const std::array<double, 3>> delta,
+                               SampleRadiance& out) const {
+  if (vectors.size() != delta.size())
+    throw std::invalid_argument("CpcaRelighter::BlendDelta: one delta per vector");
+  const std::size_t S1 = bases_ + 1;
+  for (std::size_t n = 0; n < vectors.size(); ++n) {
+    const uint32_t k = vectors[n];
+    const uint32_t c = static_cast<uint32_t>(k / S1), i = static_cast<uint32_t>(k % S1);
+    if (c >= clusters_) throw std::out_of_range("CpcaRelighter::BlendDelta: vector out of range");
+    for (uint32_t e = cluster_begin_[c]; e < cluster_begin_[c + 1]; ++e) {
+      const uint32_t r = rows_of_cluster_[e];
+      const double w = weights_[static_cast<std::size_t>(r) * S1 + i];
+      if (channels_ == 1) {
+        for (int ch = 0; ch < 3; ++ch) out.channel[ch][r] += w * delta[n][ch];
+      } else {
+        const std::size_t ch = r / spatial_, s = r % spatial_;
+        out.channel[ch][s] += w * delta[n][ch];
+      }
+    }
+  }
+}
+
+void CpcaRelighter::Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const {
+  SampleRadiance P(projection_.sample_count());
+  projection_.Accumulate(terms, P);
+  Blend(P, out);
+}
+
+void CpcaRelighter::Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const {
+  if (out.size() != spatial_)
+    throw std::invalid_argument("CpcaRelighter: output has " + std::to_string(out.size()) +
+                                " samples, expected " + std::to_string(spatial_));
+  SampleRadiance add;
+  Assign(terms, add);
+  out += add;
+}
+
+CpcaIncrementalRelighter::CpcaIncrementalRelighter(const CpcaRelighter& relighter, int n,
+                                                   std::size_t lighting_terms,
+                                                   std::size_t basis_terms)
+    : relighter_(relighter),
+      step1_(relighter.projection(), n, lighting_terms),
+      basis_terms_(basis_terms > 0 ? basis_terms
+                                   : std::max<std::size_t>(1, relighter.bases() / 4)) {}
+
+void CpcaIncrementalRelighter::Initialize(const WaveletLighting& lighting) {
+  step1_.Initialize(lighting);
+  represented_ = step1_.Radiance();
+  relighter_.Blend(represented_, image_);
+}
+
+IncrementalFrame CpcaIncrementalRelighter::Update(const WaveletLighting& lighting) {
+  if (image_.size() != relighter_.sample_count()) {
+    // Not initialised: start from nothing lit.
+    represented_ = SampleRadiance(relighter_.projection().sample_count());
+    image_ = SampleRadiance(relighter_.sample_count());
+  }
+  IncrementalFrame frame = step1_.Update(lighting);  // step 1: PBI on L (Eq. 7)
+  const SampleRadiance& P = step1_.Radiance();
+  const std::size_t S1 = relighter_.bases() + 1;
+  std::vector<uint32_t> chosen;
+  std::vector<std::array<double, 3>> delta;
+  std::vector<double> weight(S1 - 1);
+  bool complete = true;
+  for (uint32_t c = 0; c < relighter_.clusters(); ++c) {
+    const std::size_t base = static_cast<std::size_t>(c) * S1;
+    const auto diff = [&](std::size_t k) {
+      return std::array<double, 3>{P.channel[0][k] - represented_.channel[0][k],
+                                   P.channel[1][k] - represented_.channel[1][k],
+                                   P.channel[2][k] - represented_.channel[2][k]};
+    };
+    // The mean's entry always (every row's weight 1), then the basis_terms basis entries with
+    // the largest change |ΔP| (L1 over the channels): the basic incremental update of Eq. 10.
+    std::vector<uint32_t> pick{0};
+    for (std::size_t i = 1; i < S1; ++i) {
+      const auto d = diff(base + i);
+      weight[i - 1] = std::abs(d[0]) + std::abs(d[1]) + std::abs(d[2]);
+    }
+    for (uint32_t i : SelectLargest(weight, basis_terms_)) pick.push_back(i + 1);
+    for (uint32_t i : pick) {
+      const std::size_t k = base + i;
+      const auto d = diff(k);
+      if (d[0] == 0 && d[1] == 0 && d[2] == 0) continue;
+      chosen.push_back(static_cast<uint32_t>(k));
+      delta.push_back(d);
+      for (int ch = 0; ch < 3; ++ch) represented_.channel[ch][k] = P.channel[ch][k];
+    }
+    for (std::size_t i = 1; i < S1 && complete; ++i)
+      if (weight[i - 1] != 0 &&
+          std::find(pick.begin(), pick.end(), static_cast<uint32_t>(i)) == pick.end())
+        complete = false;
+  }
+  relighter_.BlendDelta(chosen, delta, image_);  // step 2: U += W·ΔP (Eq. 10)
+  frame.exact = frame.exact && complete;
+  return frame;
+}
+
+}  // namespace prt
