@@ -17,6 +17,7 @@
 #include <memory>
 #include <optional>
 
+#include "farm/cpca_phase.h"
 #include "farm/distributed_transpose.h"
 #include "farm/farm_context.h"
 #include "farm/mpi_support.h"
@@ -209,6 +210,18 @@ void Compress(FarmContext& ctx) {
     rep.keep_fraction = header.keep_fraction;
     rep.memory_budget_bytes = options.memory_budget_bytes;
     rep.raw_bytes = rows * cols * sizeof(float);
+    if (header.scheme == CompressionScheme::kCpca) {
+      RunCpcaCompression(
+          ctx, header, reader,
+          [&] {
+            return std::make_unique<ComposedTransport>(
+                folder.transport,
+                IndirectFiles(folder, ctx.params.bounces, ctx.params.path_estimator != 0),
+                ctx.params.channels);
+          },
+          start);
+      return;
+    }
 
     // Spill folder of this rank: inside the run folder when this rank can write there (shared
     // or same-named local folder), else the system's temporary folder.

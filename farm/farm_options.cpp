@@ -109,7 +109,7 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
       ->capture_default_str();
   app.add_option("--compression-scheme", o.compression_scheme,
                  "Override the scene's [compression] scheme")
-      ->check(CLI::IsMember({"2d", "4d", "adaptive4d"}));
+      ->check(CLI::IsMember({"2d", "4d", "adaptive4d", "cpca"}));
   app.add_flag("--measure-bandwidth", o.measure_bandwidth)->group("");
   try {
     app.parse(argc, argv);

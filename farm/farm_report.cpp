@@ -204,6 +204,20 @@ std::string FarmReport::ToJsonText() const {
     if (r.memory_bandwidth_mb_s > 0) c["memory_bandwidth_mb_per_second"] = r.memory_bandwidth_mb_s;
     if (r.disk_write_bandwidth_mb_s > 0)
       c["disk_write_bandwidth_mb_per_second"] = r.disk_write_bandwidth_mb_s;
+    if (r.cpca.enabled) {
+      Json p;
+      p["clusters"] = r.cpca.clusters;
+      p["bases"] = r.cpca.bases;
+      p["method"] = r.cpca.method;
+      p["rows_dense_pass"] = r.cpca.rows_dense_pass;
+      p["lbg_iterations"] = r.cpca.lbg_iterations;
+      p["distance_evaluations"] = r.cpca.distance_evaluations;
+      p["empty_clusters"] = r.cpca.empty_clusters;
+      p["seconds_dense_pass"] = r.cpca.seconds_dense;
+      p["seconds_recluster"] = r.cpca.seconds_recluster;
+      p["basis_terms"] = r.cpca.basis_terms;
+      c["cpca"] = p;
+    }
     j["compression"] = c;
   }
   if (!carried_json.empty()) {

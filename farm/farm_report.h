@@ -114,6 +114,18 @@ struct CompressionFarmReport {
   // --measure-bandwidth (0 when not measured): memcpy and write+fsync in the run folder, MB/s.
   double memory_bandwidth_mb_s = 0;
   double disk_write_bandwidth_mb_s = 0;
+  // Scheme cpca (farm/cpca_phase.h): report.json "compression"."cpca".
+  struct Cpca {
+    bool enabled = false;
+    uint32_t clusters = 0, bases = 0;
+    std::string method;  // standard | dense-recluster
+    uint64_t rows_dense_pass = 0;
+    int lbg_iterations = 0;
+    uint64_t distance_evaluations = 0;  // all ranks
+    uint32_t empty_clusters = 0;
+    double seconds_dense = 0, seconds_recluster = 0;  // rank 0's
+    uint64_t basis_terms = 0;                         // stored mean and basis terms
+  } cpca;
 
   double TransposeMbPerSecond() const;  // raw_bytes / transpose_seconds
   double PhaseMbPerSecond() const;      // raw_bytes / wall_seconds

@@ -129,6 +129,9 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
 
   if (!visibility) {
     CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options, s.channels);
+    // CPCA of a sparse run: Huang §6's dense pass and re-clustering (farm/cpca_phase.h).
+    if (plan.header.scheme == CompressionScheme::kCpca && s.method == "sparse")
+      plan.header.cpca_method = plan.options.cpca_method = CpcaMethod::kDenseRecluster;
     const CompressedTransportHeader& h = plan.header;
     m.SetStage(kStageCompression, {{"scheme", ToString(h.scheme)},
                                    {"row_wavelet", ToString(h.row_wavelet)},

@@ -1,0 +1,266 @@
+// The compression phase for scheme "cpca"; see farm/cpca_phase.h and docs/cpca.md.
+#include "farm/cpca_phase.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "farm/farm_context.h"
+#include "farm/mpi_support.h"
+#include "farm/progress.h"
+#include "farm/sparse_jobs.h"
+#include "formats/cpca_transport.h"
+#include "vocabulary/durable_file.h"
+#include "vocabulary/errors.h"
+#include "worker/composed_transport.h"
+#include "worker/cpca.h"
+#include "worker/transport_compressor.h"
+
+namespace prt {
+
+namespace {
+
+// Pieces of at most 2^27 elements per MPI call (counts are int).
+constexpr std::size_t kPiece = std::size_t{1} << 27;
+
+class MpiCpcaReducer final : public CpcaReducer {
+ public:
+  explicit MpiCpcaReducer(MPI_Comm comm) : comm_(comm) {}
+  void SumInt64(std::span<int64_t> v) override {
+    for (std::size_t at = 0; at < v.size(); at += kPiece)
+      CheckMpi(MPI_Allreduce(MPI_IN_PLACE, v.data() + at,
+                             static_cast<int>(std::min(kPiece, v.size() - at)), MPI_INT64_T,
+                             MPI_SUM, comm_),
+               "MPI_Allreduce CPCA sums");
+  }
+  void MaxDouble(std::span<double> v) override {
+    for (std::size_t at = 0; at < v.size(); at += kPiece)
+      CheckMpi(MPI_Allreduce(MPI_IN_PLACE, v.data() + at,
+                             static_cast<int>(std::min(kPiece, v.size() - at)), MPI_DOUBLE, MPI_MAX,
+                             comm_),
+               "MPI_Allreduce CPCA maxima");
+  }
+
+ private:
+  MPI_Comm comm_;
+};
+
+// Huang §6's input from the sparse phase's run/sparse/combination.bin (its pairs, `slots` per
+// sample): a sample with no pair is dense (or a fallback, sampled densely); the others list the
+// dense samples they combine, largest |α| first.
+CpcaSparseStructure StructureFromPairs(const std::vector<uint32_t>& pairs, uint64_t samples,
+                                       uint64_t slots, uint32_t channels) {
+  std::vector<uint8_t> dense(samples, 1);
+  std::vector<std::vector<uint32_t>> nb(samples);
+  for (uint64_t s = 0; s < samples; ++s) {
+    std::vector<std::pair<float, uint32_t>> by_weight;
+    for (uint64_t k = 0; k < slots; ++k) {
+      const uint32_t u = pairs[(s * slots + k) * 2];
+      if (u == kNoSample) continue;
+      float a;
+      std::memcpy(&a, &pairs[(s * slots + k) * 2 + 1], 4);
+      by_weight.push_back({-std::fabs(a), u});
+    }
+    if (by_weight.empty()) continue;
+    dense[s] = 0;
+    std::sort(by_weight.begin(), by_weight.end());
+    for (const auto& p : by_weight) nb[s].push_back(p.second);
+  }
+  return CpcaSparseStructure::Of(dense, nb, channels);
+}
+
+}  // namespace
+
+void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& header,
+                        std::unique_ptr<ComposedTransport>& reader,
+                        const std::function<std::unique_ptr<ComposedTransport>()>& open_reader,
+                        double start) {
+  const FarmOptions& options = ctx.options;
+  MPI_Comm comm = ctx.comm;
+  const int rank = ctx.rank, size = ctx.size;
+  CompressionFarmReport& rep = ctx.report.compression;
+  const uint64_t R = header.sample_count;
+  const uint32_t d = header.column_count();
+  const auto [first, last] = CpcaRowRange(R, rank, size);
+  const uint64_t count = last - first;
+  if (rank == 0) ctx.run_eta.StepStarted("compress");
+  if (rank == 0 && !options.quiet)
+    spdlog::info(
+        "compression: {} rows x {} columns ({:.1f} MB), cpca scheme: {} clusters x {} bases, {} "
+        "rank(s), {:.1f} MB of rows per rank",
+        R, d, static_cast<double>(rep.raw_bytes) / 1e6, header.cpca_clusters, header.cpca_bases,
+        size, static_cast<double>(count * d * sizeof(float)) / 1e6);
+
+  // Rows: each rank reads its own where it sees the run folder; else rank 0 reads and sends.
+  const double tr = FarmNow();
+  std::vector<float> rows(count * d);
+  const bool every_rank_reads = ctx.rows_in_place || size == 1;
+  uint64_t bytes_sent = 0;
+  if (every_rank_reads) {
+    if (!reader) reader = open_reader();
+    if (reader->rows() != R)
+      throw InputError(ctx.folder.transport, "rank " + std::to_string(rank) + " reads " +
+                                                 std::to_string(reader->rows()) + " rows, rank 0 " +
+                                                 std::to_string(R));
+    if (count > 0) reader->ReadRows(first, count, rows.data());
+  } else if (rank == 0) {
+    if (count > 0) reader->ReadRows(first, count, rows.data());
+    std::vector<float> buf;
+    for (int r = 1; r < size; ++r) {
+      const auto [f, l] = CpcaRowRange(R, r, size);
+      buf.resize((l - f) * d);
+      if (l > f) reader->ReadRows(f, l - f, buf.data());
+      for (std::size_t at = 0; at < buf.size(); at += kPiece)
+        CheckMpi(MPI_Send(buf.data() + at, static_cast<int>(std::min(kPiece, buf.size() - at)),
+                          MPI_FLOAT, r, 7401, comm),
+                 "MPI_Send CPCA rows");
+      bytes_sent += buf.size() * sizeof(float);
+    }
+  } else {
+    for (std::size_t at = 0; at < rows.size(); at += kPiece)
+      CheckMpi(MPI_Recv(rows.data() + at, static_cast<int>(std::min(kPiece, rows.size() - at)),
+                        MPI_FLOAT, 0, 7401, comm, MPI_STATUS_IGNORE),
+               "MPI_Recv CPCA rows");
+  }
+  const double read_seconds = FarmNow() - tr;
+  const double tt = FarmNow();
+  CompressionOptions copt;
+  copt.row_wavelet = header.row_wavelet;
+  if (count > 0) PrepareRows(header, copt, rows.data(), count);
+  const double transform_seconds = FarmNow() - tt;
+
+  // Huang §6 where the rows came from the sparse method (rank 0 reads the combinations).
+  std::unique_ptr<CpcaSparseStructure> sparse;
+  {
+    std::vector<uint32_t> pairs;
+    uint64_t meta[2] = {0, 0};  // has structure, pair count
+    std::string comb = ctx.folder.SparseCombinationFile();
+    if (rank == 0 && header.cpca_method == CpcaMethod::kDenseRecluster &&
+        std::filesystem::exists(comb)) {
+      uint64_t slots = 0;
+      pairs = ReadCombinationFile(comb, header.spatial_count(), slots);
+      meta[0] = slots;
+      meta[1] = pairs.size();
+    }
+    CheckMpi(MPI_Bcast(meta, 2, MPI_UINT64_T, 0, comm), "MPI_Bcast CPCA sparse structure");
+    if (meta[0] > 0) {
+      pairs.resize(meta[1]);
+      for (std::size_t at = 0; at < pairs.size(); at += kPiece)
+        CheckMpi(MPI_Bcast(pairs.data() + at, static_cast<int>(std::min(kPiece, pairs.size() - at)),
+                           MPI_UINT32_T, 0, comm),
+                 "MPI_Bcast CPCA combinations");
+      sparse = std::make_unique<CpcaSparseStructure>(
+          StructureFromPairs(pairs, header.spatial_count(), meta[0], header.channels));
+    }
+  }
+
+  ProgressOptions po = FarmProgressOptions(ctx, "LBG iterations", false);
+  std::unique_ptr<Progress> progress;
+  if (rank == 0) progress = std::make_unique<Progress>("cpca", 1, po);
+  int reported = 0;
+  MpiCpcaReducer reducer(comm);
+  const CpcaOptions o = CpcaOptionsFrom(header);
+  const double tc = FarmNow();
+  CpcaLocalResult mine = ComputeCpca(header, o, rows.data(), first, count, reducer, sparse.get(),
+                                     [&](int done, int total) {
+                                       if (!progress) return;
+                                       if (reported == 0)
+                                         progress = std::make_unique<Progress>("cpca", total, po);
+                                       progress->Advance(static_cast<uint64_t>(done - reported));
+                                       reported = done;
+                                     });
+  if (progress) progress->Finish();
+  const double compress_seconds = FarmNow() - tc;
+  rows = std::vector<float>();
+
+  // Gather the rows' cluster ids and coefficients on rank 0.
+  const double tw = FarmNow();
+  const uint32_t S = header.cpca_bases;
+  std::vector<int> counts(static_cast<std::size_t>(size)), displs(static_cast<std::size_t>(size));
+  for (int r = 0; r < size; ++r) {
+    const auto [f, l] = CpcaRowRange(R, r, size);
+    counts[static_cast<std::size_t>(r)] = static_cast<int>(l - f);
+    displs[static_cast<std::size_t>(r)] = static_cast<int>(f);
+  }
+  CpcaTransport t;
+  if (rank == 0) {
+    t.header = header;
+    t.cluster_of.resize(R);
+    t.coefficients.resize(R * S);
+  }
+  CheckMpi(MPI_Gatherv(mine.cluster_of.data(), static_cast<int>(count), MPI_UINT32_T,
+                       t.cluster_of.data(), counts.data(), displs.data(), MPI_UINT32_T, 0, comm),
+           "MPI_Gatherv CPCA clusters");
+  if (S > 0) {
+    if (static_cast<uint64_t>(R) * S > static_cast<uint64_t>(INT_MAX))
+      throw std::runtime_error("CPCA: more than 2^31 coefficients");
+    for (int r = 0; r < size; ++r) {
+      counts[static_cast<std::size_t>(r)] *= static_cast<int>(S);
+      displs[static_cast<std::size_t>(r)] *= static_cast<int>(S);
+    }
+    CheckMpi(MPI_Gatherv(mine.coefficients.data(), static_cast<int>(count * S), MPI_INT32_T,
+                         t.coefficients.data(), counts.data(), displs.data(), MPI_INT32_T, 0, comm),
+             "MPI_Gatherv CPCA coefficients");
+  }
+  uint64_t evals = mine.stats.distance_evaluations, evals_all = 0;
+  CheckMpi(MPI_Reduce(&evals, &evals_all, 1, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
+  double secs[3] = {read_seconds, transform_seconds, compress_seconds}, maxs[3] = {};
+  CheckMpi(MPI_Reduce(secs, maxs, 3, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+  if (rank != 0) return;
+
+  t.clusters = std::move(mine.clusters);
+  const std::vector<uint8_t> file = EncodeCpcaTransport(t);
+  const std::string& prtc = ctx.folder.compressed;
+  if (options.fail_in == "write" && options.fail_rank == 0) {
+    std::ofstream(prtc + ".tmp", std::ios::binary)
+        .write(reinterpret_cast<const char*>(file.data()),
+               static_cast<std::streamsize>(file.size() / 2));
+    ExitAbruptly(rank, "halfway through writing " + prtc);
+  }
+  WriteFileDurably(prtc, std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
+  const CpcaStats& st = mine.stats;
+  rep.write_seconds = FarmNow() - tw;
+  rep.every_rank_reads = every_rank_reads && size > 1;
+  rep.rank0_bytes_read = count * d * sizeof(float) + (every_rank_reads ? 0 : bytes_sent);
+  rep.rank0_bytes_sent = bytes_sent;
+  rep.bytes_moved = bytes_sent;
+  rep.read_seconds = maxs[0];
+  rep.row_transform_seconds = maxs[1];
+  rep.compress_seconds = maxs[2];
+  rep.terms = t.term_count() + t.coefficients.size();
+  rep.compressed_bytes = file.size();
+  rep.raw_kept = !options.discard_raw;
+  rep.relative_frobenius_error = st.relative_error;
+  rep.cpca.enabled = true;
+  rep.cpca.clusters = header.cpca_clusters;
+  rep.cpca.bases = S;
+  rep.cpca.method = sparse && st.rows_dense_pass < R ? "dense-recluster" : "standard";
+  rep.cpca.rows_dense_pass = st.rows_dense_pass;
+  rep.cpca.lbg_iterations = st.lbg_iterations;
+  rep.cpca.distance_evaluations = evals_all;
+  rep.cpca.empty_clusters = st.empty_clusters;
+  rep.cpca.seconds_dense = st.seconds_dense;
+  rep.cpca.seconds_recluster = st.seconds_recluster;
+  rep.cpca.basis_terms = t.term_count();
+  rep.wall_seconds = FarmNow() - start;
+  ctx.run_eta.StepFinished("compress");
+  rep.enabled = true;
+  if (!options.quiet)
+    spdlog::info(
+        "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative Frobenius "
+        "error {:.3f}%, cpca {} ({} clusters x {} bases, {} LBG iterations over {} of {} rows, "
+        "{} basis terms)",
+        prtc, Progress::FormatDuration(rep.wall_seconds), static_cast<double>(rep.raw_bytes) / 1e6,
+        static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
+        100 * rep.relative_frobenius_error, rep.cpca.method, rep.cpca.clusters, rep.cpca.bases,
+        rep.cpca.lbg_iterations, rep.cpca.rows_dense_pass, R, rep.cpca.basis_terms);
+}
+
+}  // namespace prt
