@@ -221,14 +221,15 @@ class Clustering {
       Eigen::Map<const MatF> Xb(X_ + lo * d_, static_cast<Eigen::Index>(hi - lo), d_);
       MatF D;  // mean distances, rows × K (not with restricted candidates)
       if (!use_restricted) D = Xb * mean_.transpose();
-      std::vector<std::pair<float, uint32_t>> cand;
-      Eigen::Matrix<float, 1, Eigen::Dynamic> z(std::max<uint32_t>(s, 1));
+      // Per row its candidates (mean distance, cluster); then the projections grouped by
+      // cluster, one GEMM of the block's rows that have it as a candidate; then the choice.
+      std::vector<std::vector<std::pair<float, uint32_t>>> cands(hi - lo);
       for (uint64_t r = lo; r < hi; ++r) {
         if (!active_[r]) continue;
+        auto& cand = cands[r - lo];
         const float* x = X_ + r * d_;
         Eigen::Map<const Eigen::Matrix<float, 1, Eigen::Dynamic>> xv(x, d_);
         const float xx = xv.squaredNorm();
-        cand.clear();
         if (use_restricted) {
           cand.emplace_back(0.0f, cluster_[r]);
           for (uint32_t c : restricted(r))
@@ -260,20 +261,35 @@ class Clustering {
                                 cluster_[r]);
           }
         }
+      }
+      if (s > 0) {
+        std::vector<std::vector<std::pair<uint32_t, uint32_t>>> by_cluster(K_);  // (row, slot)
+        for (uint64_t r = lo; r < hi; ++r)
+          for (uint32_t k = 0; k < cands[r - lo].size(); ++k)
+            by_cluster[cands[r - lo][k].second].push_back({static_cast<uint32_t>(r - lo), k});
+        MatF G, Z;
+        for (uint32_t c = 0; c < K_; ++c) {
+          const auto& list = by_cluster[c];
+          if (list.empty()) continue;
+          G.resize(static_cast<Eigen::Index>(list.size()), d_);
+          for (std::size_t k = 0; k < list.size(); ++k)
+            G.row(static_cast<Eigen::Index>(k)) = Xb.row(list[k].first);
+          Z.noalias() = G * basis_[c];
+          for (std::size_t k = 0; k < list.size(); ++k)
+            cands[list[k].first][list[k].second].first -=
+                (Z.row(static_cast<Eigen::Index>(k)) - Umu.row(c)).squaredNorm();
+          evaluations[b] += list.size();
+        }
+      }
+      for (uint64_t r = lo; r < hi; ++r) {
+        if (!active_[r]) continue;
         float best = std::numeric_limits<float>::infinity();
         uint32_t best_c = cluster_[r];
-        for (const auto& [dist, c] : cand) {
-          float e = dist;
-          if (s > 0) {
-            z.noalias() = xv * basis_[c];
-            e -= (z - Umu.row(c)).squaredNorm();
-            ++evaluations[b];
-          }
+        for (const auto& [e, c] : cands[r - lo])
           if (e < best || (e == best && c < best_c)) {
             best = e;
             best_c = c;
           }
-        }
         cluster_[r] = best_c;
       }
     });
@@ -397,13 +413,10 @@ class Clustering {
   }
 
   // Y_c = Σ (x − μ_c)(x − μ_c)ᵀ U_c, then U_c = orthonormal(Y_c). `last` also records the
-  // scatter trace Σ ‖x − μ_c‖² and the variance ‖Y_c e_i‖ captured by each vector.
+  // variance ‖Y_c e_i‖ = ‖C_c u_i‖ captured by each vector.
   void SubspaceIteration(bool last) {
     const uint32_t s = dim_;
-    if (s == 0) {
-      if (last) ComputeScatter();
-      return;
-    }
+    if (s == 0) return;
     // |(x − μ)_j| ≤ 2·xmax and |z_i| ≤ ‖x − μ‖ ≤ 2·xmax·√d per row.
     const Fixed fy(
         4 * xmax_ * xmax_ * std::sqrt(static_cast<double>(d_)) * static_cast<double>(R_) + 1e-300);
@@ -444,10 +457,12 @@ class Clustering {
           for (uint32_t j = 0; j < d_; ++j) Yc(j, i) = 1e-20 * Noise(o_.seed, c, i + 1000, j);
       basis_[c] = Orthonormal(Yc).cast<float>();
     }
-    if (last) ComputeScatter();
   }
 
+ public:
+  // The scatter trace Σ ‖x − μ_c‖² of every cluster (for the stored basis's variance test).
   void ComputeScatter() {
+    BuildMemberLists();
     const Fixed ft(4 * xmax_ * xmax_ * static_cast<double>(d_) * static_cast<double>(R_) + 1e-300);
     std::vector<int64_t> tr(K_, 0);
     tbb::parallel_for(uint32_t{0}, K_, [&](uint32_t c) {
@@ -468,6 +483,7 @@ class Clustering {
     for (uint32_t c = 0; c < K_; ++c) scatter_[c] = ft.From(tr[c]);
   }
 
+ private:
   const CpcaOptions& o_;
   const float* X_;
   uint64_t first_, count_, R_;
@@ -680,6 +696,7 @@ CpcaLocalResult ComputeCpca(const CompressedTransportHeader& h, const CpcaOption
   std::vector<std::vector<float>> m(K);  // dequantised means
   std::vector<MatD> pinv(K);             // (ŨᵀŨ)⁺
   const uint32_t s_now = cl.dim();
+  if (S > 0) cl.ComputeScatter();
   tbb::parallel_for(uint32_t{0}, K, [&](uint32_t c) {
     CpcaCluster& k = out.clusters[c];
     k.basis.resize(S);
