@@ -47,7 +47,11 @@ struct Fixed {
   explicit Fixed(double bound) {
     scale = bound > 0 && std::isfinite(bound) ? std::ldexp(1.0, 62) / bound : 1.0;
   }
-  int64_t To(double v) const { return static_cast<int64_t>(std::llrint(v * scale)); }
+  // Rounds half away from zero; a plain truncating conversion (one instruction, no libm call).
+  int64_t To(double v) const {
+    const double x = v * scale;
+    return static_cast<int64_t>(x >= 0 ? x + 0.5 : x - 0.5);
+  }
   double From(int64_t v) const { return static_cast<double>(v) / scale; }
 };
 
@@ -219,8 +223,22 @@ class Clustering {
     tbb::parallel_for(uint64_t{0}, blocks, [&](uint64_t b) {
       const uint64_t lo = b * kBlock, hi = std::min(count_, lo + kBlock);
       Eigen::Map<const MatF> Xb(X_ + lo * d_, static_cast<Eigen::Index>(hi - lo), d_);
-      MatF D;  // mean distances, rows × K (not with restricted candidates)
-      if (!use_restricted) D = Xb * mean_.transpose();
+      // x·μ_c for the block's active rows (not with restricted candidates): D row slot[r − lo].
+      MatF D;
+      std::vector<uint32_t> slot(hi - lo, 0);
+      if (!use_restricted) {
+        uint32_t m = 0;
+        for (uint64_t r = lo; r < hi; ++r)
+          if (active_[r]) slot[r - lo] = m++;
+        if (m == hi - lo) {
+          D = Xb * mean_.transpose();
+        } else if (m > 0) {
+          MatF A(static_cast<Eigen::Index>(m), d_);
+          for (uint64_t r = lo; r < hi; ++r)
+            if (active_[r]) A.row(slot[r - lo]) = Xb.row(static_cast<Eigen::Index>(r - lo));
+          D = A * mean_.transpose();
+        }
+      }
       // Per row its candidates (mean distance, cluster); then the projections grouped by
       // cluster, one GEMM of the block's rows that have it as a candidate; then the choice.
       std::vector<std::vector<std::pair<float, uint32_t>>> cands(hi - lo);
@@ -243,9 +261,7 @@ class Clustering {
           for (auto& [dist, c] : cand) dist = xx - 2 * xv.dot(mean_.row(c)) + mean_norm_[c];
         } else {
           for (uint32_t c = 0; c < K_; ++c)
-            if (members_[c] > 0)
-              cand.emplace_back(xx - 2 * D(static_cast<Eigen::Index>(r - lo), c) + mean_norm_[c],
-                                c);
+            if (members_[c] > 0) cand.emplace_back(xx - 2 * D(slot[r - lo], c) + mean_norm_[c], c);
           if (cand.empty()) cand.emplace_back(0.0f, 0);
           if (s > 0 && cand.size() > C) {
             const auto less = [](const auto& a, const auto& b2) {
@@ -256,8 +272,7 @@ class Clustering {
                                          [&](const auto& p) { return p.second == cluster_[r]; });
             cand.resize(C);
             if (!own && members_[cluster_[r]] > 0)
-              cand.emplace_back(xx - 2 * D(static_cast<Eigen::Index>(r - lo), cluster_[r]) +
-                                    mean_norm_[cluster_[r]],
+              cand.emplace_back(xx - 2 * D(slot[r - lo], cluster_[r]) + mean_norm_[cluster_[r]],
                                 cluster_[r]);
           }
         }
