@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "packager/prtpack_format.h"
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_writer.h"
 #include "packager/run_folder_pack.h"
@@ -81,7 +82,9 @@ int main(int argc, char** argv) {
       "prt-pack: builds, inspects and verifies .prtpack assets (docs/prtpack-format.md)."
       "\nExit status: 0 success, 1 unreadable input or failed verification, 2 usage "
       "error."};
-  app.set_version_flag("--version", std::string("prt-pack ") + PRT_VERSION + " (.prtpack 1.0)");
+  app.set_version_flag("--version", std::string("prt-pack ") + PRT_VERSION + " (.prtpack " +
+                                        std::to_string(prt::pack::kVersionMajor) + "." +
+                                        std::to_string(prt::pack::kVersionMinor) + ")");
   app.require_subcommand(1);
 
   std::string run_dir, out, metadata;

@@ -1,9 +1,10 @@
 #!/bin/sh
 # prt-pack's documented exit codes (0 success, 1 unreadable input / failed verification,
 # 2 usage error) and its pack → verify → inspect path on a real mesh.
-# Usage: prt_pack_cli_test.sh PRT_PACK SEED_PACK MESH WORK_DIR
+# With CPCA_PACK (a 1.3 pack with a clustered-PCA transport), its verify and inspect lines too.
+# Usage: prt_pack_cli_test.sh PRT_PACK SEED_PACK MESH WORK_DIR [CPCA_PACK]
 set -u
-PACK=$1 SEED=$2 MESH=$3 WORK=$4
+PACK=$1 SEED=$2 MESH=$3 WORK=$4 CPCA=${5:-}
 fail=0
 expect() {  # expect CODE command...
   code=$1; shift
@@ -36,5 +37,13 @@ expect 0 "$PACK" pack --mesh "$MESH" --out "$WORK/mesh.prtpack" --alignment 4096
 expect 0 "$PACK" verify "$WORK/mesh.prtpack"
 expect 0 "$PACK" inspect "$WORK/mesh.prtpack"
 grep -q "transport: none" "$WORK/out.txt" || { echo "FAIL: inspect summary"; fail=1; }
+if [ -n "$CPCA" ]; then
+  expect 0 "$PACK" verify "$CPCA"
+  grep -q "CPCA transport decoded (12 rows, 2 clusters x 2 bases" "$WORK/out.txt" ||
+    { echo "FAIL: verify of a CPCA pack"; cat "$WORK/out.txt"; fail=1; }
+  expect 0 "$PACK" inspect "$CPCA"
+  grep -q "transport: CPCA (clustered PCA), 12 samples" "$WORK/out.txt" ||
+    { echo "FAIL: inspect of a CPCA pack"; cat "$WORK/out.txt"; fail=1; }
+fi
 [ $fail -eq 0 ] && echo "prt-pack CLI: all checks passed"
 exit $fail

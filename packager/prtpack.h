@@ -4,8 +4,9 @@
  * on the same thread, that names the file and the problem. No function aborts or throws.
  *
  * Memory: a prtpack handle owns everything it returns pointers to (meshes, metadata, transport
- * parameters); the pointers stay valid until prtpack_close(). Transport blocks are copied into
- * caller memory. A handle may be used from one thread at a time. */
+ * parameters, the CPCA transport's arrays); the pointers stay valid until prtpack_close().
+ * Transport blocks are copied into caller memory. A handle may be used from one thread at a time.
+ */
 #ifndef PRT_PACKAGER_PRTPACK_H_
 #define PRT_PACKAGER_PRTPACK_H_
 
@@ -83,6 +84,44 @@ typedef struct prtpack_image_info {
   const uint32_t* pixel_mesh; /* width·height mesh indices or PRTPACK_BACKGROUND (owned) */
 } prtpack_image_info;
 
+/* The kind of transport a pack carries (prtpack_transport_kind): none (geometry, perhaps
+ * visibility), compressed columns (the TRNS section: prtpack_get_transport_info and blocks) or
+ * clustered PCA (the CPCA section, .prtpack 1.3: prtpack_get_cpca_info and vectors). */
+#define PRTPACK_TRANSPORT_NONE 0
+#define PRTPACK_TRANSPORT_COLUMNS 1
+#define PRTPACK_TRANSPORT_CPCA 2
+
+/* A clustered-PCA transport (docs/cpca.md): row r of T, taken in the orthonormal row-wavelet
+ * basis (row_wavelet: 0 Haar, 1 D4, over the cubemap of docs/conventions.md, column_count =
+ * 6·cubemap_n²), is approximated from its cluster k = cluster_of[r] as
+ *   T̂_r = m_k + Σ_{i<basis_count} w_{r,i} · u_{k,i},
+ * with m_k the cluster's mean and u_{k,i} its basis vectors (prtpack_get_cpca_mean / _basis)
+ * and w_{r,i} = coefficients[r·basis_count + i]. Relighting (Overbeck et al. 2006, Eq. 7–8):
+ * with L̂_c the lighting of channel c in the same wavelet basis, project once per frame
+ * P_{k,i} = u_{k,i}·L̂_c and M_k = m_k·L̂_c, then B_c(v) = albedo_c(v) · (M_k + Σ_i w_{r,i} P_{k,i})
+ * for row r = c·V + v (channels = 3) or r = v (channels = 1). Rows and channels as in TRNS. */
+typedef struct prtpack_cpca_info {
+  uint64_t row_count;         /* rows of T: channels × spatial samples */
+  uint32_t channels;          /* 1 or 3 */
+  uint32_t cubemap_n;         /* cubemap face size n */
+  uint64_t column_count;      /* 6·n² wavelet coefficients per row */
+  uint32_t row_wavelet;       /* the basis of the vectors: 0 Haar, 1 D4 */
+  uint32_t cluster_count;     /* K */
+  uint32_t basis_count;       /* S basis vectors per cluster (0: plain vector quantisation) */
+  uint64_t term_count;        /* stored mean and basis terms over all clusters */
+  const uint32_t* cluster_of; /* row_count cluster ids, each < cluster_count (owned) */
+  const float* coefficients;  /* row_count × basis_count, row-major, dequantised (owned; NULL
+                               * when basis_count is 0) */
+} prtpack_cpca_info;
+
+/* One sparse, dequantised vector over the column_count wavelet coefficients: term k is
+ * index[k] ↦ value[k], indices strictly increasing; every other coefficient is 0. */
+typedef struct prtpack_cpca_vector {
+  size_t term_count;
+  const uint32_t* index; /* term_count indices < column_count (owned; NULL when empty) */
+  const float* value;    /* term_count values (owned; NULL when empty) */
+} prtpack_cpca_vector;
+
 /* The last error on this thread, or "" if none. Valid until the next prtpack call on it. */
 const char* prtpack_last_error(void);
 
@@ -114,13 +153,28 @@ int prtpack_get_albedo(prtpack* pack, size_t index, float rgb[3]);
  * checksum mismatch, zstd failure, not a JSON object. */
 int prtpack_get_metadata(prtpack* pack, const char** json, size_t* length);
 
-/* The transport's parameters and block count. Errors: no TRNS section, index corrupted. */
+/* The transport's parameters and block count. Errors: no TRNS section (none, or a CPCA
+ * transport: prtpack_transport_kind), index corrupted. */
 int prtpack_get_transport_info(prtpack* pack, prtpack_transport_info* out);
 int prtpack_get_block_info(prtpack* pack, size_t block, prtpack_block_info* out);
 /* Block `block` decompressed into dst, which must hold exactly raw_size bytes (dst_size ==
  * raw_size). Verifies the block's checksum. Errors: out of range, wrong size, checksum mismatch,
  * decompression failure. */
 int prtpack_get_transport_block(prtpack* pack, size_t block, void* dst, size_t dst_size);
+
+/* PRTPACK_TRANSPORT_NONE, _COLUMNS (TRNS) or _CPCA; PRTPACK_TRANSPORT_NONE if pack is NULL.
+ * Cheap: reads the section table only. */
+int prtpack_transport_kind(const prtpack* pack);
+
+/* The CPCA transport's shape, cluster ids and coefficients (the whole section decoded and
+ * validated on first use; later calls return the same arrays). Errors: no CPCA section (a TRNS
+ * pack, or none), checksum or zstd failure, a header or body that does not decode (every count,
+ * index, value and cluster id is checked). */
+int prtpack_get_cpca_info(prtpack* pack, prtpack_cpca_info* out);
+/* Cluster `cluster`'s mean m_k, and its basis vector u_{k,basis}. Errors: those of
+ * prtpack_get_cpca_info, cluster ≥ cluster_count, basis ≥ basis_count. */
+int prtpack_get_cpca_mean(prtpack* pack, size_t cluster, prtpack_cpca_vector* out);
+int prtpack_get_cpca_basis(prtpack* pack, size_t cluster, size_t basis, prtpack_cpca_vector* out);
 
 /* 1 if the pack is an image-relighting pack (has an IMGE section), 0 if not or pack is NULL. */
 int prtpack_has_image(const prtpack* pack);

@@ -8,8 +8,38 @@
 #include <string>
 #include <vector>
 
+#include "formats/cpca_transport.h"
 #include "packager/prtpack.h"
 #include "packager/prtpack_reader.h"
+
+namespace {
+
+// A CPCA transport with its dequantised arrays, built once per handle.
+struct CpcaArrays {
+  prt::CpcaTransport t;
+  std::vector<float> coefficients;  // rows × S
+  // Per cluster k: its mean's values at [k·(S + 1)], basis vector i's at [k·(S + 1) + 1 + i].
+  std::vector<std::vector<float>> values;
+
+  explicit CpcaArrays(prt::CpcaTransport transport) : t(std::move(transport)) {
+    const std::size_t S = t.bases();
+    coefficients.resize(t.row_count() * S);
+    for (std::size_t r = 0; r < t.row_count(); ++r)
+      for (std::size_t i = 0; i < S; ++i) coefficients[r * S + i] = t.Coefficient(r, i);
+    values.reserve(t.clusters.size() * (S + 1));
+    auto dequantise = [&](const prt::CpcaVector& v) {
+      std::vector<float> out(v.term_count());
+      for (std::size_t k = 0; k < out.size(); ++k) out[k] = t.Value(v, k);
+      values.push_back(std::move(out));
+    };
+    for (const prt::CpcaCluster& c : t.clusters) {
+      dequantise(c.mean);
+      for (const prt::CpcaVector& v : c.basis) dequantise(v);
+    }
+  }
+};
+
+}  // namespace
 
 struct prtpack {
   explicit prtpack(prt::pack::PackReader r) : reader(std::move(r)) {}
@@ -18,6 +48,7 @@ struct prtpack {
   std::optional<std::string> metadata;
   std::optional<prt::pack::TransportIndex> transport;
   std::optional<prt::ImageSamplesInfo> image;
+  std::unique_ptr<CpcaArrays> cpca;
 };
 
 namespace {
@@ -47,6 +78,30 @@ int Guard(F&& f) {
 const prt::pack::TransportIndex& Transport(prtpack* p) {
   if (!p->transport) p->transport = p->reader.ReadTransportIndex();
   return *p->transport;
+}
+
+const CpcaArrays& Cpca(prtpack* p) {
+  if (!p->cpca) p->cpca = std::make_unique<CpcaArrays>(p->reader.ReadCpcaTransport());
+  return *p->cpca;
+}
+
+// Vector `v` (0 the mean, 1 + i basis vector i) of cluster `cluster`, range-checked.
+int CpcaVectorOf(prtpack* pack, size_t cluster, size_t v, prtpack_cpca_vector* out,
+                 const char* function) {
+  if (pack == nullptr || out == nullptr) return Fail(std::string(function) + ": NULL argument");
+  const CpcaArrays& a = Cpca(pack);
+  if (cluster >= a.t.clusters.size()) {
+    return Fail(pack->reader.name() + ": CPCA cluster " + std::to_string(cluster) +
+                " out of range (" + std::to_string(a.t.clusters.size()) + " clusters)");
+  }
+  const std::size_t S = a.t.bases();
+  const prt::CpcaCluster& c = a.t.clusters[cluster];
+  const prt::CpcaVector& vec = v == 0 ? c.mean : c.basis[v - 1];
+  const std::vector<float>& values = a.values[cluster * (S + 1) + v];
+  out->term_count = vec.term_count();
+  out->index = vec.index.empty() ? nullptr : vec.index.data();
+  out->value = values.empty() ? nullptr : values.data();
+  return PRTPACK_OK;
 }
 
 }  // namespace
@@ -223,6 +278,47 @@ int prtpack_get_transport_block(prtpack* pack, size_t block, void* dst, size_t d
     }
     pack->reader.ReadTransportBlockInto(Transport(pack), block, dst, dst_size);
     return PRTPACK_OK;
+  });
+}
+
+int prtpack_transport_kind(const prtpack* pack) {
+  if (pack == nullptr) return PRTPACK_TRANSPORT_NONE;
+  if (pack->reader.has_cpca()) return PRTPACK_TRANSPORT_CPCA;
+  return pack->reader.has_transport() ? PRTPACK_TRANSPORT_COLUMNS : PRTPACK_TRANSPORT_NONE;
+}
+
+int prtpack_get_cpca_info(prtpack* pack, prtpack_cpca_info* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_cpca_info: NULL argument");
+    const CpcaArrays& a = Cpca(pack);
+    const prt::CompressedTransportHeader& h = a.t.header;
+    out->row_count = h.sample_count;
+    out->channels = h.channels;
+    out->cubemap_n = h.cubemap_n;
+    out->column_count = h.column_count();
+    out->row_wavelet = static_cast<uint32_t>(h.row_wavelet);
+    out->cluster_count = h.cpca_clusters;
+    out->basis_count = h.cpca_bases;
+    out->term_count = a.t.term_count();
+    out->cluster_of = a.t.cluster_of.data();
+    out->coefficients = a.coefficients.empty() ? nullptr : a.coefficients.data();
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_cpca_mean(prtpack* pack, size_t cluster, prtpack_cpca_vector* out) {
+  return Guard([&] { return CpcaVectorOf(pack, cluster, 0, out, "prtpack_get_cpca_mean"); });
+}
+
+int prtpack_get_cpca_basis(prtpack* pack, size_t cluster, size_t basis, prtpack_cpca_vector* out) {
+  return Guard([&] {
+    if (pack == nullptr || out == nullptr) return Fail("prtpack_get_cpca_basis: NULL argument");
+    const std::size_t S = Cpca(pack).t.bases();
+    if (basis >= S) {
+      return Fail(pack->reader.name() + ": CPCA basis vector " + std::to_string(basis) +
+                  " out of range (" + std::to_string(S) + " per cluster)");
+    }
+    return CpcaVectorOf(pack, cluster, 1 + basis, out, "prtpack_get_cpca_basis");
   });
 }
 

@@ -2,8 +2,11 @@
  * (written from prtpack_test_util.h's MakeSmallInput), checks meshes, albedo, metadata and the
  * transport blocks bit for bit against the generator, and the error paths; with a second
  * argument, fuzz_corpus/compressed_transport_rgb.prtpack (a 1.1 pack whose transport has 3
- * colour channels), its version and channel count.
- * Usage: prtpack_c_test path/to/small.prtpack [path/to/compressed_transport_rgb.prtpack] */
+ * colour channels), its version and channel count; with a third, fuzz_corpus/cpca.prtpack (a 1.3
+ * pack whose transport is clustered PCA: prtpack_test_util.h's MakeSmallCpcaTransport), its
+ * cluster ids, coefficients and vectors against the generator's numbers.
+ * Usage: prtpack_c_test path/to/small.prtpack [path/to/compressed_transport_rgb.prtpack
+ *                                              [path/to/cpca.prtpack]] */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -87,6 +90,12 @@ static void check_pack(prtpack* p) {
   CHECK(json != NULL && strlen(json) == json_length && strstr(json, "\"report\"") != NULL &&
         strstr(json, "\"rays\":42") != NULL);
 
+  CHECK(prtpack_transport_kind(p) == PRTPACK_TRANSPORT_COLUMNS);
+  {
+    prtpack_cpca_info ci;
+    CHECK(prtpack_get_cpca_info(p, &ci) == PRTPACK_ERROR &&
+          strstr(prtpack_last_error(), "CPCA") != NULL);
+  }
   CHECK(prtpack_get_transport_info(p, &t) == PRTPACK_OK);
   CHECK(t.encoding == 7 && t.row_count == 12 && t.column_count == 9 && t.block_count == 3);
   CHECK(t.channels == 1); /* a 1.0 pack */
@@ -125,15 +134,71 @@ static void check_rgb_pack(const char* path) {
   prtpack_close(p);
 }
 
+static int close_to(float got, double want) {
+  return fabs((double)got - want) <= 1e-6 * (1.0 + fabs(want));
+}
+
+/* A 1.3 pack of MakeSmallInput's meshes with MakeSmallCpcaTransport(1): 12 rows, n = 2, K = 2,
+ * S = 2; row r in cluster 1 when r % 3 == 0; quantiser maxima 255 (vectors) and 2047
+ * (coefficients). */
+static void check_cpca_pack(const char* path) {
+  uint32_t major = 0, minor = 0;
+  prtpack_transport_info t;
+  prtpack_cpca_info info;
+  prtpack_cpca_vector v;
+  size_t r;
+  static const uint32_t mean0_index[3] = {0, 3, 7};
+  static const int mean0_q[3] = {100, -50, 255};
+  prtpack* p = prtpack_open_file(path);
+  CHECK(p != NULL);
+  if (!p) return;
+  CHECK(prtpack_version(p, &major, &minor) == PRTPACK_OK && major == 1 && minor == 3);
+  CHECK(prtpack_transport_kind(p) == PRTPACK_TRANSPORT_CPCA);
+  CHECK(prtpack_get_transport_info(p, &t) == PRTPACK_ERROR &&
+        strstr(prtpack_last_error(), "CPCA") != NULL);
+  CHECK(prtpack_get_cpca_info(p, &info) == PRTPACK_OK);
+  CHECK(info.row_count == 12 && info.channels == 1 && info.cubemap_n == 2 &&
+        info.column_count == 24 && info.row_wavelet == 0);
+  CHECK(info.cluster_count == 2 && info.basis_count == 2 && info.term_count == 12);
+  for (r = 0; r < 12; ++r) {
+    const uint32_t k = r % 3 == 0 ? 1u : 0u;
+    const double q0 = (double)((int)(r * 37 % 2000) - 1000);
+    CHECK(info.cluster_of[r] == k);
+    CHECK(close_to(info.coefficients[2 * r], q0 * (k ? 1.0 : 0.5) / 2047));
+    CHECK(close_to(info.coefficients[2 * r + 1], k ? -(double)(r * 10) * 0.75 / 2047 : 0.0));
+  }
+  CHECK(prtpack_get_cpca_mean(p, 0, &v) == PRTPACK_OK && v.term_count == 3);
+  for (r = 0; r < 3 && v.term_count == 3; ++r) {
+    CHECK(v.index[r] == mean0_index[r]);
+    CHECK(close_to(v.value[r], mean0_q[r] * 1.5 / 255));
+  }
+  CHECK(prtpack_get_cpca_basis(p, 0, 1, &v) == PRTPACK_OK && v.term_count == 0 && v.index == NULL &&
+        v.value == NULL);
+  CHECK(prtpack_get_cpca_basis(p, 1, 1, &v) == PRTPACK_OK && v.term_count == 1 &&
+        v.index[0] == 23 && close_to(v.value[0], -0.125));
+  CHECK(prtpack_get_cpca_basis(p, 1, 0, &v) == PRTPACK_OK && v.term_count == 4 && v.index[3] == 8 &&
+        close_to(v.value[3], -2 * 0.5 / 255));
+  CHECK(prtpack_get_cpca_mean(p, 2, &v) == PRTPACK_ERROR &&
+        strstr(prtpack_last_error(), "out of range") != NULL);
+  CHECK(prtpack_get_cpca_basis(p, 0, 2, &v) == PRTPACK_ERROR &&
+        strstr(prtpack_last_error(), "out of range") != NULL);
+  CHECK(prtpack_get_cpca_info(NULL, &info) == PRTPACK_ERROR);
+  CHECK(prtpack_verify(p) == PRTPACK_OK);
+  prtpack_close(p);
+}
+
 int main(int argc, char** argv) {
   size_t size = 0;
   unsigned char* data;
   prtpack* p;
-  if (argc != 2 && argc != 3) {
-    fprintf(stderr, "usage: %s small.prtpack [compressed_transport_rgb.prtpack]\n", argv[0]);
+  if (argc < 2 || argc > 4) {
+    fprintf(stderr, "usage: %s small.prtpack [compressed_transport_rgb.prtpack [cpca.prtpack]]\n",
+            argv[0]);
     return 2;
   }
-  if (argc == 3) check_rgb_pack(argv[2]);
+  if (argc >= 3) check_rgb_pack(argv[2]);
+  if (argc == 4) check_cpca_pack(argv[3]);
+  CHECK(prtpack_transport_kind(NULL) == PRTPACK_TRANSPORT_NONE);
   p = prtpack_open_file(argv[1]);
   CHECK(p != NULL);
   if (p) check_pack(p);

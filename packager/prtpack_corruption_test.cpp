@@ -108,6 +108,13 @@ TEST(PrtpackCorruption, EveryFlippedByteOfAThreeChannelPackIsPaddingOrDetected) 
   ExpectEveryFlippedByteIsPaddingOrDetected(SmallThreeChannelInput());
 }
 
+// A 1.3 pack with a CPCA transport (zstd-compressed section): every flip is caught by the
+// section checksum, and every accepted read decodes the same CpcaTransport.
+TEST(PrtpackCorruption, EveryFlippedByteOfACpcaPackIsPaddingOrDetected) {
+  ExpectEveryFlippedByteIsPaddingOrDetected(testing::MakeSmallCpcaInput(1));
+  ExpectEveryFlippedByteIsPaddingOrDetected(testing::MakeSmallCpcaInput(3));
+}
+
 void ExpectEveryTruncationFailsClearly(const PackInput& input) {
   const std::vector<uint8_t> file = WritePack(input);
   for (std::size_t n = 0; n < file.size(); ++n) {
@@ -129,6 +136,98 @@ TEST(PrtpackCorruption, EveryTruncationFailsClearly) {
   ExpectEveryTruncationFailsClearly(testing::MakeSmallInput());
   ExpectEveryTruncationFailsClearly(testing::MakeSmallGlossyInput());
   ExpectEveryTruncationFailsClearly(SmallThreeChannelInput());
+  ExpectEveryTruncationFailsClearly(testing::MakeSmallCpcaInput());
+}
+
+// Hostile CPCA payloads behind valid checksums (the section stored with codec none, its type
+// patched, ResealChecksums): every byte of the payload (its header, the encoded parameters and
+// the CPCA body) replaced by 0x00, 0x01, 0x7F, 0x80 and 0xFF; every truncation, with and without
+// the body size made to agree; parameters whose counts were made hostile consistently with the
+// section. Each must read back or fail with an InputError naming the CPCA section, never crash
+// or allocate without bound (ReaderOptions: 64 MiB).
+TEST(PrtpackCorruption, HostileCpcaPayloadsAreRefusedClearly) {
+  PackInput no_transport = testing::MakeSmallInput();
+  no_transport.transport.reset();
+  auto pack_with = [&](const std::vector<uint8_t>& payload) {
+    return testing::PackWithRawCpca(no_transport, payload);
+  };
+  const std::vector<uint8_t> good = EncodeCpcaSection(testing::MakeSmallCpcaTransport());
+  testing::FullRead reference;
+  const std::vector<uint8_t> base = pack_with(good);
+  ASSERT_EQ(TryRead(base, &reference), "");
+  ASSERT_FALSE(reference.cpca.empty());
+  EXPECT_EQ(reference.cpca, EncodeCpcaTransport(testing::MakeSmallCpcaTransport()));
+  const PackReader r = PackReader::OpenMemory(base.data(), base.size());
+  uint64_t at = 0;
+  for (const SectionInfo& s : r.sections())
+    if (s.type_code == kTypeCpca) at = s.offset;
+  ASSERT_GT(at, 0u);
+  std::size_t refused = 0, read_ok = 0;
+  auto expect_clean = [&](const std::vector<uint8_t>& bytes, const std::string& what) {
+    testing::FullRead got;
+    const std::string error = TryRead(bytes, &got);
+    (error.empty() ? read_ok : refused)++;
+    if (!error.empty()) {
+      EXPECT_NE(error.find("CPCA"), std::string::npos) << what << ": " << error;
+    }
+    return error;
+  };
+  for (std::size_t i = 0; i < good.size(); ++i) {
+    for (uint8_t value :
+         {uint8_t(0x00), uint8_t(0x01), uint8_t(0x7F), uint8_t(0x80), uint8_t(0xFF)}) {
+      if (good[i] == value) continue;
+      std::vector<uint8_t> bad = base;
+      bad[at + i] = value;
+      ResealChecksums(bad);
+      expect_clean(bad, "byte " + std::to_string(i) + " = " + std::to_string(value));
+    }
+  }
+  const uint32_t params_size = LoadU32(good.data() + kCpcaParamsSize);
+  const std::size_t body_at = kCpcaHeaderSize + params_size;
+  for (std::size_t n = 0; n < good.size(); ++n) {
+    std::vector<uint8_t> cut(good.begin(), good.begin() + std::ptrdiff_t(n));
+    EXPECT_NE(expect_clean(pack_with(cut), "cut at " + std::to_string(n)), "") << n;
+    if (n >= body_at) {  // the body cut, its size made to agree: the body decoder refuses it
+      StoreU64(cut.data() + kCpcaBodySize, n - body_at);
+      EXPECT_NE(expect_clean(pack_with(cut), "body cut at " + std::to_string(n)), "") << n;
+    }
+  }
+  std::vector<uint8_t> longer = good;
+  longer.push_back(0);
+  EXPECT_NE(expect_clean(pack_with(longer), "one more byte"), "");
+  StoreU64(longer.data() + kCpcaBodySize, LoadU64(good.data() + kCpcaBodySize) + 1);
+  EXPECT_NE(expect_clean(pack_with(longer), "trailing body byte"), "");
+  // Hostile counts in the parameters (encoded header version 4: samples at byte 16, clusters at
+  // 48, bases at 52, the one segment's count at 63) and the same in the section's header, so
+  // that they reach DecodeHeader and the CPCA body decoder's bounds.
+  const uint8_t* params = good.data() + kCpcaHeaderSize;
+  ASSERT_EQ(LoadU32(params + 16), 12u);
+  ASSERT_EQ(LoadU32(params + 48), 2u);
+  ASSERT_EQ(LoadU32(params + 52), 2u);
+  ASSERT_EQ(LoadU32(params + 63), 12u);
+  for (uint32_t rows : {12u, 13u, 1u << 20, 1u << 28, 0xFFFFFFFFu}) {
+    for (uint32_t clusters : {1u, 2u, 3u, 12u, 13u, 1u << 20, 0xFFFFFFFFu}) {
+      for (uint32_t bases : {0u, 1u, 2u, 3u, 24u, 25u, 256u, 0xFFFFFFFFu}) {
+        std::vector<uint8_t> bad = good;
+        uint8_t* p = bad.data() + kCpcaHeaderSize;
+        StoreU32(p + 16, rows);
+        StoreU32(p + 48, clusters);
+        StoreU32(p + 52, bases);
+        StoreU32(p + 63, rows);
+        StoreU64(bad.data() + kCpcaRowCount, rows);
+        StoreU32(bad.data() + kCpcaClusters, clusters);
+        StoreU32(bad.data() + kCpcaBases, bases);
+        const std::string error = expect_clean(
+            pack_with(bad), "rows " + std::to_string(rows) + ", clusters " +
+                                std::to_string(clusters) + ", bases " + std::to_string(bases));
+        if (rows != 12 || clusters != 2 || bases != 2) {
+          EXPECT_NE(error, "");
+        }
+      }
+    }
+  }
+  std::printf("hostile CPCA payloads: %zu refused with InputError, %zu read\n", refused, read_ok);
+  EXPECT_GT(refused, good.size());
 }
 
 // Hostile VISB payloads behind valid checksums (ResealChecksums): every byte of each VISB
@@ -211,6 +310,7 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
   seeds.emplace_back("visibility.prtpack", WritePack(testing::MakeSmallGlossyInput()));
   seeds.emplace_back("compressed_transport_rgb.prtpack", WritePack(SmallThreeChannelInput()));
   seeds.emplace_back("image.prtpack", WritePack(testing::MakeImageInput()));
+  seeds.emplace_back("cpca.prtpack", WritePack(testing::MakeSmallCpcaInput()));
   PackInput real;
   // A real mesh from the Debian data package the build extracts (always present, unlike
   // ../shared/data); the committed corpus also holds bunny_lowres.prtpack from an earlier run.

@@ -18,9 +18,12 @@ inline constexpr uint16_t kVersionMajor = 1;
 // (kTransportChannels); a pack that does not need it (no transport, or a one-channel transport)
 // is written as 1.0, byte-identical to what 1.0 writers wrote.
 // 1.2 adds the IMGE section (image relighting, kTypeImage), written only by packs that have one.
-inline constexpr uint16_t kVersionMinor = 2;
+// 1.3 adds the CPCA section (clustered-PCA transport, kTypeCpca), written only by packs that have
+// one (instead of TRNS).
+inline constexpr uint16_t kVersionMinor = 3;
 inline constexpr uint16_t kVersionMinorChannels = 1;
 inline constexpr uint16_t kVersionMinorImage = 2;
+inline constexpr uint16_t kVersionMinorCpca = 3;
 inline constexpr uint32_t kHeaderSize = 64;
 inline constexpr uint32_t kEntrySize = 64;
 inline constexpr uint32_t kDefaultAlignment = 64;
@@ -35,6 +38,11 @@ inline constexpr std::size_t kTransportEncoding = 0, kTransportBlockCount = 4,
                              kTransportChannels = 28,  // 1.1; reserved (0) in 1.0
     kTransportIndexChecksum = 32;
 inline constexpr uint32_t kBlockEntrySize = 48;
+// CPCA (1.3) decoded payload: a 32-byte header, the encoded CompressedTransportHeader (params),
+// then the EncodeCpcaBody bytes (formats/cpca_transport.h) to the end.
+inline constexpr uint32_t kCpcaHeaderSize = 32;
+inline constexpr std::size_t kCpcaParamsSize = 0, kCpcaChannels = 4, kCpcaRowCount = 8,
+                             kCpcaClusters = 16, kCpcaBases = 20, kCpcaBodySize = 24;
 inline constexpr uint32_t kMaterialHeaderSize = 24;
 // A MESH may declare at most this many raw bytes per stored byte (plus 4 KiB).
 inline constexpr uint64_t kMaxMeshExpansion = 256;
@@ -65,6 +73,10 @@ inline constexpr uint32_t kTypeVisibility = FourCC("VISB");
 // Image relighting (1.2): the camera and each pixel's mesh, formats/image_file.h's bytes; CRITICAL
 // (a reader that does not know it would take pixel rows for vertex rows).
 inline constexpr uint32_t kTypeImage = FourCC("IMGE");
+// Clustered-PCA transport (1.3, issue #24): instead of TRNS, the CpcaTransport of
+// formats/cpca_transport.h; CRITICAL (a reader that skipped it would take the pack for one
+// without transport, or relight its visibility alone).
+inline constexpr uint32_t kTypeCpca = FourCC("CPCA");
 
 inline std::string FourCCString(uint32_t v) {
   std::string s(4, ' ');

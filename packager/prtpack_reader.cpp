@@ -14,7 +14,9 @@
 #include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <span>
 
+#include "formats/compressed_transport.h"
 #include "packager/draco_mesh_codec.h"
 #include "packager/prtpack_format.h"
 #include "vocabulary/errors.h"
@@ -68,7 +70,7 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
   if (type == kTypeMeta) return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   if (type == kTypeMesh) return codec == uint32_t(Codec::kDraco);
   if (type == kTypeMaterial || type == kTypeTransport) return codec == uint32_t(Codec::kNone);
-  if (type == kTypeVisibility || type == kTypeImage) {
+  if (type == kTypeVisibility || type == kTypeImage || type == kTypeCpca) {
     return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   }
   return true;
@@ -76,7 +78,8 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
 
 bool IsKnownType(uint32_t type) {
   return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial ||
-         type == kTypeTransport || type == kTypeVisibility || type == kTypeImage;
+         type == kTypeTransport || type == kTypeVisibility || type == kTypeImage ||
+         type == kTypeCpca;
 }
 
 }  // namespace
@@ -93,6 +96,8 @@ struct PackReader::Impl {
   std::size_t transport = 0;
   bool has_image = false;
   std::size_t image = 0;
+  bool has_cpca = false;
+  std::size_t cpca = 0;
 
   [[noreturn]] void Fail(const std::string& what) const { throw InputError(name, what); }
   const uint8_t* data() const { return storage->data; }
@@ -114,6 +119,20 @@ struct PackReader::Impl {
   TransportIndex Transport() const;
   VisibilityBlocks Visibility(std::size_t i) const;
   ImageSamplesInfo Image() const;
+  // The CPCA section decompressed, its 32-byte header checked against raw_size.
+  struct CpcaPayload {
+    std::vector<uint8_t> raw;
+    uint32_t channels = 0, clusters = 0, bases = 0, params_size = 0;
+    uint64_t row_count = 0;
+    std::span<const uint8_t> params() const {
+      return std::span<const uint8_t>(raw).subspan(kCpcaHeaderSize, params_size);
+    }
+    std::span<const uint8_t> body() const {
+      return std::span<const uint8_t>(raw).subspan(kCpcaHeaderSize + params_size);
+    }
+  };
+  CpcaPayload CpcaBytes() const;
+  CpcaTransport Cpca() const;
   void Block(const TransportIndex& index, std::size_t b, uint8_t* dst) const;
 };
 
@@ -166,7 +185,7 @@ void PackReader::Impl::Parse() {
          "): the header or section table is corrupted");
   }
   uint64_t previous_end = table_offset + table_size;
-  int metas = 0, transports = 0, images = 0;
+  int metas = 0, transports = 0, images = 0, cpcas = 0;
   std::vector<int64_t> mesh_by_id, material_by_id, visibility_by_id;
   for (uint32_t i = 0; i < count; ++i) {
     const uint8_t* e = d + table_offset + uint64_t(i) * entry_size;
@@ -210,6 +229,9 @@ void PackReader::Impl::Parse() {
     } else if (s.type_code == kTypeImage) {
       ++images;
       image = i;
+    } else if (s.type_code == kTypeCpca) {
+      ++cpcas;
+      cpca = i;
     } else {
       auto& by_id = s.type_code == kTypeMesh       ? mesh_by_id
                     : s.type_code == kTypeMaterial ? material_by_id
@@ -223,8 +245,13 @@ void PackReader::Impl::Parse() {
   if (metas != 1) Fail("needs exactly one META section, has " + std::to_string(metas));
   if (transports > 1) Fail("has more than one TRNS section");
   if (images > 1) Fail("has more than one IMGE section");
+  if (cpcas > 1) Fail("has more than one CPCA section");
+  if (cpcas == 1 && transports == 1) {
+    Fail("has both a TRNS and a CPCA transport (a pack has one or the other)");
+  }
   has_image = images == 1;
   has_transport = transports == 1;
+  has_cpca = cpcas == 1;
   if (mesh_by_id.empty()) Fail("has no MESH section");
   if (mesh_by_id.size() != material_by_id.size()) Fail("MESH and MATL ids do not pair up");
   for (std::size_t m = 0; m < mesh_by_id.size(); ++m) {
@@ -348,7 +375,10 @@ UnpackedMesh PackReader::Impl::Mesh(std::size_t i) const {
 }
 
 TransportIndex PackReader::Impl::Transport() const {
-  if (!has_transport) Fail("has no TRNS (transport) section");
+  if (!has_transport) {
+    Fail(has_cpca ? "has no TRNS (transport) section: its transport is CPCA (clustered PCA)"
+                  : "has no TRNS (transport) section");
+  }
   const SectionInfo& s = sections[transport];
   const std::string where = SectionName(transport);
   const uint8_t* p = data() + s.offset;
@@ -482,7 +512,75 @@ ImageSamplesInfo PackReader::Impl::Image() const {
            std::to_string(t.row_count) + " rows of " + std::to_string(t.channels) +
            " channel(s) in TRNS");
   }
+  if (has_cpca) {
+    const CpcaPayload c = CpcaBytes();
+    if (c.row_count != info.pixels() * c.channels)
+      Fail(where + " has " + std::to_string(info.pixels()) + " pixels for " +
+           std::to_string(c.row_count) + " rows of " + std::to_string(c.channels) +
+           " channel(s) in CPCA");
+  }
   return info;
+}
+
+PackReader::Impl::CpcaPayload PackReader::Impl::CpcaBytes() const {
+  if (!has_cpca) {
+    Fail(has_transport ? "has no CPCA section: its transport is TRNS (compressed columns)"
+                       : "has no CPCA (clustered-PCA transport) section");
+  }
+  const SectionInfo& s = sections[cpca];
+  const std::string where = SectionName(cpca);
+  const uint8_t* p = CheckedBytes(cpca);
+  CpcaPayload c;
+  // raw_size ≤ max_section_bytes (Parse); for zstd the frame must declare exactly raw_size.
+  if (s.codec == uint32_t(Codec::kZstd)) {
+    c.raw.resize(s.raw_size);
+    Unzstd(p, s.stored_size, c.raw.data(), s.raw_size, where);
+  } else {
+    c.raw.assign(p, p + s.stored_size);
+  }
+  const uint64_t n = c.raw.size();
+  if (n < kCpcaHeaderSize) Fail(where + " is too short for its header");
+  const uint8_t* h = c.raw.data();
+  c.params_size = LoadU32(h + kCpcaParamsSize);
+  const uint32_t params_size = c.params_size;
+  c.channels = LoadU32(h + kCpcaChannels);
+  c.row_count = LoadU64(h + kCpcaRowCount);
+  c.clusters = LoadU32(h + kCpcaClusters);
+  c.bases = LoadU32(h + kCpcaBases);
+  const uint64_t body_size = LoadU64(h + kCpcaBodySize);
+  if (!InRange(kCpcaHeaderSize, params_size, n) || body_size != n - kCpcaHeaderSize - params_size) {
+    Fail(where + " parameter and body sizes (" + std::to_string(params_size) + " + " +
+         std::to_string(body_size) + ") disagree with its size " + std::to_string(n));
+  }
+  if (c.channels != 1 && c.channels != 3) {
+    Fail(where + " channel count " + std::to_string(c.channels) + " is not 1 or 3");
+  }
+  if (c.row_count % c.channels != 0) {
+    Fail(where + " row count " + std::to_string(c.row_count) +
+         " is not a multiple of its channel count " + std::to_string(c.channels));
+  }
+  return c;
+}
+
+CpcaTransport PackReader::Impl::Cpca() const {
+  const CpcaPayload c = CpcaBytes();
+  const std::string where = name + ": " + SectionName(cpca);
+  const CompressedTransportHeader h = DecodeHeader(c.params(), where + " parameters");
+  if (h.scheme != CompressionScheme::kCpca) {
+    throw InputError(where,
+                     std::string("parameters are of scheme ") + ToString(h.scheme) + ", not cpca");
+  }
+  if (h.sample_count != c.row_count || h.channels != c.channels || h.cpca_clusters != c.clusters ||
+      h.cpca_bases != c.bases) {
+    throw InputError(
+        where, "parameters (" + std::to_string(h.sample_count) + " rows, " +
+                   std::to_string(h.channels) + " channel(s), " + std::to_string(h.cpca_clusters) +
+                   " clusters, " + std::to_string(h.cpca_bases) +
+                   " bases) disagree with the section's (" + std::to_string(c.row_count) + ", " +
+                   std::to_string(c.channels) + ", " + std::to_string(c.clusters) + ", " +
+                   std::to_string(c.bases) + ")");
+  }
+  return DecodeCpcaBody(h, c.body(), where);
 }
 
 PackReader::PackReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -553,6 +651,14 @@ std::size_t PackReader::mesh_count() const {
 }
 bool PackReader::has_transport() const {
   return impl_->has_transport;
+}
+
+bool PackReader::has_cpca() const {
+  return impl_->has_cpca;
+}
+
+CpcaTransport PackReader::ReadCpcaTransport() const {
+  return impl_->Cpca();
 }
 
 bool PackReader::has_visibility() const {
@@ -631,6 +737,7 @@ void PackReader::VerifyAll() const {
   for (std::size_t m = 0; m < mesh_count(); ++m) impl_->Mesh(m);
   if (has_visibility()) ReadAllVisibility();
   if (impl_->has_image) impl_->Image();
+  if (impl_->has_cpca) impl_->Cpca();
   if (impl_->has_transport) {
     const TransportIndex t = impl_->Transport();
     std::vector<uint8_t> buffer;

@@ -1,5 +1,6 @@
 // Reader for .prtpack assets (docs/prtpack-format.md): the scene's meshes, materials, metadata
-// and compressed transport blocks. No MPI, no Embree, no Draco or zstd in this header.
+// and compressed transport: column blocks (TRNS) or clustered PCA (CPCA). No MPI, no Embree, no
+// Draco or zstd in this header.
 //
 // Safe on untrusted input: every offset, size, count and index is validated before use, every
 // decoded size is bounded (ReaderOptions::max_section_bytes) before anything is allocated, and
@@ -16,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/cpca_transport.h"
 #include "formats/image_file.h"
 #include "formats/visibility_blocks.h"
 #include "vocabulary/mesh.h"
@@ -113,7 +115,10 @@ class PackReader {
   // Every section in table order, including unknown (skipped) ones.
   const std::vector<SectionInfo>& sections() const;
   std::size_t mesh_count() const;
+  // True when the pack has a TRNS section (compressed columns). A CPCA pack has none.
   bool has_transport() const;
+  // True when the pack has a CPCA section (1.3): a clustered-PCA transport instead of TRNS.
+  bool has_cpca() const;
   // True when the pack has VISB sections (one per mesh: the reader refuses anything else).
   bool has_visibility() const;
   // True for an image-relighting pack (an IMGE section, 1.2): its rows are pixels, not vertices.
@@ -121,7 +126,7 @@ class PackReader {
   // The IMGE section: the camera, image size and each pixel's mesh. Throws InputError when
   // there is none, on a checksum or zstd failure, or on content ParseImageSamples refuses (a
   // pixel naming a mesh the pack does not have included), or a pixel count that is not the
-  // transport's rows / channels.
+  // transport's (TRNS or CPCA) rows / channels.
   ImageSamplesInfo ReadImage() const;
 
   // The META section's JSON text. Verifies the section checksum and the decompressed size;
@@ -146,6 +151,14 @@ class PackReader {
   // Same, into caller memory of exactly block.raw_size bytes (`dst_size` must equal it).
   void ReadTransportBlockInto(const TransportIndex& index, std::size_t b, void* dst,
                               std::size_t dst_size) const;
+
+  // The CPCA section's clustered-PCA transport, decoded and validated: the section checksum, a
+  // zstd frame of exactly raw_size bytes (≤ max_section_bytes), the section's own header (sizes
+  // that add up to raw_size), the compressed-transport header of scheme cpca (DecodeHeader) whose
+  // rows, channels, clusters and bases equal the section's, and DecodeCpcaBody (safe on hostile
+  // bytes: every count bounded by the bytes left before anything is allocated). Throws InputError
+  // naming the pack and the section on any failure, or when the pack has no CPCA section.
+  CpcaTransport ReadCpcaTransport() const;
 
   // Mesh `i`'s visibility maps (the VISB section with id i), decoded and validated: checksum,
   // zstd frame of exactly raw_size bytes, DecodeVisibilityBlocks (safe on hostile bytes), and

@@ -496,3 +496,260 @@ TEST(PrtpackRoundTrip, ImagePacksThatDisagreeWithTheirTransportAreRefused) {
 
 }  // namespace
 }  // namespace prt::pack
+
+namespace prt::pack {
+namespace {
+
+using testing::MakeSmallCpcaInput;
+using testing::MakeSmallCpcaTransport;
+
+void ExpectSameCpca(const CpcaTransport& got, const CpcaTransport& want) {
+  EXPECT_EQ(EncodeHeader(got.header), EncodeHeader(want.header));
+  EXPECT_EQ(got.cluster_of, want.cluster_of);
+  EXPECT_EQ(got.coefficients, want.coefficients);
+  ASSERT_EQ(got.clusters.size(), want.clusters.size());
+  for (std::size_t k = 0; k < want.clusters.size(); ++k) {
+    const CpcaCluster& a = got.clusters[k];
+    const CpcaCluster& b = want.clusters[k];
+    EXPECT_EQ(a.coefficient_scale, b.coefficient_scale) << "cluster " << k;
+    ASSERT_EQ(a.basis.size(), b.basis.size());
+    for (std::size_t v = 0; v <= b.basis.size(); ++v) {
+      const CpcaVector& x = v == 0 ? a.mean : a.basis[v - 1];
+      const CpcaVector& y = v == 0 ? b.mean : b.basis[v - 1];
+      EXPECT_EQ(x.scale, y.scale) << "cluster " << k << " vector " << v;
+      EXPECT_EQ(x.index, y.index) << "cluster " << k << " vector " << v;
+      EXPECT_EQ(x.q, y.q) << "cluster " << k << " vector " << v;
+    }
+  }
+  EXPECT_EQ(EncodeCpcaTransport(got), EncodeCpcaTransport(want));  // bit for bit
+}
+
+// A clustered-PCA transport (issue #24) packs as the CPCA section of a 1.3 pack, CRITICAL, in
+// place of TRNS, and reads back identical, with 1 and 3 colour channels.
+TEST(PrtpackRoundTrip, CpcaTransportPacksAsACriticalSectionOfVersion1_3) {
+  for (uint32_t channels : {1u, 3u}) {
+    SCOPED_TRACE(channels);
+    const PackInput in = MakeSmallCpcaInput(channels);
+    const std::vector<uint8_t> bytes = WritePack(in);
+    EXPECT_EQ(bytes, WritePack(in));  // deterministic
+    const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+    EXPECT_EQ(r.version_major(), 1);
+    EXPECT_EQ(r.version_minor(), 3);
+    EXPECT_EQ(nlohmann::json::parse(r.ReadMetadata())["format_version"], "1.3");
+    EXPECT_TRUE(r.has_cpca());
+    EXPECT_FALSE(r.has_transport());
+    // META, MESH, MATL, MESH, MATL, CPCA.
+    ASSERT_EQ(r.sections().size(), 6u);
+    const SectionInfo& s = r.sections()[5];
+    EXPECT_EQ(s.type, "CPCA");
+    EXPECT_TRUE(s.known);
+    EXPECT_EQ(s.flags, kFlagCritical);
+    EXPECT_EQ(s.raw_size, EncodeCpcaSection(*in.cpca).size());
+    EXPECT_TRUE(s.codec == 0 || (s.codec == 1 && s.stored_size < s.raw_size)) << s.codec;
+    const CpcaTransport back = ReadCpcaTransport(r);
+    ExpectSameCpca(back, *in.cpca);
+    EXPECT_EQ(back.header.channels, channels);
+    EXPECT_EQ(back.row_count(), 12u * channels);
+    std::vector<float> a(24), b(24);
+    for (std::size_t row = 0; row < back.row_count(); ++row) {
+      DecodeCpcaRow(back, row, a);
+      DecodeCpcaRow(*in.cpca, row, b);
+      EXPECT_EQ(a, b) << "row " << row;
+    }
+    EXPECT_NO_THROW(r.VerifyAll());
+    EXPECT_TRUE(testing::SameRead(
+        testing::ReadEverything(r),
+        testing::ReadEverything(PackReader::OpenMemory(bytes.data(), bytes.size()))));
+    // The column readers say what the pack has instead.
+    try {
+      r.ReadTransportIndex();
+      ADD_FAILURE() << "a CPCA pack has a TRNS index";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("its transport is CPCA"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(ReadCompressedTransport(r), InputError);
+  }
+  // A TRNS pack has no CPCA section and stays what it was (1.0, no CPCA bytes).
+  const std::vector<uint8_t> columns = WritePack(MakeSmallInput());
+  const PackReader r = PackReader::OpenMemory(columns.data(), columns.size());
+  EXPECT_FALSE(r.has_cpca());
+  EXPECT_EQ(r.version_minor(), 0);
+  try {
+    r.ReadCpcaTransport();
+    ADD_FAILURE() << "a TRNS pack has a CPCA transport";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("has no CPCA section"), std::string::npos) << e.what();
+  }
+}
+
+// The C interface (prtpack.h) over the same pack: kind, shape, cluster ids, dequantised
+// coefficients and sparse vectors equal to CpcaTransport::Value / Coefficient; clear errors.
+TEST(PrtpackRoundTrip, CpcaTransportThroughTheCApi) {
+  const PackInput in = MakeSmallCpcaInput(3);
+  const CpcaTransport& t = *in.cpca;
+  const std::vector<uint8_t> bytes = WritePack(in);
+  prtpack* c = prtpack_open_memory(bytes.data(), bytes.size());
+  ASSERT_NE(c, nullptr) << prtpack_last_error();
+  EXPECT_EQ(prtpack_transport_kind(c), PRTPACK_TRANSPORT_CPCA);
+  EXPECT_EQ(prtpack_transport_kind(nullptr), PRTPACK_TRANSPORT_NONE);
+  prtpack_transport_info ti{};
+  EXPECT_EQ(prtpack_get_transport_info(c, &ti), PRTPACK_ERROR);
+  EXPECT_NE(std::string(prtpack_last_error()).find("CPCA"), std::string::npos);
+  prtpack_cpca_info info{};
+  ASSERT_EQ(prtpack_get_cpca_info(c, &info), PRTPACK_OK) << prtpack_last_error();
+  EXPECT_EQ(info.row_count, 36u);
+  EXPECT_EQ(info.channels, 3u);
+  EXPECT_EQ(info.cubemap_n, 2u);
+  EXPECT_EQ(info.column_count, 24u);
+  EXPECT_EQ(info.row_wavelet, 0u);
+  EXPECT_EQ(info.cluster_count, 2u);
+  EXPECT_EQ(info.basis_count, 2u);
+  EXPECT_EQ(info.term_count, t.term_count());
+  for (std::size_t r = 0; r < 36; ++r) {
+    EXPECT_EQ(info.cluster_of[r], t.cluster_of[r]);
+    for (std::size_t i = 0; i < 2; ++i)
+      EXPECT_EQ(info.coefficients[2 * r + i], t.Coefficient(r, i)) << r << " " << i;
+  }
+  for (std::size_t k = 0; k < 2; ++k) {
+    for (std::size_t v = 0; v < 3; ++v) {
+      prtpack_cpca_vector vec{};
+      ASSERT_EQ(
+          v == 0 ? prtpack_get_cpca_mean(c, k, &vec) : prtpack_get_cpca_basis(c, k, v - 1, &vec),
+          PRTPACK_OK)
+          << prtpack_last_error();
+      const CpcaVector& want = v == 0 ? t.clusters[k].mean : t.clusters[k].basis[v - 1];
+      ASSERT_EQ(vec.term_count, want.term_count());
+      EXPECT_EQ(vec.index == nullptr, want.term_count() == 0);
+      for (std::size_t j = 0; j < vec.term_count; ++j) {
+        EXPECT_EQ(vec.index[j], want.index[j]);
+        EXPECT_EQ(vec.value[j], t.Value(want, j));
+      }
+    }
+  }
+  prtpack_cpca_vector vec{};
+  EXPECT_EQ(prtpack_get_cpca_mean(c, 2, &vec), PRTPACK_ERROR);
+  EXPECT_NE(std::string(prtpack_last_error()).find("cluster 2 out of range"), std::string::npos)
+      << prtpack_last_error();
+  EXPECT_EQ(prtpack_get_cpca_basis(c, 0, 2, &vec), PRTPACK_ERROR);
+  EXPECT_NE(std::string(prtpack_last_error()).find("basis vector 2 out of range"),
+            std::string::npos)
+      << prtpack_last_error();
+  EXPECT_EQ(prtpack_get_cpca_info(c, nullptr), PRTPACK_ERROR);
+  EXPECT_EQ(prtpack_get_cpca_mean(nullptr, 0, &vec), PRTPACK_ERROR);
+  EXPECT_EQ(prtpack_verify(c), PRTPACK_OK);
+  prtpack_close(c);
+
+  const std::vector<uint8_t> columns = WritePack(MakeSmallInput());
+  c = prtpack_open_memory(columns.data(), columns.size());
+  ASSERT_NE(c, nullptr);
+  EXPECT_EQ(prtpack_transport_kind(c), PRTPACK_TRANSPORT_COLUMNS);
+  EXPECT_EQ(prtpack_get_cpca_info(c, &info), PRTPACK_ERROR);
+  EXPECT_NE(std::string(prtpack_last_error()).find("has no CPCA section"), std::string::npos);
+  prtpack_close(c);
+  PackInput none = MakeSmallInput();
+  none.transport.reset();
+  const std::vector<uint8_t> geometry = WritePack(none);
+  c = prtpack_open_memory(geometry.data(), geometry.size());
+  ASSERT_NE(c, nullptr);
+  EXPECT_EQ(prtpack_transport_kind(c), PRTPACK_TRANSPORT_NONE);
+  prtpack_close(c);
+}
+
+// Where the CPCA payload's header puts what (for patching).
+std::vector<uint8_t> CpcaPayload(uint32_t channels = 1) {
+  return EncodeCpcaSection(MakeSmallCpcaTransport(channels));
+}
+PackInput NoTransport() {
+  PackInput in = MakeSmallInput();
+  in.transport.reset();
+  return in;
+}
+
+TEST(PrtpackRoundTrip, CpcaWriterRefusesWhatDoesNotFit) {
+  PackInput in = MakeSmallCpcaInput();
+  in.transport = MakeSmallInput().transport;
+  try {
+    WritePack(in);
+    ADD_FAILURE() << "wrote TRNS and CPCA";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("not both"), std::string::npos) << e.what();
+  }
+  in = MakeSmallCpcaInput();
+  in.cpca->cluster_of[4] = 2;  // K = 2
+  EXPECT_THROW(WritePack(in), InputError);
+  in = MakeSmallCpcaInput();
+  in.cpca->coefficients.pop_back();
+  EXPECT_THROW(WritePack(in), InputError);
+  in = MakeSmallCpcaInput();
+  in.extra_sections.push_back({"CPCA", 0, 0, {1, 2, 3}});  // reserved
+  EXPECT_THROW(WritePack(in), InputError);
+  // An image pack over a CPCA transport: 12 pixels for 12 rows, not 6.
+  PackInput image = testing::MakeImageInput();
+  image.transport.reset();
+  image.cpca = MakeSmallCpcaTransport();
+  const std::vector<uint8_t> bytes = WritePack(image);
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+  EXPECT_EQ(r.version_minor(), 3);
+  EXPECT_EQ(r.ReadImage().pixels(), 12u);
+  EXPECT_NO_THROW(r.VerifyAll());
+  image.image->camera.width = 2;
+  image.image->pixel_mesh.resize(6);
+  EXPECT_THROW(WritePack(image), InputError);
+}
+
+// Behind valid checksums: a CPCA section next to a TRNS, a second CPCA, section fields that
+// disagree with the payload's size or its parameters, and an image of other pixels than the
+// CPCA rows, are refused with an InputError naming the pack and the section.
+TEST(PrtpackRoundTrip, CpcaReaderRefusesInconsistentSections) {
+  const std::vector<uint8_t> good = CpcaPayload();
+  EXPECT_EQ(ErrorOf(testing::PackWithRawCpca(NoTransport(), good)), "");
+  const std::string both = ErrorOf(testing::PackWithRawCpca(MakeSmallInput(), good));
+  EXPECT_NE(both.find("has both a TRNS and a CPCA transport"), std::string::npos) << both;
+  PackInput twice = NoTransport();
+  twice.extra_sections.push_back({"XCPC", kFlagCritical, 0, good});
+  EXPECT_NE(ErrorOf(testing::PackWithRawCpca(twice, good)).find("more than one CPCA"),
+            std::string::npos);
+  struct Patch {
+    std::size_t at;
+    uint64_t value;
+    int width;
+    const char* expect;
+  };
+  const uint32_t params = LoadU32(good.data() + kCpcaParamsSize);
+  const Patch patches[] = {
+      {kCpcaBodySize, LoadU64(good.data() + kCpcaBodySize) + 1, 8, "disagree with its size"},
+      {kCpcaBodySize, 0, 8, "disagree with its size"},
+      {kCpcaParamsSize, params + 1, 4, "disagree with its size"},
+      {kCpcaParamsSize, 0xFFFFFFFFu, 4, "disagree with its size"},
+      {kCpcaChannels, 2, 4, "channel count 2 is not 1 or 3"},
+      {kCpcaChannels, 3, 4, "disagree with the section's"},
+      {kCpcaRowCount, 13, 8, "disagree with the section's"},
+      {kCpcaClusters, 3, 4, "disagree with the section's"},
+      {kCpcaBases, 1, 4, "disagree with the section's"},
+  };
+  for (const Patch& p : patches) {
+    std::vector<uint8_t> bad = good;
+    if (p.width == 4) StoreU32(bad.data() + p.at, static_cast<uint32_t>(p.value));
+    if (p.width == 8) StoreU64(bad.data() + p.at, p.value);
+    const std::string e = ErrorOf(testing::PackWithRawCpca(NoTransport(), bad));
+    EXPECT_NE(e.find(p.expect), std::string::npos) << e;
+    EXPECT_NE(e.find("CPCA"), std::string::npos) << e;
+  }
+  std::vector<uint8_t> shorter(good.begin(), good.begin() + kCpcaHeaderSize - 1);
+  EXPECT_NE(ErrorOf(testing::PackWithRawCpca(NoTransport(), shorter)).find("too short"),
+            std::string::npos);
+  // Parameters of another scheme, consistent with the section's counts.
+  std::vector<uint8_t> columns = good;
+  columns[kCpcaHeaderSize + 8] = 3;  // header version 3: no CPCA fields
+  EXPECT_NE(ErrorOf(testing::PackWithRawCpca(NoTransport(), columns)), "");
+  // An image of 6 pixels over 12 CPCA rows.
+  PackInput image = testing::MakeImageInput();
+  image.transport.reset();
+  image.image->camera.width = 2;
+  image.image->pixel_mesh.resize(6);
+  const std::string e = ErrorOf(testing::PackWithRawCpca(image, good));
+  EXPECT_NE(e.find("6 pixels for 12 rows of 1 channel(s) in CPCA"), std::string::npos) << e;
+}
+
+}  // namespace
+}  // namespace prt::pack

@@ -1,5 +1,5 @@
 // Shared fixtures for the packager tests and the fuzz harness: a small pack with every section
-// kind, and a canonical full read for comparing two packs.
+// kind (a TRNS or a CPCA transport), and a canonical full read for comparing two packs.
 #pragma once
 
 #include <cmath>
@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "packager/prtpack_format.h"
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
@@ -137,6 +138,74 @@ inline TransportInput MakeSmallCompressedTransportInput(uint32_t channels = 1) {
   return MakeTransportInput(MakeSmallCompressedTransport(channels), 5);
 }
 
+// A valid clustered-PCA transport (formats/cpca_transport.h) built by hand for the 12 vertices
+// of MakeSmallInput at n = 2 (24 columns): K = 2 clusters, S = 2 bases, bits 9 (|q| ≤ 255),
+// coefficient bits 12 (|q| ≤ 2047); row r is in cluster 1 when r % 3 == 0, else 0. Cluster 0's
+// second basis vector is empty (no variance) and its coefficients 0. With channels = 3, 3 × 12
+// channel-major rows. prtpack_c_test.c checks the same numbers.
+inline CpcaTransport MakeSmallCpcaTransport(uint32_t channels = 1) {
+  CpcaTransport t;
+  CompressedTransportHeader& h = t.header;
+  h.cubemap_n = 2;
+  h.sample_count = 12 * channels;
+  h.channels = channels;
+  h.scheme = CompressionScheme::kCpca;
+  h.bits = 9;
+  h.keep_fraction = 0.25;
+  h.terms_per_column = 0;
+  h.dither_seed = 7;
+  h.cpca_clusters = 2;
+  h.cpca_bases = 2;
+  h.cpca_coefficient_bits = 12;
+  h.cpca_method = CpcaMethod::kStandard;
+  SpatialSegment seg;
+  seg.count = 12;
+  h.domain.segments.push_back(seg);
+  h.domain = PerChannelDomain(h.domain, channels);
+  CpcaCluster c0;
+  c0.mean = {1.5f, {0, 3, 7}, {100, -50, 255}};
+  c0.basis = {{0.25f, {1, 2}, {-3, 200}}, {}};
+  c0.coefficient_scale = {0.5f, 0.0f};
+  CpcaCluster c1;
+  c1.mean = {2.0f, {0, 23}, {255, 1}};
+  c1.basis = {{0.5f, {5, 6, 7, 8}, {1, -1, 2, -2}}, {0.125f, {23}, {-255}}};
+  c1.coefficient_scale = {1.0f, 0.75f};
+  t.clusters = {c0, c1};
+  for (uint32_t r = 0; r < h.sample_count; ++r) {
+    const uint32_t k = r % 3 == 0 ? 1 : 0;
+    t.cluster_of.push_back(k);
+    t.coefficients.push_back(static_cast<int32_t>(r * 37 % 2000) - 1000);
+    t.coefficients.push_back(k == 1 ? -static_cast<int32_t>(r * 10) : 0);
+  }
+  return t;
+}
+
+// MakeSmallInput with the CPCA transport instead of TRNS (a 1.3 pack).
+inline PackInput MakeSmallCpcaInput(uint32_t channels = 1) {
+  PackInput in = MakeSmallInput();
+  in.transport.reset();
+  in.cpca = MakeSmallCpcaTransport(channels);
+  return in;
+}
+
+// `in` with `payload` as its CPCA section, as given (codec none, CRITICAL): the writer validates
+// what it encodes, so a hostile payload goes in as an unknown section whose type is then patched
+// to CPCA, and the checksums are resealed.
+inline std::vector<uint8_t> PackWithRawCpca(PackInput in, const std::vector<uint8_t>& payload) {
+  in.cpca.reset();
+  in.extra_sections.push_back({"XCPC", kFlagCritical, 0, payload});
+  std::vector<uint8_t> file = WritePack(in);
+  const uint32_t sections = LoadU32(file.data() + kHdrSectionCount);
+  for (uint32_t i = 0; i < sections; ++i) {
+    uint8_t* entry = file.data() + kHeaderSize + std::size_t(i) * kEntrySize;
+    if (LoadU32(entry + kSecType) == FourCC("XCPC")) StoreU32(entry + kSecType, kTypeCpca);
+  }
+  // A CPCA pack is 1.3 (with a TRNS too, as WritePack made it: its channel field stays 1.0's).
+  if (!in.transport) StoreU16(file.data() + kHdrMinor, kVersionMinorCpca);
+  ResealChecksums(file);
+  return file;
+}
+
 // Everything a pack holds, fully decoded (throws InputError like the reader).
 struct FullRead {
   std::string metadata;
@@ -144,6 +213,7 @@ struct FullRead {
   TransportIndex index;
   std::vector<std::vector<uint8_t>> blocks;
   std::vector<std::vector<uint8_t>> visibility;  // per vertex, all meshes: decoded levels
+  std::vector<uint8_t> cpca;                     // EncodeCpcaTransport of the CPCA section
 };
 
 inline FullRead ReadEverything(const PackReader& r) {
@@ -162,6 +232,7 @@ inline FullRead ReadEverything(const PackReader& r) {
     for (std::size_t i = 0; i < v.vertex_count; ++i)
       out.visibility.push_back(DecodeVisibilityMap(v, i));
   }
+  if (r.has_cpca()) out.cpca = EncodeCpcaTransport(ReadCpcaTransport(r));
   return out;
 }
 
@@ -169,7 +240,7 @@ inline bool SameRead(const FullRead& a, const FullRead& b) {
   if (a.metadata != b.metadata || a.meshes.size() != b.meshes.size() || a.blocks != b.blocks ||
       a.index.params != b.index.params || a.index.encoding != b.index.encoding ||
       a.index.row_count != b.index.row_count || a.index.column_count != b.index.column_count ||
-      a.visibility != b.visibility) {
+      a.visibility != b.visibility || a.cpca != b.cpca) {
     return false;
   }
   for (std::size_t i = 0; i < a.meshes.size(); ++i) {

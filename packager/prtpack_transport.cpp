@@ -75,4 +75,8 @@ CompressedTransport ReadCompressedTransport(const PackReader& reader) {
   return t;
 }
 
+CpcaTransport ReadCpcaTransport(const PackReader& reader) {
+  return reader.ReadCpcaTransport();
+}
+
 }  // namespace prt::pack

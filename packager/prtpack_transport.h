@@ -2,14 +2,16 @@
 // the encoded CompressedTransportHeader is the section's global parameters, and each block of
 // `columns_per_block` columns is one EncodeColumnBlock byte string, zstd-compressed on its own,
 // so that a runtime decodes only the blocks it needs (docs/prtpack-format.md, "TRNS").
+// A clustered-PCA transport (formats/cpca_transport.h) is the CPCA section instead (1.3).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 
+#include "formats/compressed_transport.h"
+#include "formats/cpca_transport.h"
 #include "packager/prtpack_reader.h"
 #include "packager/prtpack_writer.h"
-#include "formats/compressed_transport.h"
 
 namespace prt::pack {
 
@@ -30,5 +32,10 @@ CompressedColumnBlock ReadCompressedColumnBlock(const PackReader& reader,
                                                 std::size_t b);
 // Every block, as one CompressedTransport (columns sorted, all-zero columns absent).
 CompressedTransport ReadCompressedTransport(const PackReader& reader);
+
+// The CPCA section's transport (PackReader::ReadCpcaTransport: checksum, zstd, the section's
+// sizes, the header of scheme cpca agreeing with the section, DecodeCpcaBody). Throws
+// prt::InputError naming the pack if it has no CPCA section (a TRNS pack) or any check fails.
+CpcaTransport ReadCpcaTransport(const PackReader& reader);
 
 }  // namespace prt::pack

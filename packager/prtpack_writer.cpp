@@ -1,5 +1,5 @@
 // .prtpack writer (docs/prtpack-format.md): lays out the header, the section table and the
-// 64-byte-aligned sections (META, MESH/MATL per mesh, TRNS), then fills in the checksums.
+// 64-byte-aligned sections (META, MESH/MATL per mesh, TRNS or CPCA), then fills in the checksums.
 #include "packager/prtpack_writer.h"
 
 #include <zstd.h>
@@ -68,8 +68,9 @@ nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
 }
 
 // 1.1 only where the pack uses what 1.1 defines (a TRNS channel count other than 1), so that
-// every other pack keeps the bytes 1.0 writers gave it.
+// every other pack keeps the bytes 1.0 writers gave it; likewise 1.2 for IMGE and 1.3 for CPCA.
 uint16_t MinorVersionOf(const PackInput& input) {
+  if (input.cpca) return kVersionMinorCpca;
   if (input.image) return kVersionMinorImage;
   return input.transport && input.transport->channels != 1 ? kVersionMinorChannels : 0;
 }
@@ -191,7 +192,45 @@ PendingSection TransportSection(const TransportInput& t, const WriterOptions& o,
   return s;
 }
 
+// CPCA: the section payload zstd-compressed as one frame (or stored as is when zstd does not
+// shrink it). CRITICAL: a reader that skipped it would see a pack without transport.
+PendingSection CpcaSection(const CpcaTransport& t, const WriterOptions& o) {
+  const std::vector<uint8_t> raw = EncodeCpcaSection(t);
+  PendingSection s;
+  s.type = kTypeCpca;
+  s.flags = kFlagCritical;
+  s.raw_size = raw.size();
+  std::vector<uint8_t> z = ZstdCompress(raw.data(), raw.size(), o.zstd_level, "cpca transport");
+  if (z.size() < raw.size()) {
+    s.codec = Codec::kZstd;
+    s.bytes = std::move(z);
+  } else {
+    s.bytes = raw;
+  }
+  return s;
+}
+
 }  // namespace
+
+std::vector<uint8_t> EncodeCpcaSection(const CpcaTransport& t) {
+  ValidateCpcaTransport(t, "cpca transport");
+  const std::vector<uint8_t> params = EncodeHeader(t.header);
+  const std::vector<uint8_t> body = EncodeCpcaBody(t);
+  if (params.size() > kMaxTransportParams) {
+    throw InputError("cpca transport", "header exceeds 1 GiB");
+  }
+  std::vector<uint8_t> out(kCpcaHeaderSize + params.size() + body.size(), 0);
+  uint8_t* p = out.data();
+  StoreU32(p + kCpcaParamsSize, static_cast<uint32_t>(params.size()));
+  StoreU32(p + kCpcaChannels, t.header.channels);
+  StoreU64(p + kCpcaRowCount, t.header.sample_count);
+  StoreU32(p + kCpcaClusters, t.header.cpca_clusters);
+  StoreU32(p + kCpcaBases, t.header.cpca_bases);
+  StoreU64(p + kCpcaBodySize, body.size());
+  std::copy(params.begin(), params.end(), p + kCpcaHeaderSize);
+  std::copy(body.begin(), body.end(), p + kCpcaHeaderSize + params.size());
+  return out;
+}
 
 std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options) {
   const uint32_t a = options.alignment;
@@ -199,6 +238,9 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     throw InputError("options", "alignment must be a power of two in 64..65536");
   }
   if (input.meshes.empty()) throw InputError("input", "a pack needs at least one mesh");
+  if (input.transport && input.cpca) {
+    throw InputError("input", "a pack has either a TRNS (column) or a CPCA transport, not both");
+  }
   std::vector<PendingSection> sections;
   sections.push_back(MetaSection(input, options));
   for (std::size_t i = 0; i < input.meshes.size(); ++i) {
@@ -218,7 +260,8 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     PendingSection s;
     s.type = LoadU32(reinterpret_cast<const uint8_t*>(x.type.data()));
     if (s.type == kTypeMeta || s.type == kTypeMesh || s.type == kTypeMaterial ||
-        s.type == kTypeTransport || s.type == kTypeVisibility || s.type == kTypeImage) {
+        s.type == kTypeTransport || s.type == kTypeVisibility || s.type == kTypeImage ||
+        s.type == kTypeCpca) {
       throw InputError("extra section", "type " + x.type + " is reserved");
     }
     s.flags = x.flags;
@@ -265,6 +308,11 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
       throw InputError("image", std::to_string(im.pixels()) + " pixels do not match the " +
                                     std::to_string(input.transport->row_count) +
                                     " rows of the transport");
+    if (input.cpca &&
+        input.cpca->header.sample_count != uint64_t{im.pixels()} * input.cpca->header.channels)
+      throw InputError("image", std::to_string(im.pixels()) + " pixels do not match the " +
+                                    std::to_string(input.cpca->header.sample_count) +
+                                    " rows of the CPCA transport");
     PendingSection s;
     s.type = kTypeImage;
     s.flags = kFlagCritical;
@@ -276,6 +324,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
   }
   if (input.transport)
     sections.push_back(TransportSection(*input.transport, options, MinorVersionOf(input)));
+  if (input.cpca) sections.push_back(CpcaSection(*input.cpca, options));
 
   const uint64_t table_end = kHeaderSize + uint64_t(sections.size()) * kEntrySize;
   std::vector<uint64_t> offsets(sections.size());

@@ -1,5 +1,5 @@
 // Writer for .prtpack assets (docs/prtpack-format.md) from in-memory inputs: meshes, materials,
-// the farm's metadata JSON and the compressed transport's column blocks.
+// the farm's metadata JSON and the compressed transport's column blocks or its clustered PCA.
 #pragma once
 
 #include <array>
@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/cpca_transport.h"
 #include "formats/image_file.h"
 #include "vocabulary/mesh.h"
 #include "vocabulary/scene_geometry.h"
@@ -64,6 +65,9 @@ struct PackInput {
   std::string metadata_json;
   std::vector<PackMeshInput> meshes;
   std::optional<TransportInput> transport;
+  // A clustered-PCA transport (the CPCA section, 1.3; docs/cpca.md) instead of `transport`: a
+  // pack has at most one of the two.
+  std::optional<CpcaTransport> cpca;
   std::optional<VisibilityInput> visibility;      // one entry per mesh when present
   std::vector<ExtraSectionInput> extra_sections;  // written after the materials, before TRNS
   // Image relighting (the IMGE section, 1.2): the rows of T are this image's pixels in raster
@@ -84,8 +88,12 @@ struct WriterOptions {
 // has not one entry per mesh, a map count other than the mesh's vertex count, or n/bits that
 // differ between meshes,
 // albedo outside [0, 1], bad options, a transport whose channels is not 1 or 3 or does not divide
-// its row count.
+// its row count, both a transport and a CPCA transport, a CPCA transport that does not validate
+// (ValidateCpcaTransport), an image whose pixel count is not the transport's rows / channels.
 std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& options = {});
+// The CPCA section's decoded payload (docs/prtpack-format.md, "CPCA"): the 32-byte header, the
+// encoded CompressedTransportHeader and EncodeCpcaBody. Throws InputError if `t` does not validate.
+std::vector<uint8_t> EncodeCpcaSection(const CpcaTransport& t);
 // WritePack, then writes the bytes to `path` (via a temporary file renamed into place).
 // Throws InputError(path, ...) if the file cannot be written.
 void WritePackFile(const std::string& path, const PackInput& input,

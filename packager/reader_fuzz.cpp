@@ -1,10 +1,10 @@
 // libFuzzer harness for the .prtpack reader (docs/prtpack-format.md): every input is read twice,
 // as is (the checksums stop almost every mutation at the header) and with its checksums
 // recomputed (ResealChecksums), so that mutations reach the table rules, zstd, Draco, the TRNS
-// index and the compressed-transport block decoders. A prt::InputError is the expected outcome
-// of a bad input; any other exception, crash, leak, hang or sanitizer report is a bug.
-// Built only with clang (packager/CMakeLists.txt); run by CTest for a fixed number of runs on
-// packager/fuzz_corpus/.
+// index, the compressed-transport block decoders and the CPCA section's decoder. A prt::InputError
+// is the expected outcome of a bad input; any other exception, crash, leak, hang or sanitizer
+// report is a bug. Built only with clang (packager/CMakeLists.txt); run by CTest for a fixed number
+// of runs on packager/fuzz_corpus/.
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -33,6 +33,7 @@ void ReadAll(const std::vector<uint8_t>& bytes) {
       for (std::size_t b = 0; b < index.blocks.size(); ++b) (void)r.ReadTransportBlock(index, b);
       (void)prt::pack::VerifyPack(r);
     }
+    if (r.has_cpca()) (void)prt::pack::ReadCpcaTransport(r);
   } catch (const prt::InputError&) {
     // A clear refusal: what the reader promises for bad input.
   } catch (const std::exception& e) {

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "formats/compressed_transport.h"
+#include "formats/cpca_transport.h"
 #include "formats/geometry_file.h"
 #include "formats/image_file.h"
 #include "formats/transport_file.h"
@@ -55,6 +56,47 @@ nlohmann::json ParametersJson(const CompressedTransportHeader& h, uint32_t colum
                       {"columns_per_block", columns_per_block}};
   if (h.channels != 1) j["channels"] = h.channels;
   return j;
+}
+
+// META "parameters" of a CPCA transport (docs/cpca.md): the header's settings (no column blocks:
+// `bits` and `keep_fraction` are the basis vectors' quantiser bits and kept terms) and the
+// clustering's.
+nlohmann::json CpcaParametersJson(const CompressedTransportHeader& h) {
+  nlohmann::json j = {
+      {"cubemap_n", h.cubemap_n},
+      {"sample_count", h.sample_count},
+      {"row_wavelet", ToString(h.row_wavelet)},
+      {"scheme", ToString(h.scheme)},
+      {"bits", h.bits},
+      {"keep_fraction", h.keep_fraction},
+      {"dither_seed", h.dither_seed},
+      {"clusters", h.cpca_clusters},
+      {"bases", h.cpca_bases},
+      {"coefficient_bits", h.cpca_coefficient_bits},
+      {"cpca_method",
+       h.cpca_method == CpcaMethod::kDenseRecluster ? "dense-recluster" : "standard"}};
+  if (h.channels != 1) j["channels"] = h.channels;
+  return j;
+}
+
+// A transport's rows against the run's samples: channels × the image's pixels in an image run,
+// else channels × the geometry's vertices.
+void CheckTransportRows(const CompressedTransportHeader& h, const SceneGeometry& geometry,
+                        const std::optional<ImageSamplesInfo>& image, const std::string& file,
+                        const std::string& image_file) {
+  if (image) {
+    if (static_cast<uint64_t>(h.sample_count) != uint64_t{h.channels} * image->pixels())
+      throw InputError(file, "transport has " + std::to_string(h.sample_count) +
+                                 " rows but the image " + image_file + " has " +
+                                 std::to_string(image->pixels()) + " pixels");
+  } else if (static_cast<uint64_t>(h.sample_count) !=
+             uint64_t{h.channels} * geometry.vertex_count()) {
+    throw InputError(file, "transport has " + std::to_string(h.sample_count) + " rows (" +
+                               std::to_string(h.channels) + " colour channel(s) × " +
+                               std::to_string(h.spatial_count()) +
+                               " samples) but the geometry has " +
+                               std::to_string(geometry.vertex_count()) + " vertices");
+  }
 }
 
 std::string Bytes(uint64_t n) {
@@ -267,30 +309,24 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
   const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
                                                             : fs::path(options.transport_file);
   if (fs::exists(transport)) {
-    const std::string bytes = ReadWholeFile(transport.string());
-    const CompressedTransport t = DecodeCompressedTransport(
-        std::span(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
-        transport.string());
+    const std::string text = ReadWholeFile(transport.string());
+    const std::span<const uint8_t> bytes(reinterpret_cast<const uint8_t*>(text.data()),
+                                         text.size());
+    std::size_t body = 0;
     // channels × V rows, channel-major (formats/compressed_transport.h); V: the pixels of an
-    // image run, else the vertices.
-    if (in.image) {
-      if (static_cast<uint64_t>(t.header.sample_count) !=
-          uint64_t{t.header.channels} * in.image->pixels())
-        throw InputError(transport.string(),
-                         "transport has " + std::to_string(t.header.sample_count) +
-                             " rows but the image " + image_file.string() + " has " +
-                             std::to_string(in.image->pixels()) + " pixels");
-    } else if (static_cast<uint64_t>(t.header.sample_count) !=
-               uint64_t{t.header.channels} * geometry.vertex_count()) {
-      throw InputError(transport.string(),
-                       "transport has " + std::to_string(t.header.sample_count) + " rows (" +
-                           std::to_string(t.header.channels) + " colour channel(s) × " +
-                           std::to_string(t.header.spatial_count()) +
-                           " samples) but the geometry has " +
-                           std::to_string(geometry.vertex_count()) + " vertices");
+    // image run, else the vertices. Scheme cpca: a CPCA body (the CPCA section), else columns.
+    if (DecodeCompressedFileStart(bytes, transport.string(), body).scheme ==
+        CompressionScheme::kCpca) {
+      CpcaTransport t = DecodeCpcaTransport(bytes, transport.string());
+      CheckTransportRows(t.header, geometry, in.image, transport.string(), image_file.string());
+      meta["parameters"] = CpcaParametersJson(t.header);
+      in.cpca = std::move(t);
+    } else {
+      const CompressedTransport t = DecodeCompressedTransport(bytes, transport.string());
+      CheckTransportRows(t.header, geometry, in.image, transport.string(), image_file.string());
+      in.transport = MakeTransportInput(t, options.columns_per_block);
+      meta["parameters"] = ParametersJson(t.header, options.columns_per_block);
     }
-    in.transport = MakeTransportInput(t, options.columns_per_block);
-    meta["parameters"] = ParametersJson(t.header, options.columns_per_block);
   } else if (!options.geometry_only && !in.visibility) {
     throw InputError(transport.string(),
                      "no compressed transport (nor visibility.prtv) in the run folder (pass "
@@ -373,6 +409,28 @@ std::string InspectPack(const PackReader& r) {
     }
     out << "\n";
     if (meta.contains("parameters")) out << "parameters: " << meta["parameters"].dump() << "\n";
+  } else if (r.has_cpca()) {
+    const CpcaTransport t = r.ReadCpcaTransport();
+    const CompressedTransportHeader& h = t.header;
+    const SectionInfo* section = nullptr;
+    for (const SectionInfo& s : r.sections())
+      if (s.type_code == kTypeCpca) section = &s;
+    const uint64_t sraw = section ? section->raw_size : 0,
+                   sstored = section ? section->stored_size : 0;
+    out << "transport: CPCA (clustered PCA), " << h.spatial_count() << " samples x " << h.channels
+        << (h.channels == 1 ? " channel (one row per sample for r, g, b)"
+                            : " colour channels (rows channel-major)")
+        << " x " << h.column_count() << " columns (" << ToString(h.row_wavelet)
+        << "): " << h.cpca_clusters << " clusters x " << h.cpca_bases << " bases, "
+        << t.term_count() << " mean and basis terms (" << int(h.bits) << " bits), "
+        << t.coefficients.size() << " coefficients (" << int(h.cpca_coefficient_bits) << " bits), "
+        << Bytes(sraw) << " raw -> " << Bytes(sstored) << " stored";
+    if (sstored > 0) {
+      std::snprintf(line, sizeof line, " (%.2fx)", double(sraw) / double(sstored));
+      out << line;
+    }
+    out << "\n";
+    if (meta.contains("parameters")) out << "parameters: " << meta["parameters"].dump() << "\n";
   } else {
     out << "transport: none\n";
   }
@@ -442,6 +500,12 @@ std::string VerifyPack(const PackReader& r) {
       const CompressedTransport ct = ReadCompressedTransport(r);
       extra = ", " + std::to_string(ct.columns.size()) + " compressed columns decoded";
     }
+  }
+  if (r.has_cpca()) {
+    const CpcaTransport t = r.ReadCpcaTransport();
+    extra = ", CPCA transport decoded (" + std::to_string(t.row_count()) + " rows, " +
+            std::to_string(t.clusters.size()) + " clusters x " + std::to_string(t.bases()) +
+            " bases, " + std::to_string(t.term_count()) + " terms)";
   }
   if (r.has_visibility()) {
     const VisibilityBlocks v = r.ReadAllVisibility();

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "formats/compressed_transport.h"
+#include "formats/cpca_transport.h"
 #include "formats/geometry_file.h"
 #include "formats/transport_file.h"
 #include "packager/prtpack_test_util.h"
@@ -261,6 +262,87 @@ TEST(RunFolderPack, VisibilityRunPacksLosslesslyWithItsMaterials) {
     FAIL() << "accepted visibility for another geometry";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("visibility.prtv"), std::string::npos) << e.what();
+  }
+  fs::remove_all(f.dir);
+}
+
+// A CPCA run (scheme cpca, issue #24): transport.prtc is EncodeCpcaTransport's bytes; the pack
+// carries the CPCA section instead of TRNS (1.3), META "parameters" names the clusters and bases,
+// the transport reads back identical, inspect shows its shape and verify decodes it. A CPCA
+// transport of other rows than the geometry's vertices is refused.
+TEST(RunFolderPack, CpcaRunPacksTheCpcaSection) {
+  const RunFolderFixture f = MakeRunFolder("prtpack_run_folder_test_cpca");
+  for (uint32_t channels : {1u, 3u}) {
+    SCOPED_TRACE(channels);
+    const CpcaTransport t = testing::MakeSmallCpcaTransport(channels);
+    const std::vector<uint8_t> b = EncodeCpcaTransport(t);
+    WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                     std::string_view(reinterpret_cast<const char*>(b.data()), b.size()));
+    const PackInput in = PackInputFromRunFolder(f.dir.string(), {});
+    EXPECT_FALSE(in.transport.has_value());
+    ASSERT_TRUE(in.cpca.has_value());
+    const std::vector<uint8_t> bytes = WritePack(in);
+    const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size(), "cpca.prtpack");
+    EXPECT_EQ(r.version_minor(), 3);
+    EXPECT_TRUE(r.has_cpca());
+    EXPECT_FALSE(r.has_transport());
+    EXPECT_EQ(EncodeCpcaTransport(ReadCpcaTransport(r)), b);  // identical
+    const nlohmann::json meta = nlohmann::json::parse(r.ReadMetadata());
+    EXPECT_EQ(meta["parameters"]["scheme"], "cpca");
+    EXPECT_EQ(meta["parameters"]["clusters"], 2);
+    EXPECT_EQ(meta["parameters"]["bases"], 2);
+    EXPECT_EQ(meta["parameters"]["coefficient_bits"], 12);
+    EXPECT_EQ(meta["parameters"]["cpca_method"], "standard");
+    EXPECT_EQ(meta["parameters"]["sample_count"], 12 * channels);
+    EXPECT_FALSE(meta["parameters"].contains("columns_per_block"));
+    EXPECT_EQ(meta["parameters"].contains("channels"), channels == 3);
+    const std::string inspect = InspectPack(r);
+    EXPECT_NE(inspect.find("cpca.prtpack: .prtpack 1.3"), std::string::npos) << inspect;
+    EXPECT_NE(inspect.find("transport: CPCA (clustered PCA), 12 samples x " +
+                           std::string(channels == 1 ? "1 channel (one row per sample for r, g, b)"
+                                                     : "3 colour channels (rows channel-major)") +
+                           " x 24 columns (haar): 2 clusters x 2 bases, " +
+                           std::to_string(t.term_count()) + " mean and basis terms (9 bits), " +
+                           std::to_string(24 * channels) + " coefficients (12 bits)"),
+              std::string::npos)
+        << inspect;
+    EXPECT_NE(inspect.find("  CPCA     0  zstd"), std::string::npos) << inspect;  // section table
+    const std::string verify = VerifyPack(r);
+    EXPECT_NE(verify.find("OK"), std::string::npos) << verify;
+    EXPECT_NE(
+        verify.find("CPCA transport decoded (" + std::to_string(12 * channels) +
+                    " rows, 2 clusters x 2 bases, " + std::to_string(t.term_count()) + " terms)"),
+        std::string::npos)
+        << verify;
+  }
+  // 10 rows for 12 vertices.
+  CpcaTransport wrong = testing::MakeSmallCpcaTransport();
+  wrong.header.sample_count = 10;
+  wrong.header.domain.segments[0].count = 10;
+  wrong.cluster_of.resize(10);
+  wrong.coefficients.resize(20);
+  const std::vector<uint8_t> b = EncodeCpcaTransport(wrong);
+  WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(b.data()), b.size()));
+  try {
+    PackInputFromRunFolder(f.dir.string(), {});
+    FAIL() << "accepted a CPCA transport for another geometry";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(
+                  "10 rows (1 colour channel(s) × 10 samples) but the geometry has 12"),
+              std::string::npos)
+        << e.what();
+  }
+  // A damaged CPCA body is refused naming the file.
+  std::vector<uint8_t> cut = EncodeCpcaTransport(testing::MakeSmallCpcaTransport());
+  cut.pop_back();
+  WriteFileDurably((f.dir / kCompressedTransportFileName).string(),
+                   std::string_view(reinterpret_cast<const char*>(cut.data()), cut.size()));
+  try {
+    PackInputFromRunFolder(f.dir.string(), {});
+    FAIL() << "accepted a truncated CPCA transport";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("transport.prtc"), std::string::npos) << e.what();
   }
   fs::remove_all(f.dir);
 }

@@ -226,4 +226,40 @@ IncrementalFrame CpcaIncrementalRelighter::Update(const WaveletLighting& lightin
   return frame;
 }
 
+std::vector<float> ClusterColours(const CpcaRelighter& relighter) {
+  std::vector<float> rgb(3 * relighter.sample_count());
+  for (std::size_t s = 0; s < relighter.sample_count(); ++s) {
+    // Golden-ratio hues with a hashed lightness, so that neighbouring ids differ.
+    const uint32_t c = relighter.ClusterOf(s);
+    const double h = std::fmod(c * 0.618033988749895, 1.0) * 6.0;
+    const double v = 0.55 + 0.45 * static_cast<double>((c * 2654435761u) >> 29) / 7.0;
+    const double x = 1.0 - std::fabs(std::fmod(h, 2.0) - 1.0);
+    double r = 0, g = 0, b = 0;
+    switch (static_cast<int>(h)) {
+      case 0:
+        r = 1, g = x;
+        break;
+      case 1:
+        r = x, g = 1;
+        break;
+      case 2:
+        g = 1, b = x;
+        break;
+      case 3:
+        g = x, b = 1;
+        break;
+      case 4:
+        r = x, b = 1;
+        break;
+      default:
+        r = 1, b = x;
+        break;
+    }
+    rgb[3 * s] = static_cast<float>(v * r);
+    rgb[3 * s + 1] = static_cast<float>(v * g);
+    rgb[3 * s + 2] = static_cast<float>(v * b);
+  }
+  return rgb;
+}
+
 }  // namespace prt

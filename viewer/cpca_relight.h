@@ -98,6 +98,8 @@ class CpcaIncrementalRelighter {
   IncrementalFrame Update(const WaveletLighting& lighting);
   const SampleRadiance& Radiance() const { return image_; }
   std::size_t basis_terms() const { return basis_terms_; }
+  // L̃: the lighting step 1 currently represents.
+  const WaveletLighting& Represented() const { return step1_.Represented(); }
 
  private:
   const CpcaRelighter& relighter_;
@@ -106,5 +108,9 @@ class CpcaIncrementalRelighter {
   SampleRadiance represented_;  // P̃: what B currently holds, per projection entry
   SampleRadiance image_;
 };
+
+// Per spatial sample (channel 0's row), an RGB colour for its cluster (Overbeck 2006 Figure 12):
+// well-spread hues by a hash of the cluster id, 3 floats per sample in the relighter's order.
+std::vector<float> ClusterColours(const CpcaRelighter& relighter);
 
 }  // namespace prt

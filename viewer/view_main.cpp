@@ -53,7 +53,7 @@ std::shared_ptr<const prt::EnvironmentLookup> LoadEnvironment(const std::string&
 }
 
 struct Options {
-  std::string pack, env, out, exr, out_dir, radiance_out, camera, lighting = "pbi";
+  std::string pack, env, out, exr, out_dir, radiance_out, camera, lighting = "pbi", clusters_out;
   std::size_t terms = 100;
   bool exact = false, window = false, quiet = false;
   // The exact diffuse cosine is the default: the paper's one sample per block (Inger et al.
@@ -140,7 +140,7 @@ int Run(const Options& o) {
   {
     const prt::pack::PackReader reader = prt::pack::PackReader::OpenFile(o.pack);
     // Glossy when asked, or when the pack has visibility but no transport.
-    if (o.glossy || (!reader.has_transport() && reader.has_visibility()))
+    if (o.glossy || (!reader.has_transport() && !reader.has_cpca() && reader.has_visibility()))
       return RunGlossy(o, reader, t_open);
     if (o.reference || o.paper_cosine)
       throw std::invalid_argument("--reference/--paper-cosine apply to glossy assets only");
@@ -214,8 +214,23 @@ int Run(const Options& o) {
     if (o.out.empty()) return 0;
   }
 
+  if (!o.clusters_out.empty()) {
+    // Overbeck et al. 2006 Figure 12: every vertex in its cluster's colour.
+    if (!session->cpca())
+      throw std::invalid_argument("--clusters-out: " + o.pack + " holds no CPCA transport");
+    if (session->image())
+      throw std::invalid_argument("--clusters-out: " + o.pack + " is an image pack");
+    const prt::ImageRgb clusters =
+        session->Render(camera, prt::ClusterColours(*session->cpca()), nullptr);
+    prt::WritePng(clusters, o.clusters_out, prt::ToneMapOptions{1.0, prt::ToneMap::kClamp});
+    if (!o.quiet)
+      std::printf("wrote %s: %u clusters of %u bases\n", o.clusters_out.c_str(),
+                  session->cpca()->clusters(), session->cpca()->bases());
+    if (o.out.empty() && o.exr.empty() && o.radiance_out.empty()) return 0;
+  }
   if (o.out.empty() && o.exr.empty() && o.radiance_out.empty())
-    throw std::invalid_argument("nothing to write: give --out, --exr, --radiance-out or --frames");
+    throw std::invalid_argument(
+        "nothing to write: give --out, --exr, --radiance-out, --clusters-out or --frames");
   const prt::CubemapRgb cube = prt::ResampleToCubemap(env, n);
   const prt::WaveletLighting lighting = prt::ProjectLighting(cube);
   const auto t_relight = std::chrono::steady_clock::now();
@@ -263,6 +278,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 16384));
   app.add_option("--exposure", o.exposure, "linear exposure multiplier (default 1)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--clusters-out", o.clusters_out,
+                 "CPCA pack: PNG of the clusters colour-coded on the mesh (docs/cpca.md)");
   app.add_option("--radiance-out", o.radiance_out,
                  "shaded radiance per sample, float32 samples×3 .npy");
   app.add_option("--rotate", o.rotate, "environment rotation about +Y, degrees per frame");

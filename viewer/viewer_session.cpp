@@ -50,8 +50,9 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
                                                          const std::string& pack_path) {
   std::unique_ptr<ViewerSession> s(new ViewerSession());
   s->path_ = pack_path;
-  if (!reader.has_transport())
-    throw InputError(pack_path, "the pack has no transport (TRNS) section; nothing to relight");
+  if (!reader.has_transport() && !reader.has_cpca())
+    throw InputError(pack_path,
+                     "the pack has no transport (TRNS or CPCA) section; nothing to relight");
   s->camera_from_metadata_ = CameraFromMetadata(reader.ReadMetadata(), pack_path, s->camera_);
 
   if (reader.has_image()) {
@@ -79,8 +80,13 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
                                static_cast<uint32_t>(offset + mesh.triangles[3 * t + 2])});
     offset += nv;
   }
-  s->compressed_ = std::make_unique<CompressedTransport>(pack::ReadCompressedTransport(reader));
-  const CompressedTransportHeader& h = s->compressed_->header;
+  if (reader.has_cpca()) {
+    s->cpca_transport_ = std::make_unique<CpcaTransport>(pack::ReadCpcaTransport(reader));
+  } else {
+    s->compressed_ = std::make_unique<CompressedTransport>(pack::ReadCompressedTransport(reader));
+  }
+  const CompressedTransportHeader& h =
+      s->cpca_transport_ ? s->cpca_transport_->header : s->compressed_->header;
   // channels × V rows, channel-major (formats/compressed_transport.h).
   if (static_cast<uint64_t>(h.sample_count) != uint64_t{h.channels} * s->albedo_.size())
     throw InputError(pack_path, "the transport has " + std::to_string(h.sample_count) + " rows (" +
@@ -93,10 +99,22 @@ std::unique_ptr<ViewerSession> ViewerSession::FromReader(const pack::PackReader&
     throw InputError(pack_path, std::string("the transport's row wavelet is ") +
                                     ToString(h.row_wavelet) +
                                     "; the viewer's lighting basis is Haar");
+  if (s->cpca_transport_) {
+    // CPCA (docs/cpca.md): rows in the pack's order, relit by Eq. 7–8.
+    s->transport_terms_ =
+        s->cpca_transport_->term_count() + s->cpca_transport_->coefficients.size();
+    s->cpca_relighter_ = std::make_unique<CpcaRelighter>(*s->cpca_transport_, pack_path);
+    s->transport_op_ = s->cpca_relighter_.get();
+    s->pack_sample_.resize(s->albedo_.size());
+    for (std::size_t v = 0; v < s->pack_sample_.size(); ++v)
+      s->pack_sample_[v] = static_cast<uint32_t>(v);
+    return s;
+  }
   s->transport_terms_ = s->compressed_->term_count();
   s->relighter_ = std::make_unique<CompressedRelighter>(*s->compressed_, pack_path);
   s->operator_ =
       std::make_unique<CompressedTransportOperator>(*s->relighter_, SampleOrder::kCoefficients);
+  s->transport_op_ = s->operator_.get();
   // The session's order (viewer_session.h): position p holds the pack sample whose coefficient
   // is p. The per-sample arrays move to it once, and the triangles follow their vertices.
   const std::span<const uint32_t> coefficient = s->relighter_->coefficient_of_sample();
@@ -130,10 +148,26 @@ std::vector<float> ViewerSession::ToPackOrder(std::span<const float> values, std
 ViewerSession::~ViewerSession() = default;
 
 const CompressedTransportHeader& ViewerSession::transport_header() const {
-  return compressed_->header;
+  return cpca_transport_ ? cpca_transport_->header : compressed_->header;
+}
+
+const CompressedRelighter& ViewerSession::relighter() const {
+  if (!relighter_)
+    throw std::logic_error(path_ + " holds a CPCA transport: it has no column relighter");
+  return *relighter_;
 }
 
 SampleRadiance ViewerSession::RelightExact(const WaveletLighting& lighting) const {
+  if (cpca_relighter_) {
+    if (lighting.size() != cpca_relighter_->coefficient_count())
+      throw std::invalid_argument("RelightExact: lighting has " + std::to_string(lighting.size()) +
+                                  " coefficients, the transport " +
+                                  std::to_string(cpca_relighter_->coefficient_count()));
+    for (int c = 0; c < 3; ++c)
+      for (std::size_t j = 0; j < lighting.size(); ++j)
+        CheckFloatLighting(lighting.coefficient[c][j], j, c, path_);
+    return cpca_relighter_->Apply(ExactLightingTerms(lighting));
+  }
   const std::size_t cols = relighter_->column_count();
   if (lighting.size() != cols)
     throw std::invalid_argument("RelightExact: lighting has " + std::to_string(lighting.size()) +
@@ -258,6 +292,11 @@ std::vector<RotationFrame> RunRotation(
   const HaarLightingBasis basis(n);
   BasicIncrementalRelighter bi(t, n, options.terms);
   PerBandIncrementalRelighter pbi(t, n, options.terms);
+  // A CPCA pack: the PBI column is Overbeck §6.3's fully incremental CPCA (PBI on the lighting,
+  // Eq. 10 with S/4 basis terms per cluster).
+  std::unique_ptr<CpcaIncrementalRelighter> cpca_pbi;
+  if (session.cpca())
+    cpca_pbi = std::make_unique<CpcaIncrementalRelighter>(*session.cpca(), n, options.terms);
   std::vector<RotationFrame> frames;
   CubemapRgb cube;
   WaveletLighting lighting;
@@ -278,18 +317,26 @@ std::vector<RotationFrame> RunRotation(
     RotationFrame r;
     if (f == 0) {
       bi.Initialize(lighting);
-      pbi.Initialize(lighting);
+      if (cpca_pbi)
+        cpca_pbi->Initialize(lighting);
+      else
+        pbi.Initialize(lighting);
     } else {
       bi.Update(lighting);
-      for (uint8_t reset : pbi.Update(lighting).band_reset) r.pbi_reset_bands += reset ? '1' : '0';
+      for (uint8_t reset :
+           (cpca_pbi ? cpca_pbi->Update(lighting) : pbi.Update(lighting)).band_reset)
+        r.pbi_reset_bands += reset ? '1' : '0';
     }
     const std::vector<float> bi_rgb = session.Shade(bi.Radiance());
-    const std::vector<float> pbi_rgb = session.Shade(pbi.Radiance());
+    const std::vector<float> pbi_rgb =
+        session.Shade(cpca_pbi ? cpca_pbi->Radiance() : pbi.Radiance());
     r.frame = f;
     r.angle_deg = angle_deg;
-    r.lighting_error = {RelativeLightingError(lighting, nwa_terms),
-                        RelativeLightingError(lighting, ExactLightingTerms(bi.Represented())),
-                        RelativeLightingError(lighting, ExactLightingTerms(pbi.Represented()))};
+    r.lighting_error = {
+        RelativeLightingError(lighting, nwa_terms),
+        RelativeLightingError(lighting, ExactLightingTerms(bi.Represented())),
+        RelativeLightingError(
+            lighting, ExactLightingTerms(cpca_pbi ? cpca_pbi->Represented() : pbi.Represented()))};
     r.image_error = {RelativeRmsError(nwa, exact), RelativeRmsError(bi_rgb, exact),
                      RelativeRmsError(pbi_rgb, exact)};
     frames.push_back(r);

@@ -23,6 +23,7 @@
 
 #include "formats/image_file.h"
 #include "viewer/compressed_relight.h"
+#include "viewer/cpca_relight.h"
 #include "viewer/lighting.h"
 #include "viewer/rasterizer.h"
 #include "viewer/relight.h"
@@ -85,8 +86,13 @@ class ViewerSession {
   const ImageSamplesInfo* image() const { return image_ ? &*image_ : nullptr; }
   const CompressedTransportHeader& transport_header() const;
   std::size_t transport_terms() const { return transport_terms_; }
-  const CompressedRelighter& relighter() const { return *relighter_; }
-  const TransportOperator& transport() const { return *operator_; }
+  // The adaptive 4D / 2D relighter; a CPCA pack has none (cpca() instead): throws
+  // std::logic_error there.
+  const CompressedRelighter& relighter() const;
+  // A CPCA pack (docs/cpca.md): its relighter (Overbeck 2006 §6.3), else nullptr. The session's
+  // order is then the pack's.
+  const CpcaRelighter* cpca() const { return cpca_relighter_.get(); }
+  const TransportOperator& transport() const { return *transport_op_; }
   // Albedo and position per spatial sample, and the triangles over them, in the session's order.
   const std::vector<Rgb>& albedo() const { return albedo_; }
   std::span<const Vec3> positions() const { return positions_; }
@@ -127,7 +133,10 @@ class ViewerSession {
   std::unique_ptr<CompressedTransport> compressed_;
   std::size_t transport_terms_ = 0;
   std::unique_ptr<CompressedRelighter> relighter_;
+  std::unique_ptr<CpcaTransport> cpca_transport_;
+  std::unique_ptr<CpcaRelighter> cpca_relighter_;
   std::unique_ptr<CompressedTransportOperator> operator_;
+  const TransportOperator* transport_op_ = nullptr;
   std::vector<Rgb> albedo_;
   std::vector<Vec3> positions_;
   std::vector<std::array<uint32_t, 3>> triangles_;

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "formats/column_coding.h"
+#include "formats/cpca_transport.h"
 #include "viewer/camera_metadata.h"
 #include "viewer/environment_background.h"
 #include "viewer/error_test_support.h"
@@ -34,6 +35,7 @@
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
+#include "worker/cpca.h"
 
 namespace prt {
 namespace {
@@ -409,6 +411,105 @@ TEST(ViewerSessionTest, RotationThenHoldConverges) {
   int lines = 0;
   while (std::getline(in, line)) ++lines;
   EXPECT_EQ(lines, 2 + 23);
+}
+
+// A CPCA pack (docs/cpca.md): the session relights from the clusters in the pack's own sample
+// order, RelightExact and the operator agree with the decoded rows times the lighting, the
+// traced transport is matched to the CPCA error, and the rotation's PBI column (Overbeck 2006
+// §6.3: PBI on the lighting, Eq. 10's S/4 basis terms) converges to the exact image once the
+// lighting holds still.
+TEST(ViewerSessionTest, CpcaPackRelightsFromItsClusters) {
+  const TinyScene& tiny = Tiny();
+  const std::size_t ns = tiny.rows.size() / (6u * 64u), texels = 6u * 64u;
+  CompressionOptions o;
+  o.scheme = CompressionScheme::kCpca;
+  o.cpca_clusters = 12;
+  o.cpca_bases = 8;
+  o.bits = 14;
+  o.keep_fraction = 0.5;
+  o.cpca_coefficient_bits = 14;
+  const CompressedTransportHeader h =
+      MakeCompressedHeader(o, tiny.n, SpatialDomainOf(tiny.geometry));
+  std::vector<float> hat = tiny.rows;
+  PrepareRows(h, o, hat.data(), ns);
+  CpcaStats stats;
+  const CpcaTransport t = CompressCpca(hat.data(), h, CpcaOptionsFrom(h), nullptr, &stats);
+  pack::PackInput in;
+  in.metadata_json = R"({"scene": {"camera": {"eye": [2.0, 2.0, 3.0], "target": [0.0, 0.3, 0.0],
+      "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": 64, "height": 48}}})";
+  in.meshes = pack::PackMeshesOf(tiny.geometry);
+  in.cpca = t;
+  const std::string path = (WorkDir() / "tiny_cpca.prtpack").string();
+  pack::WritePackFile(path, in);
+  const auto s = ViewerSession::Open(path);
+  ASSERT_NE(s->cpca(), nullptr);
+  EXPECT_EQ(s->transport_header().scheme, CompressionScheme::kCpca);
+  EXPECT_THROW(s->relighter(), std::logic_error);
+  for (std::size_t p = 0; p < ns; ++p) EXPECT_EQ(s->pack_sample()[p], p);
+  const CubemapRgb cube = ResampleToCubemap(SunSky(0.3f, 40.f), tiny.n);
+  const WaveletLighting l = ProjectLighting(cube);
+  const SampleRadiance exact = s->RelightExact(l);
+  const SampleRadiance terms = s->transport().Apply(ExactLightingTerms(l));
+  std::vector<float> decoded(texels), a(3 * ns), b(3 * ns), ref(3 * ns), traced(3 * ns);
+  for (std::size_t v = 0; v < ns; ++v) {
+    DecodeCpcaRow(t, v, decoded);
+    for (int c = 0; c < 3; ++c) {
+      double sum = 0, sum_traced = 0;
+      for (std::size_t j = 0; j < texels; ++j) {
+        sum += double(decoded[j]) * l.coefficient[c][j];
+        sum_traced += double(tiny.rows[v * texels + j]) * cube.Channel(c)[j];
+      }
+      ref[3 * v + c] = static_cast<float>(sum);
+      traced[3 * v + c] = static_cast<float>(sum_traced);
+      a[3 * v + c] = static_cast<float>(exact.channel[c][v]);
+      b[3 * v + c] = static_cast<float>(terms.channel[c][v]);
+    }
+  }
+  EXPECT_LT(RelativeRmsError(a, ref), 1e-5);
+  EXPECT_LT(RelativeRmsError(b, ref), 1e-5);
+  // The relit error is at most the transport's (Frobenius) error, here a few per cent.
+  EXPECT_LT(RelativeRmsError(a, traced), std::max(0.01, stats.relative_error));
+  EXPECT_GT(RelativeRmsError(a, traced), 0.0);
+  RotationOptions ro;
+  ro.degrees_per_frame = 5;
+  ro.rotate_frames = 4;
+  ro.hold_frames = 16;
+  ro.terms = 40;
+  const std::vector<RotationFrame> f = RunRotation(*s, SunSky(0.3f, 40.f), ro, {});
+  EXPECT_LT(f[0].image_error[2], 1e-5);
+  EXPECT_GT(f[2].image_error[2], 1e-6);
+  EXPECT_LT(f.back().image_error[2], 1e-5);
+  EXPECT_LT(f.back().lighting_error[2], 1e-9);
+  // prt-view: the clusters as a picture (Overbeck Figure 12) and the relit image; a pack of
+  // columns has no clusters to draw.
+  const fs::path dir = WorkDir() / "cpca_cli";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string env = (dir / "sky.exr").string();
+  WriteEnvironmentExr(SunSky(0.3f, 40.f), env);
+  std::string out;
+  EXPECT_EQ(RunViewer("'" + path + "' --env '" + env + "' --exact --out '" +
+                          (dir / "relit.png").string() + "' --clusters-out '" +
+                          (dir / "clusters.png").string() + "'",
+                      &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("12 clusters of 8 bases"), std::string::npos) << out;
+  EXPECT_TRUE(fs::exists(dir / "relit.png"));
+  EXPECT_GT(fs::file_size(dir / "clusters.png"), 100u);
+  EXPECT_EQ(RunViewer("'" + tiny.pack + "' --env '" + env + "' --clusters-out '" +
+                          (dir / "x.png").string() + "'",
+                      &out),
+            1)
+      << out;
+  EXPECT_NE(out.find("holds no CPCA transport"), std::string::npos) << out;
+  // Cluster colours: one colour per cluster.
+  const std::vector<float> colours = ClusterColours(*s->cpca());
+  for (std::size_t v = 0; v < ns; ++v)
+    for (std::size_t u = 0; u < ns; ++u)
+      if (t.cluster_of[u] == t.cluster_of[v]) {
+        EXPECT_EQ(colours[3 * u], colours[3 * v]);
+      }
 }
 
 // No NaN or Inf is turned into a black pixel (docs/viewer.md, "NaN and Inf"): an environment
