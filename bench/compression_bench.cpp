@@ -39,22 +39,16 @@
 #include <vector>
 
 #include "bench/bench_scene.h"
+#include "bench/bench_transport.h"
 #include "formats/compressed_transport.h"
-#include "formats/geometry_file.h"
-#include "formats/image_file.h"
-#include "formats/run_folder.h"
-#include "formats/transport_file.h"
 #include "viewer/compressed_relight.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
-#include "worker/column_order.h"
-#include "worker/embree_scene.h"
 #include "worker/row_transform.h"
 #include "worker/transport_compressor.h"
-#include "worker/transport_sampler.h"
 
 namespace {
 
@@ -63,104 +57,9 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-using prt::bench::BenchScene;
 using prt::bench::DataDir;
 
-struct Transport {
-  std::string name;
-  std::vector<float> T;
-  int n = 32;
-  std::size_t S = 0;
-  prt::SpatialDomain domain;
-  std::vector<float> albedo;  // 3 per sample
-  std::string source;
-  double order_normal_weight = 0;  // of the mesh column order
-};
-
-std::vector<float> AlbedoPerSample(const prt::SceneGeometry& g) {
-  std::vector<float> a;
-  for (const prt::SceneMesh& m : g.meshes)
-    for (std::size_t v = 0; v < m.mesh.positions.size(); ++v)
-      for (int c = 0; c < 3; ++c) a.push_back(m.albedo[c]);
-  return a;
-}
-
-// T of a benchmark scene at n: from `cache` (<scene>_n<n>_r<rays>.f32) when present, else
-// traced (and written there).
-Transport SceneTransport(const std::string& name, int n, int rays, const std::string& cache,
-                         double order_normal_weight) {
-  Transport t;
-  t.name = name;
-  t.n = n;
-  const prt::SceneDescription scene = BenchScene(name, n);
-  const prt::SceneGeometry geometry = prt::BuildSceneGeometry(scene);
-  t.domain = prt::SpatialDomainOf(geometry, order_normal_weight);
-  t.order_normal_weight = order_normal_weight;
-  t.albedo = AlbedoPerSample(geometry);
-  t.S = t.domain.sample_count();
-  const std::size_t M = static_cast<std::size_t>(6) * n * n;
-  t.T.resize(t.S * M);
-  const std::string file = cache.empty() ? std::string()
-                                         : cache + "/" + name + "_n" + std::to_string(n) + "_r" +
-                                               std::to_string(rays) + ".f32";
-  if (!file.empty() && std::filesystem::exists(file) &&
-      std::filesystem::file_size(file) == t.T.size() * sizeof(float)) {
-    std::ifstream in(file, std::ios::binary);
-    in.read(reinterpret_cast<char*>(t.T.data()),
-            static_cast<std::streamsize>(t.T.size() * sizeof(float)));
-    if (!in) throw std::runtime_error(file + ": short read of the cached transport");
-    t.source = name + " (cached " + file + ")";
-    return t;
-  }
-  const prt::EmbreeScene embree(geometry);
-  const prt::TransportSampler sampler(embree, n, {rays, 1});
-  const std::vector<prt::SpatialSample> samples = prt::SpatialSamplesOf(geometry);
-  const auto t0 = Clock::now();
-  sampler.ComputeRows(samples, 0, t.T.data());
-  std::ostringstream os;
-  os << name << ", " << rays << " rays per texel, traced in " << Seconds(t0) << " s";
-  t.source = os.str();
-  if (!file.empty()) {
-    std::filesystem::create_directories(cache);
-    std::ofstream out(file, std::ios::binary);
-    out.write(reinterpret_cast<const char*>(t.T.data()),
-              static_cast<std::streamsize>(t.T.size() * sizeof(float)));
-    if (!out) throw std::runtime_error(file + ": cannot write the transport cache");
-  }
-  return t;
-}
-
-Transport ReadRun(const std::string& dir, double order_normal_weight) {
-  Transport t;
-  const prt::TransportFileReader reader(dir + "/" + prt::kTransportFileName);
-  t.n = static_cast<int>(reader.info().cubemap_n);
-  t.S = reader.info().rows;
-  t.T.resize(t.S * reader.info().cols());
-  reader.ReadRows(0, t.S, t.T.data());
-  const prt::SceneGeometry g = prt::ReadSceneGeometryFile(dir + "/" + prt::kGeometryFileName);
-  t.order_normal_weight = order_normal_weight;
-  t.name = "run";
-  const std::string image = dir + "/" + prt::kImageFileName;
-  if (std::filesystem::exists(image)) {
-    // An image run (docs/image-relighting.md): the pixels' W×H grid, each pixel's albedo.
-    const prt::ImageSamplesInfo info =
-        prt::ReadImageSamplesFile(image, static_cast<uint32_t>(g.meshes.size()));
-    if (info.pixels() != t.S)
-      throw prt::InputError(image, "does not describe the run's " + std::to_string(t.S) + " rows");
-    t.domain = prt::ImageDomain(static_cast<uint32_t>(info.camera.width),
-                                static_cast<uint32_t>(info.camera.height));
-    std::vector<prt::Rgb> mesh_albedo;
-    for (const prt::SceneMesh& m : g.meshes) mesh_albedo.push_back(m.albedo);
-    for (const prt::Rgb& a : prt::PixelAlbedo(info, mesh_albedo))
-      t.albedo.insert(t.albedo.end(), a.begin(), a.end());
-    t.name = "image";
-  } else {
-    t.domain = prt::SpatialDomainOf(g, order_normal_weight);
-    t.albedo = AlbedoPerSample(g);
-  }
-  t.source = dir;
-  return t;
-}
+using Transport = prt::bench::BenchTransport;
 
 template <class T>
 std::vector<T> SplitList(const std::string& s) {
@@ -269,21 +168,10 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
     o.row_wavelet = row_wavelet;
     prt::PrepareRows(prt::MakeCompressedHeader(o, n, tr.domain), o, rows_hat.data(), S);
   }
-  auto transpose = [&](const std::vector<float>& rows) {
-    std::vector<float> cols(S * M);
-    constexpr std::size_t kTile = 64;
-    for (std::size_t s0 = 0; s0 < S; s0 += kTile)
-      for (std::size_t j0 = 0; j0 < M; j0 += kTile)
-        for (std::size_t s = s0; s < std::min(S, s0 + kTile); ++s)
-          for (std::size_t j = j0; j < std::min(M, j0 + kTile); ++j)
-            cols[j * S + s] = rows[s * M + j];
-    return cols;
-  };
-  const std::vector<float> cols_hat = transpose(rows_hat);
+  const std::vector<float> cols_hat = prt::bench::TransposeRows(rows_hat, S, M);
   for (prt::CompressionBudget budget : budgets)
     for (prt::CompressionScheme scheme : schemes) {
-      std::vector<float> fixed;  // 2D / 4D columns transformed once
-      std::vector<uint8_t> fixed_depths(M);
+      prt::bench::FixedColumns fixed;  // 2D / 4D columns transformed once
       for (double keep : budget == prt::CompressionBudget::kColumn ? column_keeps : keeps) {
         prt::CompressionOptions o;
         o.scheme = scheme;
@@ -296,42 +184,8 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
         const prt::CompressedTransportHeader h = prt::MakeCompressedHeader(o, n, tr.domain);
         std::vector<prt::ColumnStats> stats;
         const auto t0 = Clock::now();
-        const bool per_row =
-            scheme == prt::CompressionScheme::k2D && budget == prt::CompressionBudget::kColumn;
-        std::vector<float> work;
-        std::vector<uint8_t> depths(M);
-        const float* transformed = nullptr;
-        if (per_row) {
-          std::vector<float> rows(rows_hat);
-          for (std::size_t r = 0; r < S; ++r)
-            prt::KeepLargestPerRow(rows.data() + r * M, 1, M, prt::RowTermBudget(o, M));
-          work = transpose(rows);
-          prt::TransformColumnBlock(h, static_cast<uint32_t>(M), work.data(), depths.data());
-          transformed = work.data();
-        } else if (scheme == prt::CompressionScheme::kAdaptive4D) {
-          work = cols_hat;
-          prt::TransformColumnBlock(h, static_cast<uint32_t>(M), work.data(), depths.data());
-          transformed = work.data();
-        } else {
-          if (fixed.empty()) {
-            fixed = cols_hat;
-            prt::TransformColumnBlock(h, static_cast<uint32_t>(M), fixed.data(),
-                                      fixed_depths.data());
-          }
-          transformed = fixed.data();
-          depths = fixed_depths;
-        }
-        float threshold = 0.0f;
-        if (budget == prt::CompressionBudget::kGlobal) {
-          std::vector<uint64_t> hist(prt::kMagnitudeBins, 0);
-          prt::AddColumnBlockHistogram(h, 0, static_cast<uint32_t>(M), transformed, hist.data());
-          threshold = prt::ThresholdFromHistogram(hist.data(), prt::GlobalTermBudget(h));
-        }
-        prt::CompressedTransport ct;
-        ct.header = h;
-        ct.columns = prt::QuantiseColumnBlock(h, 0, static_cast<uint32_t>(M), transformed,
-                                              depths.data(), threshold, &stats);
-        work = std::vector<float>();
+        const prt::CompressedTransport ct =
+            prt::bench::CompressPreparedColumns(h, o, rows_hat, cols_hat, fixed, &stats);
         Point p;
         p.secs = Seconds(t0);
         p.scheme = scheme;
@@ -559,14 +413,14 @@ int main(int argc, char** argv) {
     for (const std::string& s : SplitList<std::string>(schemes_arg))
       schemes.push_back(prt::ParseCompressionScheme(s, "--schemes"));
     if (!run.empty()) {
-      const Transport tr = ReadRun(run, order_normal_weight);
+      const Transport tr = prt::bench::ReadRunTransport(run, order_normal_weight);
       RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error, column_wavelet,
              row_wavelet, out_dir);
       return 0;
     }
     for (const std::string& scene : SplitList<std::string>(scenes_arg))
       for (int n : SplitList<int>(n_arg)) {
-        const Transport tr = SceneTransport(scene, n, rays, cache, order_normal_weight);
+        const Transport tr = prt::bench::SceneTransport(scene, n, rays, cache, order_normal_weight);
         RunOne(tr, schemes, budgets, keeps, column_keeps, bits, light_weight, t_error,
                column_wavelet, row_wavelet, out_dir);
       }

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -110,6 +110,16 @@ PY
 
 run_sparse() { "$BUILD_DIR/bench/prt-sparse-bench" --out "$OUT/sparse" $QUICK; }
 run_compression() { "$BUILD_DIR/bench/compression_bench"; }
+# Clustered PCA (issue #24, docs/cpca.md): prt-cpca-bench on the default scene, the dragon and the
+# armadillo at n = 32: bytes and relight time against relit error next to adaptive 4D and 2D (and
+# the ratios at equal error), incremental CPCA relighting under a rotating environment, Huang §6's
+# compression time against standard CPCA on a sparse run's T. CSVs and PNGs in $OUT/cpca; the
+# traced T is kept in $OUT/transport-cache (about 2 GB) for the next run. --quick: the default
+# scene and a smaller grid (about 2.5 min).
+run_cpca() {
+  # shellcheck disable=SC2086
+  "$BUILD_DIR/bench/prt-cpca-bench" --cache "$OUT/transport-cache" --out "$OUT/cpca" $QUICK
+}
 # Google Benchmark of the viewer's B = T·L and its fixed per-frame parts on the demo's pack
 # (PRT_RELIGHT_PACK names another).
 run_relight() {
@@ -301,11 +311,11 @@ PY
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
 
 case "$WHAT" in
-  all) run_transport; run_scaling; run_sparse; run_compression; run_compress; run_figure9; run_viewer; run_relight; run_glossy ;;
-  transport|scaling|million|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
+  all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_glossy ;;
+  transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|glossy|sweep|stress|rebake) "run_$WHAT" ;;
   mc-error) run_mc_error ;;
   gi) run_gi ;;
   sparse-gi) run_sparse_gi ;;
   image) run_image ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
 esac
