@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -49,6 +50,16 @@ CpcaProjection::CpcaProjection(const CpcaTransport& t) {
     entry_vector_[at[j]] = k;
     entry_value_[at[j]++] = v;
   });
+  // `each` walks the vectors in order, each by increasing column: the CSR arrays directly.
+  vector_begin_.assign(vectors_ + 1, 0);
+  row_column_.reserve(entry_vector_.size());
+  row_value_.reserve(entry_vector_.size());
+  each([&](uint32_t k, uint32_t j, float v) {
+    ++vector_begin_[k + 1];
+    row_column_.push_back(j);
+    row_value_.push_back(v);
+  });
+  for (std::size_t k = 0; k < vectors_; ++k) vector_begin_[k + 1] += vector_begin_[k];
 }
 
 // Eq. 7: P_k += Σ_terms u_k[j]·L̂_j per channel, walking only the lighting's terms' columns.
@@ -60,6 +71,29 @@ void CpcaProjection::Accumulate(std::span<const LightingTerm> terms, SampleRadia
   double* o0 = out.channel[0].data();
   double* o1 = out.channel[1].data();
   double* o2 = out.channel[2].data();
+  if (terms.size() * 8 >= columns_) {
+    // Many terms: one dense lighting vector (repeated indices add), then per cluster vector a
+    // sparse dot product, in parallel and with no scattered writes.
+    std::vector<double> L(3 * columns_, 0.0);
+    for (const LightingTerm& t : terms)
+      for (int c = 0; c < 3; ++c) L[3 * t.index + c] += t.value[c];
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, vectors_, 64), [&](const auto& range) {
+      for (std::size_t k = range.begin(); k < range.end(); ++k) {
+        double a0 = 0, a1 = 0, a2 = 0;
+        for (uint32_t e = vector_begin_[k]; e < vector_begin_[k + 1]; ++e) {
+          const double v = row_value_[e];
+          const double* l = L.data() + 3 * static_cast<std::size_t>(row_column_[e]);
+          a0 += v * l[0];
+          a1 += v * l[1];
+          a2 += v * l[2];
+        }
+        o0[k] += a0;
+        o1[k] += a1;
+        o2[k] += a2;
+      }
+    });
+    return;
+  }
   for (const LightingTerm& t : terms) {
     const double l0 = t.value[0], l1 = t.value[1], l2 = t.value[2];
     for (uint32_t e = column_begin_[t.index]; e < column_begin_[t.index + 1]; ++e) {
@@ -108,18 +142,43 @@ void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
     throw std::invalid_argument("CpcaRelighter::Blend: projection of the wrong size");
   for (auto& c : out.channel) c.resize(spatial_);
   const std::size_t S1 = bases_ + 1;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, spatial_, 4096), [&](const auto& range) {
+  // P per cluster with the channels interleaved and padded (P_{c,i} as 4 doubles), so that a
+  // one-channel row's three outputs take one vectorisable pass over its weights.
+  const std::size_t K = clusters_;
+  std::vector<double> Pi(K * S1 * 4, 0.0);
+  for (std::size_t k = 0; k < K * S1; ++k)
+    for (int ch = 0; ch < 3; ++ch) Pi[4 * k + ch] = P.channel[ch][k];
+  std::atomic<bool> finite{true};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, spatial_, 2048), [&](const auto& range) {
+    bool ok = true;
     for (std::size_t s = range.begin(); s < range.end(); ++s) {
-      for (int ch = 0; ch < 3; ++ch) {
-        const std::size_t r = channels_ == 1 ? s : static_cast<std::size_t>(ch) * spatial_ + s;
-        const float* w = weights_.data() + r * S1;
-        const double* p = P.channel[ch].data() + static_cast<std::size_t>(cluster_of_[r]) * S1;
-        double acc = 0;
-        for (std::size_t i = 0; i < S1; ++i) acc += w[i] * p[i];
-        out.channel[ch][s] = acc;
+      if (channels_ == 1) {
+        const float* w = weights_.data() + s * S1;
+        const double* p = Pi.data() + 4 * static_cast<std::size_t>(cluster_of_[s]) * S1;
+        double a[4] = {0, 0, 0, 0};
+        for (std::size_t i = 0; i < S1; ++i) {
+          const double wi = w[i];
+          for (int ch = 0; ch < 4; ++ch) a[ch] += wi * p[4 * i + ch];
+        }
+        out.channel[0][s] = a[0];
+        out.channel[1][s] = a[1];
+        out.channel[2][s] = a[2];
+        ok = ok && std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);
+      } else {
+        for (std::size_t ch = 0; ch < 3; ++ch) {
+          const std::size_t r = ch * spatial_ + s;
+          const float* w = weights_.data() + r * S1;
+          const double* p = Pi.data() + 4 * static_cast<std::size_t>(cluster_of_[r]) * S1 + ch;
+          double a = 0;
+          for (std::size_t i = 0; i < S1; ++i) a += w[i] * p[4 * i];
+          out.channel[ch][s] = a;
+          ok = ok && std::isfinite(a);
+        }
       }
     }
+    if (!ok) finite = false;
   });
+  if (finite) return;
   for (int ch = 0; ch < 3; ++ch)
     for (std::size_t s = 0; s < spatial_; ++s)
       if (!std::isfinite(out.channel[ch][s]))

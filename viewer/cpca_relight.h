@@ -28,6 +28,9 @@ namespace prt {
 
 // Step 1 (Eq. 7) as a transport operator: one "sample" per cluster vector, sample c·(S+1) the
 // mean of cluster c and c·(S+1) + 1 + i its basis vector i; Accumulate adds u·L̂ per channel.
+// A lighting of few terms (NWA) walks only their columns (the vectors stored column by column);
+// one of many terms (exact lighting) is scattered into a dense vector once and every cluster
+// vector's sparse dot product with it runs in parallel (the vectors stored row by row).
 class CpcaProjection final : public TransportOperator {
  public:
   explicit CpcaProjection(const CpcaTransport& t);
@@ -41,6 +44,10 @@ class CpcaProjection final : public TransportOperator {
   std::vector<uint32_t> column_begin_;  // columns_ + 1
   std::vector<uint32_t> entry_vector_;
   std::vector<float> entry_value_;
+  // Row-major (CSR): vector k's terms are (column, value) in [vector_begin_[k], …[k + 1]).
+  std::vector<uint32_t> vector_begin_;  // vectors_ + 1
+  std::vector<uint32_t> row_column_;
+  std::vector<float> row_value_;
 };
 
 class CpcaRelighter final : public TransportOperator {
