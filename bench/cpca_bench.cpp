@@ -57,6 +57,7 @@
 #include <tuple>
 #include <vector>
 
+#include "bench/bench_scene.h"
 #include "bench/bench_scenes.h"
 #include "bench/bench_transport.h"
 #include "formats/compressed_transport.h"
@@ -67,6 +68,8 @@
 #include "viewer/relight.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
+#include "vocabulary/image_io.h"
+#include "vocabulary/scene_geometry.h"
 #include "worker/column_order.h"
 #include "worker/cpca.h"
 #include "worker/embree_scene.h"
@@ -930,6 +933,39 @@ void RunRepresentations(const Settings& st, const std::string& name) {
   const std::string base =
       st.out.empty() ? std::string() : st.out + "/" + tr.name + "_n" + std::to_string(n);
   if (st.part12) RelightTablesAndPlots(st, tr, levels, lights, floor_err, reps, base);
+  // The picture (Overbeck 2006 Figure 12's two halves): the incremental configuration's
+  // clusters colour-coded, CPCA relit under the first environment's exact lighting, the exact
+  // T relit, and 10 × |difference|, side by side.
+  if (!base.empty() && inc_rep && !lights.empty()) {
+    const prt::SceneDescription scene = prt::bench::BenchScene(tr.name, n);
+    const prt::SceneGeometry geometry = prt::BuildSceneGeometry(scene);
+    prt::SampleRadiance b;
+    inc_rep->cpca->Assign(lights[0].exact, b);
+    std::vector<float> cpca_rgb(3 * S), exact_rgb(3 * S), diff_rgb(3 * S);
+    for (std::size_t v = 0; v < S; ++v)
+      for (int c = 0; c < 3; ++c) {
+        cpca_rgb[3 * v + c] = static_cast<float>(b.channel[c][v] * tr.albedo[3 * v + c]);
+        exact_rgb[3 * v + c] = static_cast<float>(ref[0][c * S + v]);
+        diff_rgb[3 * v + c] = 10.0f * std::fabs(cpca_rgb[3 * v + c] - exact_rgb[3 * v + c]);
+      }
+    const std::vector<prt::ImageRgb> panels = {
+        prt::bench::RenderVertexColours(scene, geometry, prt::ClusterColours(*inc_rep->cpca),
+                                        nullptr),
+        prt::bench::RenderVertexColours(scene, geometry, cpca_rgb, nullptr),
+        prt::bench::RenderVertexColours(scene, geometry, exact_rgb, nullptr),
+        prt::bench::RenderVertexColours(scene, geometry, diff_rgb, nullptr)};
+    prt::ImageRgb strip(4 * panels[0].width, panels[0].height);
+    for (std::size_t k = 0; k < panels.size(); ++k)
+      for (int y = 0; y < strip.height; ++y)
+        for (int x = 0; x < panels[k].width; ++x)
+          std::copy_n(panels[k].At(x, y), 3,
+                      strip.At(static_cast<int>(k) * panels[0].width + x, y));
+    const std::string png = base + "_relit.png";
+    prt::WritePng(strip, png, prt::ToneMapOptions{1.0, prt::ToneMap::kClamp});
+    std::printf(
+        "wrote %s: %s clusters | CPCA relit (%s, exact lighting) | exact T | 10x difference\n",
+        png.c_str(), inc_rep->Label().c_str(), lights[0].name.c_str());
+  }
   // ---- Part 3 ----
   if (st.part3 && inc_rep && st.frames + st.hold > 0)
     RunIncremental(st, tr, rows_hat, *inc_rep, base);
