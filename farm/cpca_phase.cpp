@@ -98,6 +98,13 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
         R, d, static_cast<double>(rep.raw_bytes) / 1e6, header.cpca_clusters, header.cpca_bases,
         size, static_cast<double>(count * d * sizeof(float)) / 1e6);
 
+  // CPCA passes over its rows many times: they stay in memory whatever --memory-budget says.
+  if (count * d * sizeof(float) > options.memory_budget_bytes)
+    spdlog::warn(
+        "rank {}: cpca holds this rank's {:.1f} MB of rows in memory, above --memory-budget "
+        "({:.1f} MB); more ranks share them",
+        rank, static_cast<double>(count * d * sizeof(float)) / 1e6,
+        static_cast<double>(options.memory_budget_bytes) / 1e6);
   // Rows: each rank reads its own where it sees the run folder; else rank 0 reads and sends.
   const double tr = FarmNow();
   std::vector<float> rows(count * d);
