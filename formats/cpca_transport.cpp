@@ -275,4 +275,19 @@ void DecodeCpcaRow(const CpcaTransport& t, std::size_t row, std::span<float> out
   for (uint32_t j = 0; j < cols; ++j) out[j] = static_cast<float>(acc[j]);
 }
 
+double CpcaDecodedRelativeError(const CpcaTransport& t, const float* rows_hat) {
+  const std::size_t d = t.header.column_count();
+  std::vector<float> row(d);
+  double e = 0, n = 0;
+  for (std::size_t r = 0; r < t.row_count(); ++r) {
+    DecodeCpcaRow(t, r, row);
+    for (std::size_t j = 0; j < d; ++j) {
+      const double x = rows_hat[r * d + j];
+      e += (x - row[j]) * (x - row[j]);
+      n += x * x;
+    }
+  }
+  return n > 0 ? std::sqrt(e / n) : std::sqrt(e);
+}
+
 }  // namespace prt

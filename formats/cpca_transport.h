@@ -80,5 +80,9 @@ CpcaTransport DecodeCpcaBody(const CompressedTransportHeader& h, std::span<const
 
 // The dequantised row r of T̂ (6n² floats): m_c + Σ_i w_{r,i} u_{c,i} (tests, error figures).
 void DecodeCpcaRow(const CpcaTransport& t, std::size_t row, std::span<float> out);
+// ‖T̂ − T̃‖_F / ‖T̂‖_F with T̃ what t decodes to, row by row (DecodeCpcaRow), and T̂ = rows_hat
+// (row_count() × 6n² floats, the row-wavelet basis); ‖T̃‖_F when T̂ = 0. NaN if a decoded value
+// is not finite.
+double CpcaDecodedRelativeError(const CpcaTransport& t, const float* rows_hat);
 
 }  // namespace prt

@@ -61,19 +61,8 @@ std::vector<float> RowsHat(const std::string& run, const CompressedTransportHead
   return T;
 }
 
-// ‖T̂ − T̃‖ / ‖T̂‖ by decoding every row.
 double DecodedError(const CpcaTransport& t, const std::vector<float>& X) {
-  const std::size_t d = t.header.column_count();
-  std::vector<float> row(d);
-  double e = 0, n = 0;
-  for (std::size_t r = 0; r < t.row_count(); ++r) {
-    DecodeCpcaRow(t, r, row);
-    for (std::size_t j = 0; j < d; ++j) {
-      e += (double(X[r * d + j]) - row[j]) * (double(X[r * d + j]) - row[j]);
-      n += double(X[r * d + j]) * X[r * d + j];
-    }
-  }
-  return std::sqrt(e / n);
+  return CpcaDecodedRelativeError(t, X.data());
 }
 
 TEST(CpcaPhase, ByteIdenticalForAnyRanksAndEqualToInProcess) {

@@ -62,21 +62,8 @@ std::vector<float> AffineClusters(int clusters, int rank, std::size_t rows, std:
   return X;
 }
 
-// ‖X − decoded‖_F / ‖X‖_F, by decoding every row.
 double DecodedError(const CpcaTransport& t, const std::vector<float>& X) {
-  const std::size_t d = t.header.column_count();
-  std::vector<float> row(d);
-  double e = 0, n = 0;
-  for (std::size_t r = 0; r < t.row_count(); ++r) {
-    DecodeCpcaRow(t, r, row);
-    for (std::size_t j = 0; j < d; ++j) {
-      EXPECT_TRUE(std::isfinite(row[j]));
-      const double x = X[r * d + j];
-      e += (x - row[j]) * (x - row[j]);
-      n += x * x;
-    }
-  }
-  return n > 0 ? std::sqrt(e / n) : std::sqrt(e);
+  return CpcaDecodedRelativeError(t, X.data());
 }
 
 TEST(Cpca, RecoversAffineClustersExactly) {
