@@ -8,7 +8,8 @@
 // al. 2008 §4.5, Eq. 8) through CompressedRelighter; the pack's transport is never decompressed
 // to a dense matrix. "Exact" lighting means every non-zero Haar coefficient of L through that
 // same compressed T, so the lighting and image errors reported here measure the lighting
-// approximation alone.
+// approximation alone. A pack whose transport is clustered PCA (a CPCA section, docs/cpca.md)
+// relights through CpcaRelighter (Overbeck et al. 2006 §6.3) instead, in the pack's order.
 #pragma once
 
 #include <array>
@@ -50,7 +51,8 @@ const char* ToString(LightingMode mode);
 // colours, Render's input — is in the session's order: the compressed transport's depth-0
 // coefficient layout (SampleOrder::kCoefficients of viewer/compressed_relight.h; each mesh
 // along its Hilbert order), the order the Eq. 8 inverse steps leave the frame in, so a frame
-// needs no gather through the permutation. The per-sample arrays albedo() and positions() are
+// needs no gather through the permutation (a CPCA pack: the pack's order, pack_sample() the
+// identity). The per-sample arrays albedo() and positions() are
 // moved to that order once at Open, and triangles() index them there. pack_sample(p) names the
 // pack sample at position p; ToPackOrder turns per-sample values back into the pack's order
 // (meshes in pack order, each mesh's vertices in order), as --radiance-out writes them.
