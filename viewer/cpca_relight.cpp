@@ -193,21 +193,40 @@ void CpcaRelighter::BlendDelta(std::span<const uint32_t> vectors,
   if (vectors.size() != delta.size())
     throw std::invalid_argument("CpcaRelighter::BlendDelta: one delta per vector");
   const std::size_t S1 = bases_ + 1;
+  // The entries grouped by cluster (stable: a cluster's entries in the order given), then every
+  // cluster's rows in one pass that applies all of its entries; clusters' rows are disjoint, so
+  // the clusters run in parallel.
+  std::vector<uint32_t> order(vectors.size());
   for (std::size_t n = 0; n < vectors.size(); ++n) {
-    const uint32_t k = vectors[n];
-    const uint32_t c = static_cast<uint32_t>(k / S1), i = static_cast<uint32_t>(k % S1);
-    if (c >= clusters_) throw std::out_of_range("CpcaRelighter::BlendDelta: vector out of range");
+    if (vectors[n] / S1 >= clusters_)
+      throw std::out_of_range("CpcaRelighter::BlendDelta: vector out of range");
+    order[n] = static_cast<uint32_t>(n);
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return vectors[a] / S1 < vectors[b] / S1; });
+  std::vector<std::size_t> group{0};  // [group[g], group[g + 1]) of `order`: one cluster
+  for (std::size_t n = 1; n <= order.size(); ++n)
+    if (n == order.size() || vectors[order[n]] / S1 != vectors[order[n - 1]] / S1)
+      group.push_back(n);
+  if (order.empty()) return;
+  tbb::parallel_for(std::size_t{0}, group.size() - 1, [&](std::size_t g) {
+    const uint32_t c = static_cast<uint32_t>(vectors[order[group[g]]] / S1);
     for (uint32_t e = cluster_begin_[c]; e < cluster_begin_[c + 1]; ++e) {
       const uint32_t r = rows_of_cluster_[e];
-      const double w = weights_[static_cast<std::size_t>(r) * S1 + i];
+      const float* w = weights_.data() + static_cast<std::size_t>(r) * S1;
+      double a[3] = {0, 0, 0};
+      for (std::size_t n = group[g]; n < group[g + 1]; ++n) {
+        const double wi = w[vectors[order[n]] % S1];
+        for (int ch = 0; ch < 3; ++ch) a[ch] += wi * delta[order[n]][ch];
+      }
       if (channels_ == 1) {
-        for (int ch = 0; ch < 3; ++ch) out.channel[ch][r] += w * delta[n][ch];
+        for (int ch = 0; ch < 3; ++ch) out.channel[ch][r] += a[ch];
       } else {
-        const std::size_t ch = r / spatial_, s = r % spatial_;
-        out.channel[ch][s] += w * delta[n][ch];
+        const std::size_t ch = r / spatial_, sm = r % spatial_;
+        out.channel[ch][sm] += a[ch];
       }
     }
-  }
+  });
 }
 
 void CpcaRelighter::Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const {
