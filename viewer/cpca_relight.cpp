@@ -211,13 +211,21 @@ void CpcaRelighter::BlendDelta(std::span<const uint32_t> vectors,
   if (order.empty()) return;
   tbb::parallel_for(std::size_t{0}, group.size() - 1, [&](std::size_t g) {
     const uint32_t c = static_cast<uint32_t>(vectors[order[group[g]]] / S1);
+    // The group's entries once: which weight each takes, and its ΔP.
+    const std::size_t m = group[g + 1] - group[g];
+    std::vector<uint32_t> which(m);
+    std::vector<std::array<double, 3>> d(m);
+    for (std::size_t n = 0; n < m; ++n) {
+      which[n] = static_cast<uint32_t>(vectors[order[group[g] + n]] % S1);
+      d[n] = delta[order[group[g] + n]];
+    }
     for (uint32_t e = cluster_begin_[c]; e < cluster_begin_[c + 1]; ++e) {
       const uint32_t r = rows_of_cluster_[e];
       const float* w = weights_.data() + static_cast<std::size_t>(r) * S1;
       double a[3] = {0, 0, 0};
-      for (std::size_t n = group[g]; n < group[g + 1]; ++n) {
-        const double wi = w[vectors[order[n]] % S1];
-        for (int ch = 0; ch < 3; ++ch) a[ch] += wi * delta[order[n]][ch];
+      for (std::size_t n = 0; n < m; ++n) {
+        const double wi = w[which[n]];
+        for (int ch = 0; ch < 3; ++ch) a[ch] += wi * d[n][ch];
       }
       if (channels_ == 1) {
         for (int ch = 0; ch < 3; ++ch) out.channel[ch][r] += a[ch];
