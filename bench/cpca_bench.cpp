@@ -87,12 +87,6 @@ double Seconds(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-double ProcessCpuSeconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
-}
-
 double Median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -540,11 +534,11 @@ void RunSparseCompression(const Settings& st, const std::string& name, std::ofst
     prt::PrepareRows(h, po, rows.data(), V);
   }
   prt::CpcaStats standard, huang;
-  const double c0 = ProcessCpuSeconds();
+  const double c0 = prt::bench::CpuSeconds();
   (void)prt::CompressCpca(rows.data(), h, o, nullptr, &standard);
-  const double c1 = ProcessCpuSeconds();
+  const double c1 = prt::bench::CpuSeconds();
   (void)prt::CompressCpca(rows.data(), h, o, &structure, &huang);
-  const double c2 = ProcessCpuSeconds();
+  const double c2 = prt::bench::CpuSeconds();
   std::printf(
       "| K | S | method | seconds | CPU s | dense pass s | re-clustering s | LBG iterations | rows "
       "in "
@@ -614,11 +608,11 @@ void RelightTablesAndPlots(const Settings& st, const prt::bench::BenchTransport&
         for (std::size_t q = 0; q < levels.size(); ++q) {
           relight(*r, q);  // warm
           for (int k = 0; k < 3; ++k) {
-            const double c0 = ProcessCpuSeconds();
+            const double c0 = prt::bench::CpuSeconds();
             const auto w0 = Clock::now();
             relight(*r, q);
             r->ms[q] = std::min(r->ms[q], 1e3 * Seconds(w0));
-            r->cpu_ms[q] = std::min(r->cpu_ms[q], 1e3 * (ProcessCpuSeconds() - c0));
+            r->cpu_ms[q] = std::min(r->cpu_ms[q], 1e3 * (prt::bench::CpuSeconds() - c0));
           }
         }
   }
