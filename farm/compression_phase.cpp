@@ -47,6 +47,103 @@ struct OptionsPod {
   uint64_t dither_seed;
 };
 
+// ---- The phase's collectives, named by what they share (every rank calls each, in this order,
+// or none: farm/farm_context.h, CollectiveStop). The CPCA path's own are in farm/cpca_phase.cpp.
+
+// Rank 0's setup outcome {exit code, rows per file block, header bytes} on every rank.
+void ShareSetupOutcome(uint64_t (&setup)[3], MPI_Comm comm) {
+  MPI_Bcast(setup, 3, MPI_UINT64_T, 0, comm);
+}
+
+// Rank 0's encoded header (`bytes` header bytes) and options on every rank.
+void ShareHeaderAndOptions(std::vector<uint8_t>& header_bytes, uint64_t bytes, OptionsPod& pod,
+                           MPI_Comm comm) {
+  header_bytes.resize(bytes);
+  CheckMpi(MPI_Bcast(header_bytes.data(), static_cast<int>(bytes), MPI_BYTE, 0, comm),
+           "MPI_Bcast header");
+  CheckMpi(MPI_Bcast(&pod, sizeof pod, MPI_BYTE, 0, comm), "MPI_Bcast options");
+}
+
+// Rank 0's estimate lights (`rank0_lights`, ignored elsewhere) on every rank, each an n × n
+// cubemap.
+std::vector<CubemapRgb> ShareEstimateLights(const std::vector<CubemapRgb>& rank0_lights, int n,
+                                            int rank, MPI_Comm comm) {
+  uint64_t count = rank0_lights.size();
+  CheckMpi(MPI_Bcast(&count, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast lights");
+  std::vector<CubemapRgb> lights(static_cast<std::size_t>(count));
+  for (std::size_t l = 0; l < lights.size(); ++l) {
+    CubemapRgb& light = lights[l];
+    light = rank == 0 ? rank0_lights[l] : CubemapRgb{};
+    light.n = n;
+    for (int c = 0; c < 3; ++c) {
+      std::vector<float>& ch = light.Channel(c);
+      ch.resize(light.TexelCount());
+      CheckMpi(MPI_Bcast(ch.data(), static_cast<int>(ch.size()), MPI_FLOAT, 0, comm),
+               "MPI_Bcast lights");
+    }
+  }
+  return lights;
+}
+
+// The global budget's magnitude histogram summed over all ranks, on every rank. Integer counts:
+// the same sum, hence the same threshold, for any number of ranks.
+std::vector<uint64_t> SumHistograms(std::vector<uint64_t>& histogram, MPI_Comm comm) {
+  std::vector<uint64_t> all(kMagnitudeBins, 0);
+  CheckMpi(MPI_Allreduce(histogram.data(), all.data(), static_cast<int>(kMagnitudeBins),
+                         MPI_UINT64_T, MPI_SUM, comm),
+           "MPI_Allreduce histogram");
+  return all;
+}
+
+// The estimate stage's Σ B² summed over the ranks' rows, on rank 0 (zeros elsewhere).
+std::vector<double> SumRadianceNorms(const std::vector<double>& mine, MPI_Comm comm) {
+  std::vector<double> all_norms(mine.size(), 0.0);
+  CheckMpi(MPI_Reduce(mine.data(), all_norms.data(), static_cast<int>(mine.size()), MPI_DOUBLE,
+                      MPI_SUM, 0, comm),
+           "MPI_Reduce radiance norms");
+  return all_norms;
+}
+
+// Every rank's encoded column block size, on rank 0.
+std::vector<uint64_t> GatherColumnBlockSizes(uint64_t my_size, int size, MPI_Comm comm) {
+  std::vector<uint64_t> sizes(static_cast<std::size_t>(size));
+  CheckMpi(MPI_Gather(&my_size, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, comm),
+           "MPI_Gather");
+  return sizes;
+}
+
+// all[i] = Σ over ranks of mine[i], on rank 0: counters (exact) and the error's energies.
+void SumOnRank0(const uint64_t* mine, uint64_t* all, int n, MPI_Comm comm) {
+  CheckMpi(MPI_Reduce(mine, all, n, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
+}
+void SumOnRank0(const double* mine, double* all, int n, MPI_Comm comm) {
+  CheckMpi(MPI_Reduce(mine, all, n, MPI_DOUBLE, MPI_SUM, 0, comm), "MPI_Reduce");
+}
+// all[i] = max over ranks of mine[i], on rank 0: a step's seconds are its slowest rank's.
+void MaxOnRank0(const double* mine, double* all, int n, MPI_Comm comm) {
+  CheckMpi(MPI_Reduce(mine, all, n, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+}
+
+// A rank's encoded column block travels to rank 0 in pieces of at most 1 GiB (MPI counts are
+// int), tag 7301.
+constexpr uint64_t kPiece = 1ull << 30;
+void SendColumnBlockToRank0(const std::vector<uint8_t>& bytes, MPI_Comm comm) {
+  const uint64_t my_size = bytes.size();
+  for (uint64_t off = 0; off < my_size; off += kPiece)
+    CheckMpi(MPI_Send(bytes.data() + off, static_cast<int>(std::min(kPiece, my_size - off)),
+                      MPI_BYTE, 0, 7301, comm),
+             "MPI_Send columns");
+}
+// Rank 0's side: rank r's `size` bytes.
+std::vector<uint8_t> ReceiveColumnBlock(int r, uint64_t size, MPI_Comm comm) {
+  std::vector<uint8_t> in(static_cast<std::size_t>(size));
+  for (uint64_t off = 0; off < in.size(); off += kPiece)
+    CheckMpi(MPI_Recv(in.data() + off, static_cast<int>(std::min(kPiece, in.size() - off)),
+                      MPI_BYTE, r, 7301, comm, MPI_STATUS_IGNORE),
+             "MPI_Recv columns");
+  return in;
+}
+
 // The global budget's first pass keeps each rank's transformed column blocks (and depths) until
 // the threshold over all ranks is known: in memory up to `budget` bytes, beyond it appended to a
 // file in the spill folder and read back in the same order.
@@ -126,144 +223,431 @@ double SquaredNorm(const float* v, std::size_t n) {
   return s;
 }
 
+// ---- The phase's steps, in the order Compress runs them (docs/farm-compression.md, "Design").
+
+// T⁰ + the bounces (docs/interreflection.md), as the compression reads them: one row of T per
+// sample, the direct and indirect transport summed.
+std::unique_ptr<ComposedTransport> OpenComposedRows(const FarmContext& ctx) {
+  return std::make_unique<ComposedTransport>(
+      ctx.folder.transport,
+      IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0),
+      ctx.params.channels);
+}
+
+// What rank 0 sets up and every rank then shares ("Design" 1): the rows' reader, the header
+// (MakeCompressedHeader's, from the plan setup keyed the compression stage with) and the options.
+struct CompressionSetup {
+  std::unique_ptr<ComposedTransport> reader;  // rank 0; every rank where ranks read their own
+  CompressedTransportHeader header;
+  CompressionOptions copt;
+  OptionsPod pod{};
+  std::vector<uint8_t> header_bytes;
+  uint64_t setup[3] = {0, 0, 0};  // exit code, rows per file block, header bytes
+};
+
+// Step 1 on rank 0: the rows' file, the scene's [compression] settings, the spatial domain,
+// checked against each other. A failure is recorded in s.setup[0] (the exit code) and the report.
+void SetUpOnRank0(FarmContext& ctx, CompressionSetup& s) {
+  const RunFolder& folder = ctx.folder;
+  try {
+    s.reader = OpenComposedRows(ctx);
+    // The plan setup keyed the compression stage with (nothing is read again but the rows).
+    if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
+    CompressionPlan plan = *ctx.compression_plan;
+    if (plan.header.cubemap_n != s.reader->direct_info().cubemap_n)
+      throw InputError(folder.transport,
+                       "cubemap n " + std::to_string(s.reader->direct_info().cubemap_n) +
+                           ", but the run's is " + std::to_string(plan.header.cubemap_n));
+    if (plan.header.sample_count != s.reader->rows())
+      throw InputError(folder.transport,
+                       std::to_string(s.reader->rows()) + " rows, but " + folder.geometry +
+                           " has " + std::to_string(plan.header.sample_count) + " spatial samples");
+    s.copt = plan.options;
+    s.header = std::move(plan.header);
+    s.header_bytes = EncodeHeader(s.header);
+    s.pod = {static_cast<uint8_t>(s.copt.row_wavelet),
+             static_cast<uint8_t>(s.copt.column_wavelet),
+             static_cast<uint8_t>(s.copt.scheme),
+             static_cast<uint8_t>(s.copt.bits),
+             s.copt.terms_per_column,
+             s.copt.keep_fraction,
+             s.copt.dither_seed};
+    s.setup[1] = s.reader->direct_info().rows_per_block;
+    s.setup[2] = s.header_bytes.size();
+  } catch (...) {
+    std::string message;
+    s.setup[0] =
+        static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, "compression phase"));
+    spdlog::error("compression: {}", message);
+    ctx.report.error = message;
+  }
+}
+
+// Step 1 on every rank: rank 0's header and options, decoded where they did not come from.
+void ShareSetup(const FarmContext& ctx, CompressionSetup& s) {
+  ShareHeaderAndOptions(s.header_bytes, s.setup[2], s.pod, ctx.comm);
+  if (ctx.rank != 0) {
+    const OptionsPod& pod = s.pod;
+    s.header = DecodeHeader(s.header_bytes, "compressed transport header from rank 0");
+    s.copt.row_wavelet = static_cast<RowWavelet>(pod.row_wavelet);
+    s.copt.column_wavelet = static_cast<ColumnWavelet>(pod.column_wavelet);
+    s.copt.scheme = static_cast<CompressionScheme>(pod.scheme);
+    s.copt.bits = pod.bits;
+    s.copt.terms_per_column = pod.terms_per_column;
+    s.copt.keep_fraction = pod.keep_fraction;
+    s.copt.dither_seed = pod.dither_seed;
+  }
+}
+
+// The report's settings, before any work (report.json "compression").
+void StartReport(FarmContext& ctx, const CompressedTransportHeader& header) {
+  CompressionFarmReport& rep = ctx.report.compression;
+  const uint64_t rows = header.sample_count;
+  const uint32_t cols = header.column_count();
+  rep.ranks = ctx.size;
+  rep.scheme = ToString(header.scheme);
+  rep.row_wavelet = ToString(header.row_wavelet);
+  rep.column_wavelet = ToString(header.column_wavelet);
+  rep.bits = header.bits;
+  rep.keep_fraction = header.keep_fraction;
+  rep.memory_budget_bytes = ctx.options.memory_budget_bytes;
+  rep.raw_bytes = rows * cols * sizeof(float);
+}
+
+// How the rows reach the transpose ("Design" 2): this rank's spill folder and column block width,
+// who reads the rows, and the rows per chunk.
+struct TransposePlan {
+  BlockSpillOptions spill;
+  fs::path spill_dir;
+  TransposeReading reading;
+  uint64_t chunk = 0;
+};
+
+TransposePlan PlanTranspose(const FarmContext& ctx, CompressionSetup& s) {
+  const FarmOptions& options = ctx.options;
+  const RunFolder& folder = ctx.folder;
+  const int rank = ctx.rank;
+  const int size = ctx.size;
+  const uint64_t rows = s.header.sample_count;
+  const uint32_t cols = s.header.column_count();
+  TransposePlan p;
+  // Spill folder of this rank: inside the run folder when this rank can write there (shared
+  // or same-named local folder), else the system's temporary folder.
+  BlockSpillOptions& spill = p.spill;
+  spill.memory_budget_bytes = std::max<uint64_t>(1, options.memory_budget_bytes / 2);
+  // A column block leaves the transposer as columns × rows floats and the column compression
+  // holds a transformed copy of it: both within a quarter of the budget (at least one column,
+  // at most 256; columns are compressed independently, so the width changes no byte). A
+  // million rows at n = 32 would otherwise hold 2 × 1 GiB whatever the budget.
+  spill.columns_per_block = static_cast<uint32_t>(std::clamp<uint64_t>(
+      options.memory_budget_bytes / 4 / std::max<uint64_t>(1, 2 * rows * sizeof(float)), 1, 256));
+  fs::path& spill_dir = p.spill_dir;
+  spill_dir = fs::path(folder.dir) / ("compress-spill-rank" + std::to_string(rank));
+  std::error_code ec;
+  fs::remove_all(spill_dir, ec);  // what a killed run left there
+  fs::create_directories(spill_dir, ec);
+  if (ec) {
+    spill_dir = fs::temp_directory_path() /
+                ("prt-farm-spill-" + std::to_string(::getpid()) + "-" + std::to_string(rank));
+    fs::create_directories(spill_dir);
+  }
+  spill.spill_dir = spill_dir.string();
+
+  // Where every rank sees the run folder, each reads its own share of the rows (no row passes
+  // through rank 0) and a chunk is every rank's share of the budget; else rank 0 reads each
+  // chunk and scatters it.
+  TransposeReading& reading = p.reading;
+  reading.every_rank_reads = ctx.rows_in_place && size > 1;
+  reading.align = reading.every_rank_reads ? s.setup[1] : 1;  // whole blocks when ranks read
+  if (reading.every_rank_reads && rank != 0) {
+    s.reader = OpenComposedRows(ctx);
+    if (s.reader->rows() != rows)
+      throw InputError(folder.transport, "rank " + std::to_string(rank) + " reads " +
+                                             std::to_string(s.reader->rows()) + " rows, rank 0 " +
+                                             std::to_string(rows));
+  }
+  p.chunk = std::min<uint64_t>(
+      rows, ChunkRows(uint64_t{cols} * sizeof(float), static_cast<uint32_t>(s.setup[1]),
+                      options.memory_budget_bytes, rows) *
+                (reading.every_rank_reads ? static_cast<uint64_t>(size) : 1));
+  return p;
+}
+
+// The estimate stage's Σ B² (farm/estimate_phase.cpp) from the rows as they pass: rank 0
+// loads the lights and every rank accumulates over its share of the rows. Null without the
+// estimate stage.
+std::unique_ptr<RadianceNormAccumulator> StartRadianceNorms(
+    FarmContext& ctx, const CompressedTransportHeader& header) {
+  if (!ctx.params.run_estimate) return nullptr;
+  if (ctx.rank == 0) LoadEstimateLights(ctx);
+  std::vector<CubemapRgb> lights = ShareEstimateLights(
+      ctx.estimate.lights, static_cast<int>(header.cubemap_n), ctx.rank, ctx.comm);
+  return std::make_unique<RadianceNormAccumulator>(std::move(lights), ctx.RowGroups(),
+                                                   ctx.params.channels);
+}
+
+// What a rank's transpose and column compression leave: its compressed columns and the figures
+// the report sums or maximises over the ranks.
+struct RankColumns {
+  std::vector<CompressedColumn> mine;
+  TransposeStats st;
+  uint64_t terms = 0;
+  double row_energy = 0, row_dropped = 0;  // this rank's rows
+  double column_error = 0;                 // this rank's columns
+};
+
+// The global budget's second pass ("Design" 3): the threshold from the histograms of all ranks
+// (ThresholdFromHistogram), then every stashed block quantised against it (QuantiseColumnBlock).
+void QuantiseStashedBlocks(const FarmContext& ctx, const CompressedTransportHeader& header,
+                           std::vector<uint64_t>& histogram, TransformedBlockStash& stash,
+                           RankColumns& out) {
+  const std::vector<uint64_t> all = SumHistograms(histogram, ctx.comm);
+  const float threshold = ThresholdFromHistogram(all.data(), GlobalTermBudget(header));
+  const double tq = FarmNow();
+  stash.Replay([&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
+    std::vector<CompressedColumn> block =
+        QuantiseColumnBlock(header, first, count, columns, depths, threshold);
+    out.column_error += ColumnBlockError(header, first, count, columns, depths, block);
+    for (CompressedColumn& c : block) {
+      out.terms += c.index.size();
+      out.mine.push_back(std::move(c));
+    }
+  });
+  out.st.sink_seconds += FarmNow() - tq;
+  out.st.bytes_spilled += stash.spilled_bytes();
+}
+
+// Steps 2–3 ("Design" 2–3; Cheslack-Postava et al. 2008 §4.4 steps 2–4): the rows read in
+// chunks and row-transformed (§4.1, PrepareRows), transposed over the ranks
+// (DistributedTranspose), and every column block this rank owns compressed (§4.2–4.3,
+// CompressColumnBlock; with the global budget transformed, histogrammed and stashed, then
+// quantised). Also measures ‖T‖² and what the compression drops (ColumnBlockError), and feeds
+// `norms` (may be null) the rows.
+RankColumns TransposeAndCompress(FarmContext& ctx, CompressionSetup& s, const TransposePlan& plan,
+                                 RadianceNormAccumulator* norms, Progress& progress,
+                                 const ProgressOptions& po) {
+  const FarmOptions& options = ctx.options;
+  const int rank = ctx.rank;
+  const CompressedTransportHeader& header = s.header;
+  const uint64_t rows = header.sample_count;
+  const uint32_t cols = header.column_count();
+  RankColumns out;
+  const bool truncates_rows =
+      header.scheme == CompressionScheme::k2D && header.budget == CompressionBudget::kColumn;
+  const auto owned = OwnedColumns(cols, rank, ctx.size);
+  ProgressOptions pc = po;
+  pc.unit = "columns of rank 0";
+  std::optional<Progress> col_progress;
+  // Global budget: first pass transforms and histograms, the quantisation waits for the
+  // threshold over all ranks (docs/compression.md).
+  const bool global = header.budget == CompressionBudget::kGlobal;
+  std::vector<uint64_t> histogram(global ? kMagnitudeBins : 0, 0);
+  TransformedBlockStash stash(plan.spill.spill_dir, plan.spill.memory_budget_bytes);
+  out.st = DistributedTranspose(
+      ctx.comm, rows, cols, plan.chunk,
+      [&](uint64_t first, uint64_t count, float* o) { s.reader->ReadRows(first, count, o); },
+      [&](uint64_t first, uint64_t count, float* r) {
+        if (options.fail_in == "transpose" && rank == options.fail_rank && first > 0)
+          ExitAbruptly(rank, "in the transpose's second chunk of rows");
+        if (norms) norms->AddRows(first, count, r);
+        // ‖T‖² (the orthonormal row transform keeps it) and, for the 2D scheme's per-row
+        // budget, what PrepareRows' truncation drops (its terms are disjoint from the kept ones,
+        // so its square adds to the column stage's).
+        const std::size_t floats = static_cast<std::size_t>(count) * cols;
+        const double before = SquaredNorm(r, floats);
+        out.row_energy += before;
+        PrepareRows(header, s.copt, r, count);
+        if (truncates_rows) out.row_dropped += before - SquaredNorm(r, floats);
+      },
+      plan.spill,
+      [&](uint32_t first, uint32_t count, std::vector<float>& columns) {
+        if (!col_progress) {
+          progress.Finish();
+          col_progress.emplace("compress", owned.second - owned.first, pc);
+        }
+        if (global) {
+          std::vector<uint8_t> depths(count);
+          TransformColumnBlock(header, count, columns.data(), depths.data());
+          AddColumnBlockHistogram(header, first, count, columns.data(), histogram.data());
+          stash.Add(first, count, columns, depths);
+        } else {
+          std::vector<CompressedColumn> block =
+              CompressColumnBlock(header, first, count, columns.data());
+          out.column_error +=
+              ColumnBlockError(header, first, count, columns.data(), nullptr, block);
+          for (CompressedColumn& c : block) {
+            out.terms += c.index.size();
+            out.mine.push_back(std::move(c));
+          }
+        }
+        col_progress->Advance(count);
+      },
+      rank == 0 ? &progress : nullptr, plan.reading);
+  progress.Finish();
+  if (col_progress) col_progress->Finish();
+  if (global) QuantiseStashedBlocks(ctx, header, histogram, stash, out);
+  return out;
+}
+
+// The ranks' figures on rank 0: counters summed, seconds maximised (a step takes its slowest
+// rank's time), and the error's energies summed.
+struct RankTotals {
+  uint64_t total[4] = {};     // bytes sent, bytes spilled, runs spilled, terms
+  double maxs[7] = {};        // read, row transform, exchange, buffer, merge, sink, transpose
+  double energy_all[3] = {};  // ‖T‖², the rows' truncation, the columns' error
+};
+
+RankTotals ReduceRankFigures(const RankColumns& c, MPI_Comm comm) {
+  RankTotals t;
+  const TransposeStats& st = c.st;
+  uint64_t sums[4] = {st.bytes_sent, st.bytes_spilled, st.runs_spilled, c.terms};
+  SumOnRank0(sums, t.total, 4, comm);
+  double secs[7] = {st.read_seconds,
+                    st.row_transform_seconds,
+                    st.exchange_seconds,
+                    st.buffer_seconds,
+                    st.merge_seconds,
+                    st.sink_seconds,
+                    st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
+  MaxOnRank0(secs, t.maxs, 7, comm);
+  double energy[3] = {c.row_energy, c.row_dropped, c.column_error};
+  SumOnRank0(energy, t.energy_all, 3, comm);
+  return t;
+}
+
+// Step 4 ("Design" 4), every rank but 0: its columns to rank 0 as one encoded column block.
+// Rank 0: every rank's block decoded (validated) in rank order into one compressed transport.
+CompressedTransport CollectColumnsOnRank0(const FarmContext& ctx,
+                                          const CompressedTransportHeader& header,
+                                          std::vector<uint8_t>& bytes,
+                                          const std::vector<uint64_t>& sizes) {
+  CompressedTransport t;
+  if (ctx.rank != 0) {
+    SendColumnBlockToRank0(bytes, ctx.comm);
+    return t;
+  }
+  t.header = header;
+  for (int r = 0; r < ctx.size; ++r) {
+    std::vector<uint8_t> in;
+    if (r == 0) {
+      in.swap(bytes);
+    } else {
+      in = ReceiveColumnBlock(r, sizes[static_cast<std::size_t>(r)], ctx.comm);
+    }
+    if (in.empty()) continue;
+    for (CompressedColumn& c :
+         DecodeColumnBlock(header, in, "column block of rank " + std::to_string(r)).columns)
+      t.columns.push_back(std::move(c));
+  }
+  return t;
+}
+
+// Rank 0 writes transport.prtc durably (temp, fsync, rename, fsync of the folder).
+void WriteCompressedFile(const FarmContext& ctx, const std::vector<uint8_t>& file) {
+  const FarmOptions& options = ctx.options;
+  const std::string& prtc = ctx.folder.compressed;
+  if (options.fail_in == "write" && options.fail_rank == 0) {
+    // As if killed inside WriteFileDurably: half of its temporary file is on disk.
+    std::ofstream(prtc + ".tmp", std::ios::binary)
+        .write(reinterpret_cast<const char*>(file.data()),
+               static_cast<std::streamsize>(file.size() / 2));
+    ExitAbruptly(ctx.rank, "halfway through writing " + prtc);
+  }
+  WriteFileDurably(prtc, std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
+}
+
+// Rank 0's report.json "compression" (CompressionFarmReport) once transport.prtc is durable,
+// and its summary line. `tw`: when the gathering began; `start`: when the phase did.
+void FinishReport(FarmContext& ctx, const CompressedTransport& t, std::size_t file_bytes,
+                  const RankTotals& totals, const TransposeStats& st,
+                  const TransposeReading& reading, double tw, double start) {
+  const FarmOptions& options = ctx.options;
+  const RunFolder& folder = ctx.folder;
+  const std::string& prtc = folder.compressed;
+  CompressionFarmReport& rep = ctx.report.compression;
+  const uint64_t* total = totals.total;
+  const double* maxs = totals.maxs;
+  const double* energy_all = totals.energy_all;
+  rep.write_seconds = FarmNow() - tw;
+  rep.bytes_moved = total[0];
+  rep.every_rank_reads = reading.every_rank_reads;
+  rep.rank0_bytes_read = st.bytes_read;
+  rep.rank0_bytes_sent = st.bytes_sent;
+  rep.spill_bytes = total[1];
+  rep.spill_runs = total[2];
+  rep.terms = total[3];
+  rep.columns_stored = t.columns.size();
+  rep.compressed_bytes = file_bytes;
+  rep.read_seconds = maxs[0];
+  rep.row_transform_seconds = maxs[1];
+  rep.exchange_seconds = maxs[2];
+  rep.buffer_seconds = maxs[3];
+  rep.merge_seconds = maxs[4];
+  rep.compress_seconds = maxs[5];
+  rep.transpose_seconds = maxs[6];
+  rep.raw_kept = !options.discard_raw;
+  // ‖T − T̃‖_F / ‖T‖_F, T̃ what transport.prtc decodes to (exact, up to float rounding).
+  rep.relative_frobenius_error =
+      energy_all[0] > 0 ? std::sqrt(std::max(0.0, energy_all[1] + energy_all[2]) / energy_all[0])
+                        : 0.0;
+  if (options.measure_bandwidth) {
+    rep.memory_bandwidth_mb_s = MeasureMemoryBandwidth(256u << 20);
+    rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
+  }
+  rep.wall_seconds = FarmNow() - start;
+  ctx.run_eta.StepFinished("compress");
+  // RunFarm writes the report, then (the compressed file being durable) removes
+  // transport.prtt if --discard-raw.
+  rep.enabled = true;
+  if (!options.quiet) {
+    spdlog::info(
+        "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative "
+        "Frobenius error {:.3f}%, {} terms in {} "
+        "columns; transpose {:.0f} MB/s ({:.1f} MB moved between ranks, {:.1f} MB spilled "
+        "in {} runs){}",
+        prtc, Progress::FormatDuration(rep.wall_seconds), static_cast<double>(rep.raw_bytes) / 1e6,
+        static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
+        100 * rep.relative_frobenius_error, rep.terms, rep.columns_stored,
+        rep.TransposeMbPerSecond(), static_cast<double>(rep.bytes_moved) / 1e6,
+        static_cast<double>(rep.spill_bytes) / 1e6, rep.spill_runs,
+        options.discard_raw ? "; transport.prtt removed (--discard-raw)" : "");
+    if (options.measure_bandwidth)
+      spdlog::info("compression: memcpy {:.0f} MB/s, disk write+fsync {:.0f} MB/s in {}",
+                   rep.memory_bandwidth_mb_s, rep.disk_write_bandwidth_mb_s, folder.dir);
+  }
+}
+
+// The phase (docs/farm-compression.md; Cheslack-Postava et al. 2008 §4.4 steps 2–5): set up on
+// rank 0 and shared (step 1), then the CPCA scheme's own path (farm/cpca_phase.h), or rows → row
+// transform → distributed transpose → column compression (steps 2–3) → the columns gathered on
+// rank 0, written and reported (step 4). A failure after the setup is logged here with what to
+// rerun and rethrown: RunFarm writes the failed report and aborts the job.
 void Compress(FarmContext& ctx) {
   const FarmOptions& options = ctx.options;
   MPI_Comm comm = ctx.comm;
   const int rank = ctx.rank;
   const int size = ctx.size;
   const double start = FarmNow();
-  const RunFolder& folder = ctx.folder;
 
-  // Setup on rank 0: the rows' file, the scene's [compression] settings, the spatial domain.
-  std::unique_ptr<ComposedTransport> reader;  // T⁰ + the bounces (docs/interreflection.md)
-  CompressedTransportHeader header;
-  CompressionOptions copt;
-  OptionsPod pod{};
-  std::vector<uint8_t> header_bytes;
-  uint64_t setup[3] = {0, 0, 0};  // exit code, rows per file block, header bytes
-  if (rank == 0) {
-    try {
-      reader = std::make_unique<ComposedTransport>(
-          folder.transport,
-          IndirectFiles(folder, ctx.params.bounces, ctx.params.path_estimator != 0),
-          ctx.params.channels);
-      // The plan setup keyed the compression stage with (nothing is read again but the rows).
-      if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
-      CompressionPlan plan = *ctx.compression_plan;
-      if (plan.header.cubemap_n != reader->direct_info().cubemap_n)
-        throw InputError(folder.transport,
-                         "cubemap n " + std::to_string(reader->direct_info().cubemap_n) +
-                             ", but the run's is " + std::to_string(plan.header.cubemap_n));
-      if (plan.header.sample_count != reader->rows())
-        throw InputError(folder.transport, std::to_string(reader->rows()) + " rows, but " +
-                                               folder.geometry + " has " +
-                                               std::to_string(plan.header.sample_count) +
-                                               " spatial samples");
-      copt = plan.options;
-      header = std::move(plan.header);
-      header_bytes = EncodeHeader(header);
-      pod = {static_cast<uint8_t>(copt.row_wavelet),
-             static_cast<uint8_t>(copt.column_wavelet),
-             static_cast<uint8_t>(copt.scheme),
-             static_cast<uint8_t>(copt.bits),
-             copt.terms_per_column,
-             copt.keep_fraction,
-             copt.dither_seed};
-      setup[1] = reader->direct_info().rows_per_block;
-      setup[2] = header_bytes.size();
-    } catch (...) {
-      std::string message;
-      setup[0] =
-          static_cast<uint64_t>(ExitCodeOf(std::current_exception(), message, "compression phase"));
-      spdlog::error("compression: {}", message);
-      ctx.report.error = message;
-    }
-  }
-  MPI_Bcast(setup, 3, MPI_UINT64_T, 0, comm);
-  if (setup[0] != kExitOk) throw CollectiveStop{static_cast<int>(setup[0])};
+  CompressionSetup s;
+  if (rank == 0) SetUpOnRank0(ctx, s);
+  ShareSetupOutcome(s.setup, comm);
+  if (s.setup[0] != kExitOk) throw CollectiveStop{static_cast<int>(s.setup[0])};
 
   CompressionFarmReport& rep = ctx.report.compression;
-  TransposeStats st;
-  std::vector<CompressedColumn> mine;
   try {
-    header_bytes.resize(setup[2]);
-    CheckMpi(MPI_Bcast(header_bytes.data(), static_cast<int>(setup[2]), MPI_BYTE, 0, comm),
-             "MPI_Bcast header");
-    CheckMpi(MPI_Bcast(&pod, sizeof pod, MPI_BYTE, 0, comm), "MPI_Bcast options");
-    if (rank != 0) {
-      header = DecodeHeader(header_bytes, "compressed transport header from rank 0");
-      copt.row_wavelet = static_cast<RowWavelet>(pod.row_wavelet);
-      copt.column_wavelet = static_cast<ColumnWavelet>(pod.column_wavelet);
-      copt.scheme = static_cast<CompressionScheme>(pod.scheme);
-      copt.bits = pod.bits;
-      copt.terms_per_column = pod.terms_per_column;
-      copt.keep_fraction = pod.keep_fraction;
-      copt.dither_seed = pod.dither_seed;
-    }
+    ShareSetup(ctx, s);
+    const CompressedTransportHeader& header = s.header;
     const uint64_t rows = header.sample_count;
     const uint32_t cols = header.column_count();
-    rep.ranks = size;
-    rep.scheme = ToString(header.scheme);
-    rep.row_wavelet = ToString(header.row_wavelet);
-    rep.column_wavelet = ToString(header.column_wavelet);
-    rep.bits = header.bits;
-    rep.keep_fraction = header.keep_fraction;
-    rep.memory_budget_bytes = options.memory_budget_bytes;
-    rep.raw_bytes = rows * cols * sizeof(float);
+    StartReport(ctx, header);
     if (header.scheme == CompressionScheme::kCpca) {
       RunCpcaCompression(
-          ctx, header, reader,
-          [&] {
-            return std::make_unique<ComposedTransport>(
-                folder.transport,
-                IndirectFiles(folder, ctx.params.bounces, ctx.params.path_estimator != 0),
-                ctx.params.channels);
-          },
-          start);
+          ctx, header, s.reader, [&] { return OpenComposedRows(ctx); }, start);
       return;
     }
 
-    // Spill folder of this rank: inside the run folder when this rank can write there (shared
-    // or same-named local folder), else the system's temporary folder.
-    BlockSpillOptions spill;
-    spill.memory_budget_bytes = std::max<uint64_t>(1, options.memory_budget_bytes / 2);
-    // A column block leaves the transposer as columns × rows floats and the column compression
-    // holds a transformed copy of it: both within a quarter of the budget (at least one column,
-    // at most 256; columns are compressed independently, so the width changes no byte). A
-    // million rows at n = 32 would otherwise hold 2 × 1 GiB whatever the budget.
-    spill.columns_per_block = static_cast<uint32_t>(std::clamp<uint64_t>(
-        options.memory_budget_bytes / 4 / std::max<uint64_t>(1, 2 * rows * sizeof(float)), 1, 256));
-    fs::path spill_dir = fs::path(folder.dir) / ("compress-spill-rank" + std::to_string(rank));
-    std::error_code ec;
-    fs::remove_all(spill_dir, ec);  // what a killed run left there
-    fs::create_directories(spill_dir, ec);
-    if (ec) {
-      spill_dir = fs::temp_directory_path() /
-                  ("prt-farm-spill-" + std::to_string(::getpid()) + "-" + std::to_string(rank));
-      fs::create_directories(spill_dir);
-    }
-    spill.spill_dir = spill_dir.string();
-
-    // Where every rank sees the run folder, each reads its own share of the rows (no row passes
-    // through rank 0) and a chunk is every rank's share of the budget; else rank 0 reads each
-    // chunk and scatters it.
-    TransposeReading reading;
-    reading.every_rank_reads = ctx.rows_in_place && size > 1;
-    reading.align = reading.every_rank_reads ? setup[1] : 1;  // whole blocks when ranks read
-    if (reading.every_rank_reads && rank != 0) {
-      reader = std::make_unique<ComposedTransport>(
-          folder.transport,
-          IndirectFiles(folder, ctx.params.bounces, ctx.params.path_estimator != 0),
-          ctx.params.channels);
-      if (reader->rows() != rows)
-        throw InputError(folder.transport, "rank " + std::to_string(rank) + " reads " +
-                                               std::to_string(reader->rows()) + " rows, rank 0 " +
-                                               std::to_string(rows));
-    }
-    const uint64_t chunk = std::min<uint64_t>(
-        rows, ChunkRows(uint64_t{cols} * sizeof(float), static_cast<uint32_t>(setup[1]),
-                        options.memory_budget_bytes, rows) *
-                  (reading.every_rank_reads ? static_cast<uint64_t>(size) : 1));
+    const TransposePlan plan = PlanTranspose(ctx, s);
     ProgressOptions po = FarmProgressOptions(ctx, "rows", false);
     if (rank == 0) ctx.run_eta.StepStarted("compress");
     Progress progress("transpose", rows, po);
@@ -271,113 +655,14 @@ void Compress(FarmContext& ctx) {
       spdlog::info(
           "compression: {} rows x {} columns ({:.1f} MB), {} scheme, {} rank(s), "
           "{} rows per chunk, memory budget {:.1f} MB per rank",
-          rows, cols, static_cast<double>(rep.raw_bytes) / 1e6, rep.scheme, size, chunk,
+          rows, cols, static_cast<double>(rep.raw_bytes) / 1e6, rep.scheme, size, plan.chunk,
           static_cast<double>(options.memory_budget_bytes) / 1e6);
-    // The estimate stage's Σ B² (farm/estimate_phase.cpp) from the rows as they pass: rank 0
-    // loads the lights and every rank accumulates over its share of the rows.
-    std::unique_ptr<RadianceNormAccumulator> norms;
-    if (ctx.params.run_estimate) {
-      if (rank == 0) LoadEstimateLights(ctx);
-      uint64_t count = ctx.estimate.lights.size();
-      CheckMpi(MPI_Bcast(&count, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast lights");
-      std::vector<CubemapRgb> lights(static_cast<std::size_t>(count));
-      for (std::size_t l = 0; l < lights.size(); ++l) {
-        CubemapRgb& light = lights[l];
-        light = rank == 0 ? ctx.estimate.lights[l] : CubemapRgb{};
-        light.n = static_cast<int>(header.cubemap_n);
-        for (int c = 0; c < 3; ++c) {
-          std::vector<float>& ch = light.Channel(c);
-          ch.resize(light.TexelCount());
-          CheckMpi(MPI_Bcast(ch.data(), static_cast<int>(ch.size()), MPI_FLOAT, 0, comm),
-                   "MPI_Bcast lights");
-        }
-      }
-      norms = std::make_unique<RadianceNormAccumulator>(std::move(lights), ctx.RowGroups(),
-                                                        ctx.params.channels);
-    }
-    double row_energy = 0, row_dropped = 0;  // this rank's rows
-    double column_error = 0;                 // this rank's columns
-    const bool truncates_rows =
-        header.scheme == CompressionScheme::k2D && header.budget == CompressionBudget::kColumn;
-    const auto owned = OwnedColumns(cols, rank, size);
-    ProgressOptions pc = po;
-    pc.unit = "columns of rank 0";
-    std::optional<Progress> col_progress;
-    uint64_t terms = 0;
-    // Global budget: first pass transforms and histograms, the quantisation waits for the
-    // threshold over all ranks (docs/compression.md).
-    const bool global = header.budget == CompressionBudget::kGlobal;
-    std::vector<uint64_t> histogram(global ? kMagnitudeBins : 0, 0);
-    TransformedBlockStash stash(spill.spill_dir, spill.memory_budget_bytes);
-    st = DistributedTranspose(
-        comm, rows, cols, chunk,
-        [&](uint64_t first, uint64_t count, float* out) { reader->ReadRows(first, count, out); },
-        [&](uint64_t first, uint64_t count, float* r) {
-          if (options.fail_in == "transpose" && rank == options.fail_rank && first > 0)
-            ExitAbruptly(rank, "in the transpose's second chunk of rows");
-          if (norms) norms->AddRows(first, count, r);
-          // ‖T‖² (the orthonormal row transform keeps it) and, for the 2D scheme's per-row
-          // budget, what PrepareRows' truncation drops (its terms are disjoint from the kept ones,
-          // so its square adds to the column stage's).
-          const std::size_t floats = static_cast<std::size_t>(count) * cols;
-          const double before = SquaredNorm(r, floats);
-          row_energy += before;
-          PrepareRows(header, copt, r, count);
-          if (truncates_rows) row_dropped += before - SquaredNorm(r, floats);
-        },
-        spill,
-        [&](uint32_t first, uint32_t count, std::vector<float>& columns) {
-          if (!col_progress) {
-            progress.Finish();
-            col_progress.emplace("compress", owned.second - owned.first, pc);
-          }
-          if (global) {
-            std::vector<uint8_t> depths(count);
-            TransformColumnBlock(header, count, columns.data(), depths.data());
-            AddColumnBlockHistogram(header, first, count, columns.data(), histogram.data());
-            stash.Add(first, count, columns, depths);
-          } else {
-            std::vector<CompressedColumn> block =
-                CompressColumnBlock(header, first, count, columns.data());
-            column_error += ColumnBlockError(header, first, count, columns.data(), nullptr, block);
-            for (CompressedColumn& c : block) {
-              terms += c.index.size();
-              mine.push_back(std::move(c));
-            }
-          }
-          col_progress->Advance(count);
-        },
-        rank == 0 ? &progress : nullptr, reading);
-    progress.Finish();
-    if (col_progress) col_progress->Finish();
-    if (global) {
-      // Integer counts: the same sum, hence the same threshold, for any number of ranks.
-      std::vector<uint64_t> all(kMagnitudeBins, 0);
-      CheckMpi(MPI_Allreduce(histogram.data(), all.data(), static_cast<int>(kMagnitudeBins),
-                             MPI_UINT64_T, MPI_SUM, comm),
-               "MPI_Allreduce histogram");
-      const float threshold = ThresholdFromHistogram(all.data(), GlobalTermBudget(header));
-      const double tq = FarmNow();
-      stash.Replay(
-          [&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
-            std::vector<CompressedColumn> block =
-                QuantiseColumnBlock(header, first, count, columns, depths, threshold);
-            column_error += ColumnBlockError(header, first, count, columns, depths, block);
-            for (CompressedColumn& c : block) {
-              terms += c.index.size();
-              mine.push_back(std::move(c));
-            }
-          });
-      st.sink_seconds += FarmNow() - tq;
-      st.bytes_spilled += stash.spilled_bytes();
-    }
-    fs::remove_all(spill_dir, ec);
+    std::unique_ptr<RadianceNormAccumulator> norms = StartRadianceNorms(ctx, header);
+    RankColumns columns = TransposeAndCompress(ctx, s, plan, norms.get(), progress, po);
+    std::error_code ec;
+    fs::remove_all(plan.spill_dir, ec);
     if (norms) {
-      const std::vector<double> mine_norms = norms->Flat();
-      std::vector<double> all_norms(mine_norms.size(), 0.0);
-      CheckMpi(MPI_Reduce(mine_norms.data(), all_norms.data(), static_cast<int>(mine_norms.size()),
-                          MPI_DOUBLE, MPI_SUM, 0, comm),
-               "MPI_Reduce radiance norms");
+      std::vector<double> all_norms = SumRadianceNorms(norms->Flat(), comm);
       if (rank == 0) {
         ctx.estimate.norms = std::move(all_norms);
         ctx.estimate.have_norms = true;
@@ -386,118 +671,22 @@ void Compress(FarmContext& ctx) {
 
     // Gather the compressed columns on rank 0 as one encoded column block per rank.
     const double tw = FarmNow();
+    const auto owned = OwnedColumns(cols, rank, size);
     std::vector<uint8_t> bytes;
     if (owned.second > owned.first) {
       CompressedColumnBlock block;
       block.first_column = owned.first;
       block.column_span = owned.second - owned.first;
-      block.columns = std::move(mine);
+      block.columns = std::move(columns.mine);
       bytes = EncodeColumnBlock(header, block);
     }
-    uint64_t my_size = bytes.size();
-    std::vector<uint64_t> sizes(static_cast<std::size_t>(size));
-    CheckMpi(MPI_Gather(&my_size, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, comm),
-             "MPI_Gather");
-    uint64_t sums[4] = {st.bytes_sent, st.bytes_spilled, st.runs_spilled, terms};
-    uint64_t total[4] = {};
-    CheckMpi(MPI_Reduce(sums, total, 4, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
-    double secs[7] = {st.read_seconds,
-                      st.row_transform_seconds,
-                      st.exchange_seconds,
-                      st.buffer_seconds,
-                      st.merge_seconds,
-                      st.sink_seconds,
-                      st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
-    double maxs[7] = {};
-    CheckMpi(MPI_Reduce(secs, maxs, 7, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
-    double energy[3] = {row_energy, row_dropped, column_error}, energy_all[3] = {};
-    CheckMpi(MPI_Reduce(energy, energy_all, 3, MPI_DOUBLE, MPI_SUM, 0, comm), "MPI_Reduce");
-    constexpr uint64_t kPiece = 1ull << 30;
-    if (rank != 0) {
-      for (uint64_t off = 0; off < my_size; off += kPiece)
-        CheckMpi(MPI_Send(bytes.data() + off, static_cast<int>(std::min(kPiece, my_size - off)),
-                          MPI_BYTE, 0, 7301, comm),
-                 "MPI_Send columns");
-    }
+    const std::vector<uint64_t> sizes = GatherColumnBlockSizes(bytes.size(), size, comm);
+    const RankTotals totals = ReduceRankFigures(columns, comm);
+    const CompressedTransport t = CollectColumnsOnRank0(ctx, header, bytes, sizes);
     if (rank == 0) {
-      CompressedTransport t;
-      t.header = header;
-      for (int r = 0; r < size; ++r) {
-        std::vector<uint8_t> in;
-        if (r == 0) {
-          in.swap(bytes);
-        } else {
-          in.resize(sizes[static_cast<std::size_t>(r)]);
-          for (uint64_t off = 0; off < in.size(); off += kPiece)
-            CheckMpi(MPI_Recv(in.data() + off, static_cast<int>(std::min(kPiece, in.size() - off)),
-                              MPI_BYTE, r, 7301, comm, MPI_STATUS_IGNORE),
-                     "MPI_Recv columns");
-        }
-        if (in.empty()) continue;
-        for (CompressedColumn& c :
-             DecodeColumnBlock(header, in, "column block of rank " + std::to_string(r)).columns)
-          t.columns.push_back(std::move(c));
-      }
       const std::vector<uint8_t> file = EncodeCompressedTransport(t);
-      const std::string& prtc = folder.compressed;
-      if (options.fail_in == "write" && options.fail_rank == 0) {
-        // As if killed inside WriteFileDurably: half of its temporary file is on disk.
-        std::ofstream(prtc + ".tmp", std::ios::binary)
-            .write(reinterpret_cast<const char*>(file.data()),
-                   static_cast<std::streamsize>(file.size() / 2));
-        ExitAbruptly(rank, "halfway through writing " + prtc);
-      }
-      WriteFileDurably(prtc,
-                       std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
-      rep.write_seconds = FarmNow() - tw;
-      rep.bytes_moved = total[0];
-      rep.every_rank_reads = reading.every_rank_reads;
-      rep.rank0_bytes_read = st.bytes_read;
-      rep.rank0_bytes_sent = st.bytes_sent;
-      rep.spill_bytes = total[1];
-      rep.spill_runs = total[2];
-      rep.terms = total[3];
-      rep.columns_stored = t.columns.size();
-      rep.compressed_bytes = file.size();
-      rep.read_seconds = maxs[0];
-      rep.row_transform_seconds = maxs[1];
-      rep.exchange_seconds = maxs[2];
-      rep.buffer_seconds = maxs[3];
-      rep.merge_seconds = maxs[4];
-      rep.compress_seconds = maxs[5];
-      rep.transpose_seconds = maxs[6];
-      rep.raw_kept = !options.discard_raw;
-      // ‖T − T̃‖_F / ‖T‖_F, T̃ what transport.prtc decodes to (exact, up to float rounding).
-      rep.relative_frobenius_error =
-          energy_all[0] > 0
-              ? std::sqrt(std::max(0.0, energy_all[1] + energy_all[2]) / energy_all[0])
-              : 0.0;
-      if (options.measure_bandwidth) {
-        rep.memory_bandwidth_mb_s = MeasureMemoryBandwidth(256u << 20);
-        rep.disk_write_bandwidth_mb_s = MeasureDiskWriteBandwidth(folder.dir, 256u << 20);
-      }
-      rep.wall_seconds = FarmNow() - start;
-      ctx.run_eta.StepFinished("compress");
-      // RunFarm writes the report, then (the compressed file being durable) removes
-      // transport.prtt if --discard-raw.
-      rep.enabled = true;
-      if (!options.quiet) {
-        spdlog::info(
-            "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative "
-            "Frobenius error {:.3f}%, {} terms in {} "
-            "columns; transpose {:.0f} MB/s ({:.1f} MB moved between ranks, {:.1f} MB spilled "
-            "in {} runs){}",
-            prtc, Progress::FormatDuration(rep.wall_seconds),
-            static_cast<double>(rep.raw_bytes) / 1e6,
-            static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
-            100 * rep.relative_frobenius_error, rep.terms, rep.columns_stored,
-            rep.TransposeMbPerSecond(), static_cast<double>(rep.bytes_moved) / 1e6,
-            static_cast<double>(rep.spill_bytes) / 1e6, rep.spill_runs,
-            options.discard_raw ? "; transport.prtt removed (--discard-raw)" : "");
-        if (options.measure_bandwidth)
-          spdlog::info("compression: memcpy {:.0f} MB/s, disk write+fsync {:.0f} MB/s in {}",
-                       rep.memory_bandwidth_mb_s, rep.disk_write_bandwidth_mb_s, folder.dir);
-      }
+      WriteCompressedFile(ctx, file);
+      FinishReport(ctx, t, file.size(), totals, columns.st, plan.reading, tw, start);
     }
   } catch (...) {
     std::string message;

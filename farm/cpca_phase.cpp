@@ -27,9 +27,12 @@ namespace prt {
 
 namespace {
 
-// Pieces of at most 2^27 elements per MPI call (counts are int).
+// ---- The CPCA path's collectives, named by what they share (every rank calls each in the same
+// order). Pieces of at most 2^27 elements per MPI call (counts are int).
 constexpr std::size_t kPiece = std::size_t{1} << 27;
 
+// ComputeCpca's reductions over the ranks (worker/cpca.h): fixed-point sums (exact, so the same
+// for any number of ranks) and maxima, on every rank.
 class MpiCpcaReducer final : public CpcaReducer {
  public:
   explicit MpiCpcaReducer(MPI_Comm comm) : comm_(comm) {}
@@ -51,6 +54,68 @@ class MpiCpcaReducer final : public CpcaReducer {
  private:
   MPI_Comm comm_;
 };
+
+// Rank 0 sends rank r its rows (tag 7401); rank r receives them into `rows`.
+void SendRowsToRank(const std::vector<float>& buf, int r, MPI_Comm comm) {
+  for (std::size_t at = 0; at < buf.size(); at += kPiece)
+    CheckMpi(MPI_Send(buf.data() + at, static_cast<int>(std::min(kPiece, buf.size() - at)),
+                      MPI_FLOAT, r, 7401, comm),
+             "MPI_Send CPCA rows");
+}
+void ReceiveRowsFromRank0(std::vector<float>& rows, MPI_Comm comm) {
+  for (std::size_t at = 0; at < rows.size(); at += kPiece)
+    CheckMpi(MPI_Recv(rows.data() + at, static_cast<int>(std::min(kPiece, rows.size() - at)),
+                      MPI_FLOAT, 0, 7401, comm, MPI_STATUS_IGNORE),
+             "MPI_Recv CPCA rows");
+}
+
+// Rank 0's combination pairs on every rank: meta = {slots per sample (0: none), pair count}.
+void ShareCombinationPairs(uint64_t (&meta)[2], std::vector<uint32_t>& pairs, MPI_Comm comm) {
+  CheckMpi(MPI_Bcast(meta, 2, MPI_UINT64_T, 0, comm), "MPI_Bcast CPCA sparse structure");
+  if (meta[0] > 0) {
+    pairs.resize(meta[1]);
+    for (std::size_t at = 0; at < pairs.size(); at += kPiece)
+      CheckMpi(MPI_Bcast(pairs.data() + at, static_cast<int>(std::min(kPiece, pairs.size() - at)),
+                         MPI_UINT32_T, 0, comm),
+               "MPI_Bcast CPCA combinations");
+  }
+}
+
+// Every row's cluster id and its S coefficients on rank 0, in row order (rank r holds the rows
+// CpcaRowRange(R, r, size) gives it); `all_*` are only written on rank 0.
+void GatherClustersAndCoefficients(const CpcaLocalResult& mine, uint64_t R, uint32_t S,
+                                   uint64_t count, int size, std::vector<uint32_t>& all_clusters,
+                                   std::vector<int32_t>& all_coefficients, MPI_Comm comm) {
+  std::vector<int> counts(static_cast<std::size_t>(size)), displs(static_cast<std::size_t>(size));
+  for (int r = 0; r < size; ++r) {
+    const auto [f, l] = CpcaRowRange(R, r, size);
+    counts[static_cast<std::size_t>(r)] = static_cast<int>(l - f);
+    displs[static_cast<std::size_t>(r)] = static_cast<int>(f);
+  }
+  CheckMpi(MPI_Gatherv(mine.cluster_of.data(), static_cast<int>(count), MPI_UINT32_T,
+                       all_clusters.data(), counts.data(), displs.data(), MPI_UINT32_T, 0, comm),
+           "MPI_Gatherv CPCA clusters");
+  if (S > 0) {
+    if (static_cast<uint64_t>(R) * S > static_cast<uint64_t>(INT_MAX))
+      throw std::runtime_error("CPCA: more than 2^31 coefficients");
+    for (int r = 0; r < size; ++r) {
+      counts[static_cast<std::size_t>(r)] *= static_cast<int>(S);
+      displs[static_cast<std::size_t>(r)] *= static_cast<int>(S);
+    }
+    CheckMpi(
+        MPI_Gatherv(mine.coefficients.data(), static_cast<int>(count * S), MPI_INT32_T,
+                    all_coefficients.data(), counts.data(), displs.data(), MPI_INT32_T, 0, comm),
+        "MPI_Gatherv CPCA coefficients");
+  }
+}
+
+// Σ over ranks of `mine` (distance evaluations), and the slowest rank's seconds, on rank 0.
+void SumOnRank0(const uint64_t* mine, uint64_t* all, int n, MPI_Comm comm) {
+  CheckMpi(MPI_Reduce(mine, all, n, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
+}
+void MaxOnRank0(const double* mine, double* all, int n, MPI_Comm comm) {
+  CheckMpi(MPI_Reduce(mine, all, n, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+}
 
 // Huang §6's input from the sparse phase's run/sparse/combination.bin (its pairs, `slots` per
 // sample): a sample with no pair is dense (or a fallback, sampled densely); the others list the
@@ -76,8 +141,134 @@ CpcaSparseStructure StructureFromPairs(const std::vector<uint32_t>& pairs, uint6
   return CpcaSparseStructure::Of(dense, nb, channels);
 }
 
+// ---- The CPCA path's steps, in the order RunCpcaCompression runs them.
+
+// The rows this rank holds (CpcaRowRange: [first, first + count) of R, d floats each): read by
+// itself where it sees the run folder, else read by rank 0 and sent. Returns the bytes rank 0
+// sent (0 elsewhere).
+uint64_t ReadRowShare(const FarmContext& ctx, uint64_t R, uint32_t d, uint64_t first,
+                      uint64_t count, bool every_rank_reads,
+                      std::unique_ptr<ComposedTransport>& reader,
+                      const std::function<std::unique_ptr<ComposedTransport>()>& open_reader,
+                      std::vector<float>& rows) {
+  const int rank = ctx.rank, size = ctx.size;
+  uint64_t bytes_sent = 0;
+  if (every_rank_reads) {
+    if (!reader) reader = open_reader();
+    if (reader->rows() != R)
+      throw InputError(ctx.folder.transport, "rank " + std::to_string(rank) + " reads " +
+                                                 std::to_string(reader->rows()) + " rows, rank 0 " +
+                                                 std::to_string(R));
+    if (count > 0) reader->ReadRows(first, count, rows.data());
+  } else if (rank == 0) {
+    if (count > 0) reader->ReadRows(first, count, rows.data());
+    std::vector<float> buf;
+    for (int r = 1; r < size; ++r) {
+      const auto [f, l] = CpcaRowRange(R, r, size);
+      buf.resize((l - f) * d);
+      if (l > f) reader->ReadRows(f, l - f, buf.data());
+      SendRowsToRank(buf, r, ctx.comm);
+      bytes_sent += buf.size() * sizeof(float);
+    }
+  } else {
+    ReceiveRowsFromRank0(rows, ctx.comm);
+  }
+  return bytes_sent;
+}
+
+// Huang §6 where the rows came from the sparse method (rank 0 reads the combinations and shares
+// them); null otherwise.
+std::unique_ptr<CpcaSparseStructure> ShareSparseStructure(const FarmContext& ctx,
+                                                          const CompressedTransportHeader& header) {
+  std::unique_ptr<CpcaSparseStructure> sparse;
+  std::vector<uint32_t> pairs;
+  uint64_t meta[2] = {0, 0};  // has structure, pair count
+  std::string comb = ctx.folder.SparseCombinationFile();
+  if (ctx.rank == 0 && header.cpca_method == CpcaMethod::kDenseRecluster &&
+      std::filesystem::exists(comb)) {
+    uint64_t slots = 0;
+    pairs = ReadCombinationFile(comb, header.spatial_count(), slots);
+    meta[0] = slots;
+    meta[1] = pairs.size();
+  }
+  ShareCombinationPairs(meta, pairs, ctx.comm);
+  if (meta[0] > 0) {
+    sparse = std::make_unique<CpcaSparseStructure>(
+        StructureFromPairs(pairs, header.spatial_count(), meta[0], header.channels));
+  }
+  return sparse;
+}
+
+// What rank 0's report needs besides the file: how the rows travelled, the slowest rank's
+// seconds (read, row transform, clustering) and the distance evaluations of all ranks.
+struct CpcaFigures {
+  bool every_rank_reads = false;
+  uint64_t rank0_rows_bytes = 0;  // the rows rank 0 holds itself
+  uint64_t bytes_sent = 0;
+  double maxs[3] = {};
+  uint64_t evals_all = 0;
+  bool sparse = false;  // a sparse structure was given
+};
+
+// Rank 0 writes transport.prtc durably, then report.json "compression" (with its "cpca" part)
+// and the summary line. `tw`: when the gathering began; `start`: when the phase did.
+void WriteCpcaFileAndReport(FarmContext& ctx, const CpcaTransport& t, const CpcaStats& st,
+                            const CpcaFigures& fig, double tw, double start) {
+  const FarmOptions& options = ctx.options;
+  const CompressedTransportHeader& header = t.header;
+  CompressionFarmReport& rep = ctx.report.compression;
+  const uint64_t R = header.sample_count;
+  const uint32_t S = header.cpca_bases;
+  const std::vector<uint8_t> file = EncodeCpcaTransport(t);
+  const std::string& prtc = ctx.folder.compressed;
+  if (options.fail_in == "write" && options.fail_rank == 0) {
+    std::ofstream(prtc + ".tmp", std::ios::binary)
+        .write(reinterpret_cast<const char*>(file.data()),
+               static_cast<std::streamsize>(file.size() / 2));
+    ExitAbruptly(ctx.rank, "halfway through writing " + prtc);
+  }
+  WriteFileDurably(prtc, std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
+  rep.write_seconds = FarmNow() - tw;
+  rep.every_rank_reads = fig.every_rank_reads && ctx.size > 1;
+  rep.rank0_bytes_read = fig.rank0_rows_bytes + (fig.every_rank_reads ? 0 : fig.bytes_sent);
+  rep.rank0_bytes_sent = fig.bytes_sent;
+  rep.bytes_moved = fig.bytes_sent;
+  rep.read_seconds = fig.maxs[0];
+  rep.row_transform_seconds = fig.maxs[1];
+  rep.compress_seconds = fig.maxs[2];
+  rep.terms = t.term_count() + t.coefficients.size();
+  rep.compressed_bytes = file.size();
+  rep.raw_kept = !options.discard_raw;
+  rep.relative_frobenius_error = st.relative_error;
+  rep.cpca.enabled = true;
+  rep.cpca.clusters = header.cpca_clusters;
+  rep.cpca.bases = S;
+  rep.cpca.method = fig.sparse && st.rows_dense_pass < R ? "dense-recluster" : "standard";
+  rep.cpca.rows_dense_pass = st.rows_dense_pass;
+  rep.cpca.lbg_iterations = st.lbg_iterations;
+  rep.cpca.distance_evaluations = fig.evals_all;
+  rep.cpca.empty_clusters = st.empty_clusters;
+  rep.cpca.seconds_dense = st.seconds_dense;
+  rep.cpca.seconds_recluster = st.seconds_recluster;
+  rep.cpca.basis_terms = t.term_count();
+  rep.wall_seconds = FarmNow() - start;
+  ctx.run_eta.StepFinished("compress");
+  rep.enabled = true;
+  if (!options.quiet)
+    spdlog::info(
+        "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative Frobenius "
+        "error {:.3f}%, cpca {} ({} clusters x {} bases, {} LBG iterations over {} of {} rows, "
+        "{} basis terms)",
+        prtc, Progress::FormatDuration(rep.wall_seconds), static_cast<double>(rep.raw_bytes) / 1e6,
+        static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
+        100 * rep.relative_frobenius_error, rep.cpca.method, rep.cpca.clusters, rep.cpca.bases,
+        rep.cpca.lbg_iterations, rep.cpca.rows_dense_pass, R, rep.cpca.basis_terms);
+}
+
 }  // namespace
 
+// The rows read and row-transformed (§4.1), clustered by ComputeCpca with MPI reductions, every
+// row's cluster id and coefficients gathered on rank 0, which writes and reports (cpca_phase.h).
 void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& header,
                         std::unique_ptr<ComposedTransport>& reader,
                         const std::function<std::unique_ptr<ComposedTransport>()>& open_reader,
@@ -109,33 +300,8 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
   const double tr = FarmNow();
   std::vector<float> rows(count * d);
   const bool every_rank_reads = ctx.rows_in_place || size == 1;
-  uint64_t bytes_sent = 0;
-  if (every_rank_reads) {
-    if (!reader) reader = open_reader();
-    if (reader->rows() != R)
-      throw InputError(ctx.folder.transport, "rank " + std::to_string(rank) + " reads " +
-                                                 std::to_string(reader->rows()) + " rows, rank 0 " +
-                                                 std::to_string(R));
-    if (count > 0) reader->ReadRows(first, count, rows.data());
-  } else if (rank == 0) {
-    if (count > 0) reader->ReadRows(first, count, rows.data());
-    std::vector<float> buf;
-    for (int r = 1; r < size; ++r) {
-      const auto [f, l] = CpcaRowRange(R, r, size);
-      buf.resize((l - f) * d);
-      if (l > f) reader->ReadRows(f, l - f, buf.data());
-      for (std::size_t at = 0; at < buf.size(); at += kPiece)
-        CheckMpi(MPI_Send(buf.data() + at, static_cast<int>(std::min(kPiece, buf.size() - at)),
-                          MPI_FLOAT, r, 7401, comm),
-                 "MPI_Send CPCA rows");
-      bytes_sent += buf.size() * sizeof(float);
-    }
-  } else {
-    for (std::size_t at = 0; at < rows.size(); at += kPiece)
-      CheckMpi(MPI_Recv(rows.data() + at, static_cast<int>(std::min(kPiece, rows.size() - at)),
-                        MPI_FLOAT, 0, 7401, comm, MPI_STATUS_IGNORE),
-               "MPI_Recv CPCA rows");
-  }
+  const uint64_t bytes_sent =
+      ReadRowShare(ctx, R, d, first, count, every_rank_reads, reader, open_reader, rows);
   const double read_seconds = FarmNow() - tr;
   const double tt = FarmNow();
   CompressionOptions copt;
@@ -143,30 +309,7 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
   if (count > 0) PrepareRows(header, copt, rows.data(), count);
   const double transform_seconds = FarmNow() - tt;
 
-  // Huang §6 where the rows came from the sparse method (rank 0 reads the combinations).
-  std::unique_ptr<CpcaSparseStructure> sparse;
-  {
-    std::vector<uint32_t> pairs;
-    uint64_t meta[2] = {0, 0};  // has structure, pair count
-    std::string comb = ctx.folder.SparseCombinationFile();
-    if (rank == 0 && header.cpca_method == CpcaMethod::kDenseRecluster &&
-        std::filesystem::exists(comb)) {
-      uint64_t slots = 0;
-      pairs = ReadCombinationFile(comb, header.spatial_count(), slots);
-      meta[0] = slots;
-      meta[1] = pairs.size();
-    }
-    CheckMpi(MPI_Bcast(meta, 2, MPI_UINT64_T, 0, comm), "MPI_Bcast CPCA sparse structure");
-    if (meta[0] > 0) {
-      pairs.resize(meta[1]);
-      for (std::size_t at = 0; at < pairs.size(); at += kPiece)
-        CheckMpi(MPI_Bcast(pairs.data() + at, static_cast<int>(std::min(kPiece, pairs.size() - at)),
-                           MPI_UINT32_T, 0, comm),
-                 "MPI_Bcast CPCA combinations");
-      sparse = std::make_unique<CpcaSparseStructure>(
-          StructureFromPairs(pairs, header.spatial_count(), meta[0], header.channels));
-    }
-  }
+  const std::unique_ptr<CpcaSparseStructure> sparse = ShareSparseStructure(ctx, header);
 
   ProgressOptions po = FarmProgressOptions(ctx, "LBG iterations", false);
   std::unique_ptr<Progress> progress;
@@ -190,84 +333,26 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
   // Gather the rows' cluster ids and coefficients on rank 0.
   const double tw = FarmNow();
   const uint32_t S = header.cpca_bases;
-  std::vector<int> counts(static_cast<std::size_t>(size)), displs(static_cast<std::size_t>(size));
-  for (int r = 0; r < size; ++r) {
-    const auto [f, l] = CpcaRowRange(R, r, size);
-    counts[static_cast<std::size_t>(r)] = static_cast<int>(l - f);
-    displs[static_cast<std::size_t>(r)] = static_cast<int>(f);
-  }
   CpcaTransport t;
   if (rank == 0) {
     t.header = header;
     t.cluster_of.resize(R);
     t.coefficients.resize(R * S);
   }
-  CheckMpi(MPI_Gatherv(mine.cluster_of.data(), static_cast<int>(count), MPI_UINT32_T,
-                       t.cluster_of.data(), counts.data(), displs.data(), MPI_UINT32_T, 0, comm),
-           "MPI_Gatherv CPCA clusters");
-  if (S > 0) {
-    if (static_cast<uint64_t>(R) * S > static_cast<uint64_t>(INT_MAX))
-      throw std::runtime_error("CPCA: more than 2^31 coefficients");
-    for (int r = 0; r < size; ++r) {
-      counts[static_cast<std::size_t>(r)] *= static_cast<int>(S);
-      displs[static_cast<std::size_t>(r)] *= static_cast<int>(S);
-    }
-    CheckMpi(MPI_Gatherv(mine.coefficients.data(), static_cast<int>(count * S), MPI_INT32_T,
-                         t.coefficients.data(), counts.data(), displs.data(), MPI_INT32_T, 0, comm),
-             "MPI_Gatherv CPCA coefficients");
-  }
-  uint64_t evals = mine.stats.distance_evaluations, evals_all = 0;
-  CheckMpi(MPI_Reduce(&evals, &evals_all, 1, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
-  double secs[3] = {read_seconds, transform_seconds, compress_seconds}, maxs[3] = {};
-  CheckMpi(MPI_Reduce(secs, maxs, 3, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
+  GatherClustersAndCoefficients(mine, R, S, count, size, t.cluster_of, t.coefficients, comm);
+  CpcaFigures fig;
+  uint64_t evals = mine.stats.distance_evaluations;
+  SumOnRank0(&evals, &fig.evals_all, 1, comm);
+  double secs[3] = {read_seconds, transform_seconds, compress_seconds};
+  MaxOnRank0(secs, fig.maxs, 3, comm);
   if (rank != 0) return;
 
   t.clusters = std::move(mine.clusters);
-  const std::vector<uint8_t> file = EncodeCpcaTransport(t);
-  const std::string& prtc = ctx.folder.compressed;
-  if (options.fail_in == "write" && options.fail_rank == 0) {
-    std::ofstream(prtc + ".tmp", std::ios::binary)
-        .write(reinterpret_cast<const char*>(file.data()),
-               static_cast<std::streamsize>(file.size() / 2));
-    ExitAbruptly(rank, "halfway through writing " + prtc);
-  }
-  WriteFileDurably(prtc, std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
-  const CpcaStats& st = mine.stats;
-  rep.write_seconds = FarmNow() - tw;
-  rep.every_rank_reads = every_rank_reads && size > 1;
-  rep.rank0_bytes_read = count * d * sizeof(float) + (every_rank_reads ? 0 : bytes_sent);
-  rep.rank0_bytes_sent = bytes_sent;
-  rep.bytes_moved = bytes_sent;
-  rep.read_seconds = maxs[0];
-  rep.row_transform_seconds = maxs[1];
-  rep.compress_seconds = maxs[2];
-  rep.terms = t.term_count() + t.coefficients.size();
-  rep.compressed_bytes = file.size();
-  rep.raw_kept = !options.discard_raw;
-  rep.relative_frobenius_error = st.relative_error;
-  rep.cpca.enabled = true;
-  rep.cpca.clusters = header.cpca_clusters;
-  rep.cpca.bases = S;
-  rep.cpca.method = sparse && st.rows_dense_pass < R ? "dense-recluster" : "standard";
-  rep.cpca.rows_dense_pass = st.rows_dense_pass;
-  rep.cpca.lbg_iterations = st.lbg_iterations;
-  rep.cpca.distance_evaluations = evals_all;
-  rep.cpca.empty_clusters = st.empty_clusters;
-  rep.cpca.seconds_dense = st.seconds_dense;
-  rep.cpca.seconds_recluster = st.seconds_recluster;
-  rep.cpca.basis_terms = t.term_count();
-  rep.wall_seconds = FarmNow() - start;
-  ctx.run_eta.StepFinished("compress");
-  rep.enabled = true;
-  if (!options.quiet)
-    spdlog::info(
-        "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative Frobenius "
-        "error {:.3f}%, cpca {} ({} clusters x {} bases, {} LBG iterations over {} of {} rows, "
-        "{} basis terms)",
-        prtc, Progress::FormatDuration(rep.wall_seconds), static_cast<double>(rep.raw_bytes) / 1e6,
-        static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
-        100 * rep.relative_frobenius_error, rep.cpca.method, rep.cpca.clusters, rep.cpca.bases,
-        rep.cpca.lbg_iterations, rep.cpca.rows_dense_pass, R, rep.cpca.basis_terms);
+  fig.every_rank_reads = every_rank_reads;
+  fig.rank0_rows_bytes = count * d * sizeof(float);
+  fig.bytes_sent = bytes_sent;
+  fig.sparse = sparse != nullptr;
+  WriteCpcaFileAndReport(ctx, t, mine.stats, fig, tw, start);
 }
 
 }  // namespace prt

@@ -1,6 +1,9 @@
 // prt-farm's setup phase (docs/farm.md, "Phases"): rank 0 loads and validates the scene,
 // prepares the run folder (or verifies the checkpoints of --resume) and broadcasts the parameters
 // and the world-space geometry; every rank builds its Embree scene and sampler from those bytes.
+// Rank 0's steps, in the order PrepareOnRank0 runs them: LoadScene, ResolveSampling,
+// ResolveInterreflection, MakeRunManifest (farm/run_manifest.h), StartReport, then
+// PrepareRunFolder's OpenFolder, PlanRunStages, RemoveStaleOutputs and ReopenCheckpoints.
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -109,6 +112,507 @@ void AgreeOnSharedFolder(FarmContext& ctx) {
   }
 }
 
+// The scene file's text and its description (the built-in default scene without a path), its
+// assets looked up in --data-dir and the build's data folder; the report's "scene".
+SceneDescription LoadScene(FarmContext& ctx, std::string& scene_text) {
+  const FarmOptions& o = ctx.options;
+  std::vector<std::string> data_dirs = o.data_dirs;
+  if (std::strlen(PRT_DEFAULT_DATA_DIR) > 0) data_dirs.emplace_back(PRT_DEFAULT_DATA_DIR);
+
+  SceneDescription scene;
+  if (o.scene_path.empty()) {
+    scene_text = DefaultSceneText();
+    scene = ParseScene(scene_text, kDefaultSceneName, "", data_dirs);
+    ctx.report.scene = kDefaultSceneName;
+  } else {
+    std::error_code ec;
+    if (!fs::is_regular_file(o.scene_path, ec)) {
+      throw InputError(o.scene_path, fs::exists(o.scene_path, ec)
+                                         ? "the scene is not a regular file"
+                                         : "scene file not found");
+    }
+    scene_text = ReadWholeFile(o.scene_path);
+    scene = LoadSceneFile(o.scene_path, data_dirs);
+    ctx.report.scene = o.scene_path;
+  }
+  return scene;
+}
+
+// What the run samples, the options overriding the scene: the method (brute or sparse, and its
+// plan), the job (transport or visibility), vertices or camera pixels, n, rays per texel and
+// the seed; the world-space geometry (returned, and its bytes in `geometry_bytes`) and the row
+// count. Sets ctx.method, ctx.params and ctx.plan, and `resolved`'s sampling fields.
+SceneGeometry ResolveSampling(FarmContext& ctx, const SceneDescription& scene,
+                              ResolvedSampling& resolved, std::string& geometry_bytes) {
+  const FarmOptions& o = ctx.options;
+  ctx.method = o.method.empty() ? scene.sampling.method : o.method;
+  if (ctx.method != "brute" && ctx.method != "sparse") {
+    throw InputError(scene.file, "unknown method '" + ctx.method + "' (brute or sparse)");
+  }
+  const std::string job = o.job.empty() ? scene.sampling.job : o.job;
+  if (job != "transport" && job != "visibility") {
+    throw InputError(scene.file, "unknown job '" + job + "' (transport or visibility)");
+  }
+  const bool visibility = job == "visibility";
+  if (visibility) ctx.method = kVisibilityPhaseName;
+  const bool image = scene.samples == SpatialSamples::kCameraPixels;
+  if (image && visibility)
+    throw InputError(scene.file,
+                     "samples = \"camera\" needs job \"transport\" (visibility cubemaps are "
+                     "per vertex, for glossy meshes)");
+  const VisibilitySettings& vis = scene.visibility;
+  const int n = visibility ? vis.n : scene.cubemap_n;
+  const int rays = visibility             ? vis.supersample * vis.supersample
+                   : o.rays_per_texel > 0 ? o.rays_per_texel
+                                          : scene.sampling.rays_per_texel;
+  if (visibility) {
+    spdlog::info("scene {} ('{}'): visibility cubemaps at n = {}, {} ray(s) per texel, {} bit(s)",
+                 ctx.report.scene, scene.name, n, rays, vis.bits);
+  } else {
+    spdlog::info("scene {} ('{}'): n = {}, {} rays per texel, method {}", ctx.report.scene,
+                 scene.name, n, rays, ctx.method);
+  }
+  SceneGeometry geometry = BuildSceneGeometry(scene);
+  geometry_bytes = SerializeSceneGeometry(geometry);
+  uint64_t rows = 0;
+  for (const SceneMesh& m : geometry.meshes) rows += m.mesh.positions.size();
+  if (rows == 0) throw InputError(scene.file, "the scene has no spatial samples");
+  if (image) {
+    // Image relighting (docs/image-relighting.md): one row per camera pixel, raster order.
+    ctx.params.image = 1;
+    ctx.params.camera = scene.camera;
+    rows = static_cast<uint64_t>(scene.camera.width) * scene.camera.height;
+    spdlog::info("image relighting: {}×{} camera pixels are the samples", scene.camera.width,
+                 scene.camera.height);
+  }
+
+  ctx.params.rows = rows;
+  ctx.params.geometry_bytes = geometry_bytes.size();
+  const uint64_t seed = o.seed ? *o.seed : scene.sampling.seed;
+  ctx.params.seed = seed;
+  ctx.params.cubemap_n = n;
+  ctx.params.rays_per_texel = rays;
+  if (visibility) {
+    ctx.params.visibility = 1;
+    ctx.params.visibility_supersample = vis.supersample;
+    ctx.params.visibility_bits = vis.bits;
+  } else if (ctx.method == "sparse") {
+    ctx.params.sparse = 1;
+    ctx.plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
+  }
+  resolved.job = job;
+  resolved.method = visibility ? std::string("brute") : ctx.method;
+  resolved.cubemap_n = n;
+  resolved.rays_per_texel = rays;
+  resolved.seed = seed;
+  resolved.rows = rows;
+  return geometry;
+}
+
+// Interreflection (docs/interreflection.md): the bounces, their estimator (gathering or path
+// tracing), the indirect grid's n, the [sparse] indirect mode and the channels (3 where an
+// albedo is coloured), checked against the job and the samples. Sets ctx.params,
+// ctx.interreflection (the report's section) and `resolved`'s interreflection fields.
+void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
+                            const SceneGeometry& geometry, ResolvedSampling& resolved) {
+  const FarmOptions& o = ctx.options;
+  const bool visibility = resolved.job == "visibility";
+  const bool image = scene.samples == SpatialSamples::kCameraPixels;
+  const int n = resolved.cubemap_n;
+  const int bounces = o.bounces ? *o.bounces : scene.sampling.bounces;
+  if (bounces > 0 && visibility)
+    throw InputError(scene.file, "bounces = " + std::to_string(bounces) +
+                                     " needs job \"transport\" (visibility maps are direct)");
+  const int indirect_n =
+      scene.sampling.indirect_n > 0 ? scene.sampling.indirect_n : std::max(1, n / 4);
+  if (bounces > 0 && indirect_n > n)
+    throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
+                                     " is larger than the cubemap's n " + std::to_string(n));
+  ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
+  if (image && bounces > 0 && !ctx.params.path_estimator)
+    throw InputError(scene.file,
+                     "samples = \"camera\" with bounces = " + std::to_string(bounces) +
+                         " needs [sampling] estimator = \"path\": bounce gathering reads the "
+                         "previous bounce's rows at mesh vertices, which an image run does not "
+                         "compute (docs/image-relighting.md)");
+  // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
+  // 2 features.
+  ctx.params.sparse_indirect = 0;
+  if (bounces > 0 && ctx.params.sparse && scene.sparse.indirect != "full")
+    ctx.params.sparse_indirect = scene.sparse.indirect == "features" ? 2 : 1;
+  ctx.params.sparse_feature_paths = scene.sparse.feature_paths;
+  ctx.params.bounces = bounces;
+  ctx.params.indirect_n = indirect_n;
+  ctx.params.gather_paths = scene.sampling.gather_paths;
+  ctx.params.near_field = scene.sampling.near_field;
+  ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
+  if (bounces > 0) {
+    ctx.interreflection = {{"bounces", bounces},
+                           {"estimator", scene.sampling.estimator},
+                           {"indirect_n", indirect_n},
+                           {"paths", scene.sampling.gather_paths},
+                           {"channels", ctx.params.channels},
+                           {"per_bounce", nlohmann::ordered_json::array()}};
+    if (ctx.params.path_estimator)
+      spdlog::info(
+          "interreflection: {} bounce(s) by per-element path tracing, {} paths per "
+          "vertex, {} channel(s)",
+          bounces, scene.sampling.gather_paths, ctx.params.channels);
+    else
+      spdlog::info(
+          "interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
+          "vertex, {} channel(s)",
+          bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
+  }
+
+  resolved.bounces = bounces;
+  resolved.estimator = scene.sampling.estimator;
+  resolved.indirect_n = indirect_n;
+  resolved.gather_paths = scene.sampling.gather_paths;
+  resolved.near_field = scene.sampling.near_field;
+  resolved.channels = ctx.params.channels;
+}
+
+// The report's settings (report.json: the scene's name, method, n, rays, seed, rows; the
+// visibility job's section).
+void StartReport(FarmContext& ctx, const SceneDescription& scene,
+                 const ResolvedSampling& resolved) {
+  const FarmOptions& o = ctx.options;
+  const bool visibility = resolved.job == "visibility";
+  const VisibilitySettings& vis = scene.visibility;
+  const int n = resolved.cubemap_n;
+  const uint64_t rows = resolved.rows;
+  FarmReport& rep = ctx.report;
+  rep.scene_name = scene.name;
+  rep.method = ctx.method;
+  rep.cubemap_n = n;
+  rep.rays_per_texel = resolved.rays_per_texel;
+  if (visibility) {
+    rep.visibility.enabled = true;
+    rep.visibility.n = n;
+    rep.visibility.supersample = vis.supersample;
+    rep.visibility.bits = vis.bits;
+    rep.visibility.vertices = rows;
+  }
+  rep.seed = resolved.seed;
+  rep.rows = rows;
+  rep.rows_per_block = o.rows_per_block;
+}
+
+// Whether `path` is a complete transport file (plain or packed): its header says so.
+bool TransportComplete(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) return false;
+  try {
+    TransportFileReader r(path);
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+// What the run folder holds for the inputs of `manifest` (RunFolderState).
+RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest) {
+  const RunFolder& f = ctx.folder;
+  std::error_code ec;
+  RunFolderState state;
+  if (ctx.params.visibility) {
+    state.rows_complete = fs::exists(f.visibility, ec);
+    state.rows_unfinished = fs::exists(f.journal, ec) || fs::exists(f.visibility_chunks, ec);
+    return state;
+  }
+  state.rows_complete = TransportComplete(f.transport);
+  state.rows_unfinished = !state.rows_complete && fs::exists(f.partial, ec);
+  // transport.prtc is current when its header is the one the manifest's compression stage
+  // was keyed with.
+  if (!ctx.options.no_compress && fs::exists(f.compressed, ec)) {
+    try {
+      state.compressed_current =
+          CompressedHeaderKey(ReadCompressedTransportHeader(f.compressed)) ==
+          manifest.Stage(kStageCompression)->at("header_xxh64").get<std::string>();
+    } catch (const InputError&) {
+      state.compressed_current = false;  // damaged: written again
+    }
+  }
+  if (const nlohmann::ordered_json* ind = manifest.Stage(kStageIndirect)) {
+    state.indirect_complete = true;
+    for (const std::string& file :
+         IndirectFiles(f, ind->at("bounces").get<int>(), ind->at("estimator") == "path"))
+      state.indirect_complete = state.indirect_complete && TransportComplete(file);
+    state.indirect_unfinished = !state.indirect_complete && fs::exists(f.indirect, ec);
+  }
+  if (fs::exists(f.accuracy, ec)) {
+    try {
+      const nlohmann::json a = nlohmann::json::parse(ReadWholeFile(f.accuracy));
+      state.estimate_current =
+          a.value("key", std::string()) == manifest.StageKeyHex(kStageEstimate);
+    } catch (const std::exception&) {
+      state.estimate_current = false;
+    }
+  }
+  return state;
+}
+
+// The run folder created (its checkpoints folder too); with --resume, the older run's manifest
+// (none: a fresh run) and its report (ctx.previous_report: the figures of the stages it
+// re-uses). A folder holding a run is refused without --resume or --force (UsageError).
+std::optional<RunManifest> OpenFolder(FarmContext& ctx) {
+  const FarmOptions& o = ctx.options;
+  const RunFolder& f = ctx.folder;
+  std::error_code ec;
+  if (fs::exists(f.dir, ec) && !fs::is_directory(f.dir, ec)) {
+    throw FileIoError(f.dir, "the output path exists and is not a folder");
+  }
+  fs::create_directories(f.checkpoints, ec);
+  if (ec) throw FileIoError(f.checkpoints, "cannot create the run folder: " + ec.message());
+
+  const bool has_run = fs::exists(f.journal) || fs::exists(f.partial) || fs::exists(f.transport) ||
+                       fs::exists(f.visibility) || fs::exists(f.compressed);
+  std::optional<RunManifest> older;
+  if (o.resume && fs::exists(f.manifest)) {
+    older = RunManifest::FromJsonText(ReadWholeFile(f.manifest), f.manifest);
+  } else if (o.resume) {
+    spdlog::info("--resume: {} holds no checkpoints yet; starting a fresh run", f.dir);
+  } else if (has_run && !o.force) {
+    throw UsageError(f.dir +
+                     " already holds a prt-farm run; pass --resume to continue it (or to "
+                     "re-run what a change to the scene touches) or --force to start over");
+  }
+  // The report of the run being continued: the figures of the stages it re-uses.
+  if (older && fs::exists(f.report)) {
+    try {
+      ctx.previous_report = ReadWholeFile(f.report);
+    } catch (const std::exception&) {
+    }
+  }
+  return older;
+}
+
+// Each stage's decision (run, resume, re-use; farm/stage_plan.h) from the older manifest, this
+// one and what the folder holds, logged; ctx.stage_plan, the estimate key and the params that
+// say which stages run.
+void PlanRunStages(FarmContext& ctx, const RunManifest& manifest,
+                   const std::optional<RunManifest>& older) {
+  const FarmOptions& o = ctx.options;
+  const RunFolder& f = ctx.folder;
+  std::error_code ec;
+  StagePlanOptions po;
+  po.force = o.force;
+  po.compress = !o.no_compress && !ctx.params.visibility;
+  po.visibility = ctx.params.visibility != 0;
+  const RunFolderState state = LookAtFolder(ctx, manifest);
+  ctx.stage_plan = PlanStages(older ? &*older : nullptr, manifest, state, po);
+  const StagePlan& plan = ctx.stage_plan;
+  ctx.estimate_key = manifest.StageKeyHex(kStageEstimate);
+  for (const StageDecision& d : plan.stages) {
+    if (o.resume || d.action != StageAction::kRun || d.name == kStageAssets) {
+      spdlog::info("stage {}: {}{}{}", d.name, ToString(d.action), d.reason.empty() ? "" : " (",
+                   d.reason.empty() ? "" : d.reason + ")");
+    }
+  }
+  // A vertex run leaves no image.prti behind (prt-pack would take its rows for pixels).
+  if (!ctx.params.image) fs::remove(f.image, ec);
+  const StageAction rows_action = plan.Get(kStageRows).action;
+  ctx.params.run_rows = rows_action == StageAction::kReuse ? 0 : 1;
+  ctx.params.run_compression = plan.Runs(kStageCompression) ? 1 : 0;
+  ctx.params.run_estimate = plan.Runs(kStageEstimate) ? 1 : 0;
+}
+
+// Outputs that no longer match their inputs go before anything else is written: a run that
+// fails from here on leaves no stale asset (the report says what is missing). `fresh`: the
+// rows are sampled from scratch. Also sets whether the indirect stage runs, and its key.
+void RemoveStaleOutputs(FarmContext& ctx, const RunManifest& manifest, bool fresh) {
+  const FarmOptions& o = ctx.options;
+  const RunFolder& f = ctx.folder;
+  const StagePlan& plan = ctx.stage_plan;
+  std::error_code ec;
+  if (fresh) {
+    for (const std::string& p : {f.transport, f.partial, f.journal, f.manifest, f.report,
+                                 f.visibility, f.visibility_chunks, f.variance, f.variance_log}) {
+      fs::remove(p, ec);
+    }
+    fs::remove_all(f.sparse, ec);
+  }
+  if (fresh || plan.Runs(kStageCompression) || o.no_compress) fs::remove(f.compressed, ec);
+  // The indirect stage from scratch: its bounce files and journal go (a resumed one keeps
+  // them; its journal is keyed by the stage's inputs).
+  ctx.params.run_indirect = plan.Runs(kStageIndirect) ? 1 : 0;
+  ctx.indirect_key = manifest.StageKey(kStageIndirect);
+  if (!plan.Has(kStageIndirect) ||
+      (plan.Has(kStageIndirect) && plan.Get(kStageIndirect).action == StageAction::kRun)) {
+    fs::remove_all(f.indirect, ec);
+    fs::remove(f.indirect_journal, ec);
+  }
+  if (fresh || plan.Runs(kStageEstimate)) fs::remove(f.accuracy, ec);
+}
+
+// transport.prtt.partial reopened (ctx.writer) and its journal read: a sparse run keeps every
+// journaled job for its phases to verify; a brute-force run's jobs are verified here against
+// the rows' checksums, and those that verify are returned (the others counted as rejected).
+std::vector<JournalEntry> ReopenPartialRows(FarmContext& ctx, const RunManifest& manifest,
+                                            const TransportFileInfo& info) {
+  const RunFolder& f = ctx.folder;
+  std::vector<JournalEntry> reused;
+  ctx.writer.emplace(TransportFileWriter::Reopen(f.partial, info));
+  const JournalContents journal = ReadJournal(f.journal);
+  if (journal.has_header && journal.run_key != manifest.Key()) {
+    throw InputError(f.journal, "journal of a different run; use --force to start over");
+  }
+  ctx.report.damaged_journal_lines = journal.damaged_lines;
+  if (journal.damaged_lines > 0) {
+    spdlog::warn("{}: {} damaged or torn journal line(s) ignored (those jobs are redone)",
+                 f.journal, journal.damaged_lines);
+  }
+  std::vector<float> rows;
+  for (const JournalEntry& e : journal.entries) {
+    if (ctx.params.sparse) {
+      // Verified against the files when its phase is planned (SparseSamplingPhase).
+      if (!e.phase.empty()) ctx.journal_entries.push_back(e);
+      continue;
+    }
+    if (e.rows.end() > info.rows || e.rows.count * info.row_bytes() > kMaxJobBytes * 4) {
+      ++ctx.report.checkpoints_rejected;
+      continue;
+    }
+    rows.resize(static_cast<std::size_t>(e.rows.count * info.cols()));
+    ctx.writer->ReadRows(e.rows.first, e.rows.count, rows.data());
+    if (Checksum64(rows.data(), rows.size() * sizeof(float)) == e.rows_checksum) {
+      reused.push_back(e);
+    } else {
+      ++ctx.report.checkpoints_rejected;
+    }
+  }
+  if (ctx.report.checkpoints_rejected > 0) {
+    spdlog::warn("{} journaled job(s) did not verify against {} and are redone",
+                 ctx.report.checkpoints_rejected, f.partial);
+  }
+  return reused;
+}
+
+// The rows' stage resumed or started: the journal's entries that the phases will re-use
+// (brute force: those whose rows verify against transport.prtt.partial now; sparse and
+// visibility: verified by their phases), the reopened or created rows file, the variance
+// accumulator and the journal this run appends to.
+void ReopenCheckpoints(FarmContext& ctx, const RunManifest& manifest, const SceneGeometry& geometry,
+                       bool fresh) {
+  const FarmOptions& o = ctx.options;
+  const RunFolder& f = ctx.folder;
+  std::error_code ec;
+  const TransportFileInfo info{manifest.Stage(kStageRows)->at("samples").get<uint64_t>(),
+                               static_cast<uint32_t>(ctx.params.cubemap_n), o.rows_per_block,
+                               static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.params.seed};
+  std::vector<JournalEntry> reused;
+  if (!fresh && ctx.params.visibility) {
+    // The chunks are verified against visibility.chunks by the visibility phase.
+    const JournalContents journal = ReadJournal(f.journal);
+    if (journal.has_header && journal.run_key != manifest.Key()) {
+      throw InputError(f.journal, "journal of a different run; use --force to start over");
+    }
+    ctx.report.damaged_journal_lines = journal.damaged_lines;
+    for (const JournalEntry& e : journal.entries) {
+      if (e.phase == kVisibilityPhaseName) ctx.journal_entries.push_back(e);
+    }
+    fs::remove(f.visibility, ec);  // written again by the finalize phase
+  } else if (!fresh) {
+    if (fs::exists(f.partial)) {
+      reused = ReopenPartialRows(ctx, manifest, info);
+    } else {
+      spdlog::warn("--resume: {} is missing; every job is redone", f.partial);
+    }
+  }
+  if (!ctx.writer && !ctx.params.visibility) {
+    ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
+  }
+  if (!ctx.params.visibility) {
+    ctx.variance = std::make_unique<VarianceAccumulator>(f, RowGroupsOf(ctx.params, geometry),
+                                                         ctx.params.cubemap_n,
+                                                         ctx.params.rays_per_texel, fresh);
+  }
+  ctx.journal = std::make_unique<CheckpointJournal>(
+      f.journal, manifest.Key(),
+      ctx.params.sparse || ctx.params.visibility ? ctx.journal_entries : reused);
+  // Brute force: the jobs whose rows verified are the method's re-used checkpoints.
+  if (!ctx.params.sparse && !ctx.params.visibility) ctx.journal_entries = std::move(reused);
+  if (!fresh && ctx.params.visibility) {
+    spdlog::info("--resume: {} journaled visibility job(s) are verified against {}",
+                 ctx.journal_entries.size(), f.visibility_chunks);
+  } else if (!fresh && ctx.params.sparse) {
+    spdlog::info("--resume: {} journaled sparse job(s) are verified phase by phase",
+                 ctx.journal_entries.size());
+  } else if (!fresh) {
+    uint64_t rows_reused = 0;
+    for (const JournalEntry& e : ctx.journal_entries) rows_reused += e.rows.count;
+    spdlog::info("--resume: {} finished job(s) ({} of {} samples) re-used from checkpoints",
+                 ctx.journal_entries.size(), rows_reused, info.rows);
+  }
+}
+
+// Rank 0 makes the run folder this run's (docs/farm.md, "Stages and re-runs"): looks at what
+// it holds, plans the stages against the older run's manifest, removes the outputs that no
+// longer match their inputs, writes the scene, geometry and manifest, and reopens (or creates)
+// the rows' files and the checkpoint journal.
+void PrepareRunFolder(FarmContext& ctx, const RunManifest& manifest, const std::string& scene_text,
+                      const std::string& geometry_bytes, const SceneGeometry& geometry) {
+  const FarmOptions& o = ctx.options;
+  const RunFolder& f = ctx.folder;
+  const std::optional<RunManifest> older = OpenFolder(ctx);
+  PlanRunStages(ctx, manifest, older);
+  const StagePlan& plan = ctx.stage_plan;
+  const StageAction rows_action = plan.Get(kStageRows).action;
+  if (plan.NothingToDo()) {
+    ctx.params.complete = 1;
+    ctx.folder_ready = true;
+    if (plan.Get(kStageAssets).action == StageAction::kReuse) {
+      if (!o.quiet) {
+        std::fprintf(stderr,
+                     "prt-farm: --resume: %s is complete and its inputs are unchanged; "
+                     "nothing to do (use --force to start over)\n",
+                     f.dir.c_str());
+      }
+      ctx.params.complete = 2;  // not even the report changes
+      return;
+    }
+    // Only what prt-pack reads changed (names, albedos, materials, camera, comments).
+    WriteFileDurably(f.scene_copy, scene_text);
+    WriteFileDurably(f.geometry, geometry_bytes);
+    WriteFileDurably(f.manifest, manifest.ToJsonText());
+    return;
+  }
+
+  const bool fresh = rows_action == StageAction::kRun;
+  RemoveStaleOutputs(ctx, manifest, fresh);
+  // From here on the folder is this run's: a failure report may replace an older report.
+  ctx.folder_ready = true;
+  WriteFileDurably(f.scene_copy, scene_text);
+  WriteFileDurably(f.geometry, geometry_bytes);
+  WriteFileDurably(f.manifest, manifest.ToJsonText());
+  if (rows_action == StageAction::kReuse) return;  // nothing to sample
+  ReopenCheckpoints(ctx, manifest, geometry, fresh);
+}
+
+// Rank 0's half of the setup: the scene loaded and resolved against the options, the
+// manifest (every stage's inputs and key, farm/run_manifest.h), the report's settings, then
+// the run folder. Throws InputError (exit code 2) for a bad scene, FileIoError (3) for the
+// folder.
+void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes) {
+  // 1. The scene (bad input: exit code 2).
+  std::string scene_text;
+  SceneDescription scene = LoadScene(ctx, scene_text);
+  ResolvedSampling resolved;
+  const SceneGeometry geometry = ResolveSampling(ctx, scene, resolved, geometry_bytes);
+  ResolveInterreflection(ctx, scene, geometry, resolved);
+  const bool visibility = resolved.job == "visibility";
+  const RunManifest manifest =
+      MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, ctx.options,
+                      visibility ? nullptr : &ctx.compression_plan.emplace());
+  StartReport(ctx, scene, resolved);
+
+  ctx.scene = std::move(scene);  // the compression phase reads its [compression] settings
+
+  // 2. The run folder (I/O errors: exit code 3).
+  PrepareRunFolder(ctx, manifest, scene_text, geometry_bytes, geometry);
+}
+
 class SetupPhase final : public FarmPhase {
  public:
   const char* name() const override { return "setup"; }
@@ -191,408 +695,6 @@ class SetupPhase final : public FarmPhase {
     }
     AgreeOrStop(ctx, local);
     AgreeOnSharedFolder(ctx);
-  }
-
- private:
-  static void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes) {
-    const FarmOptions& o = ctx.options;
-    std::vector<std::string> data_dirs = o.data_dirs;
-    if (std::strlen(PRT_DEFAULT_DATA_DIR) > 0) data_dirs.emplace_back(PRT_DEFAULT_DATA_DIR);
-
-    // 1. The scene (bad input: exit code 2).
-    std::string scene_text;
-    SceneDescription scene;
-    if (o.scene_path.empty()) {
-      scene_text = DefaultSceneText();
-      scene = ParseScene(scene_text, kDefaultSceneName, "", data_dirs);
-      ctx.report.scene = kDefaultSceneName;
-    } else {
-      std::error_code ec;
-      if (!fs::is_regular_file(o.scene_path, ec)) {
-        throw InputError(o.scene_path, fs::exists(o.scene_path, ec)
-                                           ? "the scene is not a regular file"
-                                           : "scene file not found");
-      }
-      scene_text = ReadWholeFile(o.scene_path);
-      scene = LoadSceneFile(o.scene_path, data_dirs);
-      ctx.report.scene = o.scene_path;
-    }
-    ctx.method = o.method.empty() ? scene.sampling.method : o.method;
-    if (ctx.method != "brute" && ctx.method != "sparse") {
-      throw InputError(scene.file, "unknown method '" + ctx.method + "' (brute or sparse)");
-    }
-    const std::string job = o.job.empty() ? scene.sampling.job : o.job;
-    if (job != "transport" && job != "visibility") {
-      throw InputError(scene.file, "unknown job '" + job + "' (transport or visibility)");
-    }
-    const bool visibility = job == "visibility";
-    if (visibility) ctx.method = kVisibilityPhaseName;
-    const bool image = scene.samples == SpatialSamples::kCameraPixels;
-    if (image && visibility)
-      throw InputError(scene.file,
-                       "samples = \"camera\" needs job \"transport\" (visibility cubemaps are "
-                       "per vertex, for glossy meshes)");
-    const VisibilitySettings& vis = scene.visibility;
-    const int n = visibility ? vis.n : scene.cubemap_n;
-    const int rays = visibility             ? vis.supersample * vis.supersample
-                     : o.rays_per_texel > 0 ? o.rays_per_texel
-                                            : scene.sampling.rays_per_texel;
-    if (visibility) {
-      spdlog::info("scene {} ('{}'): visibility cubemaps at n = {}, {} ray(s) per texel, {} bit(s)",
-                   ctx.report.scene, scene.name, n, rays, vis.bits);
-    } else {
-      spdlog::info("scene {} ('{}'): n = {}, {} rays per texel, method {}", ctx.report.scene,
-                   scene.name, n, rays, ctx.method);
-    }
-    const SceneGeometry geometry = BuildSceneGeometry(scene);
-    geometry_bytes = SerializeSceneGeometry(geometry);
-    uint64_t rows = 0;
-    for (const SceneMesh& m : geometry.meshes) rows += m.mesh.positions.size();
-    if (rows == 0) throw InputError(scene.file, "the scene has no spatial samples");
-    if (image) {
-      // Image relighting (docs/image-relighting.md): one row per camera pixel, raster order.
-      ctx.params.image = 1;
-      ctx.params.camera = scene.camera;
-      rows = static_cast<uint64_t>(scene.camera.width) * scene.camera.height;
-      spdlog::info("image relighting: {}×{} camera pixels are the samples", scene.camera.width,
-                   scene.camera.height);
-    }
-
-    ctx.params.rows = rows;
-    ctx.params.geometry_bytes = geometry_bytes.size();
-    const uint64_t seed = o.seed ? *o.seed : scene.sampling.seed;
-    ctx.params.seed = seed;
-    ctx.params.cubemap_n = n;
-    ctx.params.rays_per_texel = rays;
-    if (visibility) {
-      ctx.params.visibility = 1;
-      ctx.params.visibility_supersample = vis.supersample;
-      ctx.params.visibility_bits = vis.bits;
-    } else if (ctx.method == "sparse") {
-      ctx.params.sparse = 1;
-      ctx.plan = PlanFromSettings(scene.sparse, geometry.diagonal(), scene.cubemap_n);
-    }
-
-    // Interreflection (docs/interreflection.md).
-    const int bounces = o.bounces ? *o.bounces : scene.sampling.bounces;
-    if (bounces > 0 && visibility)
-      throw InputError(scene.file, "bounces = " + std::to_string(bounces) +
-                                       " needs job \"transport\" (visibility maps are direct)");
-    const int indirect_n =
-        scene.sampling.indirect_n > 0 ? scene.sampling.indirect_n : std::max(1, n / 4);
-    if (bounces > 0 && indirect_n > n)
-      throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
-                                       " is larger than the cubemap's n " + std::to_string(n));
-    ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
-    if (image && bounces > 0 && !ctx.params.path_estimator)
-      throw InputError(scene.file,
-                       "samples = \"camera\" with bounces = " + std::to_string(bounces) +
-                           " needs [sampling] estimator = \"path\": bounce gathering reads the "
-                           "previous bounce's rows at mesh vertices, which an image run does not "
-                           "compute (docs/image-relighting.md)");
-    // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
-    // 2 features.
-    ctx.params.sparse_indirect = 0;
-    if (bounces > 0 && ctx.params.sparse && scene.sparse.indirect != "full")
-      ctx.params.sparse_indirect = scene.sparse.indirect == "features" ? 2 : 1;
-    ctx.params.sparse_feature_paths = scene.sparse.feature_paths;
-    ctx.params.bounces = bounces;
-    ctx.params.indirect_n = indirect_n;
-    ctx.params.gather_paths = scene.sampling.gather_paths;
-    ctx.params.near_field = scene.sampling.near_field;
-    ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
-    if (bounces > 0) {
-      ctx.interreflection = {{"bounces", bounces},
-                             {"estimator", scene.sampling.estimator},
-                             {"indirect_n", indirect_n},
-                             {"paths", scene.sampling.gather_paths},
-                             {"channels", ctx.params.channels},
-                             {"per_bounce", nlohmann::ordered_json::array()}};
-      if (ctx.params.path_estimator)
-        spdlog::info(
-            "interreflection: {} bounce(s) by per-element path tracing, {} paths per "
-            "vertex, {} channel(s)",
-            bounces, scene.sampling.gather_paths, ctx.params.channels);
-      else
-        spdlog::info(
-            "interreflection: {} bounce(s) gathered on the n = {} grid, {} directions per "
-            "vertex, {} channel(s)",
-            bounces, indirect_n, scene.sampling.gather_paths, ctx.params.channels);
-    }
-
-    ResolvedSampling resolved;
-    resolved.bounces = bounces;
-    resolved.estimator = scene.sampling.estimator;
-    resolved.indirect_n = indirect_n;
-    resolved.gather_paths = scene.sampling.gather_paths;
-    resolved.near_field = scene.sampling.near_field;
-    resolved.channels = ctx.params.channels;
-    resolved.job = job;
-    resolved.method = visibility ? std::string("brute") : ctx.method;
-    resolved.cubemap_n = n;
-    resolved.rays_per_texel = rays;
-    resolved.seed = seed;
-    resolved.rows = rows;
-    const RunManifest manifest =
-        MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, o,
-                        visibility ? nullptr : &ctx.compression_plan.emplace());
-
-    FarmReport& rep = ctx.report;
-    rep.scene_name = scene.name;
-    rep.method = ctx.method;
-    rep.cubemap_n = n;
-    rep.rays_per_texel = rays;
-    if (visibility) {
-      rep.visibility.enabled = true;
-      rep.visibility.n = n;
-      rep.visibility.supersample = vis.supersample;
-      rep.visibility.bits = vis.bits;
-      rep.visibility.vertices = rows;
-    }
-    rep.seed = seed;
-    rep.rows = rows;
-    rep.rows_per_block = o.rows_per_block;
-
-    ctx.scene = std::move(scene);  // the compression phase reads its [compression] settings
-
-    // 2. The run folder (I/O errors: exit code 3).
-    PrepareRunFolder(ctx, manifest, scene_text, geometry_bytes, geometry);
-  }
-
-  // Whether `path` is a complete transport file (plain or packed): its header says so.
-  static bool TransportComplete(const std::string& path) {
-    std::error_code ec;
-    if (!fs::exists(path, ec)) return false;
-    try {
-      TransportFileReader r(path);
-      return true;
-    } catch (const std::exception&) {
-      return false;
-    }
-  }
-
-  // What the run folder holds for the inputs of `manifest` (RunFolderState).
-  static RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest) {
-    const RunFolder& f = ctx.folder;
-    std::error_code ec;
-    RunFolderState state;
-    if (ctx.params.visibility) {
-      state.rows_complete = fs::exists(f.visibility, ec);
-      state.rows_unfinished = fs::exists(f.journal, ec) || fs::exists(f.visibility_chunks, ec);
-      return state;
-    }
-    state.rows_complete = TransportComplete(f.transport);
-    state.rows_unfinished = !state.rows_complete && fs::exists(f.partial, ec);
-    // transport.prtc is current when its header is the one the manifest's compression stage
-    // was keyed with.
-    if (!ctx.options.no_compress && fs::exists(f.compressed, ec)) {
-      try {
-        state.compressed_current =
-            CompressedHeaderKey(ReadCompressedTransportHeader(f.compressed)) ==
-            manifest.Stage(kStageCompression)->at("header_xxh64").get<std::string>();
-      } catch (const InputError&) {
-        state.compressed_current = false;  // damaged: written again
-      }
-    }
-    if (const nlohmann::ordered_json* ind = manifest.Stage(kStageIndirect)) {
-      state.indirect_complete = true;
-      for (const std::string& file :
-           IndirectFiles(f, ind->at("bounces").get<int>(), ind->at("estimator") == "path"))
-        state.indirect_complete = state.indirect_complete && TransportComplete(file);
-      state.indirect_unfinished = !state.indirect_complete && fs::exists(f.indirect, ec);
-    }
-    if (fs::exists(f.accuracy, ec)) {
-      try {
-        const nlohmann::json a = nlohmann::json::parse(ReadWholeFile(f.accuracy));
-        state.estimate_current =
-            a.value("key", std::string()) == manifest.StageKeyHex(kStageEstimate);
-      } catch (const std::exception&) {
-        state.estimate_current = false;
-      }
-    }
-    return state;
-  }
-
-  static void PrepareRunFolder(FarmContext& ctx, const RunManifest& manifest,
-                               const std::string& scene_text, const std::string& geometry_bytes,
-                               const SceneGeometry& geometry) {
-    const FarmOptions& o = ctx.options;
-    const RunFolder& f = ctx.folder;
-    std::error_code ec;
-    if (fs::exists(f.dir, ec) && !fs::is_directory(f.dir, ec)) {
-      throw FileIoError(f.dir, "the output path exists and is not a folder");
-    }
-    fs::create_directories(f.checkpoints, ec);
-    if (ec) throw FileIoError(f.checkpoints, "cannot create the run folder: " + ec.message());
-
-    const bool has_run = fs::exists(f.journal) || fs::exists(f.partial) ||
-                         fs::exists(f.transport) || fs::exists(f.visibility) ||
-                         fs::exists(f.compressed);
-    std::optional<RunManifest> older;
-    if (o.resume && fs::exists(f.manifest)) {
-      older = RunManifest::FromJsonText(ReadWholeFile(f.manifest), f.manifest);
-    } else if (o.resume) {
-      spdlog::info("--resume: {} holds no checkpoints yet; starting a fresh run", f.dir);
-    } else if (has_run && !o.force) {
-      throw UsageError(f.dir +
-                       " already holds a prt-farm run; pass --resume to continue it (or to "
-                       "re-run what a change to the scene touches) or --force to start over");
-    }
-    // The report of the run being continued: the figures of the stages it re-uses.
-    if (older && fs::exists(f.report)) {
-      try {
-        ctx.previous_report = ReadWholeFile(f.report);
-      } catch (const std::exception&) {
-      }
-    }
-
-    StagePlanOptions po;
-    po.force = o.force;
-    po.compress = !o.no_compress && !ctx.params.visibility;
-    po.visibility = ctx.params.visibility != 0;
-    const RunFolderState state = LookAtFolder(ctx, manifest);
-    ctx.stage_plan = PlanStages(older ? &*older : nullptr, manifest, state, po);
-    const StagePlan& plan = ctx.stage_plan;
-    ctx.estimate_key = manifest.StageKeyHex(kStageEstimate);
-    for (const StageDecision& d : plan.stages) {
-      if (o.resume || d.action != StageAction::kRun || d.name == kStageAssets) {
-        spdlog::info("stage {}: {}{}{}", d.name, ToString(d.action), d.reason.empty() ? "" : " (",
-                     d.reason.empty() ? "" : d.reason + ")");
-      }
-    }
-    // A vertex run leaves no image.prti behind (prt-pack would take its rows for pixels).
-    if (!ctx.params.image) fs::remove(f.image, ec);
-    const StageAction rows_action = plan.Get(kStageRows).action;
-    ctx.params.run_rows = rows_action == StageAction::kReuse ? 0 : 1;
-    ctx.params.run_compression = plan.Runs(kStageCompression) ? 1 : 0;
-    ctx.params.run_estimate = plan.Runs(kStageEstimate) ? 1 : 0;
-    if (plan.NothingToDo()) {
-      ctx.params.complete = 1;
-      ctx.folder_ready = true;
-      if (plan.Get(kStageAssets).action == StageAction::kReuse) {
-        if (!o.quiet) {
-          std::fprintf(stderr,
-                       "prt-farm: --resume: %s is complete and its inputs are unchanged; "
-                       "nothing to do (use --force to start over)\n",
-                       f.dir.c_str());
-        }
-        ctx.params.complete = 2;  // not even the report changes
-        return;
-      }
-      // Only what prt-pack reads changed (names, albedos, materials, camera, comments).
-      WriteFileDurably(f.scene_copy, scene_text);
-      WriteFileDurably(f.geometry, geometry_bytes);
-      WriteFileDurably(f.manifest, manifest.ToJsonText());
-      return;
-    }
-
-    // Outputs that no longer match their inputs go before anything else is written: a run that
-    // fails from here on leaves no stale asset (the report says what is missing).
-    const bool fresh = rows_action == StageAction::kRun;
-    if (fresh) {
-      for (const std::string& p : {f.transport, f.partial, f.journal, f.manifest, f.report,
-                                   f.visibility, f.visibility_chunks, f.variance, f.variance_log}) {
-        fs::remove(p, ec);
-      }
-      fs::remove_all(f.sparse, ec);
-    }
-    if (fresh || plan.Runs(kStageCompression) || o.no_compress) fs::remove(f.compressed, ec);
-    // The indirect stage from scratch: its bounce files and journal go (a resumed one keeps
-    // them; its journal is keyed by the stage's inputs).
-    ctx.params.run_indirect = plan.Runs(kStageIndirect) ? 1 : 0;
-    ctx.indirect_key = manifest.StageKey(kStageIndirect);
-    if (!plan.Has(kStageIndirect) ||
-        (plan.Has(kStageIndirect) && plan.Get(kStageIndirect).action == StageAction::kRun)) {
-      fs::remove_all(f.indirect, ec);
-      fs::remove(f.indirect_journal, ec);
-    }
-    if (fresh || plan.Runs(kStageEstimate)) fs::remove(f.accuracy, ec);
-    // From here on the folder is this run's: a failure report may replace an older report.
-    ctx.folder_ready = true;
-    WriteFileDurably(f.scene_copy, scene_text);
-    WriteFileDurably(f.geometry, geometry_bytes);
-    WriteFileDurably(f.manifest, manifest.ToJsonText());
-    if (rows_action == StageAction::kReuse) return;  // nothing to sample
-
-    const TransportFileInfo info{manifest.Stage(kStageRows)->at("samples").get<uint64_t>(),
-                                 static_cast<uint32_t>(ctx.params.cubemap_n), o.rows_per_block,
-                                 static_cast<uint32_t>(ctx.params.rays_per_texel), ctx.params.seed};
-    std::vector<JournalEntry> reused;
-    if (!fresh && ctx.params.visibility) {
-      // The chunks are verified against visibility.chunks by the visibility phase.
-      const JournalContents journal = ReadJournal(f.journal);
-      if (journal.has_header && journal.run_key != manifest.Key()) {
-        throw InputError(f.journal, "journal of a different run; use --force to start over");
-      }
-      ctx.report.damaged_journal_lines = journal.damaged_lines;
-      for (const JournalEntry& e : journal.entries) {
-        if (e.phase == kVisibilityPhaseName) ctx.journal_entries.push_back(e);
-      }
-      fs::remove(f.visibility, ec);  // written again by the finalize phase
-    } else if (!fresh) {
-      if (fs::exists(f.partial)) {
-        ctx.writer.emplace(TransportFileWriter::Reopen(f.partial, info));
-        const JournalContents journal = ReadJournal(f.journal);
-        if (journal.has_header && journal.run_key != manifest.Key()) {
-          throw InputError(f.journal, "journal of a different run; use --force to start over");
-        }
-        ctx.report.damaged_journal_lines = journal.damaged_lines;
-        if (journal.damaged_lines > 0) {
-          spdlog::warn("{}: {} damaged or torn journal line(s) ignored (those jobs are redone)",
-                       f.journal, journal.damaged_lines);
-        }
-        std::vector<float> rows;
-        for (const JournalEntry& e : journal.entries) {
-          if (ctx.params.sparse) {
-            // Verified against the files when its phase is planned (SparseSamplingPhase).
-            if (!e.phase.empty()) ctx.journal_entries.push_back(e);
-            continue;
-          }
-          if (e.rows.end() > info.rows || e.rows.count * info.row_bytes() > kMaxJobBytes * 4) {
-            ++ctx.report.checkpoints_rejected;
-            continue;
-          }
-          rows.resize(static_cast<std::size_t>(e.rows.count * info.cols()));
-          ctx.writer->ReadRows(e.rows.first, e.rows.count, rows.data());
-          if (Checksum64(rows.data(), rows.size() * sizeof(float)) == e.rows_checksum) {
-            reused.push_back(e);
-          } else {
-            ++ctx.report.checkpoints_rejected;
-          }
-        }
-        if (ctx.report.checkpoints_rejected > 0) {
-          spdlog::warn("{} journaled job(s) did not verify against {} and are redone",
-                       ctx.report.checkpoints_rejected, f.partial);
-        }
-      } else {
-        spdlog::warn("--resume: {} is missing; every job is redone", f.partial);
-      }
-    }
-    if (!ctx.writer && !ctx.params.visibility) {
-      ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
-    }
-    if (!ctx.params.visibility) {
-      ctx.variance = std::make_unique<VarianceAccumulator>(f, RowGroupsOf(ctx.params, geometry),
-                                                           ctx.params.cubemap_n,
-                                                           ctx.params.rays_per_texel, fresh);
-    }
-    ctx.journal = std::make_unique<CheckpointJournal>(
-        f.journal, manifest.Key(),
-        ctx.params.sparse || ctx.params.visibility ? ctx.journal_entries : reused);
-    // Brute force: the jobs whose rows verified are the method's re-used checkpoints.
-    if (!ctx.params.sparse && !ctx.params.visibility) ctx.journal_entries = std::move(reused);
-    if (!fresh && ctx.params.visibility) {
-      spdlog::info("--resume: {} journaled visibility job(s) are verified against {}",
-                   ctx.journal_entries.size(), f.visibility_chunks);
-    } else if (!fresh && ctx.params.sparse) {
-      spdlog::info("--resume: {} journaled sparse job(s) are verified phase by phase",
-                   ctx.journal_entries.size());
-    } else if (!fresh) {
-      uint64_t rows_reused = 0;
-      for (const JournalEntry& e : ctx.journal_entries) rows_reused += e.rows.count;
-      spdlog::info("--resume: {} finished job(s) ({} of {} samples) re-used from checkpoints",
-                   ctx.journal_entries.size(), rows_reused, info.rows);
-    }
   }
 };
 
