@@ -171,8 +171,10 @@ def main():
             for root, _, names in os.walk(p):
                 files += [os.path.join(root, n) for n in names
                           if n.endswith((".cpp", ".cc", ".h", ".hpp"))]
-        else:
+        elif os.path.isfile(p):
             files.append(p)
+        else:
+            ap.error(f"{p}: no such file or folder")
     rows = []
     for path in sorted(files):
         for kind, name, first, last in measure(path):
