@@ -277,13 +277,14 @@ void Compress(FarmContext& ctx) {
     // loads the lights and every rank accumulates over its share of the rows.
     std::unique_ptr<RadianceNormAccumulator> norms;
     if (ctx.params.run_estimate) {
-      if (rank == 0) LoadEstimateLights(ctx);
-      uint64_t count = ctx.estimate.lights.size();
+      // Rank 0's lights, kept for the estimate phase with the norms (a typed result).
+      EstimateLights* estimate = rank == 0 ? &LoadEstimateLights(ctx) : nullptr;
+      uint64_t count = estimate ? estimate->lights.size() : 0;
       CheckMpi(MPI_Bcast(&count, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast lights");
       std::vector<CubemapRgb> lights(static_cast<std::size_t>(count));
       for (std::size_t l = 0; l < lights.size(); ++l) {
         CubemapRgb& light = lights[l];
-        light = rank == 0 ? ctx.estimate.lights[l] : CubemapRgb{};
+        light = estimate ? estimate->lights[l] : CubemapRgb{};
         light.n = static_cast<int>(header.cubemap_n);
         for (int c = 0; c < 3; ++c) {
           std::vector<float>& ch = light.Channel(c);
@@ -379,8 +380,9 @@ void Compress(FarmContext& ctx) {
                           MPI_DOUBLE, MPI_SUM, 0, comm),
                "MPI_Reduce radiance norms");
       if (rank == 0) {
-        ctx.estimate.norms = std::move(all_norms);
-        ctx.estimate.have_norms = true;
+        EstimateLights& estimate = LoadEstimateLights(ctx);  // loaded above: kept as it is
+        estimate.norms = std::move(all_norms);
+        estimate.have_norms = true;
       }
     }
 
@@ -514,6 +516,13 @@ void Compress(FarmContext& ctx) {
 class CompressionPhase final : public FarmPhase {
  public:
   const char* name() const override { return "compress"; }
+  const char* stage() const override { return kStageCompression; }
+  // ~100 MB/s of float32 rows per rank (the 2-core VM's prior; docs/farm-compression.md).
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const double raw_bytes =
+        static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n * 4.0;
+    steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
+  }
   void Run(FarmContext& ctx) override { Compress(ctx); }
 };
 
@@ -559,8 +568,9 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
 }
 
-std::unique_ptr<FarmPhase> MakeCompressionPhase() {
-  return std::make_unique<CompressionPhase>();
+// transport.prtc, when the compression stage runs.
+void AddCompressionPhase(const FarmContext& ctx, PhaseList& phases) {
+  if (ctx.params.run_compression) phases.push_back(std::make_unique<CompressionPhase>());
 }
 
 }  // namespace prt

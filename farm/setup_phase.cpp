@@ -112,6 +112,7 @@ void AgreeOnSharedFolder(FarmContext& ctx) {
 class SetupPhase final : public FarmPhase {
  public:
   const char* name() const override { return "setup"; }
+  const char* stage() const override { return kStageAssets; }
 
   void Run(FarmContext& ctx) override {
     std::string geometry_bytes;
@@ -155,11 +156,11 @@ class SetupPhase final : public FarmPhase {
           const std::size_t background = BackgroundPixels(ctx.pixel_mesh);
           spdlog::info("image relighting: {} of {} pixels see the environment (background)",
                        background, ctx.pixel_mesh.size());
-          ctx.report.image_json = nlohmann::json{
+          ctx.report.SetSection("image", nlohmann::json{
               {"width", ctx.params.camera.width},
               {"height", ctx.params.camera.height},
               {"background_pixels",
-               background}}.dump();
+               background}}.dump());
         }
       } else {
         ctx.samples = SpatialSamplesOf(ctx.geometry);
@@ -302,12 +303,6 @@ class SetupPhase final : public FarmPhase {
     ctx.params.near_field = scene.sampling.near_field;
     ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
     if (bounces > 0) {
-      ctx.interreflection = {{"bounces", bounces},
-                             {"estimator", scene.sampling.estimator},
-                             {"indirect_n", indirect_n},
-                             {"paths", scene.sampling.gather_paths},
-                             {"channels", ctx.params.channels},
-                             {"per_bounce", nlohmann::ordered_json::array()}};
       if (ctx.params.path_estimator)
         spdlog::info(
             "interreflection: {} bounce(s) by per-element path tracing, {} paths per "
@@ -598,8 +593,9 @@ class SetupPhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeSetupPhase() {
-  return std::make_unique<SetupPhase>();
+// Always first: it decides what the run is.
+void AddSetupPhase(const FarmContext&, PhaseList& phases) {
+  phases.push_back(std::make_unique<SetupPhase>());
 }
 
 }  // namespace prt
