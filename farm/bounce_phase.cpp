@@ -84,12 +84,44 @@ class BouncePhase final : public FarmPhase {
   // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing. With [sparse]
   // indirect = "features" these run at the dense vertices only, and `features_step` is the
   // phase after each that reconstructs the other vertices from their feature texels.
-  BouncePhase(int k, bool features_step)
-      : k_(k),
+  BouncePhase(int k, bool features_step, std::shared_ptr<nlohmann::ordered_json> figures)
+      : figures_(std::move(figures)),
+        k_(k),
         step_(features_step),
         name_((k > 0 ? "bounce-" + std::to_string(k) : std::string("path-trace")) +
               (features_step ? "-sparse" : "")) {}
   const char* name() const override { return name_.c_str(); }
+  const char* stage() const override { return kStageIndirect; }
+  // A gathered bounce: P closest-hit rays per vertex (~2 M/s per thread) and the gather's
+  // multiply-adds (~3·P·6m² per vertex and channel at ~1 G/s per thread). Path tracing: a direct
+  // row (~3n² shadow rays) per path vertex, K per path, P paths per vertex (on the indirect grid
+  // with the sparse method). With the sparse method's indirect part only the dense vertices
+  // (about the dense budget) do the whole work; a features step costs its features' share
+  // (docs/sparse-precomputation.md, "With interreflection").
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const SetupParams& p = ctx.params;
+    const double rows = static_cast<double>(p.rows);
+    const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
+    const double dense_share = p.sparse_indirect ? std::min(1.0, ctx.plan.dense_budget + 0.05) : 1.0;
+    const double share = step_ ? 1 - dense_share : dense_share;
+    if (k_ == 0) {
+      const double cols = 6.0 * p.cubemap_n * p.cubemap_n;
+      const double path_cols = p.sparse_indirect ? 6.0 * p.indirect_n * p.indirect_n : cols;
+      const double per_texel = p.bounces * p.gather_paths * 0.5 * p.channels / (1e7 * threads);
+      const double per_row = step_ ? IndirectFeatures(ctx.plan.sparse.features, p.cubemap_n,
+                                                      p.indirect_n) * per_texel
+                                   : path_cols * per_texel;
+      steps.push_back({name_, "path-trace", rows * share, per_row});
+      return;
+    }
+    const double m = p.indirect_n;
+    const double per_vertex =
+        (p.gather_paths / 2e6 + 3.0 * p.gather_paths * 6 * m * m * p.channels / 1e9) / threads;
+    // The features' directions are a fraction of P.
+    const double scale =
+        step_ ? double(std::max(1, p.sparse_feature_paths)) / std::max(1, p.gather_paths) : 1.0;
+    steps.push_back({name_, "bounce", rows * share, per_vertex * scale});
+  }
 
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
@@ -674,37 +706,41 @@ class BouncePhase final : public FarmPhase {
       bounce.erase("rays_escaped");
       bounce.erase("back_face_hits");
       bounce.erase("bounce");
-      if (k_ > 0 && !ctx.interreflection["per_bounce"].empty()) {
+      if (k_ > 0 && !(*figures_)["per_bounce"].empty()) {
         // The bounce's entry (its dense phase's) takes the whole bounce's energy.
-        auto& entry = ctx.interreflection["per_bounce"].back();
+        auto& entry = (*figures_)["per_bounce"].back();
         entry["energy"] = energy;
         entry["features"] = bounce;
       } else if (k_ == 0) {
-        ctx.interreflection["path_trace_features"] = bounce;
+        (*figures_)["path_trace_features"] = bounce;
       }
     } else if (k_ > 0) {
-      ctx.interreflection["per_bounce"].push_back(bounce);
+      (*figures_)["per_bounce"].push_back(bounce);
     } else {
       // Path tracing: the whole indirect part in one phase; each bounce's energy from the jobs'
       // (none with the sparse method: its rows are Σ_k Tᵏ, evaluated at once).
       for (int k = 1; k <= K && !ctx.params.sparse_indirect; ++k) {
         nlohmann::ordered_json e = nlohmann::ordered_json::array();
         for (int c = 0; c < C; ++c) e.push_back(path_energy[(k - 1) * C + c]);
-        ctx.interreflection["per_bounce"].push_back({{"bounce", k}, {"energy", e}});
+        (*figures_)["per_bounce"].push_back({{"bounce", k}, {"energy", e}});
       }
-      ctx.interreflection["path_trace"] = bounce;
+      (*figures_)["path_trace"] = bounce;
     }
     spdlog::info("[{}] energy {} (sum of the bounce's T per channel), {} rays, {:.1f} s", name_,
                  energy.dump(), rays, FarmNow() - start);
     ctx.report.jobs_total = ctx.report.jobs_done + ctx.report.jobs_reused;
     if ((k_ == K || k_ == 0) && (step_ || !features)) IndirectShare(ctx);
-    ctx.report.interreflection_json = ctx.interreflection.dump();
   }
 
   // Rank 0, after the last bounce: Σ_v ρ·(indirect · L) / Σ_v ρ·(T · L) under each scene
   // environment and a uniform sky, on the indirect grid.
-  static void IndirectShare(FarmContext& ctx) {
-    LoadEstimateLights(ctx);
+  // report.json "interreflection": the figures every bounce phase of the run added to.
+  void Report(FarmReport& report) const override {
+    report.SetSection("interreflection", figures_->dump());
+  }
+
+  void IndirectShare(FarmContext& ctx) {
+    const EstimateLights& estimate = LoadEstimateLights(ctx);
     const uint64_t V = ctx.params.rows;
     const int C = ctx.params.channels;
     const std::vector<std::string> files =
@@ -719,10 +755,10 @@ class BouncePhase final : public FarmPhase {
     for (const std::string& file : files)
       AddCoarsenedRows(TransportFileReader(file), coarse, indirect.data());
     nlohmann::ordered_json share = nlohmann::ordered_json::array();
-    for (std::size_t l = 0; l < ctx.estimate.lights.size(); ++l) {
+    for (std::size_t l = 0; l < estimate.lights.size(); ++l) {
       double d = 0, ind = 0;
       for (int c = 0; c < 3; ++c) {
-        const std::vector<float> L = CoarsenLight(fine, coarse, ctx.estimate.lights[l].Channel(c));
+        const std::vector<float> L = CoarsenLight(fine, coarse, estimate.lights[l].Channel(c));
         const int tc = C == 1 ? 0 : c;
         for (uint64_t v = 0; v < V; ++v) {
           const double rho = ctx.RowAlbedo(v)[c];
@@ -730,12 +766,12 @@ class BouncePhase final : public FarmPhase {
           ind += rho * Dot(indirect.data() + (tc * V + v) * cols, L.data(), cols);
         }
       }
-      share.push_back({{"light", ctx.estimate.names[l]},
+      share.push_back({{"light", estimate.names[l]},
                        {"indirect_share", d + ind > 0 ? ind / (d + ind) : 0.0}});
       spdlog::info("interreflection: {:.1f}% of B is bounce light under {}",
-                   d + ind > 0 ? 100 * ind / (d + ind) : 0.0, ctx.estimate.names[l]);
+                   d + ind > 0 ? 100 * ind / (d + ind) : 0.0, estimate.names[l]);
     }
-    ctx.interreflection["indirect_share"] = share;
+    (*figures_)["indirect_share"] = share;
   }
 
   // Sparse precomputation with interreflection ([sparse] indirect = "combination"; docs/
@@ -762,7 +798,7 @@ class BouncePhase final : public FarmPhase {
         else
           spdlog::info("[{}] {} of {} vertices gather; {} combine the dense vertices' rows", name_,
                        V - combined, V, combined);
-        ctx.interreflection["sparse_combined_vertices"] = combined;
+        (*figures_)["sparse_combined_vertices"] = combined;
       } catch (const InputError& e) {
         spdlog::warn("{}: every vertex gathers", e.what());
         pairs_.clear();
@@ -802,6 +838,8 @@ class BouncePhase final : public FarmPhase {
     }
   }
 
+  // Rank 0: report.json "interreflection", shared by the run's bounce phases.
+  std::shared_ptr<nlohmann::ordered_json> figures_;
   int k_;
   bool step_;
   std::string name_;
@@ -814,8 +852,26 @@ class BouncePhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeBouncePhase(int k, bool features_step) {
-  return std::make_unique<BouncePhase>(k, features_step);
+// The indirect stage, when it runs: one phase per bounce (gathering) or one path-tracing phase,
+// each followed by its features step with [sparse] indirect = "features".
+void AddBouncePhases(const FarmContext& ctx, PhaseList& phases) {
+  if (!ctx.params.run_indirect) return;
+  const bool features = ctx.params.sparse_indirect == 2;
+  // The figures of report.json "interreflection": the settings, then each phase's.
+  const SetupParams& p = ctx.params;
+  auto figures = std::make_shared<nlohmann::ordered_json>(
+      nlohmann::ordered_json{{"bounces", p.bounces},
+                             {"estimator", p.path_estimator ? "path" : "gather"},
+                             {"indirect_n", p.indirect_n},
+                             {"paths", p.gather_paths},
+                             {"channels", p.channels},
+                             {"per_bounce", nlohmann::ordered_json::array()}});
+  const int first = ctx.params.path_estimator ? 0 : 1;
+  const int last = ctx.params.path_estimator ? 0 : ctx.params.bounces;
+  for (int k = first; k <= last; ++k) {
+    phases.push_back(std::make_unique<BouncePhase>(k, false, figures));
+    if (features) phases.push_back(std::make_unique<BouncePhase>(k, true, figures));
+  }
 }
 
 }  // namespace prt

@@ -91,6 +91,12 @@ void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string&
 class BrutePhase final : public FarmPhase {
  public:
   const char* name() const override { return "brute"; }
+  const char* stage() const override { return kStageRows; }
+  // Every texel above the horizon traced rays_per_texel times: ~10 M occlusion rays/s per thread
+  // over about half the sphere (the 2-core VM's prior; docs/farm.md, "Progress").
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    steps.push_back({"brute", "row", static_cast<double>(ctx.params.rows), SecondsPerRow(ctx)});
+  }
 
   void Run(FarmContext& ctx) override {
     // This rank's own handle on transport.prtt.partial (rank 0's worker thread has its own, apart
@@ -193,8 +199,10 @@ class BrutePhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeBrutePhase() {
-  return std::make_unique<BrutePhase>();
+// Rows by brute force: a transport run with method "brute" whose rows stage runs.
+void AddBrutePhase(const FarmContext& ctx, PhaseList& phases) {
+  if (ctx.params.visibility || ctx.params.sparse || !ctx.params.run_rows) return;
+  phases.push_back(std::make_unique<BrutePhase>());
 }
 
 }  // namespace prt

@@ -379,9 +379,11 @@ TransposePlan PlanTranspose(const FarmContext& ctx, CompressionSetup& s) {
 std::unique_ptr<RadianceNormAccumulator> StartRadianceNorms(
     FarmContext& ctx, const CompressedTransportHeader& header) {
   if (!ctx.params.run_estimate) return nullptr;
-  if (ctx.rank == 0) LoadEstimateLights(ctx);
+  // Rank 0's lights, kept for the estimate phase with the norms (a typed result).
+  EstimateLights* estimate = ctx.rank == 0 ? &LoadEstimateLights(ctx) : nullptr;
+  const std::vector<CubemapRgb> none;
   std::vector<CubemapRgb> lights = ShareEstimateLights(
-      ctx.estimate.lights, static_cast<int>(header.cubemap_n), ctx.rank, ctx.comm);
+      estimate ? estimate->lights : none, static_cast<int>(header.cubemap_n), ctx.rank, ctx.comm);
   return std::make_unique<RadianceNormAccumulator>(std::move(lights), ctx.RowGroups(),
                                                    ctx.params.channels);
 }
@@ -664,8 +666,9 @@ void Compress(FarmContext& ctx) {
     if (norms) {
       std::vector<double> all_norms = SumRadianceNorms(norms->Flat(), comm);
       if (rank == 0) {
-        ctx.estimate.norms = std::move(all_norms);
-        ctx.estimate.have_norms = true;
+        EstimateLights& estimate = LoadEstimateLights(ctx);  // loaded above: kept as it is
+        estimate.norms = std::move(all_norms);
+        estimate.have_norms = true;
       }
     }
 
@@ -703,6 +706,13 @@ void Compress(FarmContext& ctx) {
 class CompressionPhase final : public FarmPhase {
  public:
   const char* name() const override { return "compress"; }
+  const char* stage() const override { return kStageCompression; }
+  // ~100 MB/s of float32 rows per rank (the 2-core VM's prior; docs/farm-compression.md).
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const double raw_bytes =
+        static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n * 4.0;
+    steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
+  }
   void Run(FarmContext& ctx) override { Compress(ctx); }
 };
 
@@ -748,8 +758,9 @@ double MeasureDiskWriteBandwidth(const std::string& dir, std::size_t bytes) {
   return dt > 0 ? static_cast<double>(done) / dt / 1e6 : 0;
 }
 
-std::unique_ptr<FarmPhase> MakeCompressionPhase() {
-  return std::make_unique<CompressionPhase>();
+// transport.prtc, when the compression stage runs.
+void AddCompressionPhase(const FarmContext& ctx, PhaseList& phases) {
+  if (ctx.params.run_compression) phases.push_back(std::make_unique<CompressionPhase>());
 }
 
 }  // namespace prt

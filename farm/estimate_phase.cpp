@@ -8,11 +8,14 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "farm/farm_context.h"
@@ -108,9 +111,9 @@ std::string AccuracyLine(const nlohmann::ordered_json& accuracy) {
   return line;
 }
 
-void LoadEstimateLights(FarmContext& ctx) {
-  EstimateLights& e = ctx.estimate;
-  if (e.loaded) return;
+EstimateLights& LoadEstimateLights(FarmContext& ctx) {
+  if (EstimateLights* loaded = ctx.results.Find<EstimateLights>()) return *loaded;
+  EstimateLights& e = ctx.results.Put(EstimateLights{});
   const int n = ctx.params.cubemap_n;
   e.names = {"uniform"};
   e.lights = {UniformLight(n)};
@@ -126,6 +129,7 @@ void LoadEstimateLights(FarmContext& ctx) {
   }
   e.left_out_json = skipped.dump();
   e.loaded = true;
+  return e;
 }
 
 namespace {
@@ -133,53 +137,109 @@ namespace {
 class EstimatePhase final : public FarmPhase {
  public:
   const char* name() const override { return "estimate"; }
+  const char* stage() const override { return kStageEstimate; }
+  // Over the raw rows' bytes: nearly free when the compression phase accumulated Σ B² as the
+  // rows passed, else one read of transport.prtt (~400 MB/s on the 2-core VM).
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const double raw_bytes =
+        static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n * 4.0;
+    steps.push_back(
+        {"estimate", "estimate", raw_bytes, ctx.params.run_compression ? 1e-11 : 2.5e-9});
+  }
 
   void Run(FarmContext& ctx) override {
     if (ctx.rank != 0) return;
     ctx.run_eta.StepStarted("estimate");
     const RunFolder& f = ctx.folder;
-    const int n = ctx.params.cubemap_n;
     Json out;
     out["key"] = ctx.estimate_key;
-    TransportVariance variance;
-    bool have_variance = std::filesystem::exists(f.variance);
-    if (have_variance) {
-      variance = DecodeTransportVariance(ReadWholeFile(f.variance), f.variance);
-      if (variance.cubemap_n != static_cast<uint32_t>(n) ||
-          variance.sums.size() != ctx.RowGroups().size())
-        throw InputError(f.variance, "does not describe this run's rows and meshes");
-    }
-
-    LoadEstimateLights(ctx);
-    const std::vector<std::string>& names = ctx.estimate.names;
-    const std::vector<CubemapRgb>& lights = ctx.estimate.lights;
-    const Json skipped = Json::parse(ctx.estimate.left_out_json);
-
-    // Σ B² per light, mesh and channel: accumulated by the compression phase as the rows passed
-    // through it, else read here from the rows.
+    const std::optional<TransportVariance> variance = ReadVariance(ctx);
+    const EstimateLights& estimate = LoadEstimateLights(ctx);
     const std::vector<uint64_t> mesh_rows = ctx.RowGroups();
-    RadianceNormAccumulator norms(lights, mesh_rows);
-    if (ctx.estimate.have_norms) {
-      norms.Set(ctx.estimate.norms);
-    } else {
-      const TransportFileReader reader(f.transport);
-      const TransportFileInfo& info = reader.info();
-      Progress progress("estimate", info.block_count(), FarmProgressOptions(ctx, "blocks"));
-      std::vector<float> block;
-      for (uint64_t b = 0; b < info.block_count(); ++b) {
-        block.resize(static_cast<std::size_t>(info.RowsInBlock(b) * info.cols()));
-        reader.ReadBlock(b, block);
-        norms.AddRows(info.FirstRowOfBlock(b), info.RowsInBlock(b), block.data());
-        progress.Advance(1);
-      }
-      progress.Finish();
-    }
+    const RadianceNormAccumulator norms = RadianceNorms(ctx, estimate, mesh_rows);
+    const bool estimable = variance && variance->rays_per_texel >= 2;
+    const CrossValidation cv = ReadCrossValidation(ctx, mesh_rows.size());
+    const ErrorVariances ev =
+        ComputeErrorVariances(ctx, estimable ? &*variance : nullptr, estimate, norms, cv);
 
-    const bool estimable = have_variance && variance.rays_per_texel >= 2;
+    // One table per kind of error: Monte-Carlo, reconstruction (sparse), and both.
+    Json mc = MonteCarloHeader(ctx, variance ? &*variance : nullptr, estimable);
+    const auto [envs, worst] =
+        ErrorTable(ctx, estimate, ev, [&](std::size_t l, std::size_t m) { return ev.mc[l][m]; });
+    mc["environments"] = envs;
+    mc["worst_relative_rms"] = worst;
+    const Json skipped = Json::parse(estimate.left_out_json);
+    if (!skipped.empty()) mc["environments_left_out"] = skipped;
+    out["monte_carlo"] = mc;
+    if (cv.present) {
+      const auto [rec_envs, rec_worst] = ErrorTable(
+          ctx, estimate, ev, [&](std::size_t l, std::size_t m) { return ev.reconstruction[l][m]; });
+      Json rec;
+      rec["cross_validated"] = cv.rows.size();
+      rec["vertices"] = cv.vertices;
+      rec["reconstructed_per_mesh"] = cv.reconstructed;
+      rec["environments"] = rec_envs;
+      rec["worst_relative_rms"] = rec_worst;
+      out["reconstruction"] = rec;
+      const auto [tot_envs, tot_worst] =
+          ErrorTable(ctx, estimate, ev, [&](std::size_t l, std::size_t m) {
+            return ev.mc[l][m] + ev.reconstruction[l][m];
+          });
+      out["total"] = {{"environments", tot_envs}, {"worst_relative_rms", tot_worst}};
+    }
+    WriteFileDurably(f.accuracy, out.dump(2) + "\n");
+    ctx.run_eta.StepFinished("estimate");
+    if (!ctx.options.quiet) spdlog::info("estimate: {}; in {}", AccuracyLine(out), f.accuracy);
+  }
+
+ private:
+  // Per light and mesh: the Monte-Carlo and reconstruction variances of Σ B (albedo-weighted)
+  // and Σ B² of the mesh's rows, the tables' numerators and denominators.
+  struct ErrorVariances {
+    std::vector<std::vector<double>> mc, reconstruction, norm;  // [light][mesh]
+  };
+
+  // transport.variance, checked against this run (nothing when an older prt-farm left none).
+  static std::optional<TransportVariance> ReadVariance(const FarmContext& ctx) {
+    const RunFolder& f = ctx.folder;
+    if (!std::filesystem::exists(f.variance)) return std::nullopt;
+    TransportVariance variance = DecodeTransportVariance(ReadWholeFile(f.variance), f.variance);
+    if (variance.cubemap_n != static_cast<uint32_t>(ctx.params.cubemap_n) ||
+        variance.sums.size() != ctx.RowGroups().size())
+      throw InputError(f.variance, "does not describe this run's rows and meshes");
+    return variance;
+  }
+
+  // Σ B² per light, mesh and channel: accumulated by the compression phase as the rows passed
+  // through it, else read here from the rows.
+  static RadianceNormAccumulator RadianceNorms(FarmContext& ctx, const EstimateLights& estimate,
+                                               const std::vector<uint64_t>& mesh_rows) {
+    RadianceNormAccumulator norms(estimate.lights, mesh_rows);
+    if (estimate.have_norms) {
+      norms.Set(estimate.norms);
+      return norms;
+    }
+    const TransportFileReader reader(ctx.folder.transport);
+    const TransportFileInfo& info = reader.info();
+    Progress progress("estimate", info.block_count(), FarmProgressOptions(ctx, "blocks"));
+    std::vector<float> block;
+    for (uint64_t b = 0; b < info.block_count(); ++b) {
+      block.resize(static_cast<std::size_t>(info.RowsInBlock(b) * info.cols()));
+      reader.ReadBlock(b, block);
+      norms.AddRows(info.FirstRowOfBlock(b), info.RowsInBlock(b), block.data());
+      progress.Advance(1);
+    }
+    progress.Finish();
+    return norms;
+  }
+
+  // accuracy.json "monte_carlo" before its tables: what the estimate covers, or why there is none.
+  static Json MonteCarloHeader(const FarmContext& ctx, const TransportVariance* variance,
+                               bool estimable) {
     Json mc;
     mc["rays_per_texel"] = ctx.params.rays_per_texel;
     mc["estimable"] = estimable;
-    if (!have_variance) {
+    if (!variance) {
       mc["why_not"] = "transport.variance is missing (rows of an older prt-farm)";
     } else if (!estimable) {
       mc["why_not"] = "one ray per texel: no two strata to compare";
@@ -189,39 +249,52 @@ class EstimatePhase final : public FarmPhase {
                        ? "traced texels: every texel of the dense rows, the traced features of "
                          "the reconstructed rows (their other texels' error is the fit's)"
                        : "every texel";
+    const std::vector<uint64_t> mesh_rows = ctx.RowGroups();
     Json meshes = Json::array();
     for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
       meshes.push_back({{"name", ctx.GroupName(m)},
                         {"rows", mesh_rows[m]},
-                        {"rows_covered", have_variance ? variance.rows_covered[m] : 0}});
+                        {"rows_covered", variance ? variance->rows_covered[m] : 0}});
     }
     mc["meshes"] = meshes;
-    // The sparse method's reconstruction error, from its cross-validation (farm/sparse_phase.cpp
-    // CrossValidate): per light, mesh and channel, Σ over the mesh's reconstructed vertices of
-    // E|ΔB|², as the mesh's cross-validated mean of |ΔB|² less a dense row's own Monte-Carlo
-    // variance (the reference it was compared with is itself an estimate), times the number of
-    // vertices the pipeline reconstructed.
-    const CrossValidation cv = ReadCrossValidation(ctx, mesh_rows.size());
-    std::vector<std::vector<double>> mc_var(lights.size()), rec_var(lights.size()),
-        norm(lights.size());
+    return mc;
+  }
+
+  // `variance`: nullptr when the Monte-Carlo error cannot be estimated (its variances are 0).
+  // The sparse method's reconstruction error, from its cross-validation (farm/sparse_phase.cpp
+  // CrossValidate): per light, mesh and channel, Σ over the mesh's reconstructed vertices of
+  // E|ΔB|², as the mesh's cross-validated mean of |ΔB|² less a dense row's own Monte-Carlo
+  // variance (the reference it was compared with is itself an estimate), times the number of
+  // vertices the pipeline reconstructed.
+  static ErrorVariances ComputeErrorVariances(const FarmContext& ctx,
+                                              const TransportVariance* variance,
+                                              const EstimateLights& estimate,
+                                              const RadianceNormAccumulator& norms,
+                                              const CrossValidation& cv) {
+    const std::vector<CubemapRgb>& lights = estimate.lights;
+    const std::size_t meshes = ctx.RowGroups().size();
+    ErrorVariances ev;
+    ev.mc.resize(lights.size());
+    ev.reconstruction.resize(lights.size());
+    ev.norm.resize(lights.size());
     for (std::size_t l = 0; l < lights.size(); ++l) {
-      for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
+      for (std::size_t m = 0; m < meshes; ++m) {
         const Rgb rho = ctx.GroupAlbedo(m);
         const std::array<double, 3> v =
-            estimable ? MeshRadianceVariance(variance, m, lights[l]) : std::array<double, 3>{};
+            variance ? MeshRadianceVariance(*variance, m, lights[l]) : std::array<double, 3>{};
         double var_m = 0, norm_m = 0;
         for (int c = 0; c < 3; ++c) {
           const double r2 = double(rho[c]) * rho[c];
           var_m += r2 * v[c];
           norm_m += r2 * norms.norms()[l][m][c];
         }
-        mc_var[l].push_back(var_m);
-        norm[l].push_back(norm_m);
-        rec_var[l].push_back(0.0);
+        ev.mc[l].push_back(var_m);
+        ev.norm[l].push_back(norm_m);
+        ev.reconstruction[l].push_back(0.0);
       }
       if (!cv.present) continue;
       // Σ |ΔB|² of each mesh's cross-validated vertices under this light.
-      std::vector<double> sum(mesh_rows.size(), 0.0);
+      std::vector<double> sum(meshes, 0.0);
       for (const auto& [m, diff] : cv.rows) {
         const Rgb rho = ctx.GroupAlbedo(m);
         for (int c = 0; c < 3; ++c) {
@@ -231,69 +304,55 @@ class EstimatePhase final : public FarmPhase {
           sum[m] += double(rho[c]) * rho[c] * b * b;
         }
       }
-      for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
+      for (std::size_t m = 0; m < meshes; ++m) {
         if (cv.samples[m] == 0) continue;
         const double mean = sum[m] / static_cast<double>(cv.samples[m]);
         const double per_row_mc =
-            variance.rows_covered.empty() || variance.rows_covered[m] == 0
+            !variance || variance->rows_covered.empty() || variance->rows_covered[m] == 0
                 ? 0.0
-                : mc_var[l][m] / static_cast<double>(variance.rows_covered[m]);
-        rec_var[l][m] = static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
+                : ev.mc[l][m] / static_cast<double>(variance->rows_covered[m]);
+        ev.reconstruction[l][m] =
+            static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
       }
     }
-    // One table per kind of error: Monte-Carlo, reconstruction (sparse), and both.
-    auto table = [&](auto&& var_of) {
-      Json envs = Json::array();
-      double worst = 0;
-      for (std::size_t l = 0; l < lights.size(); ++l) {
-        Json per_mesh = Json::array();
-        double var_all = 0, norm_all = 0;
-        for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
-          const double var_m = var_of(l, m);
-          var_all += var_m;
-          norm_all += norm[l][m];
-          per_mesh.push_back(
-              {{"name", ctx.GroupName(m)},
-               {"relative_rms", Ratio(var_m, norm[l][m])},
-               {"rms_radiance", mesh_rows[m]
-                                    ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m])))
-                                    : 0.0}});
-        }
-        const double rel = Ratio(var_all, norm_all);
-        worst = std::max(worst, rel);
-        envs.push_back({{"name", names[l]}, {"relative_rms", rel}, {"meshes", per_mesh}});
+    return ev;
+  }
+
+  // One table of accuracy.json: per environment, the relative RMS error of B (the variance
+  // `var_of(light, mesh)` over Σ B²), per mesh and over all; and the worst environment's.
+  template <class VarianceOf>
+  static std::pair<Json, double> ErrorTable(const FarmContext& ctx, const EstimateLights& estimate,
+                                            const ErrorVariances& ev, VarianceOf&& var_of) {
+    const std::vector<uint64_t> mesh_rows = ctx.RowGroups();
+    Json envs = Json::array();
+    double worst = 0;
+    for (std::size_t l = 0; l < estimate.lights.size(); ++l) {
+      Json per_mesh = Json::array();
+      double var_all = 0, norm_all = 0;
+      for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
+        const double var_m = var_of(l, m);
+        var_all += var_m;
+        norm_all += ev.norm[l][m];
+        per_mesh.push_back(
+            {{"name", ctx.GroupName(m)},
+             {"relative_rms", Ratio(var_m, ev.norm[l][m])},
+             {"rms_radiance", mesh_rows[m]
+                                  ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m])))
+                                  : 0.0}});
       }
-      return std::make_pair(envs, worst);
-    };
-    const auto [envs, worst] = table([&](std::size_t l, std::size_t m) { return mc_var[l][m]; });
-    mc["environments"] = envs;
-    mc["worst_relative_rms"] = worst;
-    if (!skipped.empty()) mc["environments_left_out"] = skipped;
-    out["monte_carlo"] = mc;
-    if (cv.present) {
-      const auto [rec_envs, rec_worst] =
-          table([&](std::size_t l, std::size_t m) { return rec_var[l][m]; });
-      Json rec;
-      rec["cross_validated"] = cv.rows.size();
-      rec["vertices"] = cv.vertices;
-      rec["reconstructed_per_mesh"] = cv.reconstructed;
-      rec["environments"] = rec_envs;
-      rec["worst_relative_rms"] = rec_worst;
-      out["reconstruction"] = rec;
-      const auto [tot_envs, tot_worst] =
-          table([&](std::size_t l, std::size_t m) { return mc_var[l][m] + rec_var[l][m]; });
-      out["total"] = {{"environments", tot_envs}, {"worst_relative_rms", tot_worst}};
+      const double rel = Ratio(var_all, norm_all);
+      worst = std::max(worst, rel);
+      envs.push_back({{"name", estimate.names[l]}, {"relative_rms", rel}, {"meshes", per_mesh}});
     }
-    WriteFileDurably(f.accuracy, out.dump(2) + "\n");
-    ctx.run_eta.StepFinished("estimate");
-    if (!ctx.options.quiet) spdlog::info("estimate: {}; in {}", AccuracyLine(out), f.accuracy);
+    return {envs, worst};
   }
 };
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeEstimatePhase() {
-  return std::make_unique<EstimatePhase>();
+// accuracy.json, when the estimate stage runs.
+void AddEstimatePhase(const FarmContext& ctx, PhaseList& phases) {
+  if (ctx.params.run_estimate) phases.push_back(std::make_unique<EstimatePhase>());
 }
 
 }  // namespace prt

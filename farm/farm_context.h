@@ -16,9 +16,12 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <typeindex>
+#include <unordered_map>
 #include <vector>
 
 #include "farm/checkpoint_journal.h"
+#include "farm/collectives.h"
 #include "farm/farm_options.h"
 #include "farm/farm_report.h"
 #include "farm/progress.h"
@@ -115,13 +118,39 @@ struct EstimateLights {
 // "error of B (rays + reconstruction) 0.38% uniform 1.41% sunrise.exr …" from accuracy.json
 // (the run summary and the estimate's log line).
 std::string AccuracyLine(const nlohmann::ordered_json& accuracy);
-// Rank 0: loads the lights once (every environment that cannot be read is left out, with why).
-void LoadEstimateLights(struct FarmContext& ctx);
+// Rank 0: the lights, loaded once and kept as a typed result (ctx.results) for the compression
+// phase, which accumulates the norms under them, and the estimate phase (every environment that
+// cannot be read is left out, with why).
+EstimateLights& LoadEstimateLights(struct FarmContext& ctx);
+
+// What one phase leaves for later ones, by type (the only way phase state travels besides the run
+// folder): a phase Puts a value of a type it declares in its header; a later phase Finds it
+// (nullptr when the phase that makes it did not run).
+class PhaseResults {
+ public:
+  template <class T>
+  T& Put(T value) {
+    auto p = std::make_shared<T>(std::move(value));
+    T& ref = *p;
+    values_[std::type_index(typeid(T))] = std::move(p);
+    return ref;
+  }
+  template <class T>
+  T* Find() const {
+    const auto it = values_.find(std::type_index(typeid(T)));
+    return it == values_.end() ? nullptr : static_cast<T*>(it->second.get());
+  }
+
+ private:
+  std::unordered_map<std::type_index, std::shared_ptr<void>> values_;
+};
 
 struct FarmContext {
   // ---- every rank
   FarmOptions options;
   MPI_Comm comm = MPI_COMM_WORLD;
+  Collectives collectives;  // what phases call instead of MPI (farm/collectives.h)
+  PhaseResults results;     // typed results of earlier phases
   int rank = 0;
   int size = 1;
   int threads = 1;
@@ -155,22 +184,16 @@ struct FarmContext {
   StagePlan stage_plan;         // what setup decided for each stage (report.json "stages")
   std::string previous_report;  // report.json of the run being continued ("" if none)
   std::string estimate_key;     // the estimate stage's key (accuracy.json "key")
-  EstimateLights estimate;
   RunEta run_eta;                             // the whole run's ETA on every progress line (rank 0)
   std::optional<TransportFileWriter> writer;  // transport.prtt.partial while sampling
   std::unique_ptr<CheckpointJournal> journal;
   // The indirect stage's key (its journal, checkpoints/indirect-journal.txt, is keyed by it).
   uint64_t indirect_key = 0;
-  // Bounce phases: every bounce's figures so far (report.json "interreflection").
-  nlohmann::ordered_json interreflection;
   // The sampling jobs' Monte-Carlo variance sums (transport runs while the rows are sampled).
   std::unique_ptr<VarianceAccumulator> variance;
   // The journal's lines of the method's phase, verified by that phase before it re-uses them
   // (brute force: already verified against the rows by setup).
   std::vector<JournalEntry> journal_entries;
-  // The visibility job: the chunks of visibility.chunks that make up the result (verified
-  // re-used ones and this run's), for the visibility-finalize phase.
-  std::vector<VisibilityChunkRef> visibility_chunks;
   FarmReport report;
 
   std::vector<uint64_t> RowGroups() const { return RowGroupsOf(params, geometry); }
@@ -214,28 +237,43 @@ struct FarmContext {
   }
 };
 
+// One phase of the run (docs/architecture.md, "Adding a farm phase"): everything the run needs
+// to know about it is said here, in the phase's own file. The run (farm_run.cpp) knows only the
+// list of phases (farm/phase_list.cpp); it runs them in order on every rank, adds each one's wall
+// time to its stage, asks each for its share of the run's ETA, and lets each write its section of
+// report.json at the end. A phase keeps its own state; what a later phase needs reaches it
+// through the run folder or a typed result (PhaseResults).
 class FarmPhase {
  public:
   virtual ~FarmPhase() = default;
   // The name in report.json's "phases" (and in progress lines).
   virtual const char* name() const = 0;
+  // The stage it belongs to (farm/run_manifest.h: kStageRows, kStageIndirect, …): its wall time
+  // counts in report.json's "stages", and the stage's key decides whether it runs at all.
+  virtual const char* stage() const = 0;
+  // Rank 0, once setup has decided the stages: the steps this phase will run and their predicted
+  // durations (farm/run_eta.h), its share of the whole run's ETA. Nothing by default.
+  virtual void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const {
+    (void)ctx;
+    (void)steps;
+  }
   // Runs on every rank. Throws CollectiveStop when all ranks agreed to stop; any other
   // exception on a rank is fatal for the whole job (RunFarm aborts it).
   virtual void Run(FarmContext& ctx) = 0;
+  // Rank 0, at the end of the run (also of a failed one): the phase's section of report.json
+  // from its own state. Nothing by default.
+  virtual void Report(FarmReport& report) const { (void)report; }
 };
 
-// The phases, one file each (farm/*_phase.cpp), in the order RunFarm runs them.
-std::unique_ptr<FarmPhase> MakeSetupPhase();
-std::unique_ptr<FarmPhase> MakeBrutePhase();
-std::unique_ptr<FarmPhase> MakeSparsePhase();
-std::unique_ptr<FarmPhase> MakeFinalizePhase();
-std::unique_ptr<FarmPhase> MakeVisibilityPhase();
-std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase();
-std::unique_ptr<FarmPhase> MakeCompressionPhase();
-std::unique_ptr<FarmPhase> MakeEstimatePhase();
-// Bounce k of the interreflection (farm/bounce_phase.cpp), 1 ≤ k ≤ bounces; k = 0: every
-// bounce at once by per-element path tracing (estimator "path").
-std::unique_ptr<FarmPhase> MakeBouncePhase(int k, bool features_step = false);
+using PhaseList = std::vector<std::unique_ptr<FarmPhase>>;
+// A phase's entry in the list (farm/phase_list.cpp): adds the phase (or phases: one per bounce)
+// that this run needs, given what setup decided (ctx.params), to `phases`; adds nothing when the
+// run does not need it.
+using PhaseFactory = void (*)(const FarmContext& ctx, PhaseList& phases);
+// The farm's phases in the order every rank runs them (farm/phase_list.cpp). The first is setup,
+// which decides what the run is; the others are asked once it has.
+const std::vector<PhaseFactory>& FarmPhaseList();
+
 // The indirect stage's files: indirect/bounce-1 … K.prtt, or indirect/path-traced.prtt.
 inline std::vector<std::string> IndirectFiles(const RunFolder& f, int bounces, bool path) {
   std::vector<std::string> files;
@@ -253,9 +291,15 @@ inline constexpr std::size_t kSparseCrossValidated = 400;
 // step's); else the step's prediction counts (a loop that is one part of its step).
 ProgressOptions FarmProgressOptions(FarmContext& ctx, const std::string& unit,
                                     bool whole_step = true);
-// Rank 0, once setup has decided the stages: the steps left in the run and their predicted
-// durations (farm/run_eta.h), for the whole-run ETA.
-std::vector<RunStep> PredictRunSteps(const FarmContext& ctx);
+
+// The cost models' shared prior (phases' PredictSteps; docs/farm.md, "Progress"): the seconds of
+// one brute-force row on the computing ranks, ~10 M occlusion rays/s per thread measured on the
+// 2-core VM, rays over about half the sphere. The run's ETA replaces priors by what it measures.
+inline double SecondsPerRow(const FarmContext& ctx) {
+  const double cols = 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n;
+  const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
+  return cols * ctx.params.rays_per_texel * 0.5 / (1e7 * threads);
+}
 
 // Max-reduces every rank's status; if any is non-zero, every rank stops with it.
 void AgreeOrStop(FarmContext& ctx, int local_status);

@@ -25,6 +25,21 @@ double SparseFarmReport::SampledFraction() const {
                    static_cast<double>(counters.texels_above_horizon);
 }
 
+void FarmReport::SetSection(const std::string& key, std::string json_text) {
+  for (auto& [k, text] : sections)
+    if (k == key) {
+      text = std::move(json_text);
+      return;
+    }
+  sections.emplace_back(key, std::move(json_text));
+}
+
+std::string FarmReport::Section(const std::string& key) const {
+  for (const auto& [k, text] : sections)
+    if (k == key) return text;
+  return "";
+}
+
 std::string FarmReport::ToJsonText() const {
   using Json = nlohmann::ordered_json;
   Json phases_json = Json::array();
@@ -228,13 +243,9 @@ std::string FarmReport::ToJsonText() const {
       }
     }
   }
-  if (!image_json.empty()) {
-    const Json im = Json::parse(image_json, nullptr, false);
-    if (!im.is_discarded()) j["image"] = im;
-  }
-  if (!interreflection_json.empty()) {
-    const Json ir = Json::parse(interreflection_json, nullptr, false);
-    if (!ir.is_discarded()) j["interreflection"] = ir;
+  for (const auto& [key, text] : sections) {
+    const Json section = Json::parse(text, nullptr, false);
+    if (!section.is_discarded()) j[key] = section;
   }
   if (!accuracy_json.empty()) {
     const Json accuracy = Json::parse(accuracy_json, nullptr, false);

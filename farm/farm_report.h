@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "farm/sparse_jobs.h"
@@ -158,13 +159,10 @@ struct FarmReport {
       0;  // transport.prtt as kept (packed); 0 when this run did not write it
   std::vector<PhaseReport> phases;
   std::vector<StageReport> stages;
-  // report.json "interreflection" (farm/bounce_phase.cpp, docs/interreflection.md): the
-  // settings, per bounce its energy, rays and wall time, and the indirect share of B under each
-  // scene environment; "" when the run has no bounces.
-  std::string interreflection_json;
-  // report.json "image" (image-relighting runs, docs/image-relighting.md): width, height and
-  // background_pixels, as JSON text; empty for vertex runs.
-  std::string image_json;
+  // Sections a phase writes from its own state (FarmPhase::Report), in the order they were set:
+  // report.json key → JSON text ("interreflection" from the bounce phases, "image" from setup
+  // on image runs, …).
+  std::vector<std::pair<std::string, std::string>> sections;
   std::vector<EtaReport> eta;
   double wall_seconds = 0;
   double sampling_seconds = 0;  // wall time of the sampling phase (for rays/s)
@@ -199,6 +197,11 @@ struct FarmReport {
   std::string carried_json;
   // accuracy.json of the estimate stage, as report.json "accuracy" ("" when there is none).
   std::string accuracy_json;
+
+  // Sets (or replaces) a phase's section.
+  void SetSection(const std::string& key, std::string json_text);
+  // A section's JSON text ("" when no phase set it).
+  std::string Section(const std::string& key) const;
 
   // max / mean busy time over the computing ranks (1 = perfect balance; 0 when none computed).
   double LoadImbalance() const;

@@ -22,13 +22,11 @@
 #include "farm/run_manifest.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
-#include "worker/sparse_indirect.h"
 
 namespace prt {
 
 void AgreeOrStop(FarmContext& ctx, int local_status) {
-  int status = local_status;
-  CheckMpi(MPI_Allreduce(&local_status, &status, 1, MPI_INT, MPI_MAX, ctx.comm), "MPI_Allreduce");
+  const int status = ctx.collectives.AgreeMax(local_status, "agree on the exit status");
   if (status != kExitOk) throw CollectiveStop{status};
 }
 
@@ -65,88 +63,6 @@ ProgressOptions FarmProgressOptions(FarmContext& ctx, const std::string& unit, b
   return po;
 }
 
-std::vector<RunStep> PredictRunSteps(const FarmContext& ctx) {
-  // Priors measured on the 2-core VM (docs/farm.md, "Progress"): ~10 M occlusion rays/s per
-  // thread, rays over about half the sphere; the sparse method's steps as a fraction of a brute
-  // row (dense 0.75, rank 0.08, reconstruct 0.6: docs/sparse-precomputation.md); packing ~1 GB/s
-  // on rank 0; the compression phase ~100 MB/s per rank.
-  std::vector<RunStep> steps;
-  const double rows = static_cast<double>(ctx.params.rows);
-  const double cols = 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n;
-  const double raw_bytes = rows * cols * 4.0;
-  const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
-  const double row = cols * ctx.params.rays_per_texel * 0.5 / (1e7 * threads);
-  if (ctx.params.run_rows && ctx.params.visibility) {
-    steps.push_back({kVisibilityPhaseName, "visibility", rows, cols * 0.5 / (1e7 * threads)});
-  } else if (ctx.params.run_rows && ctx.params.sparse) {
-    const std::size_t N = ctx.params.rows;
-    const SparsePlan& plan = ctx.plan;
-    const std::size_t budget = SparseDenseBudget(N, plan);
-    std::size_t dense = SparseInitialDenseCount(N, plan);
-    steps.push_back({"dense-initial", "dense", double(dense), 0.75 * row});
-    const int rounds = SparseRounds(plan);
-    for (int it = 0; it < rounds && dense < budget; ++it) {
-      const std::size_t picks = SparsePicksForRound(budget, dense, rounds, it);
-      const std::string k = std::to_string(it + 1);
-      const double cand = std::min<double>(double(N - dense),
-                                           double(picks) * std::max(1, plan.candidates_per_pick));
-      steps.push_back({"rank-" + k, "rank", cand, 0.08 * row});
-      steps.push_back({"dense-rank-" + k, "dense", double(picks), 0.75 * row});
-      dense += picks;
-    }
-    const double sparse = double(N - std::min(N, dense));
-    steps.push_back({"sparse-reconstruct", "sparse", sparse, 0.6 * row});
-    steps.push_back({"cross-validate", "sparse",
-                     double(std::min(kSparseCrossValidated, SparseInitialDenseCount(N, plan))),
-                     0.6 * row});
-    steps.push_back({"dense-fallback", "dense", 0.04 * sparse, 0.75 * row});
-  } else if (ctx.params.run_rows) {
-    steps.push_back({"brute", "row", rows, row});
-  }
-  if (ctx.params.run_rows && !ctx.params.visibility)
-    steps.push_back({"pack", "pack", raw_bytes, 1e-9});
-  // A bounce: P closest-hit rays per vertex (~2 M/s per thread) and the gather's multiply-adds
-  // (~3·P·6m² per vertex and channel at ~1 G/s per thread).
-  // With the sparse method's indirect part only the dense vertices (about the dense budget) do
-  // the whole work (docs/sparse-precomputation.md, "With interreflection").
-  const double dense_share =
-      ctx.params.sparse_indirect ? std::min(1.0, ctx.plan.dense_budget + 0.05) : 1.0;
-  if (ctx.params.run_indirect && ctx.params.path_estimator) {
-    // A direct row (~3n² shadow rays) per path vertex, K per path, P paths per vertex; on the
-    // indirect grid with the sparse method.
-    const double path_cols =
-        ctx.params.sparse_indirect ? 6.0 * ctx.params.indirect_n * ctx.params.indirect_n : cols;
-    const double per_texel =
-        ctx.params.bounces * ctx.params.gather_paths * 0.5 * ctx.params.channels / (1e7 * threads);
-    steps.push_back({"path-trace", "path-trace", rows * dense_share, path_cols * per_texel});
-    if (ctx.params.sparse_indirect == 2)
-      steps.push_back(
-          {"path-trace-sparse", "path-trace", rows * (1 - dense_share),
-           IndirectFeatures(ctx.plan.sparse.features, ctx.params.cubemap_n, ctx.params.indirect_n) *
-               per_texel});
-  } else if (ctx.params.run_indirect) {
-    const double m = ctx.params.indirect_n;
-    const double per_vertex =
-        (ctx.params.gather_paths / 2e6 +
-         3.0 * ctx.params.gather_paths * 6 * m * m * ctx.params.channels / 1e9) /
-        threads;
-    for (int k = 1; k <= ctx.params.bounces; ++k) {
-      steps.push_back({"bounce-" + std::to_string(k), "bounce", rows * dense_share, per_vertex});
-      if (ctx.params.sparse_indirect == 2)  // the features' directions, a fraction of P
-        steps.push_back({"bounce-" + std::to_string(k) + "-sparse", "bounce",
-                         rows * (1 - dense_share),
-                         per_vertex * std::max(1, ctx.params.sparse_feature_paths) /
-                             std::max(1, ctx.params.gather_paths)});
-    }
-  }
-  if (ctx.params.run_compression)
-    steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
-  if (ctx.params.run_estimate)
-    steps.push_back(
-        {"estimate", "estimate", raw_bytes, ctx.params.run_compression ? 1e-11 : 2.5e-9});
-  return steps;
-}
-
 namespace {
 
 // Rank 0, once the folder is this run's: report.json, durably. False when it could not be written.
@@ -173,49 +89,9 @@ void ConfigureLogging(const FarmContext& ctx) {
   spdlog::set_level(chatty ? spdlog::level::info : spdlog::level::warn);
 }
 
-// The phases after setup, from what setup told every rank (the stages that run).
-std::vector<std::unique_ptr<FarmPhase>> PhasesAfterSetup(const FarmContext& ctx) {
-  std::vector<std::unique_ptr<FarmPhase>> phases;
-  if (ctx.params.visibility) {
-    if (ctx.params.run_rows) {
-      phases.push_back(MakeVisibilityPhase());
-      phases.push_back(MakeVisibilityFinalizePhase());
-    }
-    return phases;
-  }
-  if (ctx.params.run_rows) {
-    phases.push_back(ctx.params.sparse ? MakeSparsePhase() : MakeBrutePhase());
-    phases.push_back(MakeFinalizePhase());
-  }
-  // [sparse] indirect = "features": each bounce (or the path tracing) is followed by its
-  // features step (farm/bounce_phase.cpp).
-  const bool features = ctx.params.sparse_indirect == 2;
-  if (ctx.params.run_indirect && ctx.params.path_estimator) {
-    phases.push_back(MakeBouncePhase(0));
-    if (features) phases.push_back(MakeBouncePhase(0, true));
-  } else if (ctx.params.run_indirect) {
-    for (int k = 1; k <= ctx.params.bounces; ++k) {
-      phases.push_back(MakeBouncePhase(k));
-      if (features) phases.push_back(MakeBouncePhase(k, true));
-    }
-  }
-  if (ctx.params.run_compression) phases.push_back(MakeCompressionPhase());
-  if (ctx.params.run_estimate) phases.push_back(MakeEstimatePhase());
-  return phases;
-}
-
-// The stage a phase belongs to (report.json "stages" adds up their wall times).
-const char* StageOfPhase(const std::string& phase) {
-  if (phase == "compress") return kStageCompression;
-  if (phase == "estimate") return kStageEstimate;
-  if (phase == "setup") return kStageAssets;
-  if (phase.rfind("bounce-", 0) == 0 || phase.rfind("path-trace", 0) == 0) return kStageIndirect;
-  return kStageRows;
-}
-
 // Rank 0: report.json's "stages", and the sections of the report of the run this one continued
 // for the stages it re-used (their figures describe the files this run keeps).
-void ReportStages(FarmContext& ctx) {
+void ReportStages(FarmContext& ctx, const PhaseList& phases) {
   FarmReport& rep = ctx.report;
   rep.eta.clear();
   for (const RunEtaSample& e : ctx.run_eta.History())
@@ -227,9 +103,9 @@ void ReportStages(FarmContext& ctx) {
   for (const StageDecision& d : ctx.stage_plan.stages) {
     StageReport st{d.name, ToString(d.action), d.reason, 0};
     if (d.name == kStageAssets) st.status = d.action == StageAction::kRun ? "updated" : "unchanged";
-    for (const PhaseReport& p : rep.phases)
-      if (d.name == StageOfPhase(p.name) && d.name != kStageAssets)
-        st.wall_seconds += p.wall_seconds;
+    for (std::size_t i = 0; i < rep.phases.size() && i < phases.size(); ++i)
+      if (d.name == phases[i]->stage() && d.name != kStageAssets)
+        st.wall_seconds += rep.phases[i].wall_seconds;
     rep.stages.push_back(st);
   }
   if (!ctx.previous_report.empty()) {
@@ -298,8 +174,9 @@ std::string RunSummary(const FarmContext& ctx) {
                     100 * rep.compression.relative_frobenius_error);
       what = st.status == "reused" ? "transport.prtc " + Megabytes(f.compressed) : buf;
     } else if (st.name == kStageIndirect) {
-      const nlohmann::ordered_json ir = nlohmann::ordered_json::parse(
-          rep.interreflection_json.empty() ? "{}" : rep.interreflection_json, nullptr, false);
+      const std::string section = rep.Section("interreflection");
+      const nlohmann::ordered_json ir =
+          nlohmann::ordered_json::parse(section.empty() ? "{}" : section, nullptr, false);
       what = "indirect/ " + std::to_string(ctx.params.bounces) + " bounce(s)";
       if (ir.is_object() && ir.contains("indirect_share")) {
         what += ", bounce light";
@@ -337,9 +214,8 @@ int RunFarm(const FarmOptions& options) {
   FarmContext ctx;
   ctx.options = options;
   ctx.folder = RunFolder(options.out_dir);
-  MPI_Comm_set_errhandler(ctx.comm, MPI_ERRORS_RETURN);
-  MPI_Comm_rank(ctx.comm, &ctx.rank);
-  MPI_Comm_size(ctx.comm, &ctx.size);
+  ctx.rank = ctx.collectives.rank();
+  ctx.size = ctx.collectives.size();
   ConfigureLogging(ctx);
   char host[256] = {};
   ::gethostname(host, sizeof host - 1);
@@ -365,8 +241,15 @@ int RunFarm(const FarmOptions& options) {
                  rep.version, ctx.size, ctx.threads, ctx.folder.dir);
   }
 
-  std::vector<std::unique_ptr<FarmPhase>> phases;
-  phases.push_back(MakeSetupPhase());
+  // The list's first entry (setup) decides what the run is; the others are asked once it has.
+  const std::vector<PhaseFactory>& list = FarmPhaseList();
+  PhaseList phases;
+  if (!list.empty()) list.front()(ctx, phases);
+  // Rank 0: every phase writes its section of the report (also when the run fails).
+  auto report_phases = [&] {
+    if (ctx.rank == 0)
+      for (const auto& p : phases) p->Report(rep);
+  };
 
   const double start = FarmNow();
   int exit_code = kExitOk;
@@ -388,6 +271,7 @@ int RunFarm(const FarmOptions& options) {
         rep.wall_seconds = FarmNow() - start;
         rep.phases.push_back({phase->name(), FarmNow() - t0});
         rep.jobs_total = rep.jobs_done + rep.jobs_reused;
+        report_phases();
         WriteReport(ctx);
         spdlog::error(
             "stopping all ranks (exit code {}); finished jobs are kept in {}: rerun "
@@ -396,8 +280,7 @@ int RunFarm(const FarmOptions& options) {
       }
       spdlog::default_logger()->flush();
       // The others may be blocked in MPI calls: only an abort releases them.
-      MPI_Abort(ctx.comm, exit_code);
-      return exit_code;
+      ctx.collectives.AbortEveryRank(exit_code);
     }
     rep.phases.push_back({phase->name(), FarmNow() - t0});
     if (std::string(phase->name()) == ctx.method) rep.sampling_seconds = FarmNow() - t0;
@@ -407,10 +290,16 @@ int RunFarm(const FarmOptions& options) {
       // too; 1: only scene.toml/geometry.prtg changed, the report says so).
       if (ctx.params.complete == 2) return kExitOk;
       if (ctx.params.complete) break;
-      for (auto& p : PhasesAfterSetup(ctx)) phases.push_back(std::move(p));
-      if (ctx.rank == 0) ctx.run_eta.SetSteps(PredictRunSteps(ctx));
+      for (std::size_t f = 1; f < list.size(); ++f) list[f](ctx, phases);
+      if (ctx.rank == 0) {
+        // The whole run's ETA: every phase's own cost model.
+        std::vector<RunStep> steps;
+        for (std::size_t p = 1; p < phases.size(); ++p) phases[p]->PredictSteps(ctx, steps);
+        ctx.run_eta.SetSteps(std::move(steps));
+      }
     }
   }
+  report_phases();
   rep.wall_seconds = FarmNow() - start;
   rep.status = exit_code == kExitOk ? "ok" : "failed";
   rep.exit_code = exit_code;
@@ -420,13 +309,12 @@ int RunFarm(const FarmOptions& options) {
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     const uint64_t peak = static_cast<uint64_t>(usage.ru_maxrss) * 1024;  // Linux: KiB
-    std::vector<uint64_t> peaks(static_cast<std::size_t>(ctx.size));
-    CheckMpi(MPI_Gather(&peak, 1, MPI_UINT64_T, peaks.data(), 1, MPI_UINT64_T, 0, ctx.comm),
-             "MPI_Gather peak memory");
+    const std::vector<uint64_t> peaks =
+        ctx.collectives.GatherOnRank0(std::span<const uint64_t>(&peak, 1), "gather peak memory");
     if (ctx.rank == 0)
       for (int r = 0; r < ctx.size; ++r) rep.rank_reports[r].peak_rss_bytes = peaks[r];
   }
-  if (ctx.rank == 0) ReportStages(ctx);
+  if (ctx.rank == 0) ReportStages(ctx, phases);
   const bool reported = WriteReport(ctx);
   // The compressed file and the report being durable, the raw matrix goes if asked to.
   if (ctx.rank == 0 && exit_code == kExitOk && reported && options.discard_raw &&

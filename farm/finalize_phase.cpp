@@ -64,6 +64,12 @@ void ReduceRankVariance(FarmContext& ctx) {
 class FinalizePhase final : public FarmPhase {
  public:
   const char* name() const override { return "finalize"; }
+  const char* stage() const override { return kStageRows; }
+  // Packing: ~1 GB/s of float32 rows (the 2-core VM's prior; docs/farm.md, "Progress").
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const double cols = 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n;
+    steps.push_back({"pack", "pack", static_cast<double>(ctx.params.rows) * cols * 4.0, 1e-9});
+  }
   void Run(FarmContext& ctx) override {
     if (ctx.rows_in_place) ReduceRankVariance(ctx);
     if (ctx.rank != 0 && !ctx.rows_in_place) return;
@@ -97,7 +103,7 @@ class FinalizePhase final : public FarmPhase {
     std::optional<TransportFileWriter> rows_in;
     int out_fd = -1;
     if (ranks > 1) {
-      CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
+      ctx.collectives.WaitForEveryRank("finalize: wait for the packed file");
       if (ctx.rank != 0) {
         rows_in.emplace(TransportFileWriter::OpenRows(ctx.folder.partial, info));
         const std::string tmp = ctx.folder.transport + ".tmp";
@@ -129,12 +135,8 @@ class FinalizePhase final : public FarmPhase {
       std::fill(sizes.begin(), sizes.end(), 0);
       for (uint64_t i = 0; i < count; ++i) sizes[i] = frames[i].size();
       if (ranks > 1) {
-        CheckMpi(MPI_Allgather(sizes.data(), static_cast<int>(group), MPI_UINT64_T,
-                               all_sizes.data(), static_cast<int>(group), MPI_UINT64_T, ctx.comm),
-                 "MPI_Allgather frame sizes");
-        CheckMpi(MPI_Gather(sums.data(), static_cast<int>(group), MPI_UINT64_T, all_sums.data(),
-                            static_cast<int>(group), MPI_UINT64_T, 0, ctx.comm),
-                 "MPI_Gather block checksums");
+        all_sizes = ctx.collectives.GatherEverywhere(sizes, "gather frame sizes");
+        all_sums = ctx.collectives.GatherOnRank0(sums, "gather block checksums");
       } else {
         all_sizes.assign(sizes.begin(), sizes.end());
         all_sums.assign(sums.begin(), sums.end());
@@ -163,10 +165,10 @@ class FinalizePhase final : public FarmPhase {
       ::close(out_fd);
       if (!synced) throw FileIoError(out_path, SystemReason("fsync failed"));
     }
-    if (ranks > 1) CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
+    if (ranks > 1) ctx.collectives.WaitForEveryRank("finalize: wait for every rank's frames");
     if (ctx.rank == 0) Finish(ctx, *packed, *progress, info, blocks, ranks);
     // The next phases read transport.prtt on every rank: not before it is in place.
-    if (ranks > 1) CheckMpi(MPI_Barrier(ctx.comm), "MPI_Barrier finalize");
+    if (ranks > 1) ctx.collectives.WaitForEveryRank("finalize: wait for transport.prtt");
   }
 
  private:
@@ -192,8 +194,10 @@ class FinalizePhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeFinalizePhase() {
-  return std::make_unique<FinalizePhase>();
+// The sampled rows of a transport run (brute force or sparse) become transport.prtt.
+void AddFinalizePhase(const FarmContext& ctx, PhaseList& phases) {
+  if (ctx.params.visibility || !ctx.params.run_rows) return;
+  phases.push_back(std::make_unique<FinalizePhase>());
 }
 
 }  // namespace prt

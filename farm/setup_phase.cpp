@@ -211,8 +211,8 @@ SceneGeometry ResolveSampling(FarmContext& ctx, const SceneDescription& scene,
 
 // Interreflection (docs/interreflection.md): the bounces, their estimator (gathering or path
 // tracing), the indirect grid's n, the [sparse] indirect mode and the channels (3 where an
-// albedo is coloured), checked against the job and the samples. Sets ctx.params,
-// ctx.interreflection (the report's section) and `resolved`'s interreflection fields.
+// albedo is coloured), checked against the job and the samples. Sets ctx.params and
+// `resolved`'s interreflection fields.
 void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
                             const SceneGeometry& geometry, ResolvedSampling& resolved) {
   const FarmOptions& o = ctx.options;
@@ -247,12 +247,6 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
   ctx.params.near_field = scene.sampling.near_field;
   ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
   if (bounces > 0) {
-    ctx.interreflection = {{"bounces", bounces},
-                           {"estimator", scene.sampling.estimator},
-                           {"indirect_n", indirect_n},
-                           {"paths", scene.sampling.gather_paths},
-                           {"channels", ctx.params.channels},
-                           {"per_bounce", nlohmann::ordered_json::array()}};
     if (ctx.params.path_estimator)
       spdlog::info(
           "interreflection: {} bounce(s) by per-element path tracing, {} paths per "
@@ -616,6 +610,7 @@ void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes) {
 class SetupPhase final : public FarmPhase {
  public:
   const char* name() const override { return "setup"; }
+  const char* stage() const override { return kStageAssets; }
 
   void Run(FarmContext& ctx) override {
     std::string geometry_bytes;
@@ -659,11 +654,10 @@ class SetupPhase final : public FarmPhase {
           const std::size_t background = BackgroundPixels(ctx.pixel_mesh);
           spdlog::info("image relighting: {} of {} pixels see the environment (background)",
                        background, ctx.pixel_mesh.size());
-          ctx.report.image_json = nlohmann::json{
-              {"width", ctx.params.camera.width},
-              {"height", ctx.params.camera.height},
-              {"background_pixels",
-               background}}.dump();
+          ctx.report.SetSection("image", nlohmann::json{{"width", ctx.params.camera.width},
+                                                        {"height", ctx.params.camera.height},
+                                                        {"background_pixels", background}}
+                                             .dump());
         }
       } else {
         ctx.samples = SpatialSamplesOf(ctx.geometry);
@@ -700,8 +694,9 @@ class SetupPhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeSetupPhase() {
-  return std::make_unique<SetupPhase>();
+// Always first: it decides what the run is.
+void AddSetupPhase(const FarmContext&, PhaseList& phases) {
+  phases.push_back(std::make_unique<SetupPhase>());
 }
 
 }  // namespace prt

@@ -272,6 +272,33 @@ namespace {
 class SparsePhase final : public FarmPhase {
  public:
   const char* name() const override { return "sparse"; }
+  const char* stage() const override { return kStageRows; }
+  // The method's steps (RunSparseSchedule's order), each as a fraction of a brute-force row:
+  // dense 0.75, rank 0.08, reconstruct 0.6 (docs/sparse-precomputation.md).
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const double row = SecondsPerRow(ctx);
+    const std::size_t N = ctx.params.rows;
+    const SparsePlan& plan = ctx.plan;
+    const std::size_t budget = SparseDenseBudget(N, plan);
+    std::size_t dense = SparseInitialDenseCount(N, plan);
+    steps.push_back({"dense-initial", "dense", double(dense), 0.75 * row});
+    const int rounds = SparseRounds(plan);
+    for (int it = 0; it < rounds && dense < budget; ++it) {
+      const std::size_t picks = SparsePicksForRound(budget, dense, rounds, it);
+      const std::string k = std::to_string(it + 1);
+      const double cand = std::min<double>(double(N - dense),
+                                           double(picks) * std::max(1, plan.candidates_per_pick));
+      steps.push_back({"rank-" + k, "rank", cand, 0.08 * row});
+      steps.push_back({"dense-rank-" + k, "dense", double(picks), 0.75 * row});
+      dense += picks;
+    }
+    const double sparse = double(N - std::min(N, dense));
+    steps.push_back({"sparse-reconstruct", "sparse", sparse, 0.6 * row});
+    steps.push_back({"cross-validate", "sparse",
+                     double(std::min(kSparseCrossValidated, SparseInitialDenseCount(N, plan))),
+                     0.6 * row});
+    steps.push_back({"dense-fallback", "dense", 0.04 * sparse, 0.75 * row});
+  }
 
   void Run(FarmContext& ctx) override {
     // This rank's handles on the run's files (rows in place), opened at its first job: rank 0
@@ -320,8 +347,10 @@ class SparsePhase final : public FarmPhase {
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeSparsePhase() {
-  return std::make_unique<SparsePhase>();
+// Rows by the sparse method: a transport run with method "sparse" whose rows stage runs.
+void AddSparsePhase(const FarmContext& ctx, PhaseList& phases) {
+  if (ctx.params.visibility || !ctx.params.sparse || !ctx.params.run_rows) return;
+  phases.push_back(std::make_unique<SparsePhase>());
 }
 
 }  // namespace prt

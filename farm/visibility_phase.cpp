@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -25,9 +26,24 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// The chunks of visibility.chunks that make up the result (verified re-used ones and this
+// run's), which the visibility phase finds and the visibility-finalize phase assembles: the
+// pair's own state.
+using VisibilityChunks = std::vector<VisibilityChunkRef>;
+
 class VisibilityPhase final : public FarmPhase {
  public:
+  explicit VisibilityPhase(std::shared_ptr<VisibilityChunks> chunks) : chunks_(std::move(chunks)) {}
   const char* name() const override { return kVisibilityPhaseName; }
+  const char* stage() const override { return kStageRows; }
+  // About half the sphere's texels traced per map, ~10 M occlusion rays/s per thread (the 2-core
+  // VM's prior; docs/farm.md, "Progress").
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    const double cols = 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n;
+    const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
+    steps.push_back({kVisibilityPhaseName, "visibility", static_cast<double>(ctx.params.rows),
+                     cols * 0.5 / (1e7 * threads)});
+  }
 
   void Run(FarmContext& ctx) override {
     RunJobPhase(
@@ -37,11 +53,11 @@ class VisibilityPhase final : public FarmPhase {
               ComputeVisibilityJob(*ctx.visibility_sampler, ctx.samples, range.first, range.count));
           out.append(reinterpret_cast<const char*>(r.data()), r.size());
         },
-        [&ctx](JobLoop& loop) { Coordinate(ctx, loop); });
+        [&](JobLoop& loop) { Coordinate(ctx, loop, *chunks_); });
   }
 
  private:
-  static void Coordinate(FarmContext& ctx, JobLoop& loop) {
+  static void Coordinate(FarmContext& ctx, JobLoop& loop, VisibilityChunks& made) {
     const uint64_t total = ctx.params.rows;
     FarmReport& rep = ctx.report;
     const std::string& path = ctx.folder.visibility_chunks;
@@ -70,7 +86,7 @@ class VisibilityPhase final : public FarmPhase {
         continue;
       }
       batch.done.push_back(e.rows);
-      ctx.visibility_chunks.push_back(ref);
+      made.push_back(ref);
       rep.rows_reused += e.rows.count;
       rep.rays_traced_all += ref.rays_traced;
       rep.texels_below_horizon_all += ref.texels_below_horizon;
@@ -109,7 +125,7 @@ class VisibilityPhase final : public FarmPhase {
     batch.committed = [&](const JournalEntry& e) {
       VisibilityChunkRef ref;
       ChunkOfJournalEntry(e, ref);
-      ctx.visibility_chunks.push_back(ref);
+      made.push_back(ref);
       rep.rows_done += e.rows.count;
       rep.rays_traced += e.rays_traced;
       rep.texels_traced += texels * e.rows.count - e.texels_below_horizon;
@@ -120,6 +136,8 @@ class VisibilityPhase final : public FarmPhase {
     loop.Run(batch);
     rep.jobs_total = rep.jobs_done + rep.jobs_reused;
   }
+
+  std::shared_ptr<VisibilityChunks> chunks_;
 };
 
 // Rank 0 assembles visibility.prtv from the journaled chunks (in sample order, so the file does
@@ -127,15 +145,18 @@ class VisibilityPhase final : public FarmPhase {
 // that --resume of a finished run re-uses every job.
 class VisibilityFinalizePhase final : public FarmPhase {
  public:
+  explicit VisibilityFinalizePhase(std::shared_ptr<const VisibilityChunks> chunks)
+      : chunks_(std::move(chunks)) {}
   const char* name() const override { return "visibility-finalize"; }
+  const char* stage() const override { return kStageRows; }
   void Run(FarmContext& ctx) override {
     if (ctx.rank != 0) return;
     const std::string& path = ctx.folder.visibility_chunks;
     SideFile chunks(path);
-    std::vector<std::vector<uint8_t>> data(ctx.visibility_chunks.size());
+    std::vector<std::vector<uint8_t>> data(chunks_->size());
     std::vector<VisibilityChunk> parts;
     for (std::size_t i = 0; i < data.size(); ++i) {
-      const VisibilityChunkRef& ref = ctx.visibility_chunks[i];
+      const VisibilityChunkRef& ref = (*chunks_)[i];
       data[i].resize(static_cast<std::size_t>(ref.length));
       if (!chunks.Read(data[i].data(), data[i].size(), ref.offset) ||
           Checksum64(data[i].data(), data[i].size()) != ref.checksum) {
@@ -166,16 +187,19 @@ class VisibilityFinalizePhase final : public FarmPhase {
         double(file.size()) / double(ctx.params.rows),
         file.empty() ? 0.0 : double(v.raw_bytes) / double(file.size()));
   }
+
+ private:
+  std::shared_ptr<const VisibilityChunks> chunks_;
 };
 
 }  // namespace
 
-std::unique_ptr<FarmPhase> MakeVisibilityPhase() {
-  return std::make_unique<VisibilityPhase>();
-}
-
-std::unique_ptr<FarmPhase> MakeVisibilityFinalizePhase() {
-  return std::make_unique<VisibilityFinalizePhase>();
+// The visibility job (job = "visibility"), when its rows stage runs: the maps, then the file.
+void AddVisibilityPhases(const FarmContext& ctx, PhaseList& phases) {
+  if (!ctx.params.visibility || !ctx.params.run_rows) return;
+  auto chunks = std::make_shared<VisibilityChunks>();
+  phases.push_back(std::make_unique<VisibilityPhase>(chunks));
+  phases.push_back(std::make_unique<VisibilityFinalizePhase>(chunks));
 }
 
 }  // namespace prt
