@@ -16,7 +16,9 @@
 #include <fstream>
 #include <memory>
 #include <optional>
+#include <span>
 
+#include "farm/collectives.h"
 #include "farm/cpca_phase.h"
 #include "farm/distributed_transpose.h"
 #include "farm/farm_context.h"
@@ -47,39 +49,38 @@ struct OptionsPod {
   uint64_t dither_seed;
 };
 
-// ---- The phase's collectives, named by what they share (every rank calls each, in this order,
-// or none: farm/farm_context.h, CollectiveStop). The CPCA path's own are in farm/cpca_phase.cpp.
+// ---- The phase's collectives, named by what they share, on farm/collectives.h (every rank
+// calls each, in this order, or none: farm/farm_context.h, CollectiveStop). The transpose's own
+// are in farm/distributed_transpose.cpp, the CPCA path's in farm/cpca_phase.cpp.
 
 // Rank 0's setup outcome {exit code, rows per file block, header bytes} on every rank.
-void ShareSetupOutcome(uint64_t (&setup)[3], MPI_Comm comm) {
-  MPI_Bcast(setup, 3, MPI_UINT64_T, 0, comm);
+void ShareSetupOutcome(uint64_t (&setup)[3], const Collectives& c) {
+  c.ShareValueFromRank0(setup, "share the compression setup");
 }
 
 // Rank 0's encoded header (`bytes` header bytes) and options on every rank.
 void ShareHeaderAndOptions(std::vector<uint8_t>& header_bytes, uint64_t bytes, OptionsPod& pod,
-                           MPI_Comm comm) {
+                           const Collectives& c) {
   header_bytes.resize(bytes);
-  CheckMpi(MPI_Bcast(header_bytes.data(), static_cast<int>(bytes), MPI_BYTE, 0, comm),
-           "MPI_Bcast header");
-  CheckMpi(MPI_Bcast(&pod, sizeof pod, MPI_BYTE, 0, comm), "MPI_Bcast options");
+  c.ShareFromRank0(header_bytes.data(), header_bytes.size(), "share the compressed header");
+  c.ShareValueFromRank0(pod, "share the compression options");
 }
 
 // Rank 0's estimate lights (`rank0_lights`, ignored elsewhere) on every rank, each an n × n
 // cubemap.
 std::vector<CubemapRgb> ShareEstimateLights(const std::vector<CubemapRgb>& rank0_lights, int n,
-                                            int rank, MPI_Comm comm) {
+                                            const Collectives& c) {
   uint64_t count = rank0_lights.size();
-  CheckMpi(MPI_Bcast(&count, 1, MPI_UINT64_T, 0, comm), "MPI_Bcast lights");
+  c.ShareValueFromRank0(count, "share the estimate lights");
   std::vector<CubemapRgb> lights(static_cast<std::size_t>(count));
   for (std::size_t l = 0; l < lights.size(); ++l) {
     CubemapRgb& light = lights[l];
-    light = rank == 0 ? rank0_lights[l] : CubemapRgb{};
+    light = c.rank() == 0 ? rank0_lights[l] : CubemapRgb{};
     light.n = n;
-    for (int c = 0; c < 3; ++c) {
-      std::vector<float>& ch = light.Channel(c);
+    for (int k = 0; k < 3; ++k) {
+      std::vector<float>& ch = light.Channel(k);
       ch.resize(light.TexelCount());
-      CheckMpi(MPI_Bcast(ch.data(), static_cast<int>(ch.size()), MPI_FLOAT, 0, comm),
-               "MPI_Bcast lights");
+      c.ShareFromRank0(ch.data(), ch.size() * sizeof(float), "share the estimate lights");
     }
   }
   return lights;
@@ -87,60 +88,33 @@ std::vector<CubemapRgb> ShareEstimateLights(const std::vector<CubemapRgb>& rank0
 
 // The global budget's magnitude histogram summed over all ranks, on every rank. Integer counts:
 // the same sum, hence the same threshold, for any number of ranks.
-std::vector<uint64_t> SumHistograms(std::vector<uint64_t>& histogram, MPI_Comm comm) {
-  std::vector<uint64_t> all(kMagnitudeBins, 0);
-  CheckMpi(MPI_Allreduce(histogram.data(), all.data(), static_cast<int>(kMagnitudeBins),
-                         MPI_UINT64_T, MPI_SUM, comm),
-           "MPI_Allreduce histogram");
+std::vector<uint64_t> SumHistograms(const std::vector<uint64_t>& histogram, const Collectives& c) {
+  std::vector<uint64_t> all = histogram;
+  c.SumEverywhere(std::span<uint64_t>(all), "sum the magnitude histograms");
   return all;
 }
 
-// The estimate stage's Σ B² summed over the ranks' rows, on rank 0 (zeros elsewhere).
-std::vector<double> SumRadianceNorms(const std::vector<double>& mine, MPI_Comm comm) {
-  std::vector<double> all_norms(mine.size(), 0.0);
-  CheckMpi(MPI_Reduce(mine.data(), all_norms.data(), static_cast<int>(mine.size()), MPI_DOUBLE,
-                      MPI_SUM, 0, comm),
-           "MPI_Reduce radiance norms");
-  return all_norms;
+// The estimate stage's Σ B² summed over the ranks' rows, on rank 0 (a report figure: double sums
+// in any order; the other ranks get their own back).
+std::vector<double> SumRadianceNorms(const std::vector<double>& mine, const Collectives& c) {
+  std::vector<double> all = mine;
+  c.SumOnRank0(std::span<double>(all), "sum the radiance norms");
+  return all;
 }
 
-// Every rank's encoded column block size, on rank 0.
-std::vector<uint64_t> GatherColumnBlockSizes(uint64_t my_size, int size, MPI_Comm comm) {
-  std::vector<uint64_t> sizes(static_cast<std::size_t>(size));
-  CheckMpi(MPI_Gather(&my_size, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, comm),
-           "MPI_Gather");
-  return sizes;
+// Every rank's encoded column block size, on rank 0 (empty elsewhere).
+std::vector<uint64_t> GatherColumnBlockSizes(uint64_t my_size, const Collectives& c) {
+  return c.GatherOnRank0(std::span<const uint64_t>(&my_size, 1), "gather the column block sizes");
 }
 
-// all[i] = Σ over ranks of mine[i], on rank 0: counters (exact) and the error's energies.
-void SumOnRank0(const uint64_t* mine, uint64_t* all, int n, MPI_Comm comm) {
-  CheckMpi(MPI_Reduce(mine, all, n, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
-}
-void SumOnRank0(const double* mine, double* all, int n, MPI_Comm comm) {
-  CheckMpi(MPI_Reduce(mine, all, n, MPI_DOUBLE, MPI_SUM, 0, comm), "MPI_Reduce");
-}
-// all[i] = max over ranks of mine[i], on rank 0: a step's seconds are its slowest rank's.
-void MaxOnRank0(const double* mine, double* all, int n, MPI_Comm comm) {
-  CheckMpi(MPI_Reduce(mine, all, n, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
-}
-
-// A rank's encoded column block travels to rank 0 in pieces of at most 1 GiB (MPI counts are
-// int), tag 7301.
-constexpr uint64_t kPiece = 1ull << 30;
-void SendColumnBlockToRank0(const std::vector<uint8_t>& bytes, MPI_Comm comm) {
-  const uint64_t my_size = bytes.size();
-  for (uint64_t off = 0; off < my_size; off += kPiece)
-    CheckMpi(MPI_Send(bytes.data() + off, static_cast<int>(std::min(kPiece, my_size - off)),
-                      MPI_BYTE, 0, 7301, comm),
-             "MPI_Send columns");
+// A rank's encoded column block travels to rank 0 (tag 7301).
+void SendColumnBlockToRank0(const std::vector<uint8_t>& bytes, const Collectives& c) {
+  c.SendTo(0, bytes.data(), bytes.size(), 7301, "send the compressed columns");
 }
 // Rank 0's side: rank r's `size` bytes.
-std::vector<uint8_t> ReceiveColumnBlock(int r, uint64_t size, MPI_Comm comm) {
+std::vector<uint8_t> ReceiveColumnBlock(int r, uint64_t size, const Collectives& c) {
   std::vector<uint8_t> in(static_cast<std::size_t>(size));
-  for (uint64_t off = 0; off < in.size(); off += kPiece)
-    CheckMpi(MPI_Recv(in.data() + off, static_cast<int>(std::min(kPiece, in.size() - off)),
-                      MPI_BYTE, r, 7301, comm, MPI_STATUS_IGNORE),
-             "MPI_Recv columns");
+  c.ReceiveFrom(r, in.data(), in.size(), 7301, "receive the compressed columns");
   return in;
 }
 
@@ -285,7 +259,7 @@ void SetUpOnRank0(FarmContext& ctx, CompressionSetup& s) {
 
 // Step 1 on every rank: rank 0's header and options, decoded where they did not come from.
 void ShareSetup(const FarmContext& ctx, CompressionSetup& s) {
-  ShareHeaderAndOptions(s.header_bytes, s.setup[2], s.pod, ctx.comm);
+  ShareHeaderAndOptions(s.header_bytes, s.setup[2], s.pod, ctx.collectives);
   if (ctx.rank != 0) {
     const OptionsPod& pod = s.pod;
     s.header = DecodeHeader(s.header_bytes, "compressed transport header from rank 0");
@@ -383,7 +357,7 @@ std::unique_ptr<RadianceNormAccumulator> StartRadianceNorms(
   EstimateLights* estimate = ctx.rank == 0 ? &LoadEstimateLights(ctx) : nullptr;
   const std::vector<CubemapRgb> none;
   std::vector<CubemapRgb> lights = ShareEstimateLights(
-      estimate ? estimate->lights : none, static_cast<int>(header.cubemap_n), ctx.rank, ctx.comm);
+      estimate ? estimate->lights : none, static_cast<int>(header.cubemap_n), ctx.collectives);
   return std::make_unique<RadianceNormAccumulator>(std::move(lights), ctx.RowGroups(),
                                                    ctx.params.channels);
 }
@@ -403,7 +377,7 @@ struct RankColumns {
 void QuantiseStashedBlocks(const FarmContext& ctx, const CompressedTransportHeader& header,
                            std::vector<uint64_t>& histogram, TransformedBlockStash& stash,
                            RankColumns& out) {
-  const std::vector<uint64_t> all = SumHistograms(histogram, ctx.comm);
+  const std::vector<uint64_t> all = SumHistograms(histogram, ctx.collectives);
   const float threshold = ThresholdFromHistogram(all.data(), GlobalTermBudget(header));
   const double tq = FarmNow();
   stash.Replay([&](uint32_t first, uint32_t count, const float* columns, const uint8_t* depths) {
@@ -499,21 +473,28 @@ struct RankTotals {
   double energy_all[3] = {};  // ‖T‖², the rows' truncation, the columns' error
 };
 
-RankTotals ReduceRankFigures(const RankColumns& c, MPI_Comm comm) {
+RankTotals ReduceRankFigures(const RankColumns& c, const Collectives& collectives) {
   RankTotals t;
   const TransposeStats& st = c.st;
-  uint64_t sums[4] = {st.bytes_sent, st.bytes_spilled, st.runs_spilled, c.terms};
-  SumOnRank0(sums, t.total, 4, comm);
-  double secs[7] = {st.read_seconds,
-                    st.row_transform_seconds,
-                    st.exchange_seconds,
-                    st.buffer_seconds,
-                    st.merge_seconds,
-                    st.sink_seconds,
-                    st.exchange_seconds + st.buffer_seconds + st.merge_seconds};
-  MaxOnRank0(secs, t.maxs, 7, comm);
-  double energy[3] = {c.row_energy, c.row_dropped, c.column_error};
-  SumOnRank0(energy, t.energy_all, 3, comm);
+  uint64_t* total = t.total;
+  total[0] = st.bytes_sent;
+  total[1] = st.bytes_spilled;
+  total[2] = st.runs_spilled;
+  total[3] = c.terms;
+  collectives.SumOnRank0(std::span<uint64_t>(t.total), "sum the transpose counters");
+  double* secs = t.maxs;
+  secs[0] = st.read_seconds;
+  secs[1] = st.row_transform_seconds;
+  secs[2] = st.exchange_seconds;
+  secs[3] = st.buffer_seconds;
+  secs[4] = st.merge_seconds;
+  secs[5] = st.sink_seconds;
+  secs[6] = st.exchange_seconds + st.buffer_seconds + st.merge_seconds;
+  collectives.MaxOnRank0(std::span<double>(t.maxs), "the slowest rank's seconds");
+  t.energy_all[0] = c.row_energy;
+  t.energy_all[1] = c.row_dropped;
+  t.energy_all[2] = c.column_error;
+  collectives.SumOnRank0(std::span<double>(t.energy_all), "sum the compression's error");
   return t;
 }
 
@@ -525,7 +506,7 @@ CompressedTransport CollectColumnsOnRank0(const FarmContext& ctx,
                                           const std::vector<uint64_t>& sizes) {
   CompressedTransport t;
   if (ctx.rank != 0) {
-    SendColumnBlockToRank0(bytes, ctx.comm);
+    SendColumnBlockToRank0(bytes, ctx.collectives);
     return t;
   }
   t.header = header;
@@ -534,7 +515,7 @@ CompressedTransport CollectColumnsOnRank0(const FarmContext& ctx,
     if (r == 0) {
       in.swap(bytes);
     } else {
-      in = ReceiveColumnBlock(r, sizes[static_cast<std::size_t>(r)], ctx.comm);
+      in = ReceiveColumnBlock(r, sizes[static_cast<std::size_t>(r)], ctx.collectives);
     }
     if (in.empty()) continue;
     for (CompressedColumn& c :
@@ -626,14 +607,13 @@ void FinishReport(FarmContext& ctx, const CompressedTransport& t, std::size_t fi
 // rerun and rethrown: RunFarm writes the failed report and aborts the job.
 void Compress(FarmContext& ctx) {
   const FarmOptions& options = ctx.options;
-  MPI_Comm comm = ctx.comm;
   const int rank = ctx.rank;
   const int size = ctx.size;
   const double start = FarmNow();
 
   CompressionSetup s;
   if (rank == 0) SetUpOnRank0(ctx, s);
-  ShareSetupOutcome(s.setup, comm);
+  ShareSetupOutcome(s.setup, ctx.collectives);
   if (s.setup[0] != kExitOk) throw CollectiveStop{static_cast<int>(s.setup[0])};
 
   CompressionFarmReport& rep = ctx.report.compression;
@@ -664,7 +644,7 @@ void Compress(FarmContext& ctx) {
     std::error_code ec;
     fs::remove_all(plan.spill_dir, ec);
     if (norms) {
-      std::vector<double> all_norms = SumRadianceNorms(norms->Flat(), comm);
+      std::vector<double> all_norms = SumRadianceNorms(norms->Flat(), ctx.collectives);
       if (rank == 0) {
         EstimateLights& estimate = LoadEstimateLights(ctx);  // loaded above: kept as it is
         estimate.norms = std::move(all_norms);
@@ -683,8 +663,8 @@ void Compress(FarmContext& ctx) {
       block.columns = std::move(columns.mine);
       bytes = EncodeColumnBlock(header, block);
     }
-    const std::vector<uint64_t> sizes = GatherColumnBlockSizes(bytes.size(), size, comm);
-    const RankTotals totals = ReduceRankFigures(columns, comm);
+    const std::vector<uint64_t> sizes = GatherColumnBlockSizes(bytes.size(), ctx.collectives);
+    const RankTotals totals = ReduceRankFigures(columns, ctx.collectives);
     const CompressedTransport t = CollectColumnsOnRank0(ctx, header, bytes, sizes);
     if (rank == 0) {
       const std::vector<uint8_t> file = EncodeCompressedTransport(t);

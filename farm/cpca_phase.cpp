@@ -9,11 +9,12 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "farm/collectives.h"
 #include "farm/farm_context.h"
-#include "farm/mpi_support.h"
 #include "farm/progress.h"
 #include "farm/sparse_jobs.h"
 #include "formats/cpca_transport.h"
@@ -27,94 +28,60 @@ namespace prt {
 
 namespace {
 
-// ---- The CPCA path's collectives, named by what they share (every rank calls each in the same
-// order). Pieces of at most 2^27 elements per MPI call (counts are int).
-constexpr std::size_t kPiece = std::size_t{1} << 27;
+// ---- The CPCA path's collectives, named by what they share, on farm/collectives.h (every rank
+// calls each in the same order).
 
 // ComputeCpca's reductions over the ranks (worker/cpca.h): fixed-point sums (exact, so the same
 // for any number of ranks) and maxima, on every rank.
-class MpiCpcaReducer final : public CpcaReducer {
+class CollectiveCpcaReducer final : public CpcaReducer {
  public:
-  explicit MpiCpcaReducer(MPI_Comm comm) : comm_(comm) {}
-  void SumInt64(std::span<int64_t> v) override {
-    for (std::size_t at = 0; at < v.size(); at += kPiece)
-      CheckMpi(MPI_Allreduce(MPI_IN_PLACE, v.data() + at,
-                             static_cast<int>(std::min(kPiece, v.size() - at)), MPI_INT64_T,
-                             MPI_SUM, comm_),
-               "MPI_Allreduce CPCA sums");
-  }
-  void MaxDouble(std::span<double> v) override {
-    for (std::size_t at = 0; at < v.size(); at += kPiece)
-      CheckMpi(MPI_Allreduce(MPI_IN_PLACE, v.data() + at,
-                             static_cast<int>(std::min(kPiece, v.size() - at)), MPI_DOUBLE, MPI_MAX,
-                             comm_),
-               "MPI_Allreduce CPCA maxima");
-  }
+  explicit CollectiveCpcaReducer(const Collectives& c) : c_(c) {}
+  void SumInt64(std::span<int64_t> v) override { c_.SumEverywhere(v, "sum the CPCA sums"); }
+  void MaxDouble(std::span<double> v) override { c_.MaxEverywhere(v, "the CPCA maxima"); }
 
  private:
-  MPI_Comm comm_;
+  const Collectives& c_;
 };
 
 // Rank 0 sends rank r its rows (tag 7401); rank r receives them into `rows`.
-void SendRowsToRank(const std::vector<float>& buf, int r, MPI_Comm comm) {
-  for (std::size_t at = 0; at < buf.size(); at += kPiece)
-    CheckMpi(MPI_Send(buf.data() + at, static_cast<int>(std::min(kPiece, buf.size() - at)),
-                      MPI_FLOAT, r, 7401, comm),
-             "MPI_Send CPCA rows");
+void SendRowsToRank(const std::vector<float>& buf, int r, const Collectives& c) {
+  c.SendTo(r, buf.data(), buf.size() * sizeof(float), 7401, "send CPCA rows");
 }
-void ReceiveRowsFromRank0(std::vector<float>& rows, MPI_Comm comm) {
-  for (std::size_t at = 0; at < rows.size(); at += kPiece)
-    CheckMpi(MPI_Recv(rows.data() + at, static_cast<int>(std::min(kPiece, rows.size() - at)),
-                      MPI_FLOAT, 0, 7401, comm, MPI_STATUS_IGNORE),
-             "MPI_Recv CPCA rows");
+void ReceiveRowsFromRank0(std::vector<float>& rows, const Collectives& c) {
+  c.ReceiveFrom(0, rows.data(), rows.size() * sizeof(float), 7401, "receive CPCA rows");
 }
 
 // Rank 0's combination pairs on every rank: meta = {slots per sample (0: none), pair count}.
-void ShareCombinationPairs(uint64_t (&meta)[2], std::vector<uint32_t>& pairs, MPI_Comm comm) {
-  CheckMpi(MPI_Bcast(meta, 2, MPI_UINT64_T, 0, comm), "MPI_Bcast CPCA sparse structure");
+void ShareCombinationPairs(uint64_t (&meta)[2], std::vector<uint32_t>& pairs,
+                           const Collectives& c) {
+  c.ShareValueFromRank0(meta, "share the CPCA sparse structure");
   if (meta[0] > 0) {
     pairs.resize(meta[1]);
-    for (std::size_t at = 0; at < pairs.size(); at += kPiece)
-      CheckMpi(MPI_Bcast(pairs.data() + at, static_cast<int>(std::min(kPiece, pairs.size() - at)),
-                         MPI_UINT32_T, 0, comm),
-               "MPI_Bcast CPCA combinations");
+    c.ShareFromRank0(pairs.data(), pairs.size() * sizeof(uint32_t), "share the CPCA combinations");
   }
 }
 
 // Every row's cluster id and its S coefficients on rank 0, in row order (rank r holds the rows
 // CpcaRowRange(R, r, size) gives it); `all_*` are only written on rank 0.
 void GatherClustersAndCoefficients(const CpcaLocalResult& mine, uint64_t R, uint32_t S,
-                                   uint64_t count, int size, std::vector<uint32_t>& all_clusters,
-                                   std::vector<int32_t>& all_coefficients, MPI_Comm comm) {
-  std::vector<int> counts(static_cast<std::size_t>(size)), displs(static_cast<std::size_t>(size));
+                                   uint64_t count, std::vector<uint32_t>& all_clusters,
+                                   std::vector<int32_t>& all_coefficients, const Collectives& c) {
+  const int size = c.size();
+  std::vector<uint64_t> counts(static_cast<std::size_t>(size));
   for (int r = 0; r < size; ++r) {
     const auto [f, l] = CpcaRowRange(R, r, size);
-    counts[static_cast<std::size_t>(r)] = static_cast<int>(l - f);
-    displs[static_cast<std::size_t>(r)] = static_cast<int>(f);
+    counts[static_cast<std::size_t>(r)] = l - f;
   }
-  CheckMpi(MPI_Gatherv(mine.cluster_of.data(), static_cast<int>(count), MPI_UINT32_T,
-                       all_clusters.data(), counts.data(), displs.data(), MPI_UINT32_T, 0, comm),
-           "MPI_Gatherv CPCA clusters");
+  c.ConcatenateOnRank0(std::span<const uint32_t>(mine.cluster_of.data(), count),
+                       std::span<uint32_t>(all_clusters), counts, "gather the CPCA clusters");
   if (S > 0) {
     if (static_cast<uint64_t>(R) * S > static_cast<uint64_t>(INT_MAX))
       throw std::runtime_error("CPCA: more than 2^31 coefficients");
-    for (int r = 0; r < size; ++r) {
-      counts[static_cast<std::size_t>(r)] *= static_cast<int>(S);
-      displs[static_cast<std::size_t>(r)] *= static_cast<int>(S);
-    }
-    CheckMpi(
-        MPI_Gatherv(mine.coefficients.data(), static_cast<int>(count * S), MPI_INT32_T,
-                    all_coefficients.data(), counts.data(), displs.data(), MPI_INT32_T, 0, comm),
-        "MPI_Gatherv CPCA coefficients");
+    for (uint64_t& k : counts) k *= S;
+    c.ConcatenateOnRank0(std::span<const int32_t>(mine.coefficients.data(), count * S),
+                         std::span<int32_t>(all_coefficients), counts,
+                         "gather the CPCA coefficients");
   }
-}
-
-// Σ over ranks of `mine` (distance evaluations), and the slowest rank's seconds, on rank 0.
-void SumOnRank0(const uint64_t* mine, uint64_t* all, int n, MPI_Comm comm) {
-  CheckMpi(MPI_Reduce(mine, all, n, MPI_UINT64_T, MPI_SUM, 0, comm), "MPI_Reduce");
-}
-void MaxOnRank0(const double* mine, double* all, int n, MPI_Comm comm) {
-  CheckMpi(MPI_Reduce(mine, all, n, MPI_DOUBLE, MPI_MAX, 0, comm), "MPI_Reduce");
 }
 
 // Huang §6's input from the sparse phase's run/sparse/combination.bin (its pairs, `slots` per
@@ -167,11 +134,11 @@ uint64_t ReadRowShare(const FarmContext& ctx, uint64_t R, uint32_t d, uint64_t f
       const auto [f, l] = CpcaRowRange(R, r, size);
       buf.resize((l - f) * d);
       if (l > f) reader->ReadRows(f, l - f, buf.data());
-      SendRowsToRank(buf, r, ctx.comm);
+      SendRowsToRank(buf, r, ctx.collectives);
       bytes_sent += buf.size() * sizeof(float);
     }
   } else {
-    ReceiveRowsFromRank0(rows, ctx.comm);
+    ReceiveRowsFromRank0(rows, ctx.collectives);
   }
   return bytes_sent;
 }
@@ -191,7 +158,7 @@ std::unique_ptr<CpcaSparseStructure> ShareSparseStructure(const FarmContext& ctx
     meta[0] = slots;
     meta[1] = pairs.size();
   }
-  ShareCombinationPairs(meta, pairs, ctx.comm);
+  ShareCombinationPairs(meta, pairs, ctx.collectives);
   if (meta[0] > 0) {
     sparse = std::make_unique<CpcaSparseStructure>(
         StructureFromPairs(pairs, header.spatial_count(), meta[0], header.channels));
@@ -274,7 +241,6 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
                         const std::function<std::unique_ptr<ComposedTransport>()>& open_reader,
                         double start) {
   const FarmOptions& options = ctx.options;
-  MPI_Comm comm = ctx.comm;
   const int rank = ctx.rank, size = ctx.size;
   CompressionFarmReport& rep = ctx.report.compression;
   const uint64_t R = header.sample_count;
@@ -315,7 +281,7 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
   std::unique_ptr<Progress> progress;
   if (rank == 0) progress = std::make_unique<Progress>("cpca", 1, po);
   int reported = 0;
-  MpiCpcaReducer reducer(comm);
+  CollectiveCpcaReducer reducer(ctx.collectives);
   const CpcaOptions o = CpcaOptionsFrom(header);
   const double tc = FarmNow();
   CpcaLocalResult mine = ComputeCpca(header, o, rows.data(), first, count, reducer, sparse.get(),
@@ -339,12 +305,14 @@ void RunCpcaCompression(FarmContext& ctx, const CompressedTransportHeader& heade
     t.cluster_of.resize(R);
     t.coefficients.resize(R * S);
   }
-  GatherClustersAndCoefficients(mine, R, S, count, size, t.cluster_of, t.coefficients, comm);
+  GatherClustersAndCoefficients(mine, R, S, count, t.cluster_of, t.coefficients, ctx.collectives);
   CpcaFigures fig;
-  uint64_t evals = mine.stats.distance_evaluations;
-  SumOnRank0(&evals, &fig.evals_all, 1, comm);
-  double secs[3] = {read_seconds, transform_seconds, compress_seconds};
-  MaxOnRank0(secs, fig.maxs, 3, comm);
+  fig.evals_all = mine.stats.distance_evaluations;
+  ctx.collectives.SumOnRank0(std::span<uint64_t>(&fig.evals_all, 1), "sum the CPCA distances");
+  fig.maxs[0] = read_seconds;
+  fig.maxs[1] = transform_seconds;
+  fig.maxs[2] = compress_seconds;
+  ctx.collectives.MaxOnRank0(std::span<double>(fig.maxs), "the slowest rank's CPCA seconds");
   if (rank != 0) return;
 
   t.clusters = std::move(mine.clusters);
