@@ -47,14 +47,10 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kDefaultSceneName = "<default scene>";
-constexpr uint64_t kMaxBroadcastBytes = uint64_t{1} << 30;
-
+// Rank 0's `size` bytes (the serialized geometry) on every rank.
 void BroadcastBytes(FarmContext& ctx, std::string& bytes, uint64_t size) {
   bytes.resize(static_cast<std::size_t>(size));
-  for (uint64_t at = 0; at < size; at += kMaxBroadcastBytes) {
-    const auto n = static_cast<int>(std::min(kMaxBroadcastBytes, size - at));
-    CheckMpi(MPI_Bcast(bytes.data() + at, n, MPI_BYTE, 0, ctx.comm), "MPI_Bcast geometry");
-  }
+  ctx.collectives.ShareFromRank0(bytes.data(), bytes.size(), "share the geometry");
 }
 
 // Whether every rank sees rank 0's run folder (docs/farm.md, "Where the rows go"): rank 0 writes a
@@ -65,7 +61,7 @@ void AgreeOnSharedFolder(FarmContext& ctx) {
   ctx.rows_in_place = false;
   if (ctx.size == 1 || ctx.params.visibility) return;
   int want = ctx.options.rows_via_rank0 ? 0 : 1;
-  CheckMpi(MPI_Bcast(&want, 1, MPI_INT, 0, ctx.comm), "MPI_Bcast rows in place");
+  ctx.collectives.ShareValueFromRank0(want, "share --rows-via-rank0");
   if (!want) {
     if (ctx.rank == 0)
       spdlog::info("--rows-via-rank0: every row travels to rank 0, which writes it");
@@ -85,17 +81,15 @@ void AgreeOnSharedFolder(FarmContext& ctx) {
       local = 0;
     }
   }
-  CheckMpi(MPI_Bcast(&token, 1, MPI_UINT64_T, 0, ctx.comm), "MPI_Bcast probe token");
+  ctx.collectives.ShareValueFromRank0(token, "share the probe token");
   if (ctx.rank != 0) {
     std::ifstream in(probe);
     std::string text;
     local = (in >> text) && text == std::to_string(token) ? 1 : 0;
   }
-  int all = 0, first_blind = ctx.size;
   const int mine = local ? ctx.size : ctx.rank;
-  CheckMpi(MPI_Allreduce(&local, &all, 1, MPI_INT, MPI_MIN, ctx.comm), "MPI_Allreduce probe");
-  CheckMpi(MPI_Allreduce(&mine, &first_blind, 1, MPI_INT, MPI_MIN, ctx.comm),
-           "MPI_Allreduce probe");
+  const int all = ctx.collectives.AgreeMin(local, "agree on the shared folder");
+  const int first_blind = ctx.collectives.AgreeMin(mine, "the first rank blind to the folder");
   ctx.rows_in_place = all == 1;
   if (ctx.rank == 0) {
     std::error_code ec;
@@ -625,12 +619,12 @@ class SetupPhase final : public FarmPhase {
         ctx.report.error = message;
       }
     }
-    CheckMpi(MPI_Bcast(&status, 1, MPI_INT, 0, ctx.comm), "MPI_Bcast status");
+    ctx.collectives.ShareValueFromRank0(status, "share the setup status");
     if (status != kExitOk) throw CollectiveStop{status};
-    CheckMpi(MPI_Bcast(&ctx.params, sizeof(SetupParams), MPI_BYTE, 0, ctx.comm), "MPI_Bcast");
+    ctx.collectives.ShareValueFromRank0(ctx.params, "share the run's parameters");
     if (ctx.params.complete) return;  // a finished run: RunFarm stops after this phase
     if (ctx.params.sparse) {
-      CheckMpi(MPI_Bcast(&ctx.plan, sizeof(SparsePlan), MPI_BYTE, 0, ctx.comm), "MPI_Bcast plan");
+      ctx.collectives.ShareValueFromRank0(ctx.plan, "share the sparse plan");
       ctx.method = "sparse";
     }
     if (ctx.params.visibility) ctx.method = kVisibilityPhaseName;
