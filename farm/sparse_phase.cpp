@@ -921,7 +921,7 @@ class SparsePhase final : public FarmPhase {
           rep.sparse.candidates_ranked += c.candidates_ranked;
           rep.sparse.dense_by_rank += c.dense_by_rank;
           rep.sparse.dense_fallback = c.dense_fallback;
-          // The combinations the bounces reuse (farm/bounce_phase.cpp; a fallback's is empty).
+          // The combinations the bounces reuse (farm/bounce/driver.cpp; a fallback's is empty).
           if (!steps.combination_.empty())
             WriteFileDurably(ctx.folder.SparseCombinationFile(),
                              EncodeCombinationFile(ctx.samples.size(), CombinationSlots(ctx.plan),
