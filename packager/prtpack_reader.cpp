@@ -1,7 +1,8 @@
 // .prtpack reader (docs/prtpack-format.md). Every offset, size, count and index read from the
 // file is range-checked before it is used, in 64-bit arithmetic that cannot overflow (sizes are
 // compared against the remaining length, never added blindly), and every decoded size is
-// bounded before anything is allocated.
+// bounded before anything is allocated. Fields are read with vocabulary/bytes.h's LoadAt and
+// SliceAt, bounded themselves: a check forgotten here would throw, not read outside the file.
 #include "packager/prtpack_reader.h"
 
 #include <fcntl.h>
