@@ -112,9 +112,7 @@ std::string EncodeTransportVariance(const TransportVariance& v) {
 TransportVariance DecodeTransportVariance(std::string_view bytes, const std::string& name) {
   if (bytes.size() < 16 || bytes.substr(0, 8) != std::string_view(kMagic, 8))
     throw InputError(name, "not a prtfarm variance file (bad magic)");
-  uint64_t stored;
-  std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
-  if (Checksum64(bytes.data(), bytes.size() - 8) != stored)
+  if (Checksum64(bytes.data(), bytes.size() - 8) != LoadAt<uint64_t>(bytes, bytes.size() - 8))
     throw InputError(name, "damaged variance file (checksum mismatch)");
   ByteReader in = Reader(bytes.substr(0, bytes.size() - 8), name);
   in.Take(8, "magic");
@@ -143,16 +141,12 @@ std::vector<VarianceLogRecord> DecodeVarianceLog(std::string_view bytes, const s
   std::vector<VarianceLogRecord> out;
   std::size_t at = 0;
   while (bytes.size() - at >= 12) {
-    uint32_t magic;
-    uint64_t size;
-    std::memcpy(&magic, bytes.data() + at, 4);
-    std::memcpy(&size, bytes.data() + at + 4, 8);
+    const auto magic = LoadAt<uint32_t>(bytes, at);
+    const auto size = LoadAt<uint64_t>(bytes, at + 4);
     if (magic != kLogMagic || size > bytes.size() - at - 12 || bytes.size() - at - 12 - size < 8)
       break;  // torn or damaged: the records after it are not trusted
     const std::string_view body = bytes.substr(at + 12, size);
-    uint64_t sum;
-    std::memcpy(&sum, bytes.data() + at + 12 + size, 8);
-    if (Checksum64(body.data(), body.size()) != sum) break;
+    if (Checksum64(body.data(), body.size()) != LoadAt<uint64_t>(bytes, at + 12 + size)) break;
     try {
       ByteReader in = Reader(body, name);
       VarianceLogRecord r;
