@@ -592,6 +592,7 @@ class BouncePhase final : public FarmPhase {
     batch.items = V;
     batch.unit = "samples";
     batch.max_items = std::max<uint64_t>(1, kMaxJobBytes / (C * cols * sizeof(float)));
+    batch.cost = SampleCost(ctx);  // image runs: background pixels next to free (issue 37)
     const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
     batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
       BounceResultHeader h;
