@@ -58,10 +58,10 @@ TEST(JobLoopMpiTest, CostModelWrongBy100xOnAThrottledRankFinishesWithTheSameByte
   ASSERT_EQ(plain.exit_code, 0) << plain.output;
 
   const double timeout = 1.0;
-  const testing::RunResult slow = testing::RunPrtFarm(
-      2, common + " --out " + dir + "/slow --job-seconds 0.2 --rank-timeout 1" +
-             " --debug-item-seconds 0.004 --debug-item-cost-skew 100" +
-             " --debug-slow-rank 0 --debug-slow-factor 4");
+  const testing::RunResult slow =
+      testing::RunPrtFarm(2, common + " --out " + dir + "/slow --job-seconds 0.2 --rank-timeout 1" +
+                                 " --debug-item-seconds 0.004 --debug-item-cost-skew 100" +
+                                 " --debug-slow-rank 0 --debug-slow-factor 4");
   ASSERT_EQ(slow.exit_code, 0) << slow.output;
   EXPECT_EQ(slow.output.find("giving up"), std::string::npos) << slow.output;
   EXPECT_TRUE(ReadWholeFile(dir + "/slow/transport.prtt") ==
@@ -77,10 +77,12 @@ TEST(JobLoopMpiTest, CostModelWrongBy100xOnAThrottledRankFinishesWithTheSameByte
   EXPECT_GT(times["longest_seconds_by_rank"][1].get<double>(), 1.5 * timeout);
   // Rank 1 was never silent for long while it computed: its heartbeats came every 0.25 s.
   EXPECT_LT(times["longest_silence_seconds"].get<double>(), timeout);
-  // Surprised at most twice per rank (the jobs where the dear items begin): after a job far
-  // over its plan, a rank's next jobs are planned from that job's rate.
-  EXPECT_LE(times["over_4x_planned"].get<int>(), 4);
-  EXPECT_GE(times["over_4x_planned"].get<int>(), 1);  // the cost model was wrong
+  // The cost model was wrong: some jobs ran over 4× their plan, but only a few (the jobs where
+  // the dear items begin, one or two per rank, and scheduling noise on a loaded machine): after
+  // a job far over its plan, a rank's next jobs are planned from that job's rate (2 and 4 of 27
+  // and 31 jobs in two runs on the 2-core VM).
+  EXPECT_GE(times["over_4x_planned"].get<int>(), 1);
+  EXPECT_LE(times["over_4x_planned"].get<int>(), 6);
 
   // Rank 0's progress line kept coming every --log-interval, naming the slow job, also while
   // no job finished for seconds.
