@@ -230,7 +230,8 @@ struct FarmContext {
   int computing_ranks() const {
     return size - 1 + ((size == 1 || options.coordinator_works) ? 1 : 0);
   }
-  // How long a job may stay out (or a rank stay silent) before rank 0 gives up.
+  // How long a rank with jobs out may stay silent (no result, no heartbeat) before rank 0 gives
+  // up on it (rank 0's own jobs are never timed out).
   double rank_timeout() const {
     return options.rank_timeout_s > 0 ? options.rank_timeout_s
                                       : std::max(300.0, 50.0 * options.job_seconds);

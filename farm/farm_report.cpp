@@ -251,6 +251,22 @@ std::string FarmReport::ToJsonText() const {
     const Json accuracy = Json::parse(accuracy_json, nullptr, false);
     if (!accuracy.is_discarded()) j["accuracy"] = accuracy;
   }
+  if (job_times.jobs > 0) {
+    const JobTimesReport& t = job_times;
+    j["job_times"] = {{"target_seconds", t.target_seconds},
+                      {"jobs", t.jobs},
+                      {"over_4x_target", t.over_4x_target},
+                      {"over_4x_planned", t.over_4x_planned},
+                      {"longest",
+                       {{"seconds", t.longest_seconds},
+                        {"planned_seconds", t.longest_planned_seconds},
+                        {"batch", t.longest_batch},
+                        {"rank", t.longest_rank},
+                        {"first", t.longest_first},
+                        {"count", t.longest_count}}},
+                      {"longest_seconds_by_rank", t.longest_by_rank},
+                      {"longest_silence_seconds", t.longest_silence_seconds}};
+  }
   return j.dump(2) + "\n";
 }
 

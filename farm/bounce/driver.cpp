@@ -284,6 +284,7 @@ void BounceDriver::Coordinate(FarmContext& ctx, JobLoop& loop, const Jobs& jobs,
   batch.items = V;
   batch.unit = "samples";
   batch.max_items = std::max<uint64_t>(1, kMaxJobBytes / (C * jobs.cols * sizeof(float)));
+  batch.cost = SampleCost(ctx);  // image runs: background pixels next to free
   batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
     return Accept(ctx, jobs, *writer, rank, range, payload);
   };
