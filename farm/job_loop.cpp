@@ -434,200 +434,284 @@ JobLoop::JobLoop(FarmContext& ctx, JobCompute compute) : s_(std::make_unique<Sta
 
 JobLoop::~JobLoop() = default;
 
-void JobLoop::Run(JobBatch& batch) {
-  State& st = *s_;
-  FarmContext& ctx = st.ctx;
-  FarmReport& rep = ctx.report;
-  JobSizing sizing = BatchSizing(ctx, batch.max_items);
-  sizing.cost = batch.cost;
-  JobPlanner planner(batch.items, batch.done, sizing);
+// One Run(batch) on rank 0: the batch's planner, progress, pending journal lines and traffic, and
+// the steps of its loop (hand out jobs, take results, check silence, commit), each a method.
+class JobLoop::BatchRun {
+ public:
+  BatchRun(State& st, JobBatch& batch)
+      : st_(st),
+        ctx_(st.ctx),
+        batch_(batch),
+        planner_(batch.items, batch.done, Sizing(st.ctx, batch)),
+        progress_(batch.name, batch.items, ProgressOptionsOf(st, batch, planner_)),
+        timeout_(st.ctx.rank_timeout()),
+        number_(st.batch_number),
+        cpu0_(ThreadCpuSeconds()),
+        wall0_(FarmNow()),
+        last_commit_(FarmNow()) {
+    traffic_.batch = batch.name;
+    traffic_.items = batch.items - planner_.done_before_rows();
+  }
 
-  ProgressOptions po = FarmProgressOptions(ctx, batch.unit);
-  po.rate_unit = batch.rate_unit;
-  po.already_done = planner.done_before_rows();
-  // Every line also names the job out longest once it has been out a log interval (the line
-  // comes every --log-interval whether or not a job finished: Advance(0) below).
-  const double log_interval = ctx.options.log_interval_s;
-  std::function<std::string(double)> run_suffix = std::move(po.suffix);
-  po.suffix = [&st, &batch, log_interval, run_suffix](double eta_s) {
-    return (run_suffix ? run_suffix(eta_s) : std::string()) +
-           st.LongestOut(batch.name, FarmNow(), std::max(1.0, log_interval));
-  };
-  ctx.run_eta.StepStarted(batch.name);
-  Progress progress(batch.name, batch.items, po);
-
-  const double timeout = ctx.rank_timeout();
-  const uint32_t number = st.batch_number;
-  CoordinatorReport traffic;
-  traffic.batch = batch.name;
-  traffic.items = batch.items - po.already_done;
-  const double cpu0 = ThreadCpuSeconds(), wall0 = FarmNow();
-  double last_commit = FarmNow();
-  std::vector<JournalEntry> pending;
-
-  // A finished job: stored by the phase now, counted once the journal has it (commit).
-  auto accept = [&](int rank, const std::string& message) {
-    State::Slot& s = st.SlotOf(rank);
-    const JobEnvelope e = PeekEnvelope(message, rank);
-    if (s.jobs.empty() || e.batch != number || s.jobs.front().range.first != e.first ||
-        s.jobs.front().range.count != e.count) {
-      throw RankFailure("rank " + std::to_string(rank) + " returned " + batch.name + " items " +
-                        std::to_string(e.first) + "+" + std::to_string(e.count) +
-                        " it was not given");
+  // Runs every job of the batch; returns when all are journaled.
+  void Loop() {
+    for (;;) {
+      HandOut();
+      if (!Outstanding() && pending_.empty() && planner_.unassigned_rows() == 0) {
+        // Every job came back, so every send has left; complete the requests.
+        for (State::Slot& s : st_.slots) s.sends.WaitAll();
+        return;
+      }
+      bool busy = PollLocal();
+      if (ReceiveMessages()) busy = true;
+      CheckSilence();
+      // Results become durable (fdatasync'ed, then their journal lines) every commit interval
+      // and when no job is out. A failure-injection run commits every result, as its resume
+      // tests count on.
+      if (!Outstanding() || ctx_.options.fail_after_jobs >= 0 ||
+          FarmNow() - last_commit_ >= batch_.commit_interval_s) {
+        Commit();
+        last_commit_ = FarmNow();
+      }
+      progress_.Advance(0);  // a line every --log-interval, also while no job finishes
+      if (!busy) {
+        if (st_.local) {
+          st_.local->Wait(0.001);
+        } else {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+      }
     }
-    const State::OutJob job = s.jobs.front();
-    JournalEntry line = batch.accept(rank, job.range, PayloadOf(message));
-    line.rank = rank;
-    line.busy_seconds = e.busy_seconds;
-    pending.push_back(std::move(line));
-    planner.Measured(rank, job.range, e.busy_seconds);
-    s.jobs.pop_front();
-    const double now = FarmNow();
-    if (!s.jobs.empty()) s.jobs.front().started = now;
-    JobTimesReport& times = rep.job_times;
-    ++times.jobs;
-    if (e.busy_seconds > 4.0 * ctx.options.job_seconds) ++times.over_4x_target;
-    if (job.planned >= 0 && e.busy_seconds > 4.0 * job.planned) ++times.over_4x_planned;
-    if (times.longest_by_rank.size() < rep.rank_reports.size())
-      times.longest_by_rank.resize(rep.rank_reports.size(), 0.0);
-    double& longest = times.longest_by_rank[static_cast<std::size_t>(rank)];
-    longest = std::max(longest, e.busy_seconds);
-    if (e.busy_seconds > times.longest_seconds) {
-      times.longest_seconds = e.busy_seconds;
-      times.longest_planned_seconds = job.planned;
-      times.longest_batch = batch.name;
-      times.longest_rank = rank;
-      times.longest_first = job.range.first;
-      times.longest_count = job.range.count;
-    }
-    // Far over its plan: its items were dearer than the batch's cost model says; the planner
-    // takes the rank's rate from this job at once, so its next job is small.
-    if (job.planned >= 0 && e.busy_seconds > 4.0 * std::max(job.planned, ctx.options.job_seconds))
+  }
+
+  // The batch's last progress line and its traffic in the report.
+  void Finish() {
+    progress_.Finish();
+    ctx_.run_eta.StepFinished(batch_.name);
+    traffic_.cpu_seconds = ThreadCpuSeconds() - cpu0_;
+    traffic_.wall_seconds = FarmNow() - wall0_;
+    if (ctx_.size > 1 && traffic_.jobs > 0) {
       spdlog::info(
-          "[{}] rank {}'s job (items {}..{}) took {}, planned {}; its next jobs are cut "
-          "from this rate",
-          batch.name, rank, job.range.first, job.range.end() - 1,
-          Progress::FormatDuration(e.busy_seconds), Progress::FormatDuration(job.planned));
-  };
-
-  auto commit = [&] {
-    if (pending.empty()) return;
-    KeepJobsBeforeFailure(ctx, st.jobs_this_run, pending);
-    if (batch.sync) batch.sync();  // results durable first,
-    ctx.journal->Append(pending);  // then the journal lines that count them
-    for (const JournalEntry& e : pending) {
-      RankReport& rr = rep.rank_reports[e.rank];
-      ++rr.jobs;
-      rr.rows += e.rows.count;
-      rr.rays_traced += e.rays_traced;
-      rr.busy_seconds += e.busy_seconds;
-      ++rep.jobs_done;
-      if (batch.committed) batch.committed(e);
-      progress.Advance(e.rows.count, e.rays_traced);
-      ++st.jobs_this_run;
+          "[{}] rank 0 exchanged {:.1f} B per {} with the other ranks ({:.1f} MB in, {:.1f} MB "
+          "out) and spent {:.2f} ms of CPU per job",
+          batch_.name,
+          static_cast<double>(traffic_.bytes_in + traffic_.bytes_out) /
+              static_cast<double>(std::max<uint64_t>(1, traffic_.items)),
+          batch_.unit == "samples" ? std::string("row")
+          : !batch_.unit.empty() && batch_.unit.back() == 's'
+              ? batch_.unit.substr(0, batch_.unit.size() - 1)
+              : batch_.unit,
+          1e-6 * static_cast<double>(traffic_.bytes_in),
+          1e-6 * static_cast<double>(traffic_.bytes_out),
+          1e3 * traffic_.cpu_seconds / static_cast<double>(traffic_.jobs));
     }
-    pending.clear();
-    if (FailureDue(ctx, st.jobs_this_run)) InjectFailure(ctx, st.jobs_this_run);
-  };
+    ctx_.report.coordinator.push_back(std::move(traffic_));
+    ++st_.batch_number;
+  }
 
-  auto outstanding = [&] {
-    return std::any_of(st.slots.begin(), st.slots.end(),
+ private:
+  static JobSizing Sizing(const FarmContext& ctx, const JobBatch& batch) {
+    JobSizing sizing = BatchSizing(ctx, batch.max_items);
+    sizing.cost = batch.cost;
+    return sizing;
+  }
+
+  // The batch's progress options; also starts its step of the run's ETA. Every line also names
+  // the job out longest once it has been out a log interval (the line comes every
+  // --log-interval whether or not a job finished: Advance(0) in Loop).
+  static ProgressOptions ProgressOptionsOf(State& st, const JobBatch& batch,
+                                           const JobPlanner& planner) {
+    FarmContext& ctx = st.ctx;
+    ProgressOptions po = FarmProgressOptions(ctx, batch.unit);
+    po.rate_unit = batch.rate_unit;
+    po.already_done = planner.done_before_rows();
+    const double log_interval = ctx.options.log_interval_s;
+    std::function<std::string(double)> run_suffix = std::move(po.suffix);
+    po.suffix = [&st, &batch, log_interval, run_suffix](double eta_s) {
+      return (run_suffix ? run_suffix(eta_s) : std::string()) +
+             st.LongestOut(batch.name, FarmNow(), std::max(1.0, log_interval));
+    };
+    ctx.run_eta.StepStarted(batch.name);
+    return po;
+  }
+
+  bool Outstanding() const {
+    return std::any_of(st_.slots.begin(), st_.slots.end(),
                        [](const State::Slot& s) { return !s.jobs.empty(); });
-  };
+  }
 
-  for (;;) {
-    // Hand out work: every ready rank holds up to jobs_ahead jobs.
-    for (State::Slot& s : st.slots) {
+  // Hands out work: every ready rank holds up to jobs_ahead jobs.
+  void HandOut() {
+    for (State::Slot& s : st_.slots) {
       s.sends.Retire();
-      while (s.ready && s.jobs.size() < batch.jobs_ahead) {
-        const std::optional<RowRange> next = planner.Next(s.rank);
+      while (s.ready && s.jobs.size() < batch_.jobs_ahead) {
+        const std::optional<RowRange> next = planner_.Next(s.rank);
         if (!next) break;
         RowRange range = *next;
         std::string message(sizeof(JobEnvelope), '\0');  // the envelope, filled in below
-        if (batch.make_job) batch.make_job(range, message);
-        if (range.count < next->count) planner.Return({range.end(), next->count - range.count});
+        if (batch_.make_job) batch_.make_job(range, message);
+        if (range.count < next->count) planner_.Return({range.end(), next->count - range.count});
         const double now = FarmNow();
         if (s.jobs.empty()) s.heard = now;  // silence counts from when it has work
-        s.jobs.push_back({range, now, planner.PredictedSeconds(s.rank, range)});
+        s.jobs.push_back({range, now, planner_.PredictedSeconds(s.rank, range)});
         JobEnvelope e;
-        e.batch = number;
+        e.batch = number_;
         e.first = range.first;
         e.count = range.count;
-        e.batch_items = batch.items;
+        e.batch_items = batch_.items;
         std::memcpy(message.data(), &e, sizeof e);
-        ++traffic.jobs;
+        ++traffic_.jobs;
         if (s.local) {
-          st.local->Give(e, std::move(message));
+          st_.local->Give(e, std::move(message));
         } else {
-          traffic.bytes_out += message.size();
-          s.sends.Send(std::move(message), s.rank, kTagJob, ctx.comm,
+          traffic_.bytes_out += message.size();
+          s.sends.Send(std::move(message), s.rank, kTagJob, ctx_.comm,
                        "MPI_Isend job to rank " + std::to_string(s.rank));
         }
       }
     }
-    if (!outstanding() && pending.empty() && planner.unassigned_rows() == 0) {
-      // Every job came back, so every send has left; complete the requests.
-      for (State::Slot& s : st.slots) s.sends.WaitAll();
-      break;
-    }
+  }
 
-    bool busy = false;
-    if (st.local) {
-      while (std::optional<ComputedJob> r = st.local->Poll()) {
-        if (r->error) std::rethrow_exception(r->error);
-        accept(0, r->message);
-        busy = true;
-      }
+  // Rank 0's own worker thread's finished jobs; true when there was one.
+  bool PollLocal() {
+    bool any = false;
+    if (!st_.local) return any;
+    while (std::optional<ComputedJob> r = st_.local->Poll()) {
+      if (r->error) std::rethrow_exception(r->error);
+      Accept(0, r->message);
+      any = true;
     }
+    return any;
+  }
+
+  // Every message waiting from the other ranks: READY, heartbeats, results, failures; true
+  // when there was one.
+  bool ReceiveMessages() {
+    bool any = false;
     for (;;) {
       int flag = 0;
       MPI_Status ms;
-      CheckMpi(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, ctx.comm, &flag, &ms), "MPI_Iprobe");
-      if (!flag) break;
-      busy = true;
+      CheckMpi(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, ctx_.comm, &flag, &ms), "MPI_Iprobe");
+      if (!flag) return any;
+      any = true;
       const int src = ms.MPI_SOURCE;
       if (ms.MPI_TAG == kTagReady) {
         ReadyMsg ready;
         CheckMpi(
-            MPI_Recv(&ready, sizeof ready, MPI_BYTE, src, kTagReady, ctx.comm, MPI_STATUS_IGNORE),
+            MPI_Recv(&ready, sizeof ready, MPI_BYTE, src, kTagReady, ctx_.comm, MPI_STATUS_IGNORE),
             "MPI_Recv ready");
-        st.MarkReady(src, ready);
-        State::Slot& s = st.SlotOf(src);
+        st_.MarkReady(src, ready);
+        State::Slot& s = st_.SlotOf(src);
         s.ready = true;
-        st.Heard(s, FarmNow());
+        st_.Heard(s, FarmNow());
       } else if (ms.MPI_TAG == kTagAlive) {
         // A worker still computing: only the silence timer cares (the envelope says which job
         // and for how long, which the progress line's own clock already shows).
-        ReceiveBytes(ctx.comm, ms, st.incoming,
+        ReceiveBytes(ctx_.comm, ms, st_.incoming,
                      "MPI_Recv heartbeat from rank " + std::to_string(src));
-        st.Heard(st.SlotOf(src), FarmNow());
+        st_.Heard(st_.SlotOf(src), FarmNow());
       } else if (ms.MPI_TAG == kTagResult) {
-        ReceiveBytes(ctx.comm, ms, st.incoming, "MPI_Recv result from rank " + std::to_string(src));
-        traffic.bytes_in += st.incoming.size();
-        State::Slot& s = st.SlotOf(src);
-        st.Heard(s, FarmNow());
-        accept(src, st.incoming);
+        ReceiveBytes(ctx_.comm, ms, st_.incoming,
+                     "MPI_Recv result from rank " + std::to_string(src));
+        traffic_.bytes_in += st_.incoming.size();
+        st_.Heard(st_.SlotOf(src), FarmNow());
+        Accept(src, st_.incoming);
       } else if (ms.MPI_TAG == kTagFailed) {
         std::string message;
-        ReceiveBytes(ctx.comm, ms, message, "MPI_Recv failure of rank " + std::to_string(src));
+        ReceiveBytes(ctx_.comm, ms, message, "MPI_Recv failure of rank " + std::to_string(src));
         throw RankFailure("rank " + std::to_string(src) + " failed: " + message);
       } else {
         throw RankFailure("unexpected message tag " + std::to_string(ms.MPI_TAG) + " from rank " +
                           std::to_string(src));
       }
     }
+  }
 
-    // A rank that neither answers nor dies (mpirun aborts the job when one dies) must not keep
-    // rank 0 waiting forever. Checked right after every waiting message was received, so that
-    // time rank 0 itself spent elsewhere (a slow sync) does not count as the rank's silence.
-    // A worker computing a long job sends heartbeats: only silence counts, not the job's length.
-    // Rank 0's own worker thread is never timed out: it lives in this process, and a slow job
-    // there is just slow (issue 37: a 6.7-minute job of rank 0 ended a good run).
+  // A finished job: stored by the phase now, counted once the journal has it (Commit).
+  void Accept(int rank, const std::string& message) {
+    State::Slot& s = st_.SlotOf(rank);
+    const JobEnvelope e = PeekEnvelope(message, rank);
+    if (s.jobs.empty() || e.batch != number_ || s.jobs.front().range.first != e.first ||
+        s.jobs.front().range.count != e.count) {
+      throw RankFailure("rank " + std::to_string(rank) + " returned " + batch_.name + " items " +
+                        std::to_string(e.first) + "+" + std::to_string(e.count) +
+                        " it was not given");
+    }
+    const State::OutJob job = s.jobs.front();
+    JournalEntry line = batch_.accept(rank, job.range, PayloadOf(message));
+    line.rank = rank;
+    line.busy_seconds = e.busy_seconds;
+    pending_.push_back(std::move(line));
+    planner_.Measured(rank, job.range, e.busy_seconds);
+    s.jobs.pop_front();
+    if (!s.jobs.empty()) s.jobs.front().started = FarmNow();
+    RecordJobTime(rank, job, e.busy_seconds);
+  }
+
+  // report.json "job_times", and a log line for a job far over its plan.
+  void RecordJobTime(int rank, const State::OutJob& job, double busy_seconds) {
+    FarmReport& rep = ctx_.report;
+    JobTimesReport& times = rep.job_times;
+    ++times.jobs;
+    if (busy_seconds > 4.0 * ctx_.options.job_seconds) ++times.over_4x_target;
+    if (job.planned >= 0 && busy_seconds > 4.0 * job.planned) ++times.over_4x_planned;
+    if (times.longest_by_rank.size() < rep.rank_reports.size())
+      times.longest_by_rank.resize(rep.rank_reports.size(), 0.0);
+    double& longest = times.longest_by_rank[static_cast<std::size_t>(rank)];
+    longest = std::max(longest, busy_seconds);
+    if (busy_seconds > times.longest_seconds) {
+      times.longest_seconds = busy_seconds;
+      times.longest_planned_seconds = job.planned;
+      times.longest_batch = batch_.name;
+      times.longest_rank = rank;
+      times.longest_first = job.range.first;
+      times.longest_count = job.range.count;
+    }
+    // Far over its plan: its items were dearer than the batch's cost model says; the planner
+    // takes the rank's rate from this job at once, so its next job is small.
+    if (job.planned >= 0 && busy_seconds > 4.0 * std::max(job.planned, ctx_.options.job_seconds))
+      spdlog::info(
+          "[{}] rank {}'s job (items {}..{}) took {}, planned {}; its next jobs are cut "
+          "from this rate",
+          batch_.name, rank, job.range.first, job.range.end() - 1,
+          Progress::FormatDuration(busy_seconds), Progress::FormatDuration(job.planned));
+  }
+
+  // The accepted results made durable, then their journal lines, then counted.
+  void Commit() {
+    if (pending_.empty()) return;
+    FarmReport& rep = ctx_.report;
+    KeepJobsBeforeFailure(ctx_, st_.jobs_this_run, pending_);
+    if (batch_.sync) batch_.sync();  // results durable first,
+    ctx_.journal->Append(pending_);  // then the journal lines that count them
+    for (const JournalEntry& e : pending_) {
+      RankReport& rr = rep.rank_reports[e.rank];
+      ++rr.jobs;
+      rr.rows += e.rows.count;
+      rr.rays_traced += e.rays_traced;
+      rr.busy_seconds += e.busy_seconds;
+      ++rep.jobs_done;
+      if (batch_.committed) batch_.committed(e);
+      progress_.Advance(e.rows.count, e.rays_traced);
+      ++st_.jobs_this_run;
+    }
+    pending_.clear();
+    if (FailureDue(ctx_, st_.jobs_this_run)) InjectFailure(ctx_, st_.jobs_this_run);
+  }
+
+  // A rank that neither answers nor dies (mpirun aborts the job when one dies) must not keep
+  // rank 0 waiting forever. Checked right after every waiting message was received, so that
+  // time rank 0 itself spent elsewhere (a slow sync) does not count as the rank's silence. A
+  // worker computing a long job sends heartbeats: only silence counts, not the job's length.
+  // Rank 0's own worker thread is never timed out: it lives in this process, and a slow job
+  // there is just slow (issue 37: a 6.7-minute job of rank 0 ended a good run).
+  void CheckSilence() const {
     const double now = FarmNow();
-    for (const State::Slot& s : st.slots) {
-      if (s.local || (s.ready && s.jobs.empty()) || now - s.heard <= timeout) continue;
+    for (const State::Slot& s : st_.slots) {
+      if (s.local || (s.ready && s.jobs.empty()) || now - s.heard <= timeout_) continue;
       const std::string what = !s.ready ? std::string(" never reported ready")
-                                        : " has not returned its job (" + batch.name + " items " +
+                                        : " has not returned its job (" + batch_.name +
+                                              " items " +
                                               std::to_string(s.jobs.front().range.first) + ".." +
                                               std::to_string(s.jobs.front().range.end() - 1) +
                                               ") and has been silent";
@@ -635,44 +719,25 @@ void JobLoop::Run(JobBatch& batch) {
                         std::to_string(static_cast<int>(now - s.heard)) +
                         " s (--rank-timeout: no result, no heartbeat); giving up");
     }
+  }
 
-    // Results become durable (fdatasync'ed, then their journal lines) every commit interval and
-    // when no job is out. A failure-injection run commits every result, as its resume tests
-    // count on.
-    if (!outstanding() || ctx.options.fail_after_jobs >= 0 ||
-        FarmNow() - last_commit >= batch.commit_interval_s) {
-      commit();
-      last_commit = FarmNow();
-    }
-    progress.Advance(0);  // a line every --log-interval, also while no job finishes
-    if (!busy) {
-      if (st.local) {
-        st.local->Wait(0.001);
-      } else {
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      }
-    }
-  }
-  progress.Finish();
-  ctx.run_eta.StepFinished(batch.name);
-  traffic.cpu_seconds = ThreadCpuSeconds() - cpu0;
-  traffic.wall_seconds = FarmNow() - wall0;
-  if (ctx.size > 1 && traffic.jobs > 0) {
-    spdlog::info(
-        "[{}] rank 0 exchanged {:.1f} B per {} with the other ranks ({:.1f} MB in, {:.1f} MB "
-        "out) and spent {:.2f} ms of CPU per job",
-        batch.name,
-        static_cast<double>(traffic.bytes_in + traffic.bytes_out) /
-            static_cast<double>(std::max<uint64_t>(1, traffic.items)),
-        batch.unit == "samples" ? std::string("row")
-        : !batch.unit.empty() && batch.unit.back() == 's'
-            ? batch.unit.substr(0, batch.unit.size() - 1)
-            : batch.unit,
-        1e-6 * static_cast<double>(traffic.bytes_in), 1e-6 * static_cast<double>(traffic.bytes_out),
-        1e3 * traffic.cpu_seconds / static_cast<double>(traffic.jobs));
-  }
-  rep.coordinator.push_back(std::move(traffic));
-  ++st.batch_number;
+  State& st_;
+  FarmContext& ctx_;
+  JobBatch& batch_;
+  JobPlanner planner_;
+  Progress progress_;
+  const double timeout_;
+  const uint32_t number_;
+  CoordinatorReport traffic_;
+  const double cpu0_, wall0_;
+  double last_commit_;
+  std::vector<JournalEntry> pending_;
+};
+
+void JobLoop::Run(JobBatch& batch) {
+  BatchRun run(*s_, batch);
+  run.Loop();
+  run.Finish();
 }
 
 void JobLoop::Finish() {

@@ -90,6 +90,7 @@ class JobLoop {
 
  private:
   struct State;
+  class BatchRun;  // one Run(batch): farm/job_loop.cpp
   std::unique_ptr<State> s_;
 };
 
