@@ -8,7 +8,8 @@
 // Scenes: tests/data/tiny.toml with a 24×24 ground (584 rows: enough that the variance sums of the
 // old order-dependent reduction differed) farmed by brute force with one bounce (gathering), and
 // tests/data/sparse_tiny.toml (the sparse method) with one bounce (gathering at the dense
-// vertices, combinations elsewhere).
+// vertices, combinations elsewhere); without a kill, the glossy visibility job and an image
+// (samples = "camera") by the sparse method with a path-traced bounce.
 #include <fnmatch.h>
 #include <gtest/gtest.h>
 
@@ -40,6 +41,9 @@ const NotCompared kNotCompared[] = {
      "a record per job in the order jobs finished (their exact sum, transport.variance, is "
      "compared)"},
     {"checkpoints/variance.rank-*.log", "a computing rank's own records (rows in place)"},
+    {"visibility.chunks",
+     "the visibility job's results in the order jobs finished, a checkpoint (visibility.prtv, "
+     "compared, is assembled from it in sample order)"},
 };
 
 bool Compared(const std::string& relative) {
@@ -122,7 +126,8 @@ struct Variant {
 };
 
 // Farms `scene` (with `common` arguments) as each variant and compares every run folder with the
-// first's; then a run killed by `kill` on `kill_ranks` ranks, resumed on `resume_ranks`.
+// first's; then (kill_ranks > 0) a run killed by `kill` on `kill_ranks` ranks, resumed on
+// `resume_ranks`.
 void ExpectTheSameFilesForEveryVariant(const std::string& dir, const std::string& scene,
                                        const std::string& common,
                                        const std::vector<Variant>& variants, int kill_ranks,
@@ -135,6 +140,7 @@ void ExpectTheSameFilesForEveryVariant(const std::string& dir, const std::string
     ASSERT_EQ(r.exit_code, 0) << v.name << ":\n" << r.output;
     if (run != reference) ExpectSameFiles(reference, run, v.name);
   }
+  if (kill_ranks == 0) return;
   const std::string run = dir + "/killed";
   const testing::RunResult killed =
       testing::RunPrtFarm(kill_ranks, scene + " --out " + run + common + kill);
@@ -170,6 +176,26 @@ TEST(RunFolderDeterminismMpiTest, SparseWithABounceGivesTheSameFilesForAnyRanksS
                                      {"np3", 3, ""},
                                      {"np8", 8, " --max-job-rows 7"}},
                                     2, " --max-job-rows 6 --fail-after-jobs 8 --fail-rank 0", 3);
+}
+
+// The other kinds of run, without a kill (their resumes have tests of their own): the glossy
+// visibility job, and an image (samples = "camera") by the sparse method with a path-traced
+// bounce.
+TEST(RunFolderDeterminismMpiTest, VisibilityJobAndPathTracedImageGiveTheSameFilesForAnyRanks) {
+  const std::string dir = WorkDir("other");
+  ExpectTheSameFilesForEveryVariant(
+      dir + "/vis", std::string(PRT_TESTS_DATA_DIR) + "/glossy_tiny.toml", " --quiet",
+      {{"np1", 1, " --max-job-rows 5"}, {"np3", 3, " --max-job-rows 9"}, {"np8", 8, ""}}, 0, "", 0);
+  std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/sparse_tiny.toml");
+  testing::ReplaceOnce(text, "[scene]\n", "[scene]\nsamples = \"camera\"\n");
+  testing::ReplaceOnce(text, "[sampling]\n",
+                       "[camera]\neye = [0.4, 1.6, 3.2]\ntarget = [0.0, 0.2, 0.0]\nfov = 30.0\n"
+                       "width = 24\nheight = 16\n\n[sampling]\nbounces = 1\nestimator = \"path\"\n"
+                       "gather_paths = 4\n");
+  const std::string scene = testing::WriteTestScene(text, dir + "/image.toml");
+  ExpectTheSameFilesForEveryVariant(
+      dir + "/image", scene, " --quiet",
+      {{"np1", 1, " --max-job-rows 5"}, {"np3", 3, " --max-job-rows 9"}, {"np8", 8, ""}}, 0, "", 0);
 }
 
 // The comparison itself: a changed byte, a file only one run has and a file in a sub-folder are
