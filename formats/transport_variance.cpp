@@ -22,6 +22,7 @@ constexpr char kMagicV1[8] = {'P', 'R', 'T', 'V', 'A', 'R', '0', '1'};
 constexpr uint32_t kLogMagic = 0x324C5650;    // "PVL2": records of exact sums
 constexpr uint32_t kLogMagicV1 = 0x474C5650;  // "PVLG": records of doubles (read, not written)
 constexpr uint64_t kMaxMeshes = 1u << 20;
+constexpr uint64_t kMaxSums = uint64_t{1} << 28;
 constexpr double kUnit = 0x1p88;  // 2^kVarianceFractionBits
 static_assert(kVarianceFractionBits == 88);
 
@@ -46,8 +47,10 @@ TransportVariance GetVariance(ByteReader& in, const std::string& name, bool exac
   v.cubemap_n = in.Get<uint32_t>("cubemap n");
   v.rays_per_texel = in.Get<uint32_t>("rays per texel");
   const uint64_t meshes = in.Get<uint64_t>("mesh count");
+  // A mesh none of whose rows is covered takes no bytes but its zeros take memory: at most
+  // kMaxSums sums in all (4 GiB), whatever a hostile file claims.
   if (v.cubemap_n == 0 || v.cubemap_n > 4096 || meshes > kMaxMeshes ||
-      meshes * 16 > in.remaining()) {
+      meshes * 16 > in.remaining() || meshes * v.texels() > kMaxSums) {
     throw InputError(name, "damaged variance sums (inconsistent sizes)");
   }
   const std::size_t texels = static_cast<std::size_t>(v.texels());
@@ -57,6 +60,9 @@ TransportVariance GetVariance(ByteReader& in, const std::string& name, bool exac
     const uint64_t covered = v.rows_covered.back();
     if (covered > v.mesh_rows.back() || v.mesh_rows.back() >= kMaxMeshRows)
       throw InputError(name, "damaged variance sums (more rows covered than the mesh has)");
+    const std::size_t bytes = texels * (exact ? sizeof(ExactVarianceSum) : sizeof(double));
+    if (covered > 0 && bytes > in.remaining())
+      throw InputError(name, "truncated variance file in sums");
     std::vector<ExactVarianceSum> s(texels);
     if (covered > 0 && exact) {
       const std::string_view raw = in.Take(texels * sizeof(ExactVarianceSum), "sums");
@@ -201,6 +207,8 @@ TransportVariance MakeTransportVariance(uint32_t cubemap_n, uint32_t rays_per_te
       throw std::invalid_argument("variance sums: a mesh of 2^36 rows or more (see kMaxMeshRows)");
   TransportVariance v;
   v.cubemap_n = cubemap_n;
+  if (mesh_rows.size() * v.texels() > kMaxSums)
+    throw std::invalid_argument("variance sums: more than 2^28 (meshes x 6n^2), see kMaxSums");
   v.rays_per_texel = rays_per_texel;
   v.rows_covered.assign(mesh_rows.size(), 0);
   v.sums.assign(mesh_rows.size(),

@@ -182,6 +182,24 @@ TEST(TransportVarianceTest, FileRoundTripsAndDamageIsRefused) {
   const uint64_t sum = Checksum64(huge.data(), huge.size());
   huge.append(reinterpret_cast<const char*>(&sum), 8);
   EXPECT_THROW(DecodeTransportVariance(huge, "v"), InputError);
+
+  // A hostile header: 20 uncovered meshes of n = 4096 would be 2·10⁹ zeros (32 GB); refused
+  // before anything is allocated, as is a covered mesh whose sums the file does not hold.
+  for (const uint64_t covered : {0, 1}) {
+    ByteWriter w;
+    w.PutBytes("PRTVAR02", 8);
+    w.Put<uint32_t>(covered ? 1024 : 4096);
+    w.Put<uint32_t>(4);
+    w.Put<uint64_t>(covered ? 1 : 20);
+    for (int m = 0; m < (covered ? 1 : 20); ++m) {
+      w.Put<uint64_t>(1);
+      w.Put<uint64_t>(covered);
+    }
+    std::string& b = w.bytes();
+    w.Put<uint64_t>(Checksum64(b.data(), b.size()));
+    EXPECT_THROW(DecodeTransportVariance(b, "hostile"), InputError) << covered;
+  }
+  EXPECT_THROW(MakeTransportVariance(4096, 4, std::vector<uint64_t>(3, 1)), std::invalid_argument);
 }
 
 // A version-1 file (doubles) as prt-farm wrote it before the sums were exact.
