@@ -113,7 +113,9 @@ struct EstimateLights {
   std::vector<CubemapRgb> lights;
   std::string left_out_json = "[]";  // environments that could not be read, and why
   bool have_norms = false;
-  std::vector<double> norms;  // [light][mesh][channel], flattened
+  // RadianceNormAccumulator::Flat() of every rank summed: its exact digits, [light][mesh][channel]
+  // (the sum is exact in any order, farm/compression_phase.cpp).
+  std::vector<double> norms;
 };
 // "error of B (rays + reconstruction) 0.38% uniform 1.41% sunrise.exr …" from accuracy.json
 // (the run summary and the estimate's log line).

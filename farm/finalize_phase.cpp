@@ -12,7 +12,6 @@
 // (8 bytes each) and writes the header. Otherwise rank 0 packs every block itself. The bytes of
 // transport.prtt are the same either way.
 #include <fcntl.h>
-#include <mpi.h>
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
@@ -41,20 +40,14 @@ void ReduceRankVariance(FarmContext& ctx) {
   const TransportVariance mine =
       ctx.rank_variance ? ctx.rank_variance->total() : ctx.EmptyVarianceSums();
   ctx.rank_variance.reset();
-  const std::vector<uint64_t> digits = mine.Digits();
-  std::vector<uint64_t> digits_all(ctx.rank == 0 ? digits.size() : 0);
-  std::vector<uint64_t> covered_all(ctx.rank == 0 ? mine.rows_covered.size() : 0);
-  CheckMpi(MPI_Reduce(digits.data(), digits_all.data(), static_cast<int>(digits.size()),
-                      MPI_UINT64_T, MPI_SUM, 0, ctx.comm),
-           "MPI_Reduce variance sums");
-  CheckMpi(
-      MPI_Reduce(mine.rows_covered.data(), covered_all.data(),
-                 static_cast<int>(mine.rows_covered.size()), MPI_UINT64_T, MPI_SUM, 0, ctx.comm),
-      "MPI_Reduce variance rows");
+  std::vector<uint64_t> digits = mine.Digits();
+  std::vector<uint64_t> covered = mine.rows_covered;
+  ctx.collectives.SumOnRank0(digits, "sum the variance digits");
+  ctx.collectives.SumOnRank0(covered, "sum the variance rows");
   if (ctx.rank != 0 || !ctx.variance) return;
   TransportVariance all = ctx.EmptyVarianceSums();
-  all.AddDigits(digits_all);
-  all.rows_covered = covered_all;
+  all.AddDigits(digits);
+  all.rows_covered = covered;
   ctx.variance->AddTotal(all);
 }
 
