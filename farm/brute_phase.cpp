@@ -142,6 +142,7 @@ class BrutePhase final : public FarmPhase {
     batch.name = ctx.method;
     batch.items = ctx.params.rows;
     batch.max_items = std::max<uint64_t>(1, kMaxJobBytes / row_bytes);
+    batch.cost = SampleCost(ctx);  // image runs: background pixels next to free (issue 37)
     batch.accept = [&ctx, row_bytes](int rank, const RowRange& range, std::string_view payload) {
       BruteResultHeader h;
       if (payload.size() >= sizeof h) std::memcpy(&h, payload.data(), sizeof h);

@@ -10,7 +10,7 @@
 //            them to rank 0 as one encoded column block; rank 0 writes EncodeCompressedTransport
 //            durably. Columns are independent, so the bytes equal the in-process
 //            CompressTransport on the same rows for any number of ranks and any budget.
-// The phase is MakeCompressionPhase() (farm/farm_context.h); it reads the scene and geometry the
+// The phase (AddCompressionPhase, in the list farm/phase_list.cpp) reads the scene and geometry the
 // setup phase holds, and only the rows from disk. Its figures go to report.json "compression"
 // (CompressionFarmReport, farm/farm_report.h).
 #pragma once

@@ -113,7 +113,9 @@ struct EstimateLights {
   std::vector<CubemapRgb> lights;
   std::string left_out_json = "[]";  // environments that could not be read, and why
   bool have_norms = false;
-  std::vector<double> norms;  // [light][mesh][channel], flattened
+  // RadianceNormAccumulator::Flat() of every rank summed: its exact digits, [light][mesh][channel]
+  // (the sum is exact in any order, farm/compression_phase.cpp).
+  std::vector<double> norms;
 };
 // "error of B (rays + reconstruction) 0.38% uniform 1.41% sunrise.exr …" from accuracy.json
 // (the run summary and the estimate's log line).
@@ -230,7 +232,8 @@ struct FarmContext {
   int computing_ranks() const {
     return size - 1 + ((size == 1 || options.coordinator_works) ? 1 : 0);
   }
-  // How long a job may stay out (or a rank stay silent) before rank 0 gives up.
+  // How long a rank with jobs out may stay silent (no result, no heartbeat) before rank 0 gives
+  // up on it (rank 0's own jobs are never timed out).
   double rank_timeout() const {
     return options.rank_timeout_s > 0 ? options.rank_timeout_s
                                       : std::max(300.0, 50.0 * options.job_seconds);

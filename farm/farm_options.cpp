@@ -66,7 +66,9 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
       ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
   app.add_option("--rank-timeout", o.rank_timeout_s,
-                 "Seconds a job may stay out before rank 0 gives up with exit code 4 "
+                 "Seconds a rank with jobs out may stay silent (no result, no heartbeat) "
+                 "before rank 0 gives up with exit code 4; a worker sends a heartbeat every "
+                 "min(5, timeout/4) s while it computes, so a job may take longer than this "
                  "(0: max(300, 50 x --job-seconds))")
       ->check(CLI::Range(0.0, 1e7));
   bool coordinator_only = false;
@@ -83,6 +85,16 @@ int ParseFarmCommandLine(int argc, char** argv, FarmOptions& o, std::ostream& ou
   app.add_option("--fail-mode", o.fail_mode)->check(CLI::IsMember({"exit", "hang"}))->group("");
   app.add_option("--fail-in", o.fail_in)
       ->check(CLI::IsMember({"finalize", "transpose", "write"}))
+      ->group("");
+  app.add_option("--debug-item-seconds", o.debug_item_seconds)
+      ->check(CLI::Range(0.0, 3600.0))
+      ->group("");
+  app.add_option("--debug-item-cost-skew", o.debug_item_cost_skew)
+      ->check(CLI::Range(1.0, 1e6))
+      ->group("");
+  app.add_option("--debug-slow-rank", o.debug_slow_rank)->group("");
+  app.add_option("--debug-slow-factor", o.debug_slow_factor)
+      ->check(CLI::Range(1.0, 1e6))
       ->group("");
   app.add_option("--initial-job-rows", o.initial_job_rows)->group("");
   app.add_option("--max-job-rows", o.max_job_rows)->group("");

@@ -63,6 +63,15 @@ struct FarmOptions {
   // arrives in the compression's transpose), "write" (rank 0, halfway through writing
   // transport.prtc's temporary file). Empty: never.
   std::string fail_in;
+  // Synthetic job costs for the job loop's tests (farm/job_loop.cpp, tests/job_loop_mpi_test.cpp):
+  // every job sleeps debug_item_seconds per item on top of its computation; items in the second
+  // half of a batch cost debug_item_cost_skew times as much (a cost model wrong by that
+  // factor); and the rank debug_slow_rank takes debug_slow_factor times as long for every job
+  // (a throttled rank). The sleeps count as the job's busy time.
+  double debug_item_seconds = 0;
+  double debug_item_cost_skew = 1;
+  int debug_slow_rank = -1;
+  double debug_slow_factor = 1;
   uint64_t initial_job_rows = 0;  // 0: auto
   uint64_t max_job_rows = 0;      // 0: auto (a job's rows fit in 256 MiB)
 

@@ -140,6 +140,25 @@ struct EtaReport {
   double predicted_total_seconds = 0;
 };
 
+// report.json "job_times" (farm/job_loop.cpp; docs/farm.md, "Jobs"): how long this run's jobs
+// took against --job-seconds, its slowest job, and the longest a rank with a job out stayed
+// silent (no result, no heartbeat) as rank 0 saw it.
+struct JobTimesReport {
+  double target_seconds = 0;  // --job-seconds
+  uint64_t jobs = 0;
+  uint64_t over_4x_target = 0;  // jobs whose busy time exceeded 4 × target_seconds
+  // Jobs whose busy time exceeded 4 × what the planner expected of them (their items dearer
+  // than the cost model said): after one such job a rank's next jobs are cut from its rate.
+  uint64_t over_4x_planned = 0;
+  double longest_seconds = 0;  // the slowest job's busy time
+  std::string longest_batch;
+  int longest_rank = -1;
+  uint64_t longest_first = 0, longest_count = 0;
+  double longest_planned_seconds = -1;  // what the planner expected of it (−1: a first job)
+  double longest_silence_seconds = 0;   // the longest gap between messages of a busy rank
+  std::vector<double> longest_by_rank;  // each rank's slowest job (seconds)
+};
+
 struct FarmReport {
   std::string status = "running";  // ok | failed | running
   int exit_code = 0;
@@ -197,6 +216,7 @@ struct FarmReport {
   std::string carried_json;
   // accuracy.json of the estimate stage, as report.json "accuracy" ("" when there is none).
   std::string accuracy_json;
+  JobTimesReport job_times;  // report.json "job_times", the last key
 
   // Sets (or replaces) a phase's section.
   void SetSection(const std::string& key, std::string json_text);

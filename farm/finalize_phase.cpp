@@ -12,7 +12,6 @@
 // (8 bytes each) and writes the header. Otherwise rank 0 packs every block itself. The bytes of
 // transport.prtt are the same either way.
 #include <fcntl.h>
-#include <mpi.h>
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
@@ -35,30 +34,21 @@ namespace prt {
 namespace {
 
 // Rank 0: the sum of every rank's RankVarianceLog (rows in place: brute force, sparse) is added to
-// the run's variance sums. Collective.
+// the run's variance sums. Collective. The sums travel as 32-bit digits (TransportVariance::Digits)
+// whose MPI_SUM is exact in any reduction order: the same bytes for any number of ranks.
 void ReduceRankVariance(FarmContext& ctx) {
-  TransportVariance mine = ctx.rank_variance ? ctx.rank_variance->total() : ctx.EmptyVarianceSums();
+  const TransportVariance mine =
+      ctx.rank_variance ? ctx.rank_variance->total() : ctx.EmptyVarianceSums();
   ctx.rank_variance.reset();
-  std::vector<double> flat;
-  for (const std::vector<double>& s : mine.sums) flat.insert(flat.end(), s.begin(), s.end());
-  std::vector<double> flat_all(ctx.rank == 0 ? flat.size() : 0);
-  std::vector<uint64_t> covered_all(ctx.rank == 0 ? mine.rows_covered.size() : 0);
-  CheckMpi(MPI_Reduce(flat.data(), flat_all.data(), static_cast<int>(flat.size()), MPI_DOUBLE,
-                      MPI_SUM, 0, ctx.comm),
-           "MPI_Reduce variance sums");
-  CheckMpi(
-      MPI_Reduce(mine.rows_covered.data(), covered_all.data(),
-                 static_cast<int>(mine.rows_covered.size()), MPI_UINT64_T, MPI_SUM, 0, ctx.comm),
-      "MPI_Reduce variance rows");
+  std::vector<uint64_t> digits = mine.Digits();
+  std::vector<uint64_t> covered = mine.rows_covered;
+  ctx.collectives.SumOnRank0(digits, "sum the variance digits");
+  ctx.collectives.SumOnRank0(covered, "sum the variance rows");
   if (ctx.rank != 0 || !ctx.variance) return;
-  std::size_t at = 0;
-  for (std::size_t g = 0; g < mine.sums.size(); ++g) {
-    std::copy_n(flat_all.begin() + static_cast<std::ptrdiff_t>(at), mine.sums[g].size(),
-                mine.sums[g].begin());
-    at += mine.sums[g].size();
-    mine.rows_covered[g] = covered_all[g];
-  }
-  ctx.variance->AddTotal(mine);
+  TransportVariance all = ctx.EmptyVarianceSums();
+  all.AddDigits(digits);
+  all.rows_covered = covered;
+  ctx.variance->AddTotal(all);
 }
 
 class FinalizePhase final : public FarmPhase {

@@ -1,14 +1,22 @@
 // THE job loop of prt-farm (docs/farm.md, "Job queue"; docs/architecture.md): every phase that
 // hands out work (brute force, the sparse method's sub-phases, the visibility job) supplies its
 // jobs and what to do with a result; this loop owns everything else: the workers' slots, rank 0's
-// own worker thread, sends in the background, adaptive job sizes (JobPlanner), the journal
-// commits, progress with an ETA, --rank-timeout and failure injection.
+// own worker thread, sends in the background, adaptive job sizes (JobPlanner, in units of the
+// batch's item cost), the journal commits, progress with an ETA, --rank-timeout and failure
+// injection.
 //
 // Wire protocol (MPI_COMM_WORLD, tags in job_loop.cpp): a worker sends READY once per phase;
-// rank 0 sends jobs, each one message [envelope: batch, first, count][payload]; the worker answers
-// each with one message [envelope: batch, first, count, busy seconds][payload], or with a FAILED
-// message naming its error; rank 0 ends the phase with STOP. A worker holds up to `jobs_ahead`
-// jobs, so that it never waits for rank 0 to encode its next one.
+// rank 0 sends jobs, each one message [envelope: batch, first, count, batch items][payload]; the
+// worker answers each with one message [envelope: batch, first, count, busy seconds][payload], or
+// with a FAILED message naming its error; rank 0 ends the phase with STOP. A worker holds up to
+// `jobs_ahead` jobs, so that it never waits for rank 0 to encode its next one.
+// A worker computes on a thread of its own while its main thread (the only one calling MPI:
+// MPI_THREAD_FUNNELED) sends rank 0 an ALIVE message [envelope: batch, first, count, seconds
+// computing so far] every min(5 s, --rank-timeout / 4). --rank-timeout is therefore how long a
+// rank with jobs out may stay silent (no READY, result or ALIVE), not how long a job may take: a
+// slow job on a loaded machine is told apart from a dead or hung rank. Rank 0's own worker thread
+// is never timed out (it is in rank 0's process), and rank 0's progress line keeps ticking every
+// --log-interval while jobs are out, naming the longest one.
 #pragma once
 
 #include <cstdint>
@@ -44,6 +52,11 @@ struct JobBatch {
   std::string rate_unit = "rays";  // progress: what the rate counts ("" for none)
   uint64_t max_items = 1;          // per job
   std::size_t jobs_ahead = 1;      // jobs a rank holds at once
+  // The relative cost of a range of items (farm/job_planner.h, ItemCost): jobs are cut to
+  // --job-seconds of cost at each rank's measured seconds per unit, so that cheap items (an image's
+  // background pixels) and dear ones (pixels that see the model) make jobs of similar duration.
+  // Empty: every item costs 1.
+  ItemCost cost;
   // Results become durable (sync, then their journal lines) at most this often while jobs are
   // out, and always when none is (0: after every pass over the incoming messages).
   double commit_interval_s = 0;
@@ -77,6 +90,7 @@ class JobLoop {
 
  private:
   struct State;
+  class BatchRun;  // one Run(batch): farm/job_loop.cpp
   std::unique_ptr<State> s_;
 };
 
@@ -84,6 +98,14 @@ class JobLoop {
 // every other rank computes the jobs it is sent until STOP.
 void RunJobPhase(FarmContext& ctx, const JobCompute& compute,
                  const std::function<void(JobLoop&)>& coordinate);
+
+// JobBatch::cost for a batch whose items are the run's samples in order (ctx.samples): a
+// background pixel of an image run (SpatialSample::background: a zero row, nothing traced) costs
+// kBackgroundSampleCost of a sample on a surface, so that the job that reaches the model after
+// rows of sky is not sized from the sky's rate (issue 37). Empty (every sample alike) when no
+// sample is background.
+inline constexpr double kBackgroundSampleCost = 1e-3;
+ItemCost SampleCost(const FarmContext& ctx);
 
 // The JobSizing of a batch: --job-seconds, the computing ranks, --max-job-rows or `max_items`,
 // --initial-job-rows or 4 per thread.

@@ -3,8 +3,24 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <memory>
 
 namespace prt {
+
+ItemCost ItemCostOfWeights(const std::vector<double>& weights, double floor) {
+  auto prefix = std::make_shared<std::vector<double>>(weights.size() + 1, 0.0);
+  for (std::size_t i = 0; i < weights.size(); ++i) {
+    const double w = std::isfinite(weights[i]) ? std::max(weights[i], floor) : floor;
+    (*prefix)[i + 1] = (*prefix)[i] + w;
+  }
+  return [prefix, floor](uint64_t first, uint64_t count) {
+    const uint64_t n = prefix->size() - 1;
+    const uint64_t a = std::min(first, n), b = std::min(first + count, n);
+    // Items past the weights (none in a batch built right) cost the floor.
+    return (*prefix)[b] - (*prefix)[a] + static_cast<double>(count - (b - a)) * floor;
+  };
+}
 
 JobPlanner::JobPlanner(uint64_t total_rows, const std::vector<RowRange>& done,
                        const JobSizing& sizing)
@@ -13,6 +29,7 @@ JobPlanner::JobPlanner(uint64_t total_rows, const std::vector<RowRange>& done,
   sizing_.max_rows = std::max(sizing_.min_rows, sizing_.max_rows);
   sizing_.initial_rows = std::clamp(sizing_.initial_rows, sizing_.min_rows, sizing_.max_rows);
   sizing_.workers = std::max(1, sizing_.workers);
+  if (!(sizing_.growth >= 1.0)) sizing_.growth = 1.0;
   std::vector<RowRange> sorted;
   for (const RowRange& r : done) {
     const uint64_t first = std::min(r.first, total_);
@@ -38,26 +55,67 @@ JobPlanner::WorkerState& JobPlanner::State(int worker) {
   return workers_[worker];
 }
 
+const JobPlanner::WorkerState* JobPlanner::Find(int worker) const {
+  if (worker < 0 || static_cast<std::size_t>(worker) >= workers_.size()) return nullptr;
+  return &workers_[worker];
+}
+
 uint64_t JobPlanner::unassigned_rows() const {
   uint64_t n = 0;
   for (const RowRange& g : gaps_) n += g.count;
   return n;
 }
 
-uint64_t JobPlanner::NextSize(int worker) const {
-  const WorkerState s = (worker >= 0 && static_cast<std::size_t>(worker) < workers_.size())
-                            ? workers_[worker]
-                            : WorkerState{};
-  double size = static_cast<double>(sizing_.initial_rows);
-  if (s.rows_per_second > 0 && s.last_rows > 0) {
-    size = std::min(s.rows_per_second * sizing_.job_seconds,
-                    static_cast<double>(s.last_rows) * sizing_.growth);
+double JobPlanner::Cost(uint64_t first, uint64_t count) const {
+  if (count == 0) return 0;
+  return sizing_.cost ? sizing_.cost(first, count) : static_cast<double>(count);
+}
+
+double JobPlanner::UnassignedCost() const {
+  double c = 0;
+  for (const RowRange& g : gaps_) c += Cost(g.first, g.count);
+  return c;
+}
+
+uint64_t JobPlanner::ItemsWithin(uint64_t first, uint64_t limit, double budget) const {
+  limit = std::min(limit, sizing_.max_rows);
+  uint64_t lo = 0, hi = limit;  // the most items whose cost is ≤ budget: in [lo, hi]
+  if (!sizing_.cost) {
+    lo = hi =
+        static_cast<uint64_t>(std::clamp(std::floor(budget), 0.0, static_cast<double>(limit)));
   }
-  // Guided tail: no job larger than half of an equal share of what is left.
-  const double tail = static_cast<double>(unassigned_rows()) / (2.0 * sizing_.workers);
-  size = std::min(size, std::max(tail, static_cast<double>(sizing_.min_rows)));
-  const auto rows = static_cast<uint64_t>(std::llround(std::max(1.0, size)));
-  return std::clamp(rows, sizing_.min_rows, sizing_.max_rows);
+  while (lo < hi) {
+    const uint64_t mid = lo + (hi - lo + 1) / 2;
+    if (Cost(first, mid) <= budget) {
+      lo = mid;
+    } else {
+      hi = mid - 1;
+    }
+  }
+  // The count whose cost is nearest the budget (a half rounds up).
+  if (lo < limit && Cost(first, lo + 1) - budget <= budget - Cost(first, lo)) ++lo;
+  return std::clamp(lo, sizing_.min_rows, sizing_.max_rows);
+}
+
+double JobPlanner::NextCost(int worker) const {
+  const WorkerState* s = Find(worker);
+  double cost = std::numeric_limits<double>::infinity();
+  if (s && s->seconds_per_cost > 0) {
+    cost = sizing_.job_seconds / s->seconds_per_cost;
+    if (s->last_cost > 0) cost = std::min(cost, s->last_cost * sizing_.growth);
+  }
+  // Guided tail: no job costs more than half of an equal share of what is left.
+  return std::min(cost, UnassignedCost() / (2.0 * sizing_.workers));
+}
+
+uint64_t JobPlanner::NextSize(int worker) const {
+  if (gaps_.empty()) return sizing_.min_rows;
+  const uint64_t first = gaps_.front().first;
+  uint64_t rows = ItemsWithin(first, total_ - first, NextCost(worker));
+  const WorkerState* s = Find(worker);
+  // Before its first measurement a worker gets initial_rows items, to calibrate its rate.
+  if (!s || s->seconds_per_cost <= 0) rows = std::min(rows, sizing_.initial_rows);
+  return rows;
 }
 
 std::optional<RowRange> JobPlanner::Next(int worker) {
@@ -68,17 +126,28 @@ std::optional<RowRange> JobPlanner::Next(int worker) {
   gap.first += job.count;
   gap.count -= job.count;
   if (gap.count == 0) gaps_.erase(gaps_.begin());
-  State(worker).last_rows = job.count;
+  State(worker).last_cost = Cost(job.first, job.count);
   return job;
 }
 
-void JobPlanner::Measured(int worker, uint64_t rows, double busy_seconds) {
-  if (rows == 0 || !(busy_seconds > 0) || !std::isfinite(busy_seconds)) return;
+double JobPlanner::PredictedSeconds(int worker, const RowRange& job) const {
+  const WorkerState* s = Find(worker);
+  if (!s || s->seconds_per_cost <= 0) return -1;
+  return Cost(job.first, job.count) * s->seconds_per_cost;
+}
+
+void JobPlanner::Measured(int worker, const RowRange& job, double busy_seconds) {
+  const double cost = Cost(job.first, job.count);
+  if (!(cost > 0) || !(busy_seconds > 0) || !std::isfinite(busy_seconds)) return;
   WorkerState& s = State(worker);
-  const double rate = static_cast<double>(rows) / busy_seconds;
-  // Exponential average: later jobs (warm caches, larger batches) weigh more.
-  s.rows_per_second = s.rows_per_second > 0 ? 0.5 * s.rows_per_second + 0.5 * rate : rate;
-  s.last_rows = rows;
+  const double spc = busy_seconds / cost;
+  // Slower than the average: believed at once, so that a job far over its target makes the next
+  // one small (its items were dearer than the cost model said, and so may the next ones be).
+  // Faster: averaged (later jobs, with warm caches and larger batches, weigh half).
+  s.seconds_per_cost = (s.seconds_per_cost <= 0 || spc > s.seconds_per_cost)
+                           ? spc
+                           : 0.5 * s.seconds_per_cost + 0.5 * spc;
+  s.last_cost = cost;
 }
 
 void JobPlanner::Return(const RowRange& job) {

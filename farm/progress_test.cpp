@@ -1,7 +1,11 @@
 #include "farm/progress.h"
 
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
+#include <memory>
+#include <sstream>
 #include <string>
 
 namespace prt {
@@ -47,6 +51,34 @@ TEST(ProgressTest, WorkDoneBeforeCountsTowardsPercentageNotRate) {
   const ProgressSnapshot s = p.Snapshot();
   EXPECT_DOUBLE_EQ(s.units_per_s, 25.0);  // 100 in 4 s, not 700 in 4 s
   EXPECT_DOUBLE_EQ(s.eta_s, 12.0);        // 300 remaining at 25/s
+}
+
+// The job loop calls Advance(0) on every pass (farm/job_loop.cpp): a line comes every interval
+// while no unit finishes (a long job out), with the elapsed time and the ETA moving on.
+TEST(ProgressTest, AdvanceWithoutUnitsLogsEveryInterval) {
+  std::ostringstream log;
+  auto previous = spdlog::default_logger();
+  auto logger = std::make_shared<spdlog::logger>(
+      "progress-test", std::make_shared<spdlog::sinks::ostream_sink_st>(log));
+  logger->set_pattern("%v");
+  logger->set_level(spdlog::level::info);
+  spdlog::set_default_logger(logger);
+  double now = 0.0;
+  ProgressOptions options;
+  options.log_interval_s = 5.0;
+  options.clock = [&] { return now; };
+  options.suffix = [](double eta_s) { return " | step ETA " + Progress::FormatDuration(eta_s); };
+  Progress p("path-trace", 100, options);
+  now = 2.0;
+  p.Advance(10);  // within the interval: no line
+  for (now = 2.0; now <= 20.0; now += 0.5) p.Advance(0);
+  spdlog::set_default_logger(previous);
+  const std::string text = log.str();
+  int lines = 0;
+  for (char c : text) lines += c == '\n' ? 1 : 0;
+  EXPECT_EQ(lines, 4) << text;  // at 5, 10, 15 and 20 s
+  EXPECT_NE(text.find("10.0% (10/100 items)"), std::string::npos) << text;
+  EXPECT_NE(text.find("elapsed 20.0s, ETA 3m00s | step ETA 3m00s"), std::string::npos) << text;
 }
 
 TEST(ProgressTest, FormatsDurationsAndCounts) {

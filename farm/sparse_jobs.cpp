@@ -253,242 +253,282 @@ SparseJobResult DecodeSparseJobResult(std::string_view bytes) {
   return res;
 }
 
+namespace {
+
+// What a sparse job's computation shares across its kinds (ComputeSparseJob).
+struct SparseJobWork {
+  SparseJobWork(const TransportSampler& s, std::span<const SpatialSample> v, const SparsePlan& p,
+                SparseRowFiles* f)
+      : sampler(s), samples(v), plan(p), files(f) {}
+  const TransportSampler& sampler;
+  std::span<const SpatialSample> samples;
+  const SparsePlan& plan;
+  SparseRowFiles* files;
+  bool with_variance = false;
+  TransportVariance sums;  // the job's Monte-Carlo variance sums (with_variance)
+  std::size_t T = 0;       // texels per row
+  uint32_t in_place = 0;   // the job's in-place flags (kWriteRowsInPlace, …)
+  std::string step;        // its step's name (dense and sparse jobs)
+  std::mutex mutex;        // guards the totals the parallel loops add up
+
+  // The job's in-place flags, checked against this rank having the run's files.
+  uint32_t InPlaceOf(uint32_t flags) const {
+    if (flags != 0 && files == nullptr)
+      throw std::runtime_error("a sparse job asks for rows in place, and this rank has no files");
+    return flags;
+  }
+};
+
+std::string StepOf(ByteReader& r) {
+  const std::vector<char> name = r.GetVector<char>("message");
+  return std::string(name.begin(), name.end());
+}
+
+// A dense job: whole rows by adaptive angular sampling (Huang & Ramamoorthi 2010 §4.2), with
+// their visibility and feature rows, written in place or returned.
+void ComputeDenseJob(SparseJobWork& job, ByteReader& r, SparseJobResult& res) {
+  const std::size_t T = job.T;
+  std::mutex& mutex = job.mutex;
+  const std::vector<uint32_t> ids = r.GetVector<uint32_t>("message");
+  job.in_place = job.InPlaceOf(r.Get<uint32_t>("message"));
+  job.step = StepOf(r);
+  for (uint32_t s : ids)
+    if (s >= job.samples.size()) throw std::runtime_error("dense job names a missing sample");
+  res.transport.resize(ids.size() * T);
+  res.visibility.resize(ids.size() * T);
+  res.feature.resize(ids.size() * T);
+  std::vector<float> variance(job.with_variance ? ids.size() * T : 0);
+  AngularStats total;
+  tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
+    DenseRow row;
+    const AngularStats st =
+        SampleDenseRowAdaptive(job.sampler, job.samples[ids[i]], ids[i], job.plan.angular, row);
+    if (job.with_variance)
+      std::copy(row.variance.begin(), row.variance.end(), variance.begin() + i * T);
+    std::copy(row.transport.begin(), row.transport.end(), res.transport.begin() + i * T);
+    std::copy(row.visibility.begin(), row.visibility.end(), res.visibility.begin() + i * T);
+    std::copy(row.feature.begin(), row.feature.end(), res.feature.begin() + i * T);
+    std::lock_guard lock(mutex);
+    total += st;
+  });
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    CheckFinite(res.transport.data() + i * T, T, "transport", ids[i]);
+    CheckFinite(res.visibility.data() + i * T, T, "visibility", ids[i]);
+    if (job.with_variance) job.sums.AddRow(ids[i], variance.data() + i * T);
+  }
+  if (job.in_place & kWriteRowsInPlace) {
+    // The rows go into the run's files here; the journal's checksum comes back instead.
+    const int n = job.sampler.layout().n(), m = job.files->low_resolution();
+    std::vector<float> low(static_cast<std::size_t>(6 * m * m));
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      DownsampleRow(res.transport.data() + i * T, n, m, low.data());
+      job.files->WriteDense(ids[i], res.transport.data() + i * T, res.visibility.data() + i * T,
+                        res.feature.data() + i * T, low.data());
+    }
+    res.checksum = DenseResultChecksum(ids.size(), T, res.transport.data(),
+                                       res.visibility.data(), res.feature.data());
+    res.in_place = 1;
+    res.transport = {};
+    res.visibility = {};
+    res.feature = {};
+  }
+  SparseJobCounters& c = res.counters;
+  c.rays_traced = total.trace.rays_traced;
+  c.texels_traced = total.trace.texels_traced;
+  c.texels_below_horizon = total.trace.texels_below_horizon;
+  c.rays_below_horizon = total.trace.rays_below_horizon;
+  c.texels_above_horizon = total.texels_above_horizon;
+  c.grid_texels = total.grid_texels;
+  c.feature_texels = total.feature_texels;
+  c.borrowed_texels = total.borrowed_texels;
+}
+
+// A rank job: each candidate's local-rank weight from its dense neighbours' downsampled rows
+// (§4.1).
+void ComputeRankJob(SparseJobWork& job, ByteReader& r, SparseJobResult& res) {
+  const auto low_dim = r.Get<uint32_t>("message");
+  const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
+  const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
+  std::vector<float> low = r.GetVector<float>("message");
+  job.in_place = job.InPlaceOf(r.Get<uint32_t>("message"));
+  const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
+  if (job.in_place & kReadRowsInPlace) {
+    // The union's downsampled rows, from the run's files.
+    const int m = job.files->low_resolution();
+    if (low_dim != static_cast<uint32_t>(6 * m * m) || !low.empty())
+      throw std::runtime_error("malformed rank job rows");
+    low.resize(union_ids.size() * low_dim);
+    for (std::size_t k = 0; k < union_ids.size(); ++k) {
+      if (union_ids[k] >= job.samples.size())
+        throw std::runtime_error("rank job names a missing sample");
+      job.files->ReadLow(union_ids[k], low.data() + k * low_dim);
+    }
+    job.in_place = 0;  // nothing is written
+  }
+  if (low_dim == 0 || low.size() % low_dim != 0)
+    throw std::runtime_error("malformed rank job rows");
+  if (offsets.empty()) throw std::runtime_error("malformed rank job");
+  const std::size_t count = offsets.size() - 1;
+  CheckLists(count, offsets, nb, low.size() / low_dim);
+  res.weights.resize(count);
+  tbb::parallel_for(std::size_t{0}, count, [&](std::size_t i) {
+    std::vector<const float*> rows;
+    for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k)
+      rows.push_back(low.data() + static_cast<std::size_t>(nb[k]) * low_dim);
+    res.weights[i] = SparseCandidateWeight(rows, low_dim, job.plan);
+  });
+}
+
+// A sparse job: each vertex's row reconstructed from its dense neighbours by the L1 fit of its
+// feature texels (§5), with the combination the bounces reuse; written in place, kept for the
+// cross-validation, or returned.
+void ComputeSparseRows(SparseJobWork& job, ByteReader& r, SparseJobResult& res) {
+  const std::size_t T = job.T;
+  std::mutex& mutex = job.mutex;
+  const auto texels = r.Get<uint32_t>("message");
+  if (texels != T) throw std::runtime_error("sparse job for another cubemap resolution");
+  const std::vector<uint32_t> vertices = r.GetVector<uint32_t>("message");
+  const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
+  const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
+  std::vector<float> tr = r.GetVector<float>("message");
+  std::vector<float> vis = r.GetVector<float>("message");
+  std::vector<uint8_t> feat = r.GetVector<uint8_t>("message");
+  const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
+  job.in_place = job.InPlaceOf(r.Get<uint32_t>("message"));
+  job.step = StepOf(r);
+  if (job.in_place & kReadRowsInPlace) {
+    // The dense neighbours' rows, from the run's files.
+    if (!tr.empty() || !vis.empty() || !feat.empty())
+      throw std::runtime_error("malformed sparse job rows");
+    const std::size_t u = union_ids.size();
+    tr.resize(u * T);
+    vis.resize(u * T);
+    feat.resize(u * T);
+    for (std::size_t k = 0; k < u; ++k) {
+      if (union_ids[k] >= job.samples.size())
+        throw std::runtime_error("sparse job names a missing sample");
+      job.files->ReadDense(union_ids[k], tr.data() + k * T, vis.data() + k * T,
+                       feat.data() + k * T);
+    }
+  }
+  const std::size_t rows = tr.size() / T;
+  if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T ||
+      union_ids.size() != rows)
+    throw std::runtime_error("malformed sparse job rows");
+  for (uint32_t s : union_ids)
+    if (s >= job.samples.size()) throw std::runtime_error("sparse job names a missing sample");
+  CheckLists(vertices.size(), offsets, nb, rows);
+  for (uint32_t s : vertices)
+    if (s >= job.samples.size()) throw std::runtime_error("sparse job names a missing sample");
+  std::vector<float> out(vertices.size() * T, 0.0f);
+  std::vector<float> variance(job.with_variance ? vertices.size() * T : 0);
+  res.outcomes.assign(vertices.size(), 0);
+  tbb::enumerable_thread_specific<L1Solver> solvers([&] {
+    L1Options o;
+    o.lambda = job.plan.sparse.lambda;
+    return L1Solver(o);
+  });
+  SparseStats total;
+  const std::size_t slots = CombinationSlots(job.plan);
+  res.combination.assign(vertices.size() * slots * 2, 0);
+  for (std::size_t i = 0; i < vertices.size() * slots; ++i) res.combination[2 * i] = kNoSample;
+  tbb::parallel_for(std::size_t{0}, vertices.size(), [&](std::size_t i) {
+    std::vector<DenseNeighbor> nbs;
+    for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
+      const std::size_t u = nb[k];
+      nbs.push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T,
+                     job.samples[union_ids[u]].normal});
+    }
+    SparseStats st;
+    std::vector<NeighborWeight> weights;
+    const SparseOutcome o = ReconstructSparseRow(
+        job.sampler, job.samples[vertices[i]], vertices[i], nbs, job.plan.sparse, solvers.local(),
+        out.data() + i * T, st, job.with_variance ? variance.data() + i * T : nullptr, &weights);
+    res.outcomes[i] = static_cast<uint8_t>(o);
+    if (o == SparseOutcome::kReconstructed) {
+      uint32_t* rec = res.combination.data() + i * slots * 2;
+      for (std::size_t w = 0; w < weights.size() && w < slots; ++w) {
+        rec[2 * w] = union_ids[nb[offsets[i] + weights[w].neighbor]];
+        rec[2 * w + 1] = std::bit_cast<uint32_t>(weights[w].alpha);
+      }
+    }
+    std::lock_guard lock(mutex);
+    total += st;
+  });
+  for (std::size_t i = 0; i < vertices.size(); ++i) {
+    if (res.outcomes[i] != static_cast<uint8_t>(SparseOutcome::kReconstructed)) continue;
+    CheckFinite(out.data() + i * T, T, "transport", vertices[i]);
+    if (job.with_variance) job.sums.AddRow(vertices[i], variance.data() + i * T);
+    res.transport.insert(res.transport.end(), out.begin() + static_cast<std::ptrdiff_t>(i * T),
+                         out.begin() + static_cast<std::ptrdiff_t>((i + 1) * T));
+    if (job.in_place & kWriteRowsInPlace) job.files->WriteRow(vertices[i], out.data() + i * T);
+  }
+  if (job.in_place & kWriteRowsInPlace) {
+    res.checksum = SparseResultChecksum(res.outcomes, res.transport, res.combination);
+    res.in_place = 1;
+    res.transport = {};
+  } else if (job.in_place & kCrossValidateInPlace) {
+    res.checksum = job.files->WriteCrossValidation(res.header.first, vertices, res.outcomes,
+                                               res.transport.data());
+    res.in_place = 1;
+    res.transport = {};
+    res.combination = {};
+  }
+  SparseJobCounters& c = res.counters;
+  c.rays_traced = total.trace.rays_traced;
+  c.texels_traced = total.trace.texels_traced;
+  c.texels_below_horizon = total.trace.texels_below_horizon;
+  c.rays_below_horizon = total.trace.rays_below_horizon;
+  c.texels_above_horizon = total.texels_above_horizon;
+  c.reconstructed = total.reconstructed;
+  c.fallback_too_few_neighbors = total.fallback_too_few_neighbors;
+  c.fallback_solve_failed = total.fallback_solve_failed;
+  c.fallback_poor_fit = total.fallback_poor_fit;
+  c.solved_lars = total.solved_lars;
+  c.solved_admm = total.solved_admm;
+  c.zero_systems = total.zero_systems;
+  c.features_traced = total.features_traced;
+}
+
+}  // namespace
+
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
                              std::string_view job_bytes, std::string prefix,
                              const std::vector<uint64_t>* mesh_rows, SparseRowFiles* files) {
   ByteReader r = MessageReader(job_bytes);
-  // The job's in-place flags and step name, after its kind's fields.
-  auto in_place_of = [&](uint32_t flags) {
-    if (flags != 0 && files == nullptr)
-      throw std::runtime_error("a sparse job asks for rows in place, and this rank has no files");
-    return flags;
-  };
-  auto step_of = [&] {
-    const std::vector<char> name = r.GetVector<char>("message");
-    return std::string(name.begin(), name.end());
-  };
-  uint32_t in_place = 0;
-  std::string step;
-  const bool with_variance = mesh_rows != nullptr;
-  TransportVariance sums;
-  if (with_variance) {
-    sums =
+  SparseJobWork job(sampler, samples, plan, files);
+  job.with_variance = mesh_rows != nullptr;
+  if (job.with_variance) {
+    job.sums =
         MakeTransportVariance(static_cast<uint32_t>(sampler.layout().n()),
                               static_cast<uint32_t>(sampler.options().rays_per_texel), *mesh_rows);
   }
   SparseJobResult res;
   res.header = GetHeader(r, kJobMagic);
   const double t0 = Now();
-  const std::size_t T = sampler.layout().texel_count();
-  std::mutex mutex;
+  job.T = sampler.layout().texel_count();
   switch (static_cast<SparseJobKind>(res.header.kind)) {
-    case SparseJobKind::kDense: {
-      const std::vector<uint32_t> ids = r.GetVector<uint32_t>("message");
-      in_place = in_place_of(r.Get<uint32_t>("message"));
-      step = step_of();
-      for (uint32_t s : ids)
-        if (s >= samples.size()) throw std::runtime_error("dense job names a missing sample");
-      res.transport.resize(ids.size() * T);
-      res.visibility.resize(ids.size() * T);
-      res.feature.resize(ids.size() * T);
-      std::vector<float> variance(with_variance ? ids.size() * T : 0);
-      AngularStats total;
-      tbb::parallel_for(std::size_t{0}, ids.size(), [&](std::size_t i) {
-        DenseRow row;
-        const AngularStats st =
-            SampleDenseRowAdaptive(sampler, samples[ids[i]], ids[i], plan.angular, row);
-        if (with_variance)
-          std::copy(row.variance.begin(), row.variance.end(), variance.begin() + i * T);
-        std::copy(row.transport.begin(), row.transport.end(), res.transport.begin() + i * T);
-        std::copy(row.visibility.begin(), row.visibility.end(), res.visibility.begin() + i * T);
-        std::copy(row.feature.begin(), row.feature.end(), res.feature.begin() + i * T);
-        std::lock_guard lock(mutex);
-        total += st;
-      });
-      for (std::size_t i = 0; i < ids.size(); ++i) {
-        CheckFinite(res.transport.data() + i * T, T, "transport", ids[i]);
-        CheckFinite(res.visibility.data() + i * T, T, "visibility", ids[i]);
-        if (with_variance) sums.AddRow(ids[i], variance.data() + i * T);
-      }
-      if (in_place & kWriteRowsInPlace) {
-        // The rows go into the run's files here; the journal's checksum comes back instead.
-        const int n = sampler.layout().n(), m = files->low_resolution();
-        std::vector<float> low(static_cast<std::size_t>(6 * m * m));
-        for (std::size_t i = 0; i < ids.size(); ++i) {
-          DownsampleRow(res.transport.data() + i * T, n, m, low.data());
-          files->WriteDense(ids[i], res.transport.data() + i * T, res.visibility.data() + i * T,
-                            res.feature.data() + i * T, low.data());
-        }
-        res.checksum = DenseResultChecksum(ids.size(), T, res.transport.data(),
-                                           res.visibility.data(), res.feature.data());
-        res.in_place = 1;
-        res.transport = {};
-        res.visibility = {};
-        res.feature = {};
-      }
-      SparseJobCounters& c = res.counters;
-      c.rays_traced = total.trace.rays_traced;
-      c.texels_traced = total.trace.texels_traced;
-      c.texels_below_horizon = total.trace.texels_below_horizon;
-      c.rays_below_horizon = total.trace.rays_below_horizon;
-      c.texels_above_horizon = total.texels_above_horizon;
-      c.grid_texels = total.grid_texels;
-      c.feature_texels = total.feature_texels;
-      c.borrowed_texels = total.borrowed_texels;
+    case SparseJobKind::kDense:
+      ComputeDenseJob(job, r, res);
       break;
-    }
-    case SparseJobKind::kRank: {
-      const auto low_dim = r.Get<uint32_t>("message");
-      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
-      const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
-      std::vector<float> low = r.GetVector<float>("message");
-      in_place = in_place_of(r.Get<uint32_t>("message"));
-      const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
-      if (in_place & kReadRowsInPlace) {
-        // The union's downsampled rows, from the run's files.
-        const int m = files->low_resolution();
-        if (low_dim != static_cast<uint32_t>(6 * m * m) || !low.empty())
-          throw std::runtime_error("malformed rank job rows");
-        low.resize(union_ids.size() * low_dim);
-        for (std::size_t k = 0; k < union_ids.size(); ++k) {
-          if (union_ids[k] >= samples.size())
-            throw std::runtime_error("rank job names a missing sample");
-          files->ReadLow(union_ids[k], low.data() + k * low_dim);
-        }
-        in_place = 0;  // nothing is written
-      }
-      if (low_dim == 0 || low.size() % low_dim != 0)
-        throw std::runtime_error("malformed rank job rows");
-      if (offsets.empty()) throw std::runtime_error("malformed rank job");
-      const std::size_t count = offsets.size() - 1;
-      CheckLists(count, offsets, nb, low.size() / low_dim);
-      res.weights.resize(count);
-      tbb::parallel_for(std::size_t{0}, count, [&](std::size_t i) {
-        std::vector<const float*> rows;
-        for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k)
-          rows.push_back(low.data() + static_cast<std::size_t>(nb[k]) * low_dim);
-        res.weights[i] = SparseCandidateWeight(rows, low_dim, plan);
-      });
+    case SparseJobKind::kRank:
+      ComputeRankJob(job, r, res);
       break;
-    }
-    case SparseJobKind::kSparse: {
-      const auto texels = r.Get<uint32_t>("message");
-      if (texels != T) throw std::runtime_error("sparse job for another cubemap resolution");
-      const std::vector<uint32_t> vertices = r.GetVector<uint32_t>("message");
-      const std::vector<uint32_t> offsets = r.GetVector<uint32_t>("message");
-      const std::vector<uint32_t> nb = r.GetVector<uint32_t>("message");
-      std::vector<float> tr = r.GetVector<float>("message");
-      std::vector<float> vis = r.GetVector<float>("message");
-      std::vector<uint8_t> feat = r.GetVector<uint8_t>("message");
-      const std::vector<uint32_t> union_ids = r.GetVector<uint32_t>("message");
-      in_place = in_place_of(r.Get<uint32_t>("message"));
-      step = step_of();
-      if (in_place & kReadRowsInPlace) {
-        // The dense neighbours' rows, from the run's files.
-        if (!tr.empty() || !vis.empty() || !feat.empty())
-          throw std::runtime_error("malformed sparse job rows");
-        const std::size_t u = union_ids.size();
-        tr.resize(u * T);
-        vis.resize(u * T);
-        feat.resize(u * T);
-        for (std::size_t k = 0; k < u; ++k) {
-          if (union_ids[k] >= samples.size())
-            throw std::runtime_error("sparse job names a missing sample");
-          files->ReadDense(union_ids[k], tr.data() + k * T, vis.data() + k * T,
-                           feat.data() + k * T);
-        }
-      }
-      const std::size_t rows = tr.size() / T;
-      if (tr.size() != rows * T || vis.size() != rows * T || feat.size() != rows * T ||
-          union_ids.size() != rows)
-        throw std::runtime_error("malformed sparse job rows");
-      for (uint32_t s : union_ids)
-        if (s >= samples.size()) throw std::runtime_error("sparse job names a missing sample");
-      CheckLists(vertices.size(), offsets, nb, rows);
-      for (uint32_t s : vertices)
-        if (s >= samples.size()) throw std::runtime_error("sparse job names a missing sample");
-      std::vector<float> out(vertices.size() * T, 0.0f);
-      std::vector<float> variance(with_variance ? vertices.size() * T : 0);
-      res.outcomes.assign(vertices.size(), 0);
-      tbb::enumerable_thread_specific<L1Solver> solvers([&] {
-        L1Options o;
-        o.lambda = plan.sparse.lambda;
-        return L1Solver(o);
-      });
-      SparseStats total;
-      const std::size_t slots = CombinationSlots(plan);
-      res.combination.assign(vertices.size() * slots * 2, 0);
-      for (std::size_t i = 0; i < vertices.size() * slots; ++i) res.combination[2 * i] = kNoSample;
-      tbb::parallel_for(std::size_t{0}, vertices.size(), [&](std::size_t i) {
-        std::vector<DenseNeighbor> nbs;
-        for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
-          const std::size_t u = nb[k];
-          nbs.push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T,
-                         samples[union_ids[u]].normal});
-        }
-        SparseStats st;
-        std::vector<NeighborWeight> weights;
-        const SparseOutcome o = ReconstructSparseRow(
-            sampler, samples[vertices[i]], vertices[i], nbs, plan.sparse, solvers.local(),
-            out.data() + i * T, st, with_variance ? variance.data() + i * T : nullptr, &weights);
-        res.outcomes[i] = static_cast<uint8_t>(o);
-        if (o == SparseOutcome::kReconstructed) {
-          uint32_t* rec = res.combination.data() + i * slots * 2;
-          for (std::size_t w = 0; w < weights.size() && w < slots; ++w) {
-            rec[2 * w] = union_ids[nb[offsets[i] + weights[w].neighbor]];
-            rec[2 * w + 1] = std::bit_cast<uint32_t>(weights[w].alpha);
-          }
-        }
-        std::lock_guard lock(mutex);
-        total += st;
-      });
-      for (std::size_t i = 0; i < vertices.size(); ++i) {
-        if (res.outcomes[i] != static_cast<uint8_t>(SparseOutcome::kReconstructed)) continue;
-        CheckFinite(out.data() + i * T, T, "transport", vertices[i]);
-        if (with_variance) sums.AddRow(vertices[i], variance.data() + i * T);
-        res.transport.insert(res.transport.end(), out.begin() + static_cast<std::ptrdiff_t>(i * T),
-                             out.begin() + static_cast<std::ptrdiff_t>((i + 1) * T));
-        if (in_place & kWriteRowsInPlace) files->WriteRow(vertices[i], out.data() + i * T);
-      }
-      if (in_place & kWriteRowsInPlace) {
-        res.checksum = SparseResultChecksum(res.outcomes, res.transport, res.combination);
-        res.in_place = 1;
-        res.transport = {};
-      } else if (in_place & kCrossValidateInPlace) {
-        res.checksum = files->WriteCrossValidation(res.header.first, vertices, res.outcomes,
-                                                   res.transport.data());
-        res.in_place = 1;
-        res.transport = {};
-        res.combination = {};
-      }
-      SparseJobCounters& c = res.counters;
-      c.rays_traced = total.trace.rays_traced;
-      c.texels_traced = total.trace.texels_traced;
-      c.texels_below_horizon = total.trace.texels_below_horizon;
-      c.rays_below_horizon = total.trace.rays_below_horizon;
-      c.texels_above_horizon = total.texels_above_horizon;
-      c.reconstructed = total.reconstructed;
-      c.fallback_too_few_neighbors = total.fallback_too_few_neighbors;
-      c.fallback_solve_failed = total.fallback_solve_failed;
-      c.fallback_poor_fit = total.fallback_poor_fit;
-      c.solved_lars = total.solved_lars;
-      c.solved_admm = total.solved_admm;
-      c.zero_systems = total.zero_systems;
-      c.features_traced = total.features_traced;
+    case SparseJobKind::kSparse:
+      ComputeSparseRows(job, r, res);
       break;
-    }
     default:
       throw std::runtime_error("unknown sparse job kind " + std::to_string(res.header.kind));
   }
   // A cross-validation's rays are not T's: its sums are never recorded (rank 0 ignores them).
-  if (with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank) &&
-      !(in_place & kCrossValidateInPlace)) {
+  if (job.with_variance && res.header.kind != static_cast<uint32_t>(SparseJobKind::kRank) &&
+      !(job.in_place & kCrossValidateInPlace)) {
     if (res.in_place) {
-      files->RecordVariance(step, res.header.first, res.header.count,
-                            EncodeTransportVariance(sums));
+      files->RecordVariance(job.step, res.header.first, res.header.count,
+                            EncodeTransportVariance(job.sums));
     } else {
-      res.variance = EncodeTransportVariance(sums);
+      res.variance = EncodeTransportVariance(job.sums);
     }
   }
   // Rows and variance record durable before the result that lets rank 0 journal them.

@@ -330,11 +330,12 @@ class SparsePhase final : public FarmPhase {
           rep.sparse.candidates_ranked += c.candidates_ranked;
           rep.sparse.dense_by_rank += c.dense_by_rank;
           rep.sparse.dense_fallback = c.dense_fallback;
-          // The combinations the bounces reuse (farm/bounce_phase.cpp; a fallback's is empty).
+          // The combinations the bounces reuse (farm/bounce/driver.cpp; a fallback's is empty).
           if (!steps.combination_.empty())
             WriteFileDurably(ctx.folder.SparseCombinationFile(),
                              EncodeCombinationFile(ctx.samples.size(), CombinationSlots(ctx.plan),
                                                    steps.combination_));
+          RemoveSparseScratch(ctx.folder);
           if (steps.variance_uncovered_jobs_ > 0)
             spdlog::warn(
                 "{} re-used job(s) have no logged variance: the Monte-Carlo estimate "

@@ -57,6 +57,16 @@ constexpr char kListsMagic[8] = {'P', 'R', 'T', 'S', 'L', 'S', '1', '\0'};
 std::string StepListsPath(const RunFolder& f, uint32_t step) {
   return (fs::path(f.sparse) / ("lists-" + std::to_string(step) + ".bin")).string();
 }
+void RemoveSparseScratch(const RunFolder& f) {
+  std::error_code ec;
+  std::vector<fs::path> scratch = {fs::path(f.sparse) / "dense_low.bin"};
+  for (const auto& entry : fs::directory_iterator(f.sparse, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind("lists-", 0) == 0 && entry.path().extension() == ".bin")
+      scratch.push_back(entry.path());
+  }
+  for (const fs::path& p : scratch) fs::remove(p, ec);
+}
 void WriteStepLists(const std::string& path, std::span<const uint32_t> dense,
                     std::span<const uint32_t> items) {
   std::string b(kListsMagic, sizeof kListsMagic);

@@ -47,6 +47,10 @@ uint64_t ListNeighbours(const NeighborIndex& index, std::span<const SpatialSampl
 std::string StepListsPath(const RunFolder& f, uint32_t step);
 void WriteStepLists(const std::string& path, std::span<const uint32_t> dense,
                     std::span<const uint32_t> items);
+// The rows-in-place scratch of the steps (dense_low.bin, lists-<step>.bin): read only while the
+// steps run, and written again by a resume. Removed once the steps are done, so that the run
+// folder holds the same files for any number of ranks (docs/farm.md, "Determinism").
+void RemoveSparseScratch(const RunFolder& f);
 // Throws InputError for a file that is not a step's lists, is damaged, or names a sample at or
 // beyond `samples`.
 void ReadStepLists(const std::string& path, uint64_t samples, std::vector<uint32_t>& dense,

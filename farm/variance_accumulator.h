@@ -9,6 +9,10 @@
 // keeps their running sum, which the finalize phase reduces onto rank 0. The next run's
 // VarianceAccumulator merges the rank logs into variance.log, so that a resume finds every
 // journaled job's record wherever it was computed.
+//
+// Every sum here is exact (integers, formats/transport_variance.h), so the total, and the bytes of
+// transport.variance, are the same whatever order the jobs finish in, whichever rank computed
+// them and however many ranks reduce them (docs/farm.md, "Determinism").
 #pragma once
 
 #include <map>

@@ -6,7 +6,9 @@
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
+#include <utility>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 
@@ -17,14 +19,6 @@ namespace {
 constexpr char kResultMagic[8] = {'P', 'R', 'T', 'V', 'J', 'O', 'B', '1'};
 constexpr std::size_t kResultHeader = 8 + 8 * 7;  // magic, 6 u64 fields + busy seconds
 
-void PutU64(std::vector<uint8_t>& out, uint64_t v) {
-  for (int i = 0; i < 8; ++i) out.push_back(static_cast<uint8_t>(v >> (8 * i)));
-}
-uint64_t GetU64(const uint8_t* p) {
-  uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v |= uint64_t(p[i]) << (8 * i);
-  return v;
-}
 
 }  // namespace
 
@@ -50,19 +44,17 @@ VisibilityJobResult ComputeVisibilityJob(const VisibilitySampler& sampler,
 }
 
 std::vector<uint8_t> EncodeVisibilityJobResult(const VisibilityJobResult& r) {
-  std::vector<uint8_t> out(kResultMagic, kResultMagic + 8);
-  out.reserve(kResultHeader + r.chunk.size());
-  PutU64(out, r.first);
-  PutU64(out, r.count);
-  PutU64(out, r.rays_traced);
-  PutU64(out, r.texels_below_horizon);
-  uint64_t busy = 0;
-  std::memcpy(&busy, &r.busy_seconds, 8);
-  PutU64(out, busy);
-  PutU64(out, r.chunk.size());
-  PutU64(out, Checksum64(r.chunk.data(), r.chunk.size()));
-  out.insert(out.end(), r.chunk.begin(), r.chunk.end());
-  return out;
+  ByteVectorWriter w(std::vector<uint8_t>(kResultMagic, kResultMagic + 8));
+  w.Reserve(kResultHeader + r.chunk.size());
+  w.Put<uint64_t>(r.first);
+  w.Put<uint64_t>(r.count);
+  w.Put<uint64_t>(r.rays_traced);
+  w.Put<uint64_t>(r.texels_below_horizon);
+  w.Put<double>(r.busy_seconds);
+  w.Put<uint64_t>(r.chunk.size());
+  w.Put<uint64_t>(Checksum64(r.chunk.data(), r.chunk.size()));
+  w.PutBytes(r.chunk.data(), r.chunk.size());
+  return std::move(w.bytes());
 }
 
 VisibilityJobResult DecodeVisibilityJobResult(std::span<const uint8_t> bytes) {
@@ -70,16 +62,14 @@ VisibilityJobResult DecodeVisibilityJobResult(std::span<const uint8_t> bytes) {
     throw std::runtime_error("not a visibility job result (" + std::to_string(bytes.size()) +
                              " bytes)");
   }
-  const uint8_t* p = bytes.data() + 8;
   VisibilityJobResult r;
-  r.first = GetU64(p);
-  r.count = GetU64(p + 8);
-  r.rays_traced = GetU64(p + 16);
-  r.texels_below_horizon = GetU64(p + 24);
-  const uint64_t busy = GetU64(p + 32);
-  std::memcpy(&r.busy_seconds, &busy, 8);
-  const uint64_t length = GetU64(p + 40);
-  const uint64_t sum = GetU64(p + 48);
+  r.first = LoadAt<uint64_t>(bytes, 8);
+  r.count = LoadAt<uint64_t>(bytes, 16);
+  r.rays_traced = LoadAt<uint64_t>(bytes, 24);
+  r.texels_below_horizon = LoadAt<uint64_t>(bytes, 32);
+  r.busy_seconds = LoadAt<double>(bytes, 40);
+  const uint64_t length = LoadAt<uint64_t>(bytes, 48);
+  const uint64_t sum = LoadAt<uint64_t>(bytes, 56);
   if (length != bytes.size() - kResultHeader) {
     throw std::runtime_error("visibility job result of " + std::to_string(bytes.size()) +
                              " bytes declares a chunk of " + std::to_string(length));

@@ -10,9 +10,13 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/wavelets.h"
 
@@ -30,151 +34,77 @@ constexpr uint32_t kChannelsVersion = 3;
 constexpr uint32_t kCpcaVersion = 4;
 constexpr uint32_t kMaxSamples = 1u << 28;  // consumers allocate O(samples)
 
-class Writer {
- public:
-  void U8(uint8_t v) { out_.push_back(v); }
-  void U32(uint32_t v) {
-    for (int i = 0; i < 4; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
-  }
-  void U64(uint64_t v) {
-    for (int i = 0; i < 8; ++i) out_.push_back(static_cast<uint8_t>(v >> (8 * i)));
-  }
-  void F32(float v) {
-    uint32_t u;
-    std::memcpy(&u, &v, 4);
-    U32(u);
-  }
-  void F64(double v) {
-    uint64_t u;
-    std::memcpy(&u, &v, 8);
-    U64(u);
-  }
-  void Varint(uint64_t v) {
-    while (v >= 0x80) {
-      out_.push_back(static_cast<uint8_t>(v | 0x80));
-      v >>= 7;
-    }
-    out_.push_back(static_cast<uint8_t>(v));
-  }
-  void Bytes(const void* p, std::size_t n) {
-    const auto* b = static_cast<const uint8_t*>(p);
-    out_.insert(out_.end(), b, b + n);
-  }
-  // Packs `bits`-bit two's complement fields, little-endian bit order, padded to a byte.
-  void PackedSigned(const std::vector<int32_t>& q, int bits) {
-    uint64_t acc = 0;
-    int filled = 0;
-    const uint64_t mask = (uint64_t{1} << bits) - 1;
-    for (int32_t v : q) {
-      acc |= (static_cast<uint64_t>(static_cast<int64_t>(v)) & mask) << filled;
-      filled += bits;
-      while (filled >= 8) {
-        out_.push_back(static_cast<uint8_t>(acc));
-        acc >>= 8;
-        filled -= 8;
-      }
-    }
-    if (filled > 0) out_.push_back(static_cast<uint8_t>(acc));
-  }
-  std::vector<uint8_t>& out() { return out_; }
+// Every reader of this file's formats: a truncated read is an InputError naming the file, the
+// field and the byte.
+ByteReader Reader(std::span<const uint8_t> bytes, const std::string& name) {
+  return ByteReader(bytes, [&name](const char* what, std::size_t at) {
+    throw InputError(name,
+                     std::string("truncated: ") + what + " (at byte " + std::to_string(at) + ")");
+  });
+}
+std::span<const uint8_t> AsBytes(std::string_view s) {
+  return {reinterpret_cast<const uint8_t*>(s.data()), s.size()};
+}
+[[noreturn]] void Fail(const ByteReader& r, const std::string& name, const std::string& what) {
+  throw InputError(name, what + " (at byte " + std::to_string(r.position()) + ")");
+}
+void Magic(ByteReader& r, const std::string& name, const char* m, std::size_t n, const char* what) {
+  r.Need(n, what);
+  if (r.rest().substr(0, n) != std::string_view(m, n))
+    Fail(r, name, std::string("bad magic: ") + what);
+  r.Skip(n, what);
+}
+// Out of line, so that Varint32 needs no stack frame for the message.
+[[noreturn, gnu::cold, gnu::noinline]] void BadVarint(const ByteReader& r, const std::string& name,
+                                                      const char* what) {
+  Fail(r, name, std::string("varint longer than 5 bytes or above 2^32: ") + what);
+}
+// LEB128, at most 5 bytes, value must fit 32 bits.
+uint32_t Varint32(ByteReader& r, const std::string& name, const char* what) {
+  const std::optional<uint32_t> v = r.GetVarint<uint32_t>(what);
+  if (!v) BadVarint(r, name, what);
+  return *v;
+}
 
- private:
-  std::vector<uint8_t> out_;
-};
-
-class Reader {
- public:
-  Reader(std::span<const uint8_t> b, const std::string& name) : b_(b), name_(name) {}
-  [[noreturn]] void Fail(const std::string& what) const {
-    throw InputError(name_, what + " (at byte " + std::to_string(pos_) + ")");
-  }
-  std::size_t remaining() const { return b_.size() - pos_; }
-  std::size_t pos() const { return pos_; }
-  std::span<const uint8_t> bytes() const { return b_; }
-  void Skip(std::size_t n) {
-    Need(n, "skip");
-    pos_ += n;
-  }
-  void Need(std::size_t n, const char* what) const {
-    if (remaining() < n) Fail(std::string("truncated: ") + what);
-  }
-  uint8_t U8(const char* what) {
-    Need(1, what);
-    return b_[pos_++];
-  }
-  uint32_t U32(const char* what) {
-    Need(4, what);
-    uint32_t v = 0;
-    for (int i = 0; i < 4; ++i) v |= static_cast<uint32_t>(b_[pos_ + i]) << (8 * i);
-    pos_ += 4;
-    return v;
-  }
-  uint64_t U64(const char* what) {
-    Need(8, what);
-    uint64_t v = 0;
-    for (int i = 0; i < 8; ++i) v |= static_cast<uint64_t>(b_[pos_ + i]) << (8 * i);
-    pos_ += 8;
-    return v;
-  }
-  float F32(const char* what) {
-    const uint32_t u = U32(what);
-    float f;
-    std::memcpy(&f, &u, 4);
-    return f;
-  }
-  double F64(const char* what) {
-    const uint64_t u = U64(what);
-    double d;
-    std::memcpy(&d, &u, 8);
-    return d;
-  }
-  // LEB128, at most 5 bytes, value must fit 32 bits.
-  uint32_t Varint32(const char* what) {
-    uint64_t v = 0;
-    for (int i = 0; i < 5; ++i) {
-      const uint8_t byte = U8(what);
-      v |= static_cast<uint64_t>(byte & 0x7f) << (7 * i);
-      if ((byte & 0x80) == 0) {
-        if (v > std::numeric_limits<uint32_t>::max()) Fail(std::string("varint overflow: ") + what);
-        return static_cast<uint32_t>(v);
-      }
+// Packs `bits`-bit two's complement fields, little-endian bit order, padded to a byte.
+void PutPackedSigned(ByteVectorWriter& w, const std::vector<int32_t>& q, int bits) {
+  std::vector<uint8_t>& out = w.bytes();
+  uint64_t acc = 0;
+  int filled = 0;
+  const uint64_t mask = (uint64_t{1} << bits) - 1;
+  for (int32_t v : q) {
+    acc |= (static_cast<uint64_t>(static_cast<int64_t>(v)) & mask) << filled;
+    filled += bits;
+    while (filled >= 8) {
+      out.push_back(static_cast<uint8_t>(acc));
+      acc >>= 8;
+      filled -= 8;
     }
-    Fail(std::string("varint too long: ") + what);
   }
-  void Magic(const char* m, std::size_t n, const char* what) {
-    Need(n, what);
-    if (std::memcmp(b_.data() + pos_, m, n) != 0) Fail(std::string("bad magic: ") + what);
-    pos_ += n;
-  }
-  std::vector<int32_t> PackedSigned(std::size_t count, int bits, const char* what) {
-    const std::size_t nbytes = (count * static_cast<std::size_t>(bits) + 7) / 8;
-    Need(nbytes, what);
-    std::vector<int32_t> q(count);
-    uint64_t acc = 0;
-    int filled = 0;
-    std::size_t p = pos_;
-    const uint64_t mask = (uint64_t{1} << bits) - 1;
-    for (std::size_t k = 0; k < count; ++k) {
-      while (filled < bits) {
-        acc |= static_cast<uint64_t>(b_[p++]) << filled;
-        filled += 8;
-      }
-      uint64_t u = acc & mask;
-      acc >>= bits;
-      filled -= bits;
-      int64_t v = static_cast<int64_t>(u);
-      if (u >> (bits - 1)) v -= static_cast<int64_t>(uint64_t{1} << bits);  // sign extend
-      q[k] = static_cast<int32_t>(v);
+  if (filled > 0) out.push_back(static_cast<uint8_t>(acc));
+}
+std::vector<int32_t> GetPackedSigned(ByteReader& r, std::size_t count, int bits, const char* what) {
+  const std::size_t nbytes = (count * static_cast<std::size_t>(bits) + 7) / 8;
+  const auto* b = reinterpret_cast<const uint8_t*>(r.Take(nbytes, what).data());
+  std::vector<int32_t> q(count);
+  uint64_t acc = 0;
+  int filled = 0;
+  std::size_t p = 0;
+  const uint64_t mask = (uint64_t{1} << bits) - 1;
+  for (std::size_t k = 0; k < count; ++k) {
+    while (filled < bits) {
+      acc |= static_cast<uint64_t>(b[p++]) << filled;
+      filled += 8;
     }
-    pos_ += nbytes;
-    return q;
+    uint64_t u = acc & mask;
+    acc >>= bits;
+    filled -= bits;
+    int64_t v = static_cast<int64_t>(u);
+    if (u >> (bits - 1)) v -= static_cast<int64_t>(uint64_t{1} << bits);  // sign extend
+    q[k] = static_cast<int32_t>(v);
   }
-
- private:
-  std::span<const uint8_t> b_;
-  const std::string& name_;
-  std::size_t pos_ = 0;
-};
+  return q;
+}
 
 int MaxQ(int bits) {
   return (1 << (bits - 1)) - 1;
@@ -246,10 +176,10 @@ class BitWriter {
   int filled_ = 0;
 };
 
-// Reads what BitWriter wrote from bytes [pos, end); fails (InputError via fail) past the end.
+// Reads what BitWriter wrote from `b`; fails (InputError via fail) past its end.
 class BitReader {
  public:
-  BitReader(std::span<const uint8_t> b, std::size_t pos) : b_(b), p_(pos) {}
+  explicit BitReader(std::span<const uint8_t> b) : b_(b) {}
   template <class Fail>
   uint64_t Get(int nbits, Fail&& fail) {
     uint64_t v = 0;
@@ -279,7 +209,7 @@ class BitReader {
 
  private:
   std::span<const uint8_t> b_;
-  std::size_t p_;
+  std::size_t p_ = 0;
   uint32_t acc_ = 0;
   int filled_ = 0;
 };
@@ -489,110 +419,114 @@ std::vector<uint8_t> EncodeHeader(const CompressedTransportHeader& h) {
   const bool v3 = h.channels != 1 || v4;
   const SpatialDomain stored = v3 ? SpatialDomainOfChannel(h.domain, h.channels) : SpatialDomain{};
   const SpatialDomain& domain = v3 ? stored : h.domain;
-  Writer w;
-  w.Bytes(kHeaderMagic, 8);
-  w.U32(v4 ? kCpcaVersion : v3 ? kChannelsVersion : kFormatVersion);
-  w.U32(h.cubemap_n);
-  w.U32(h.sample_count);
-  w.U8(static_cast<uint8_t>(h.row_wavelet));
-  w.U8(static_cast<uint8_t>(h.column_wavelet));
-  w.U8(static_cast<uint8_t>(h.scheme));
-  w.U8(h.bits);
-  w.F64(h.keep_fraction);
-  w.U32(h.terms_per_column);
-  w.U64(h.dither_seed);
-  w.U8(static_cast<uint8_t>(h.budget));
-  w.U8(static_cast<uint8_t>(h.index_coding));
-  w.U8(h.light_weight);
-  if (v3) w.U8(static_cast<uint8_t>(h.channels));
+  ByteVectorWriter w;
+  w.PutBytes(kHeaderMagic, 8);
+  w.Put<uint32_t>(v4 ? kCpcaVersion : v3 ? kChannelsVersion : kFormatVersion);
+  w.Put<uint32_t>(h.cubemap_n);
+  w.Put<uint32_t>(h.sample_count);
+  w.Put<uint8_t>(static_cast<uint8_t>(h.row_wavelet));
+  w.Put<uint8_t>(static_cast<uint8_t>(h.column_wavelet));
+  w.Put<uint8_t>(static_cast<uint8_t>(h.scheme));
+  w.Put<uint8_t>(h.bits);
+  w.Put<double>(h.keep_fraction);
+  w.Put<uint32_t>(h.terms_per_column);
+  w.Put<uint64_t>(h.dither_seed);
+  w.Put<uint8_t>(static_cast<uint8_t>(h.budget));
+  w.Put<uint8_t>(static_cast<uint8_t>(h.index_coding));
+  w.Put<uint8_t>(h.light_weight);
+  if (v3) w.Put<uint8_t>(static_cast<uint8_t>(h.channels));
   if (v4) {
-    w.U32(h.cpca_clusters);
-    w.U32(h.cpca_bases);
-    w.U8(h.cpca_coefficient_bits);
-    w.U8(static_cast<uint8_t>(h.cpca_method));
+    w.Put<uint32_t>(h.cpca_clusters);
+    w.Put<uint32_t>(h.cpca_bases);
+    w.Put<uint8_t>(h.cpca_coefficient_bits);
+    w.Put<uint8_t>(static_cast<uint8_t>(h.cpca_method));
   }
-  w.U32(static_cast<uint32_t>(domain.segments.size()));
+  w.Put<uint32_t>(static_cast<uint32_t>(domain.segments.size()));
   for (const auto& s : domain.segments) {
-    w.U8(static_cast<uint8_t>(s.kind));
-    w.U32(s.count);
-    w.U32(s.width);
-    w.U32(s.height);
-    w.U8(s.order.empty() ? 0 : 1);
-    for (uint32_t v : s.order) w.U32(v);
+    w.Put<uint8_t>(static_cast<uint8_t>(s.kind));
+    w.Put<uint32_t>(s.count);
+    w.Put<uint32_t>(s.width);
+    w.Put<uint32_t>(s.height);
+    w.Put<uint8_t>(s.order.empty() ? 0 : 1);
+    for (uint32_t v : s.order) w.Put<uint32_t>(v);
   }
-  return std::move(w.out());
+  return std::move(w.bytes());
 }
 
 namespace {
-CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
+CompressedTransportHeader ReadHeader(ByteReader& r, const std::string& name) {
   CompressedTransportHeader h;
-  r.Magic(kHeaderMagic, 8, "header magic");
-  const uint32_t version = r.U32("version");
+  Magic(r, name, kHeaderMagic, 8, "header magic");
+  const uint32_t version = r.Get<uint32_t>("version");
   if (version != kCpcaVersion && version != kChannelsVersion && version != kFormatVersion &&
       version != 1)
-    r.Fail("unsupported compressed-transport version " + std::to_string(version));
-  h.cubemap_n = r.U32("cubemap size");
-  h.sample_count = r.U32("sample count");
-  const uint8_t rw = r.U8("row wavelet");
-  const uint8_t cw = r.U8("column wavelet");
-  const uint8_t sc = r.U8("scheme");
-  if (rw > 1) r.Fail("unknown row wavelet id " + std::to_string(rw));
-  if (cw > 1) r.Fail("unknown column wavelet id " + std::to_string(cw));
-  if (sc > (version >= kCpcaVersion ? 3 : 2)) r.Fail("unknown scheme id " + std::to_string(sc));
+    Fail(r, name, "unsupported compressed-transport version " + std::to_string(version));
+  h.cubemap_n = r.Get<uint32_t>("cubemap size");
+  h.sample_count = r.Get<uint32_t>("sample count");
+  const uint8_t rw = r.Get<uint8_t>("row wavelet");
+  const uint8_t cw = r.Get<uint8_t>("column wavelet");
+  const uint8_t sc = r.Get<uint8_t>("scheme");
+  if (rw > 1) Fail(r, name, "unknown row wavelet id " + std::to_string(rw));
+  if (cw > 1) Fail(r, name, "unknown column wavelet id " + std::to_string(cw));
+  if (sc > (version >= kCpcaVersion ? 3 : 2))
+    Fail(r, name, "unknown scheme id " + std::to_string(sc));
   h.row_wavelet = static_cast<RowWavelet>(rw);
   h.column_wavelet = static_cast<ColumnWavelet>(cw);
   h.scheme = static_cast<CompressionScheme>(sc);
-  h.bits = r.U8("bits");
-  h.keep_fraction = r.F64("keep fraction");
-  h.terms_per_column = r.U32("terms per column");
-  h.dither_seed = r.U64("dither seed");
+  h.bits = r.Get<uint8_t>("bits");
+  h.keep_fraction = r.Get<double>("keep fraction");
+  h.terms_per_column = r.Get<uint32_t>("terms per column");
+  h.dither_seed = r.Get<uint64_t>("dither seed");
   h.budget = CompressionBudget::kColumn;
   h.index_coding = IndexCoding::kVarint;
   if (version >= 2) {
-    const uint8_t bu = r.U8("budget");
-    const uint8_t ic = r.U8("index coding");
-    if (bu > 1) r.Fail("unknown budget id " + std::to_string(bu));
-    if (ic > 1) r.Fail("unknown index coding id " + std::to_string(ic));
+    const uint8_t bu = r.Get<uint8_t>("budget");
+    const uint8_t ic = r.Get<uint8_t>("index coding");
+    if (bu > 1) Fail(r, name, "unknown budget id " + std::to_string(bu));
+    if (ic > 1) Fail(r, name, "unknown index coding id " + std::to_string(ic));
     h.budget = static_cast<CompressionBudget>(bu);
     h.index_coding = static_cast<IndexCoding>(ic);
-    h.light_weight = r.U8("light weight");
+    h.light_weight = r.Get<uint8_t>("light weight");
   }
   h.channels = 1;
   if (version >= kChannelsVersion) {
-    const uint8_t ch = r.U8("channels");
-    if (ch != 1 && ch != 3) r.Fail("channel count " + std::to_string(ch) + " is not 1 or 3");
+    const uint8_t ch = r.Get<uint8_t>("channels");
+    if (ch != 1 && ch != 3) Fail(r, name, "channel count " + std::to_string(ch) + " is not 1 or 3");
     if (h.sample_count % ch != 0)
-      r.Fail("sample count " + std::to_string(h.sample_count) +
-             " is not a multiple of the channel count " + std::to_string(ch));
+      Fail(r, name,
+           "sample count " + std::to_string(h.sample_count) +
+               " is not a multiple of the channel count " + std::to_string(ch));
     h.channels = ch;
   }
   if (version >= kCpcaVersion) {
-    h.cpca_clusters = r.U32("CPCA clusters");
-    h.cpca_bases = r.U32("CPCA bases");
-    h.cpca_coefficient_bits = r.U8("CPCA coefficient bits");
-    const uint8_t m = r.U8("CPCA method");
-    if (m > 1) r.Fail("unknown CPCA method id " + std::to_string(m));
+    h.cpca_clusters = r.Get<uint32_t>("CPCA clusters");
+    h.cpca_bases = r.Get<uint32_t>("CPCA bases");
+    h.cpca_coefficient_bits = r.Get<uint8_t>("CPCA coefficient bits");
+    const uint8_t m = r.Get<uint8_t>("CPCA method");
+    if (m > 1) Fail(r, name, "unknown CPCA method id " + std::to_string(m));
     h.cpca_method = static_cast<CpcaMethod>(m);
     if (h.scheme != CompressionScheme::kCpca)
-      r.Fail("version 4 header of a scheme other than cpca");
+      Fail(r, name, "version 4 header of a scheme other than cpca");
   }
-  const uint32_t nseg = r.U32("segment count");
+  const uint32_t nseg = r.Get<uint32_t>("segment count");
   // Every segment takes at least 14 bytes: bound the count before allocating.
-  if (nseg == 0 || nseg > r.remaining() / 14) r.Fail("segment count " + std::to_string(nseg));
+  if (nseg == 0 || nseg > r.remaining() / 14)
+    Fail(r, name, "segment count " + std::to_string(nseg));
   h.domain.segments.resize(nseg);
   for (auto& s : h.domain.segments) {
-    const uint8_t kind = r.U8("segment kind");
-    if (kind > 1) r.Fail("unknown segment kind " + std::to_string(kind));
+    const uint8_t kind = r.Get<uint8_t>("segment kind");
+    if (kind > 1) Fail(r, name, "unknown segment kind " + std::to_string(kind));
     s.kind = static_cast<SpatialSegment::Kind>(kind);
-    s.count = r.U32("segment count");
-    s.width = r.U32("segment width");
-    s.height = r.U32("segment height");
-    const uint8_t has_order = r.U8("segment order flag");
-    if (has_order > 1) r.Fail("bad order flag");
+    s.count = r.Get<uint32_t>("segment count");
+    s.width = r.Get<uint32_t>("segment width");
+    s.height = r.Get<uint32_t>("segment height");
+    const uint8_t has_order = r.Get<uint8_t>("segment order flag");
+    if (has_order > 1) Fail(r, name, "bad order flag");
     if (has_order) {
-      if (s.count > kMaxSamples || s.count > r.remaining() / 4) r.Fail("truncated vertex order");
+      if (s.count > kMaxSamples || s.count > r.remaining() / 4)
+        Fail(r, name, "truncated vertex order");
       s.order.resize(s.count);
-      for (auto& v : s.order) v = r.U32("vertex order");
+      for (auto& v : s.order) v = r.Get<uint32_t>("vertex order");
     }
   }
   // Version 3 stored one channel's segments: the others are copies (at most 3× what was read).
@@ -601,13 +535,14 @@ CompressedTransportHeader ReadHeader(Reader& r, const std::string& name) {
   return h;
 }
 
-void WriteBlock(Writer& w, const CompressedTransportHeader& h, const CompressedColumnBlock& block) {
+void WriteBlock(ByteVectorWriter& w, const CompressedTransportHeader& h,
+                const CompressedColumnBlock& block) {
   if (static_cast<uint64_t>(block.first_column) + block.column_span > h.column_count())
     throw InputError("EncodeColumnBlock", "block column range exceeds the column count");
-  w.Bytes(kBlockMagic, 4);
-  w.U32(block.first_column);
-  w.U32(block.column_span);
-  w.U32(static_cast<uint32_t>(block.columns.size()));
+  w.PutBytes(kBlockMagic, 4);
+  w.Put<uint32_t>(block.first_column);
+  w.Put<uint32_t>(block.column_span);
+  w.Put<uint32_t>(static_cast<uint32_t>(block.columns.size()));
   uint32_t prev = block.first_column;
   bool first = true;
   for (const auto& c : block.columns) {
@@ -615,15 +550,15 @@ void WriteBlock(Writer& w, const CompressedTransportHeader& h, const CompressedC
     if (c.column < block.first_column || c.column >= block.first_column + block.column_span ||
         (!first && c.column <= prev))
       throw InputError("EncodeColumnBlock", "columns not sorted inside the block range");
-    w.Varint(c.column - (first ? block.first_column : prev + 1));
+    w.PutVarint(c.column - (first ? block.first_column : prev + 1));
     prev = c.column;
     first = false;
-    w.U8(c.depth);
-    w.F32(c.scale);
-    w.Varint(c.index.size());
+    w.Put<uint8_t>(c.depth);
+    w.Put<float>(c.scale);
+    w.PutVarint(c.index.size());
     if (h.index_coding == IndexCoding::kAdaptiveRice) {
       // Gaps (first index, then index − previous − 1), then (|q| − 1, sign) per term.
-      BitWriter bw(w.out());
+      BitWriter bw(w.bytes());
       RiceState gaps(InitialGapMean(h.sample_count, c.index.size()));
       uint32_t last = 0;
       for (std::size_t k = 0; k < c.index.size(); ++k) {
@@ -640,56 +575,56 @@ void WriteBlock(Writer& w, const CompressedTransportHeader& h, const CompressedC
     } else {
       uint32_t pi = 0;
       for (std::size_t k = 0; k < c.index.size(); ++k) {
-        w.Varint(k == 0 ? c.index[0] : c.index[k] - pi - 1);
+        w.PutVarint(k == 0 ? c.index[0] : c.index[k] - pi - 1);
         pi = c.index[k];
       }
     }
-    w.PackedSigned(c.q, h.bits);
+    PutPackedSigned(w, c.q, h.bits);
   }
 }
 
-CompressedColumnBlock ReadBlock(Reader& r, const CompressedTransportHeader& h,
+CompressedColumnBlock ReadBlock(ByteReader& r, const CompressedTransportHeader& h,
                                 const std::string& name) {
   CompressedColumnBlock b;
-  r.Magic(kBlockMagic, 4, "block magic");
-  b.first_column = r.U32("first column");
-  b.column_span = r.U32("column span");
+  Magic(r, name, kBlockMagic, 4, "block magic");
+  b.first_column = r.Get<uint32_t>("first column");
+  b.column_span = r.Get<uint32_t>("column span");
   if (static_cast<uint64_t>(b.first_column) + b.column_span > h.column_count())
-    r.Fail("block column range exceeds the column count");
-  const uint32_t ncols = r.U32("column count");
+    Fail(r, name, "block column range exceeds the column count");
+  const uint32_t ncols = r.Get<uint32_t>("column count");
   // Each stored column takes at least 8 bytes (delta, depth, scale, count, one index, one value).
   if (ncols > b.column_span || ncols > r.remaining() / 8)
-    r.Fail("stored column count " + std::to_string(ncols) + " impossible");
+    Fail(r, name, "stored column count " + std::to_string(ncols) + " impossible");
   b.columns.resize(ncols);
   uint64_t next = b.first_column;
   for (auto& c : b.columns) {
-    const uint64_t col = next + r.Varint32("column delta");
+    const uint64_t col = next + Varint32(r, name, "column delta");
     if (col >= static_cast<uint64_t>(b.first_column) + b.column_span)
-      r.Fail("column outside the block range");
+      Fail(r, name, "column outside the block range");
     c.column = static_cast<uint32_t>(col);
     next = col + 1;
-    c.depth = r.U8("depth");
-    c.scale = r.F32("scale");
-    const uint32_t nterms = r.Varint32("term count");
+    c.depth = r.Get<uint8_t>("depth");
+    c.scale = r.Get<float>("scale");
+    const uint32_t nterms = Varint32(r, name, "term count");
     // Every term costs at least one index bit and `bits` value bits: never allocate beyond a
     // constant times the input.
     if (nterms == 0 || nterms > h.sample_count ||
         (h.index_coding == IndexCoding::kVarint &&
          nterms > r.remaining() * 8 / (static_cast<std::size_t>(h.bits) + 1)))
-      r.Fail("term count " + std::to_string(nterms) + " impossible");
+      Fail(r, name, "term count " + std::to_string(nterms) + " impossible");
     if (h.index_coding == IndexCoding::kAdaptiveRice) {
       // At least 1 bit per gap and 2 per value.
       if (nterms > r.remaining() * 8 / 3)
-        r.Fail("term count " + std::to_string(nterms) + " impossible");
-      BitReader br(r.bytes(), r.pos());
-      auto fail = [&]() { r.Fail("truncated adaptive Rice codes"); };
+        Fail(r, name, "term count " + std::to_string(nterms) + " impossible");
+      BitReader br(AsBytes(r.rest()));
+      auto fail = [&]() { Fail(r, name, "truncated adaptive Rice codes"); };
       c.index.resize(nterms);
       c.q.resize(nterms);
       RiceState gaps(InitialGapMean(h.sample_count, nterms));
       uint64_t from = 0;
       for (uint32_t k = 0; k < nterms; ++k) {
         const uint64_t idx = from + br.Rice(gaps, kGapRawBits, fail);
-        if (idx >= h.sample_count) r.Fail("coefficient index out of range");
+        if (idx >= h.sample_count) Fail(r, name, "coefficient index out of range");
         c.index[k] = static_cast<uint32_t>(idx);
         from = idx + 1;
       }
@@ -697,23 +632,23 @@ CompressedColumnBlock ReadBlock(Reader& r, const CompressedTransportHeader& h,
       const uint64_t maxq = static_cast<uint64_t>(MaxQ(h.bits));
       for (uint32_t k = 0; k < nterms; ++k) {
         const uint64_t m = br.Rice(values, h.bits - 1, fail) + 1;
-        if (m > maxq) r.Fail("quantised value out of range");
+        if (m > maxq) Fail(r, name, "quantised value out of range");
         c.q[k] = br.Get(1, fail) != 0 ? -static_cast<int32_t>(m) : static_cast<int32_t>(m);
       }
-      r.Skip(br.end() - r.pos());
+      r.Skip(br.end(), "adaptive Rice codes");
       ValidateColumn(h, c, name);
       continue;
     } else {
       c.index.resize(nterms);
       uint64_t idx = 0;
       for (uint32_t k = 0; k < nterms; ++k) {
-        const uint64_t d = r.Varint32("index delta");
+        const uint64_t d = Varint32(r, name, "index delta");
         idx = (k == 0) ? d : idx + 1 + d;
-        if (idx >= h.sample_count) r.Fail("coefficient index out of range");
+        if (idx >= h.sample_count) Fail(r, name, "coefficient index out of range");
         c.index[k] = static_cast<uint32_t>(idx);
       }
     }
-    c.q = r.PackedSigned(nterms, h.bits, "quantised values");
+    c.q = GetPackedSigned(r, nterms, h.bits, "quantised values");
     ValidateColumn(h, c, name);
   }
   return b;
@@ -721,24 +656,24 @@ CompressedColumnBlock ReadBlock(Reader& r, const CompressedTransportHeader& h,
 }  // namespace
 
 CompressedTransportHeader DecodeHeader(std::span<const uint8_t> bytes, const std::string& name) {
-  Reader r(bytes, name);
+  ByteReader r = Reader(bytes, name);
   CompressedTransportHeader h = ReadHeader(r, name);
-  if (r.remaining() != 0) r.Fail("trailing bytes after header");
+  if (r.remaining() != 0) Fail(r, name, "trailing bytes after header");
   return h;
 }
 
 std::vector<uint8_t> EncodeColumnBlock(const CompressedTransportHeader& h,
                                        const CompressedColumnBlock& block) {
-  Writer w;
+  ByteVectorWriter w;
   WriteBlock(w, h, block);
-  return std::move(w.out());
+  return std::move(w.bytes());
 }
 
 CompressedColumnBlock DecodeColumnBlock(const CompressedTransportHeader& h,
                                         std::span<const uint8_t> bytes, const std::string& name) {
-  Reader r(bytes, name);
+  ByteReader r = Reader(bytes, name);
   CompressedColumnBlock b = ReadBlock(r, h, name);
-  if (r.remaining() != 0) r.Fail("trailing bytes after column block");
+  if (r.remaining() != 0) Fail(r, name, "trailing bytes after column block");
   return b;
 }
 
@@ -746,22 +681,22 @@ CompressedColumnBlock DecodeColumnBlock(const CompressedTransportHeader& h,
 // u32 block bytes and the block.
 std::vector<uint8_t> EncodeCompressedFileStart(const CompressedTransportHeader& h) {
   const std::vector<uint8_t> head = EncodeHeader(h);
-  Writer w;
-  w.Bytes(kFileMagic, 8);
-  w.U32(static_cast<uint32_t>(head.size()));
-  w.Bytes(head.data(), head.size());
-  return std::move(w.out());
+  ByteVectorWriter w;
+  w.PutBytes(kFileMagic, 8);
+  w.Put<uint32_t>(static_cast<uint32_t>(head.size()));
+  w.PutBytes(head.data(), head.size());
+  return std::move(w.bytes());
 }
 
 CompressedTransportHeader DecodeCompressedFileStart(std::span<const uint8_t> bytes,
                                                     const std::string& name,
                                                     std::size_t& body_offset) {
-  Reader r(bytes, name);
-  r.Magic(kFileMagic, 8, "file magic");
-  const uint32_t hsize = r.U32("header size");
+  ByteReader r = Reader(bytes, name);
+  Magic(r, name, kFileMagic, 8, "file magic");
+  const uint32_t hsize = r.Get<uint32_t>("header size");
   r.Need(hsize, "header");
-  CompressedTransportHeader h = DecodeHeader(bytes.subspan(r.pos(), hsize), name);
-  body_offset = r.pos() + hsize;
+  CompressedTransportHeader h = DecodeHeader(bytes.subspan(r.position(), hsize), name);
+  body_offset = r.position() + hsize;
   return h;
 }
 
@@ -770,14 +705,14 @@ std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
   if (columns_per_block == 0) columns_per_block = 1;
   if (t.header.scheme == CompressionScheme::kCpca)
     throw std::invalid_argument("EncodeCompressedTransport: a cpca header has no columns");
-  Writer w;
+  ByteVectorWriter w;
   {
     std::vector<uint8_t> start = EncodeCompressedFileStart(t.header);
-    w.Bytes(start.data(), start.size());
+    w.PutBytes(start.data(), start.size());
   }
   const uint32_t ncol = t.header.column_count();
   const uint32_t nblocks = (ncol + columns_per_block - 1) / columns_per_block;
-  w.U32(nblocks);
+  w.Put<uint32_t>(nblocks);
   std::size_t k = 0;
   for (uint32_t b = 0; b < nblocks; ++b) {
     CompressedColumnBlock block;
@@ -787,40 +722,41 @@ std::vector<uint8_t> EncodeCompressedTransport(const CompressedTransport& t,
       block.columns.push_back(t.columns[k++]);
     }
     const std::vector<uint8_t> bytes = EncodeColumnBlock(t.header, block);
-    w.U32(static_cast<uint32_t>(bytes.size()));
-    w.Bytes(bytes.data(), bytes.size());
+    w.Put<uint32_t>(static_cast<uint32_t>(bytes.size()));
+    w.PutBytes(bytes.data(), bytes.size());
   }
   if (k != t.columns.size())
     throw InputError("EncodeCompressedTransport", "columns not sorted or out of range");
-  return std::move(w.out());
+  return std::move(w.bytes());
 }
 
 CompressedTransport DecodeCompressedTransport(std::span<const uint8_t> bytes,
                                               const std::string& name) {
-  Reader r(bytes, name);
+  ByteReader r = Reader(bytes, name);
   CompressedTransport t;
   std::size_t body = 0;
   t.header = DecodeCompressedFileStart(bytes, name, body);
   if (t.header.scheme == CompressionScheme::kCpca)
     throw InputError(name, "holds a CPCA transport (scheme cpca), not compressed columns");
-  Reader r2(bytes.subspan(body), name);
-  const uint32_t nblocks = r2.U32("block count");
+  ByteReader r2 = Reader(bytes.subspan(body), name);
+  const uint32_t nblocks = r2.Get<uint32_t>("block count");
   if (nblocks > t.header.column_count() || nblocks > r2.remaining() / 16)
-    r2.Fail("block count " + std::to_string(nblocks) + " impossible");
+    Fail(r2, name, "block count " + std::to_string(nblocks) + " impossible");
   std::size_t off = body + 4;
   uint64_t next_column = 0;
   for (uint32_t b = 0; b < nblocks; ++b) {
-    Reader rs(bytes.subspan(off), name);
-    const uint32_t bsize = rs.U32("block size");
+    ByteReader rs = Reader(bytes.subspan(off), name);
+    const uint32_t bsize = rs.Get<uint32_t>("block size");
     rs.Need(bsize, "column block");
     CompressedColumnBlock block = DecodeColumnBlock(t.header, bytes.subspan(off + 4, bsize), name);
-    if (block.first_column != next_column) rs.Fail("column blocks not contiguous");
+    if (block.first_column != next_column) Fail(rs, name, "column blocks not contiguous");
     next_column = static_cast<uint64_t>(block.first_column) + block.column_span;
     for (auto& c : block.columns) t.columns.push_back(std::move(c));
     off += 4 + static_cast<std::size_t>(bsize);
   }
-  if (next_column != t.header.column_count()) r.Fail("column blocks do not cover every column");
-  if (off != bytes.size()) r.Fail("trailing bytes after the last column block");
+  if (next_column != t.header.column_count())
+    Fail(r, name, "column blocks do not cover every column");
+  if (off != bytes.size()) Fail(r, name, "trailing bytes after the last column block");
   return t;
 }
 
@@ -830,20 +766,20 @@ CompressedTransportHeader ReadCompressedTransportHeader(const std::string& path)
   std::vector<uint8_t> start(12);
   in.read(reinterpret_cast<char*>(start.data()), static_cast<std::streamsize>(start.size()));
   start.resize(static_cast<std::size_t>(std::max<std::streamsize>(0, in.gcount())));
-  Reader r(start, path);
-  r.Magic(kFileMagic, 8, "file magic");
-  const uint32_t hsize = r.U32("header size");
+  ByteReader r = Reader(start, path);
+  Magic(r, path, kFileMagic, 8, "file magic");
+  const uint32_t hsize = r.Get<uint32_t>("header size");
   // The size is checked against the file before anything is allocated (safe on hostile input).
   const std::streampos here = in.tellg();
   in.seekg(0, std::ios::end);
   const std::streamoff left = in.tellg() - here;
   in.seekg(here);
   if (!in || left < static_cast<std::streamoff>(hsize))
-    Reader(start, path).Fail("truncated: header");
+    Fail(Reader(start, path), path, "truncated: header");
   std::vector<uint8_t> header(hsize);
   in.read(reinterpret_cast<char*>(header.data()), static_cast<std::streamsize>(hsize));
   if (in.gcount() != static_cast<std::streamsize>(hsize))
-    Reader(start, path).Fail("truncated: header");
+    Fail(Reader(start, path), path, "truncated: header");
   return DecodeHeader(header, path);
 }
 

@@ -3,11 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <cstring>
 #include <numeric>
 #include <random>
 
 #include "formats/column_coding.h"
+#include "vocabulary/bytes.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -172,15 +172,13 @@ TEST(CompressedTransportFormat, HeaderIsReadFromTheFileAloneAndTruncationsAreRej
   };
   write(bytes.size());
   EXPECT_EQ(EncodeHeader(ReadCompressedTransportHeader(path)), EncodeHeader(t.header));
-  uint32_t hsize = 0;
-  std::memcpy(&hsize, bytes.data() + 8, 4);
+  const auto hsize = LoadAt<uint32_t>(bytes, 8);
   for (std::size_t len = 0; len < 12 + hsize; ++len) {
     write(len);
     EXPECT_THROW(ReadCompressedTransportHeader(path), InputError) << len;
   }
   std::vector<uint8_t> huge = bytes;
-  const uint32_t lie = 0xfffffff0u;
-  std::memcpy(huge.data() + 8, &lie, 4);
+  StoreAt<uint32_t>(huge, 8, 0xfffffff0u);
   WriteFileDurably(path, std::string_view(reinterpret_cast<const char*>(huge.data()), huge.size()));
   EXPECT_THROW(ReadCompressedTransportHeader(path), InputError);
   EXPECT_THROW(ReadCompressedTransportHeader(path + ".missing"), InputError);
@@ -273,22 +271,16 @@ CompressedTransportHeader ThreeChannelHeader(int bits = 9) {
 // Byte offsets in an encoded header: the version, the sample count and (version 3) the channels.
 constexpr std::size_t kVersionAt = 8, kSamplesAt = 16, kChannelsAt = 47;
 
-uint32_t LoadU32At(const std::vector<uint8_t>& b, std::size_t at) {
-  uint32_t v;
-  std::memcpy(&v, b.data() + at, 4);
-  return v;
-}
-
 // A one-channel header is written as version 2, exactly as before channels existed; a 3-channel
 // header as version 3: one more byte (the channel count) and channel 0's segments only, the
 // decoder repeating them at offsets V and 2V.
 TEST(CompressedTransportFormat, ThreeChannelHeaderIsVersion3WithOneChannelsSegments) {
   const std::vector<uint8_t> one = EncodeHeader(TestHeader());
-  EXPECT_EQ(LoadU32At(one, kVersionAt), 2u);
+  EXPECT_EQ(LoadAt<uint32_t>(one, kVersionAt), 2u);
   EXPECT_EQ(DecodeHeader(one, "h").channels, 1u);
   const CompressedTransportHeader h = ThreeChannelHeader();
   const std::vector<uint8_t> three = EncodeHeader(h);
-  EXPECT_EQ(LoadU32At(three, kVersionAt), 3u);
+  EXPECT_EQ(LoadAt<uint32_t>(three, kVersionAt), 3u);
   EXPECT_EQ(three[kChannelsAt], 3u);
   EXPECT_EQ(three.size(), one.size() + 1);
   const CompressedTransportHeader d = DecodeHeader(three, "h3");

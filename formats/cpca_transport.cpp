@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 
@@ -21,13 +23,6 @@ int32_t MaxQ(int bits) {
   return (int32_t{1} << (bits - 1)) - 1;
 }
 
-void PutVarint(ByteWriter& w, uint64_t v) {
-  while (v >= 0x80) {
-    w.Put(static_cast<uint8_t>(v | 0x80));
-    v >>= 7;
-  }
-  w.Put(static_cast<uint8_t>(v));
-}
 uint32_t ZigZag(int32_t v) {
   return (static_cast<uint32_t>(v) << 1) ^ static_cast<uint32_t>(v >> 31);
 }
@@ -35,42 +30,27 @@ int32_t UnZigZag(uint32_t u) {
   return static_cast<int32_t>((u >> 1) ^ (~(u & 1) + 1));
 }
 
-// Reads the body with every failure an InputError naming the file and the byte.
-class BodyReader {
- public:
-  BodyReader(std::span<const uint8_t> bytes, const std::string& name)
-      : name_(name),
-        r_(std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()),
-           [this](const char* what, std::size_t at) {
-             throw InputError(name_, std::string("truncated: ") + what + " (at byte " +
-                                         std::to_string(at) + " of the CPCA body)");
-           }) {}
-  [[noreturn]] void Fail(const std::string& what) const {
-    throw InputError(name_,
-                     what + " (at byte " + std::to_string(r_.position()) + " of the CPCA body)");
-  }
-  template <class T>
-  T Get(const char* what) {
-    return r_.Get<T>(what);
-  }
-  uint32_t Varint(const char* what) {
-    uint64_t v = 0;
-    for (int i = 0; i < 5; ++i) {
-      const uint8_t b = r_.Get<uint8_t>(what);
-      v |= static_cast<uint64_t>(b & 0x7f) << (7 * i);
-      if ((b & 0x80) == 0) {
-        if (v > std::numeric_limits<uint32_t>::max()) Fail(std::string("varint overflow: ") + what);
-        return static_cast<uint32_t>(v);
-      }
-    }
-    Fail(std::string("varint too long: ") + what);
-  }
-  std::size_t remaining() const { return r_.remaining(); }
-
- private:
-  const std::string& name_;
-  ByteReader r_;
-};
+// The body's reader: every failure is an InputError naming the file and the byte.
+ByteReader BodyReader(std::span<const uint8_t> bytes, const std::string& name) {
+  return ByteReader(bytes, [&name](const char* what, std::size_t at) {
+    throw InputError(name, std::string("truncated: ") + what + " (at byte " + std::to_string(at) +
+                               " of the CPCA body)");
+  });
+}
+[[noreturn]] void Fail(const ByteReader& r, const std::string& name, const std::string& what) {
+  throw InputError(name, what + " (at byte " + std::to_string(r.position()) + " of the CPCA body)");
+}
+// Out of line, so that Varint needs no stack frame for the message.
+[[noreturn, gnu::cold, gnu::noinline]] void BadVarint(const ByteReader& r, const std::string& name,
+                                                      const char* what) {
+  Fail(r, name, std::string("varint longer than 5 bytes or above 2^32: ") + what);
+}
+// LEB128, at most 5 bytes, value must fit 32 bits.
+uint32_t Varint(ByteReader& r, const std::string& name, const char* what) {
+  const std::optional<uint32_t> v = r.GetVarint<uint32_t>(what);
+  if (!v) BadVarint(r, name, what);
+  return *v;
+}
 
 void CheckVector(const CpcaVector& v, uint32_t columns, int bits, const std::string& name,
                  const std::string& where) {
@@ -89,35 +69,35 @@ void CheckVector(const CpcaVector& v, uint32_t columns, int bits, const std::str
   }
 }
 
-void PutVector(ByteWriter& w, const CpcaVector& v) {
+void PutVector(ByteVectorWriter& w, const CpcaVector& v) {
   w.Put(v.scale);
-  PutVarint(w, v.index.size());
+  w.PutVarint(v.index.size());
   uint32_t prev = 0;
   for (std::size_t k = 0; k < v.index.size(); ++k) {
-    PutVarint(w, k == 0 ? v.index[0] : v.index[k] - prev - 1);
+    w.PutVarint(k == 0 ? v.index[0] : v.index[k] - prev - 1);
     prev = v.index[k];
   }
-  for (int32_t q : v.q) PutVarint(w, ZigZag(q));
+  for (int32_t q : v.q) w.PutVarint(ZigZag(q));
 }
 
-CpcaVector GetVector(BodyReader& r, uint32_t columns, int bits, const std::string& name,
+CpcaVector GetVector(ByteReader& r, uint32_t columns, int bits, const std::string& name,
                      const std::string& where) {
   CpcaVector v;
   v.scale = r.Get<float>("vector scale");
-  const uint32_t n = r.Varint("vector term count");
+  const uint32_t n = Varint(r, name, "vector term count");
   // Every term takes at least two bytes (its gap and its value).
   if (n > columns || n > r.remaining() / 2)
-    r.Fail(where + ": term count " + std::to_string(n) + " impossible");
+    Fail(r, name, where + ": term count " + std::to_string(n) + " impossible");
   v.index.resize(n);
   v.q.resize(n);
   uint64_t at = 0;
   for (uint32_t k = 0; k < n; ++k) {
-    const uint64_t gap = r.Varint("vector index gap");
+    const uint64_t gap = Varint(r, name, "vector index gap");
     at = k == 0 ? gap : at + gap + 1;
-    if (at >= columns) r.Fail(where + ": index out of range");
+    if (at >= columns) Fail(r, name, where + ": index out of range");
     v.index[k] = static_cast<uint32_t>(at);
   }
-  for (uint32_t k = 0; k < n; ++k) v.q[k] = UnZigZag(r.Varint("vector value"));
+  for (uint32_t k = 0; k < n; ++k) v.q[k] = UnZigZag(Varint(r, name, "vector value"));
   CheckVector(v, columns, bits, name, where);
   return v;
 }
@@ -188,42 +168,41 @@ void ValidateCpcaTransport(const CpcaTransport& t, const std::string& name) {
 // its S coefficients (zig-zag LEB128).
 std::vector<uint8_t> EncodeCpcaBody(const CpcaTransport& t) {
   ValidateCpcaTransport(t, "EncodeCpcaBody");
-  ByteWriter w;
+  ByteVectorWriter w;
   w.PutBytes(kBodyMagic, 4);
-  for (uint32_t c : t.cluster_of) PutVarint(w, c);
+  for (uint32_t c : t.cluster_of) w.PutVarint(c);
   for (const CpcaCluster& k : t.clusters) {
     PutVector(w, k.mean);
     for (const CpcaVector& v : k.basis) PutVector(w, v);
     for (float s : k.coefficient_scale) w.Put(s);
   }
-  for (int32_t q : t.coefficients) PutVarint(w, ZigZag(q));
-  const std::string& b = w.bytes();
-  return std::vector<uint8_t>(b.begin(), b.end());
+  for (int32_t q : t.coefficients) w.PutVarint(ZigZag(q));
+  return std::move(w.bytes());
 }
 
 CpcaTransport DecodeCpcaBody(const CompressedTransportHeader& h, std::span<const uint8_t> bytes,
                              const std::string& name) {
   ValidateHeader(h, name);
   if (h.scheme != CompressionScheme::kCpca) throw InputError(name, "scheme is not cpca");
-  BodyReader r(bytes, name);
+  ByteReader r = BodyReader(bytes, name);
   for (int i = 0; i < 4; ++i)
-    if (r.Get<char>("CPCA body magic") != kBodyMagic[i]) r.Fail("bad magic: CPCA body");
+    if (r.Get<char>("CPCA body magic") != kBodyMagic[i]) Fail(r, name, "bad magic: CPCA body");
   CpcaTransport t;
   t.header = h;
   const std::size_t rows = h.sample_count;
   const std::size_t S = h.cpca_bases;
   const uint32_t cols = h.column_count();
   // Each row takes at least one byte for its cluster and one per coefficient.
-  if (rows * (1 + S) > r.remaining()) r.Fail("truncated: " + std::to_string(rows) + " rows");
+  if (rows * (1 + S) > r.remaining()) Fail(r, name, "truncated: " + std::to_string(rows) + " rows");
   t.cluster_of.resize(rows);
   for (std::size_t i = 0; i < rows; ++i) {
-    t.cluster_of[i] = r.Varint("cluster id");
+    t.cluster_of[i] = Varint(r, name, "cluster id");
     if (t.cluster_of[i] >= h.cpca_clusters)
-      r.Fail("row " + std::to_string(i) + ": cluster id out of range");
+      Fail(r, name, "row " + std::to_string(i) + ": cluster id out of range");
   }
   // Each cluster takes at least 5 bytes per vector and 4 per coefficient scale.
   if (static_cast<uint64_t>(h.cpca_clusters) * (5 + 9 * S) > r.remaining())
-    r.Fail("truncated: " + std::to_string(h.cpca_clusters) + " clusters");
+    Fail(r, name, "truncated: " + std::to_string(h.cpca_clusters) + " clusters");
   t.clusters.resize(h.cpca_clusters);
   for (std::size_t c = 0; c < t.clusters.size(); ++c) {
     CpcaCluster& k = t.clusters[c];
@@ -235,10 +214,10 @@ CpcaTransport DecodeCpcaBody(const CompressedTransportHeader& h, std::span<const
     k.coefficient_scale.resize(S);
     for (float& s : k.coefficient_scale) s = r.Get<float>("coefficient scale");
   }
-  if (rows * S > r.remaining()) r.Fail("truncated: coefficients");
+  if (rows * S > r.remaining()) Fail(r, name, "truncated: coefficients");
   t.coefficients.resize(rows * S);
-  for (int32_t& q : t.coefficients) q = UnZigZag(r.Varint("coefficient"));
-  if (r.remaining() != 0) r.Fail("trailing bytes after the coefficients");
+  for (int32_t& q : t.coefficients) q = UnZigZag(Varint(r, name, "coefficient"));
+  if (r.remaining() != 0) Fail(r, name, "trailing bytes after the coefficients");
   ValidateCpcaTransport(t, name);
   return t;
 }

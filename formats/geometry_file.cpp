@@ -83,9 +83,7 @@ SceneGeometry ParseSceneGeometry(std::string_view bytes, const std::string& name
     throw InputError(name, "not a prtfarm geometry file (bad magic)");
   }
   const std::size_t body = bytes.size() - 8;
-  uint64_t stored;
-  std::memcpy(&stored, bytes.data() + body, 8);
-  if (Checksum64(bytes.data(), body) != stored) {
+  if (Checksum64(bytes.data(), body) != LoadAt<uint64_t>(bytes, body)) {
     throw InputError(name, "geometry file checksum mismatch: the file is damaged");
   }
   ByteReader in = GeometryReader(bytes.substr(0, body), name);

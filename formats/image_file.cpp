@@ -40,9 +40,7 @@ ImageSamplesInfo ParseImageSamples(std::string_view bytes, const std::string& na
   if (bytes.size() < 16 || std::memcmp(bytes.data(), kImageMagic, 8) != 0)
     throw InputError(name, "not a prtfarm image file (bad magic)");
   const std::size_t body = bytes.size() - 8;
-  uint64_t stored;
-  std::memcpy(&stored, bytes.data() + body, 8);
-  if (Checksum64(bytes.data(), body) != stored)
+  if (Checksum64(bytes.data(), body) != LoadAt<uint64_t>(bytes, body))
     throw InputError(name, "image file checksum mismatch: the file is damaged");
   ByteReader in(bytes.substr(0, body), [&name](const char* what, std::size_t) {
     throw InputError(name, std::string("truncated image file in ") + what);

@@ -8,7 +8,6 @@
 #include <zstd.h>
 
 #include <algorithm>
-#include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -16,14 +15,12 @@
 #include <limits>
 #include <utility>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
 
 namespace prt {
-
-static_assert(std::endian::native == std::endian::little,
-              "prtfarm's file formats are little-endian; this host is not");
 
 namespace {
 
@@ -38,57 +35,37 @@ uint64_t PackedDataOffset(const TransportFileInfo& info) {
   return kTransportHeaderBytes + 8 * info.block_count() + 8 * (info.block_count() + 1);
 }
 
-template <typename T>
-void Put(std::string& out, T value) {
-  char bytes[sizeof(T)];
-  std::memcpy(bytes, &value, sizeof(T));
-  out.append(bytes, sizeof(T));
-}
-
-template <typename T>
-void PutAt(unsigned char* out, std::size_t offset, T value) {
-  std::memcpy(out + offset, &value, sizeof(T));
-}
-
-template <typename T>
-T GetAt(const unsigned char* in, std::size_t offset) {
-  T value;
-  std::memcpy(&value, in + offset, sizeof(T));
-  return value;
-}
-
 // Bytes [0, 72) of the header, which both versions share (docs/transport-format.md).
-void PutFixedFields(unsigned char* h, const TransportFileInfo& info, uint32_t version,
+void PutFixedFields(std::span<uint8_t> h, const TransportFileInfo& info, uint32_t version,
                     uint32_t flags, uint64_t data_offset) {
-  std::memcpy(h, kTransportMagic, 8);
-  PutAt<uint32_t>(h, 8, version);
-  PutAt<uint32_t>(h, 12, static_cast<uint32_t>(kTransportHeaderBytes));
-  PutAt<uint64_t>(h, 16, info.rows);
-  PutAt<uint64_t>(h, 24, info.cols());
-  PutAt<uint32_t>(h, 32, info.cubemap_n);
-  PutAt<uint32_t>(h, 36, info.rows_per_block);
-  PutAt<uint64_t>(h, 40, info.block_count());
-  PutAt<uint32_t>(h, 48, info.rays_per_texel);
-  PutAt<uint32_t>(h, 52, flags);
-  PutAt<uint64_t>(h, 56, info.seed);
-  PutAt<uint64_t>(h, 64, data_offset);
+  std::memcpy(h.data(), kTransportMagic, 8);
+  StoreAt<uint32_t>(h, 8, version);
+  StoreAt<uint32_t>(h, 12, static_cast<uint32_t>(kTransportHeaderBytes));
+  StoreAt<uint64_t>(h, 16, info.rows);
+  StoreAt<uint64_t>(h, 24, info.cols());
+  StoreAt<uint32_t>(h, 32, info.cubemap_n);
+  StoreAt<uint32_t>(h, 36, info.rows_per_block);
+  StoreAt<uint64_t>(h, 40, info.block_count());
+  StoreAt<uint32_t>(h, 48, info.rays_per_texel);
+  StoreAt<uint32_t>(h, 52, flags);
+  StoreAt<uint64_t>(h, 56, info.seed);
+  StoreAt<uint64_t>(h, 64, data_offset);
 }
 
 // Header layout (docs/transport-format.md): fixed 96 bytes, then the checksum table.
 std::vector<unsigned char> EncodeHeader(const TransportFileInfo& info, bool complete,
                                         std::span<const uint64_t> checksums) {
   std::vector<unsigned char> h(kTransportHeaderBytes + 8 * checksums.size(), 0);
-  PutFixedFields(h.data(), info, kTransportFileVersion, complete ? kFlagComplete : 0u,
-                 info.data_offset());
+  PutFixedFields(h, info, kTransportFileVersion, complete ? kFlagComplete : 0u, info.data_offset());
   for (std::size_t b = 0; b < checksums.size(); ++b) {
-    PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * b, checksums[b]);
+    StoreAt<uint64_t>(h, kTransportHeaderBytes + 8 * b, checksums[b]);
   }
   // The header checksum covers bytes [0, 88) and the checksum table.
   XXH64_state_t* state = XXH64_createState();
   XXH64_reset(state, 0);
   XXH64_update(state, h.data(), kHeaderChecksumOffset);
   XXH64_update(state, h.data() + kTransportHeaderBytes, 8 * checksums.size());
-  PutAt<uint64_t>(h.data(), kHeaderChecksumOffset, XXH64_digest(state));
+  StoreAt<uint64_t>(h, kHeaderChecksumOffset, XXH64_digest(state));
   XXH64_freeState(state);
   return h;
 }
@@ -100,20 +77,20 @@ std::vector<unsigned char> EncodePackedHeader(const TransportFileInfo& info,
                                               std::span<const uint64_t> offsets) {
   const std::size_t blocks = checksums.size();
   std::vector<unsigned char> h(kTransportHeaderBytes + 8 * blocks + 8 * offsets.size(), 0);
-  PutFixedFields(h.data(), info, kPackedTransportFileVersion, kFlagComplete | kFlagPacked,
+  PutFixedFields(h, info, kPackedTransportFileVersion, kFlagComplete | kFlagPacked,
                  PackedDataOffset(info));
-  PutAt<uint64_t>(h.data(), 72, kCodecZstd);
+  StoreAt<uint64_t>(h, 72, kCodecZstd);
   for (std::size_t b = 0; b < blocks; ++b) {
-    PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * b, checksums[b]);
+    StoreAt<uint64_t>(h, kTransportHeaderBytes + 8 * b, checksums[b]);
   }
   for (std::size_t b = 0; b < offsets.size(); ++b) {
-    PutAt<uint64_t>(h.data(), kTransportHeaderBytes + 8 * blocks + 8 * b, offsets[b]);
+    StoreAt<uint64_t>(h, kTransportHeaderBytes + 8 * blocks + 8 * b, offsets[b]);
   }
   XXH64_state_t* state = XXH64_createState();
   XXH64_reset(state, 0);
   XXH64_update(state, h.data(), kHeaderChecksumOffset);
   XXH64_update(state, h.data() + kTransportHeaderBytes, h.size() - kTransportHeaderBytes);
-  PutAt<uint64_t>(h.data(), kHeaderChecksumOffset, XXH64_digest(state));
+  StoreAt<uint64_t>(h, kHeaderChecksumOffset, XXH64_digest(state));
   XXH64_freeState(state);
   return h;
 }
@@ -134,7 +111,7 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
   if (std::memcmp(h, kTransportMagic, 8) != 0) {
     throw InputError(path, "not a prtfarm transport file (bad magic)");
   }
-  const auto version = GetAt<uint32_t>(h, 8);
+  const auto version = LoadAt<uint32_t>(h, 8);
   if (version != kTransportFileVersion && version != kPackedTransportFileVersion) {
     throw InputError(path, "transport file version " + std::to_string(version) +
                                " is not supported (this build reads versions " +
@@ -143,24 +120,24 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
   }
   const bool packed = version == kPackedTransportFileVersion;
   DecodedHeader d;
-  d.info.rows = GetAt<uint64_t>(h, 16);
-  const auto cols = GetAt<uint64_t>(h, 24);
-  d.info.cubemap_n = GetAt<uint32_t>(h, 32);
-  d.info.rows_per_block = GetAt<uint32_t>(h, 36);
-  const auto blocks = GetAt<uint64_t>(h, 40);
-  d.info.rays_per_texel = GetAt<uint32_t>(h, 48);
-  d.complete = (GetAt<uint32_t>(h, 52) & kFlagComplete) != 0;
-  d.info.seed = GetAt<uint64_t>(h, 56);
-  const auto data_offset = GetAt<uint64_t>(h, 64);
-  const auto stored_checksum = GetAt<uint64_t>(h, kHeaderChecksumOffset);
-  if (GetAt<uint32_t>(h, 12) != kTransportHeaderBytes || d.info.cubemap_n == 0 ||
+  d.info.rows = LoadAt<uint64_t>(h, 16);
+  const auto cols = LoadAt<uint64_t>(h, 24);
+  d.info.cubemap_n = LoadAt<uint32_t>(h, 32);
+  d.info.rows_per_block = LoadAt<uint32_t>(h, 36);
+  const auto blocks = LoadAt<uint64_t>(h, 40);
+  d.info.rays_per_texel = LoadAt<uint32_t>(h, 48);
+  d.complete = (LoadAt<uint32_t>(h, 52) & kFlagComplete) != 0;
+  d.info.seed = LoadAt<uint64_t>(h, 56);
+  const auto data_offset = LoadAt<uint64_t>(h, 64);
+  const auto stored_checksum = LoadAt<uint64_t>(h, kHeaderChecksumOffset);
+  if (LoadAt<uint32_t>(h, 12) != kTransportHeaderBytes || d.info.cubemap_n == 0 ||
       d.info.cubemap_n > 4096 || cols != d.info.cols() || d.info.rows_per_block == 0 ||
       blocks != d.info.block_count() ||
       d.info.rows > (std::numeric_limits<uint64_t>::max() / 2) / d.info.row_bytes() ||
       blocks > size / 16 ||
       data_offset != (packed ? PackedDataOffset(d.info) : d.info.data_offset()) ||
-      (packed && (GetAt<uint32_t>(h, 52) != (kFlagComplete | kFlagPacked) ||
-                  GetAt<uint64_t>(h, 72) != kCodecZstd))) {
+      (packed && (LoadAt<uint32_t>(h, 52) != (kFlagComplete | kFlagPacked) ||
+                  LoadAt<uint64_t>(h, 72) != kCodecZstd))) {
     throw InputError(path, "damaged transport header (inconsistent dimensions)");
   }
   if (packed) {
@@ -172,12 +149,12 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
     }
     d.checksums.resize(blocks);
     d.offsets.resize(blocks + 1);
-    for (uint64_t b = 0; b < blocks; ++b) d.checksums[b] = GetAt<uint64_t>(tables.data(), 8 * b);
+    for (uint64_t b = 0; b < blocks; ++b) d.checksums[b] = LoadAt<uint64_t>(tables, 8 * b);
     for (uint64_t b = 0; b <= blocks; ++b) {
-      d.offsets[b] = GetAt<uint64_t>(tables.data(), 8 * blocks + 8 * b);
+      d.offsets[b] = LoadAt<uint64_t>(tables, 8 * blocks + 8 * b);
     }
     const auto expected = EncodePackedHeader(d.info, d.checksums, d.offsets);
-    if (GetAt<uint64_t>(expected.data(), kHeaderChecksumOffset) != stored_checksum) {
+    if (LoadAt<uint64_t>(expected, kHeaderChecksumOffset) != stored_checksum) {
       throw InputError(path, "damaged transport header (header checksum mismatch)");
     }
     if (d.offsets.front() != data_offset || d.offsets.back() != size) {
@@ -203,9 +180,9 @@ DecodedHeader DecodeHeader(int fd, const std::string& path) {
     throw InputError(path, "truncated checksum table");
   }
   d.checksums.resize(blocks);
-  for (uint64_t b = 0; b < blocks; ++b) d.checksums[b] = GetAt<uint64_t>(table.data(), 8 * b);
+  for (uint64_t b = 0; b < blocks; ++b) d.checksums[b] = LoadAt<uint64_t>(table, 8 * b);
   const auto expected = EncodeHeader(d.info, d.complete, d.checksums);
-  if (GetAt<uint64_t>(expected.data(), kHeaderChecksumOffset) != stored_checksum) {
+  if (LoadAt<uint64_t>(expected, kHeaderChecksumOffset) != stored_checksum) {
     throw InputError(path, "damaged transport header (header checksum mismatch)");
   }
   return d;

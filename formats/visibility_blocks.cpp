@@ -1,8 +1,12 @@
 #include "formats/visibility_blocks.h"
 
 #include <algorithm>
+#include <optional>
+#include <span>
 #include <stdexcept>
+#include <string>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -16,36 +20,26 @@ void CheckShape(int n, int bits) {
     throw std::invalid_argument("visibility blocks: bits must be in [1, 8]");
 }
 
-// Reads varints from a byte span; every failure throws InputError naming the source and where.
-class VarintReader {
- public:
-  VarintReader(std::span<const uint8_t> bytes, const std::string& source)
-      : bytes_(bytes), source_(source) {}
-  uint64_t Next(const char* what) {
-    uint64_t value = 0;
-    for (int shift = 0; shift < 64; shift += 7) {
-      if (pos_ >= bytes_.size()) Fail(std::string("truncated while reading ") + what);
-      const uint8_t b = bytes_[pos_++];
-      if (shift == 63 && (b & 0x7e) != 0) Fail(std::string("varint overflow in ") + what);
-      value |= static_cast<uint64_t>(b & 0x7f) << shift;
-      if ((b & 0x80) == 0) return value;
-    }
-    Fail(std::string("varint longer than 10 bytes in ") + what);
-  }
-  uint8_t Byte(const char* what) {
-    if (pos_ >= bytes_.size()) Fail(std::string("truncated while reading ") + what);
-    return bytes_[pos_++];
-  }
-  std::size_t left() const { return bytes_.size() - pos_; }
-  [[noreturn]] void Fail(const std::string& what) const {
-    throw InputError(source_, what + " (byte " + std::to_string(pos_) + ")");
-  }
-
- private:
-  std::span<const uint8_t> bytes_;
-  const std::string& source_;
-  std::size_t pos_ = 0;
-};
+// The stream's reader: every failure throws InputError naming the source and the byte.
+ByteReader StreamReader(std::span<const uint8_t> bytes, const std::string& source) {
+  return ByteReader(bytes, [&source](const char* what, std::size_t at) {
+    throw InputError(source, std::string("truncated while reading ") + what + " (byte " +
+                                 std::to_string(at) + ")");
+  });
+}
+[[noreturn]] void Fail(const ByteReader& in, const std::string& source, const std::string& what) {
+  throw InputError(source, what + " (byte " + std::to_string(in.position()) + ")");
+}
+// Out of line, so that Varint needs no stack frame for the message.
+[[noreturn, gnu::cold, gnu::noinline]] void BadVarint(const ByteReader& in,
+                                                      const std::string& source, const char* what) {
+  Fail(in, source, std::string("varint longer than 10 bytes or above 2^64 in ") + what);
+}
+uint64_t Varint(ByteReader& in, const std::string& source, const char* what) {
+  const std::optional<uint64_t> v = in.GetVarint<uint64_t>(what);
+  if (!v) BadVarint(in, source, what);
+  return *v;
+}
 
 }  // namespace
 
@@ -151,19 +145,18 @@ std::vector<uint8_t> DecodeVisibilityMap(const VisibilityBlocks& blocks, std::si
 }
 
 void AppendVarint(std::vector<uint8_t>& out, uint64_t value) {
-  while (value >= 0x80) {
-    out.push_back(static_cast<uint8_t>(value | 0x80));
-    value >>= 7;
-  }
-  out.push_back(static_cast<uint8_t>(value));
+  ByteVectorWriter w(std::move(out));
+  w.PutVarint(value);
+  out = std::move(w.bytes());
 }
 
 std::vector<uint8_t> EncodeVisibilityBlocks(const VisibilityBlocks& blocks) {
-  std::vector<uint8_t> out = {'V', 'B'};
-  AppendVarint(out, 1);
-  AppendVarint(out, static_cast<uint64_t>(blocks.n));
-  AppendVarint(out, static_cast<uint64_t>(blocks.bits));
-  AppendVarint(out, blocks.vertex_count);
+  ByteVectorWriter w;
+  w.PutBytes("VB", 2);
+  w.PutVarint(1);
+  w.PutVarint(static_cast<uint64_t>(blocks.n));
+  w.PutVarint(static_cast<uint64_t>(blocks.bits));
+  w.PutVarint(blocks.vertex_count);
   const int nb = blocks.blocks_per_map();
   for (std::size_t v = 0; v < blocks.vertex_count; ++v) {
     const std::size_t e0 = blocks.Entry(v, 0);
@@ -171,52 +164,54 @@ std::vector<uint8_t> EncodeVisibilityBlocks(const VisibilityBlocks& blocks) {
       uint8_t packed = 0;
       for (int i = 0; i < 4 && b + i < nb; ++i)
         packed = static_cast<uint8_t>(packed | (blocks.kind[e0 + b + i] << (2 * i)));
-      out.push_back(packed);
+      w.Put<uint8_t>(packed);
     }
     for (int b = 0; b < nb; ++b) {
       const std::size_t e = e0 + b;
       if (blocks.kind[e] != static_cast<uint8_t>(VisibilityBlockKind::kMixed)) continue;
       const uint64_t first = blocks.change_begin[e], last = blocks.change_begin[e + 1];
-      AppendVarint(out, last - first);
+      w.PutVarint(last - first);
       int prev = -1;
       for (uint64_t i = first; i < last; ++i) {
-        AppendVarint(out, static_cast<uint64_t>(blocks.change_pos[i] - prev - 1));
+        w.PutVarint(static_cast<uint64_t>(blocks.change_pos[i] - prev - 1));
         prev = blocks.change_pos[i];
-        if (blocks.bits > 1) AppendVarint(out, ZigZag(blocks.change_value[i]));
+        if (blocks.bits > 1) w.PutVarint(ZigZag(blocks.change_value[i]));
       }
     }
   }
-  return out;
+  return std::move(w.bytes());
 }
 
 VisibilityBlocks DecodeVisibilityBlocks(std::span<const uint8_t> bytes, const std::string& source) {
-  VarintReader in(bytes, source);
-  if (in.Byte("magic") != 'V' || in.Byte("magic") != 'B') in.Fail("not a visibility block stream");
-  if (in.Next("version") != 1) in.Fail("unsupported version");
-  const uint64_t n = in.Next("n"), bits = in.Next("bits");
-  if (n < 16 || n > 256 || n % 16 != 0) in.Fail("n is not a multiple of 16 in [16, 256]");
-  if (bits < 1 || bits > 8) in.Fail("bits outside [1, 8]");
+  ByteReader in = StreamReader(bytes, source);
+  if (in.Get<uint8_t>("magic") != 'V' || in.Get<uint8_t>("magic") != 'B')
+    Fail(in, source, "not a visibility block stream");
+  if (Varint(in, source, "version") != 1) Fail(in, source, "unsupported version");
+  const uint64_t n = Varint(in, source, "n"), bits = Varint(in, source, "bits");
+  if (n < 16 || n > 256 || n % 16 != 0) Fail(in, source, "n is not a multiple of 16 in [16, 256]");
+  if (bits < 1 || bits > 8) Fail(in, source, "bits outside [1, 8]");
   VisibilityBlocks out = MakeVisibilityBlocks(static_cast<int>(n), static_cast<int>(bits));
-  const uint64_t vertices = in.Next("vertex count");
+  const uint64_t vertices = Varint(in, source, "vertex count");
   const int nb = out.blocks_per_map();
   const std::size_t kind_bytes = static_cast<std::size_t>(nb + 3) / 4;
   // Every vertex needs at least its kind bytes: bounds the allocation by the input size.
-  if (vertices > in.left() / kind_bytes) in.Fail("vertex count larger than the data");
+  if (vertices > in.remaining() / kind_bytes) Fail(in, source, "vertex count larger than the data");
   out.kind.reserve(vertices * nb);
   out.change_begin.reserve(vertices * nb + 1);
   const int max_level = out.max_level();
   for (uint64_t v = 0; v < vertices; ++v) {
     const std::size_t e0 = out.kind.size();
     for (std::size_t i = 0; i < kind_bytes; ++i) {
-      const uint8_t packed = in.Byte("block kinds");
+      const uint8_t packed = in.Get<uint8_t>("block kinds");
       for (int j = 0; j < 4; ++j) {
         const int b = static_cast<int>(i) * 4 + j;
         const uint8_t k = static_cast<uint8_t>((packed >> (2 * j)) & 3);
         if (b >= nb) {
-          if (k != 0) in.Fail("padding bits set in block kinds of vertex " + std::to_string(v));
+          if (k != 0)
+            Fail(in, source, "padding bits set in block kinds of vertex " + std::to_string(v));
           continue;
         }
-        if (k > 2) in.Fail("invalid block kind at vertex " + std::to_string(v));
+        if (k > 2) Fail(in, source, "invalid block kind at vertex " + std::to_string(v));
         out.kind.push_back(k);
       }
     }
@@ -224,21 +219,26 @@ VisibilityBlocks DecodeVisibilityBlocks(std::span<const uint8_t> bytes, const st
       if (out.kind[e0 + b] == static_cast<uint8_t>(VisibilityBlockKind::kMixed)) {
         const std::string where =
             " (vertex " + std::to_string(v) + ", block " + std::to_string(b) + ")";
-        const uint64_t count = in.Next("change count");
-        if (count < 1 || count > kVisibilityBlockSize) in.Fail("change count out of range" + where);
-        if (count > in.left()) in.Fail("change count larger than the data" + where);
+        const uint64_t count = Varint(in, source, "change count");
+        if (count < 1 || count > kVisibilityBlockSize)
+          Fail(in, source, "change count out of range" + where);
+        if (count > in.remaining()) Fail(in, source, "change count larger than the data" + where);
         int64_t pos = -1;
         int level = 0;
         for (uint64_t c = 0; c < count; ++c) {
-          pos += static_cast<int64_t>(std::min<uint64_t>(in.Next("change position"), 1024)) + 1;
-          if (pos >= kVisibilityBlockSize) in.Fail("change position beyond the block" + where);
+          pos += static_cast<int64_t>(
+                     std::min<uint64_t>(Varint(in, source, "change position"), 1024)) +
+                 1;
+          if (pos >= kVisibilityBlockSize)
+            Fail(in, source, "change position beyond the block" + where);
           out.change_pos.push_back(static_cast<uint8_t>(pos));
           if (bits > 1) {
-            const uint64_t z = in.Next("change value");
-            if (z > 1024) in.Fail("change value out of range" + where);
+            const uint64_t z = Varint(in, source, "change value");
+            if (z > 1024) Fail(in, source, "change value out of range" + where);
             const int64_t d = static_cast<int64_t>(z >> 1) ^ -static_cast<int64_t>(z & 1);
             level += static_cast<int>(d);
-            if (d == 0 || level < 0 || level > max_level) in.Fail("level out of range" + where);
+            if (d == 0 || level < 0 || level > max_level)
+              Fail(in, source, "level out of range" + where);
             out.change_value.push_back(static_cast<int16_t>(d));
           } else {
             level = 1 - level;
@@ -249,7 +249,7 @@ VisibilityBlocks DecodeVisibilityBlocks(std::span<const uint8_t> bytes, const st
     }
     ++out.vertex_count;
   }
-  if (in.left() != 0) in.Fail("trailing bytes after the last vertex");
+  if (in.remaining() != 0) Fail(in, source, "trailing bytes after the last vertex");
   return out;
 }
 

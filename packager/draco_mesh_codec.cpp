@@ -9,12 +9,15 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
+#include <span>
 
 #include "draco/compression/decode.h"
 #include "draco/compression/expert_encode.h"
 #include "draco/core/decoder_buffer.h"
 #include "draco/core/encoder_buffer.h"
 #include "draco/mesh/mesh.h"
+#include "vocabulary/bytes.h"
 #include "vocabulary/errors.h"
 
 namespace prt::pack {
@@ -35,21 +38,6 @@ int AddFloatAttribute(draco::Mesh& mesh, draco::GeometryAttribute::Type type,
     att->SetAttributeValue(draco::AttributeValueIndex(static_cast<uint32_t>(i)), v);
   }
   return id;
-}
-
-bool ReadVarint(const uint8_t* data, std::size_t size, std::size_t& pos, uint32_t& out) {
-  uint64_t v = 0;
-  for (int shift = 0; shift < 35; shift += 7) {
-    if (pos >= size) return false;
-    const uint8_t b = data[pos++];
-    v |= uint64_t(b & 0x7F) << shift;
-    if (!(b & 0x80)) {
-      if (v > std::numeric_limits<uint32_t>::max()) return false;
-      out = static_cast<uint32_t>(v);
-      return true;
-    }
-  }
-  return false;
 }
 
 void ExtractAttribute(const draco::Mesh& mesh, draco::GeometryAttribute::Type type,
@@ -144,11 +132,18 @@ DracoMeshCounts PeekDracoMeshCounts(const uint8_t* data, std::size_t size,
     throw InputError(where, "MESH is not a sequentially encoded Draco triangle mesh");
   }
   if (data[9] != 0 || data[10] != 0) throw InputError(where, "MESH Draco flags must be 0");
-  std::size_t pos = 11;
+  const auto truncated = [&where] {
+    return InputError(where, "MESH Draco connectivity header is truncated");
+  };
+  ByteReader in(
+      std::span<const uint8_t>(data, size), [&](const char*, std::size_t) { throw truncated(); },
+      11);
+  const std::optional<uint32_t> faces = in.GetVarint<uint32_t>("faces");
+  const std::optional<uint32_t> points = faces ? in.GetVarint<uint32_t>("points") : std::nullopt;
+  if (!faces || !points) throw truncated();  // a varint longer than 5 bytes or ≥ 2^32
   DracoMeshCounts counts;
-  if (!ReadVarint(data, size, pos, counts.faces) || !ReadVarint(data, size, pos, counts.points)) {
-    throw InputError(where, "MESH Draco connectivity header is truncated");
-  }
+  counts.faces = *faces;
+  counts.points = *points;
   if (counts.points == 0 || counts.points > kMaxPoints) {
     throw InputError(where, "MESH declares " + std::to_string(counts.points) + " vertices");
   }

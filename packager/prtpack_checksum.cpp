@@ -2,6 +2,8 @@
 // (docs/prtpack-format.md, "File header").
 #include <xxhash.h>
 
+#include <span>
+
 #include "packager/prtpack_format.h"
 
 namespace prt::pack {
@@ -37,40 +39,45 @@ bool Inside(uint64_t offset, uint64_t size, uint64_t limit) {
   return offset <= limit && size <= limit - offset;
 }
 
-void ResealTransport(uint8_t* p, uint64_t n) {
+void ResealTransport(std::span<uint8_t> sec) {
+  const uint64_t n = sec.size();
   if (n < kTransportHeaderSize) return;
-  const uint32_t block_count = LoadU32(p + 4);
-  const uint32_t params_size = LoadU32(p + 24);
+  const uint32_t block_count = LoadAt<uint32_t>(sec, kTransportBlockCount);
+  const uint32_t params_size = LoadAt<uint32_t>(sec, kTransportParamsSize);
   const uint64_t index_offset = AlignUp(kTransportHeaderSize + uint64_t(params_size), 8);
   const uint64_t index_size = uint64_t(block_count) * kBlockEntrySize;
   if (!Inside(index_offset, index_size, n)) return;
   for (uint32_t b = 0; b < block_count; ++b) {
-    uint8_t* e = p + index_offset + uint64_t(b) * kBlockEntrySize;
-    const uint64_t offset = LoadU64(e + 16), stored = LoadU64(e + 24);
-    if (Inside(offset, stored, n)) StoreU64(e + 40, Checksum(p + offset, stored));
+    const std::span<uint8_t> e =
+        SliceAt(sec, index_offset + uint64_t(b) * kBlockEntrySize, kBlockEntrySize);
+    const uint64_t offset = LoadAt<uint64_t>(e, 16), stored = LoadAt<uint64_t>(e, 24);
+    if (Inside(offset, stored, n)) StoreAt<uint64_t>(e, 40, Checksum(sec.data() + offset, stored));
   }
-  StoreU64(p + 32, TransportIndexChecksum(p, params_size, index_offset, block_count));
+  StoreAt<uint64_t>(sec, kTransportIndexChecksum,
+                    TransportIndexChecksum(sec.data(), params_size, index_offset, block_count));
 }
 }  // namespace
 
 void ResealChecksums(std::vector<uint8_t>& file) {
   const uint64_t n = file.size();
   if (n < kHeaderSize) return;
-  uint8_t* d = file.data();
-  const uint32_t count = LoadU32(d + kHdrSectionCount);
-  const uint32_t entry_size = LoadU32(d + kHdrEntrySize);
-  const uint64_t table_offset = LoadU64(d + kHdrTableOffset);
+  const std::span<uint8_t> d(file);
+  const uint32_t count = LoadAt<uint32_t>(d, kHdrSectionCount);
+  const uint32_t entry_size = LoadAt<uint32_t>(d, kHdrEntrySize);
+  const uint64_t table_offset = LoadAt<uint64_t>(d, kHdrTableOffset);
   if (count > kMaxSectionCount || entry_size < kEntrySize || entry_size > 4096) return;
   const uint64_t table_size = uint64_t(count) * entry_size;
   if (!Inside(table_offset, table_size, n)) return;
   for (uint32_t i = 0; i < count; ++i) {
-    uint8_t* e = d + table_offset + uint64_t(i) * entry_size;
-    const uint64_t offset = LoadU64(e + kSecOffset), stored = LoadU64(e + kSecStored);
+    const std::span<uint8_t> e = SliceAt(d, table_offset + uint64_t(i) * entry_size, entry_size);
+    const uint64_t offset = LoadAt<uint64_t>(e, kSecOffset),
+                   stored = LoadAt<uint64_t>(e, kSecStored);
     if (!Inside(offset, stored, n)) continue;
-    if (LoadU32(e + kSecType) == kTypeTransport) ResealTransport(d + offset, stored);
-    StoreU64(e + kSecChecksum, Checksum(d + offset, stored));
+    if (LoadAt<uint32_t>(e, kSecType) == kTypeTransport)
+      ResealTransport(SliceAt(d, offset, stored));
+    StoreAt<uint64_t>(e, kSecChecksum, Checksum(d.data() + offset, stored));
   }
-  StoreU64(d + kHdrChecksum, HeaderChecksum(d, d + table_offset, table_size));
+  StoreAt<uint64_t>(d, kHdrChecksum, HeaderChecksum(d.data(), d.data() + table_offset, table_size));
 }
 
 }  // namespace prt::pack

@@ -182,41 +182,40 @@ TEST(PrtpackCorruption, HostileCpcaPayloadsAreRefusedClearly) {
       expect_clean(bad, "byte " + std::to_string(i) + " = " + std::to_string(value));
     }
   }
-  const uint32_t params_size = LoadU32(good.data() + kCpcaParamsSize);
+  const uint32_t params_size = LoadAt<uint32_t>(good, kCpcaParamsSize);
   const std::size_t body_at = kCpcaHeaderSize + params_size;
   for (std::size_t n = 0; n < good.size(); ++n) {
     std::vector<uint8_t> cut(good.begin(), good.begin() + std::ptrdiff_t(n));
     EXPECT_NE(expect_clean(pack_with(cut), "cut at " + std::to_string(n)), "") << n;
     if (n >= body_at) {  // the body cut, its size made to agree: the body decoder refuses it
-      StoreU64(cut.data() + kCpcaBodySize, n - body_at);
+      StoreAt<uint64_t>(cut, kCpcaBodySize, n - body_at);
       EXPECT_NE(expect_clean(pack_with(cut), "body cut at " + std::to_string(n)), "") << n;
     }
   }
   std::vector<uint8_t> longer = good;
   longer.push_back(0);
   EXPECT_NE(expect_clean(pack_with(longer), "one more byte"), "");
-  StoreU64(longer.data() + kCpcaBodySize, LoadU64(good.data() + kCpcaBodySize) + 1);
+  StoreAt<uint64_t>(longer, kCpcaBodySize, LoadAt<uint64_t>(good, kCpcaBodySize) + 1);
   EXPECT_NE(expect_clean(pack_with(longer), "trailing body byte"), "");
   // Hostile counts in the parameters (encoded header version 4: samples at byte 16, clusters at
   // 48, bases at 52, the one segment's count at 63) and the same in the section's header, so
   // that they reach DecodeHeader and the CPCA body decoder's bounds.
-  const uint8_t* params = good.data() + kCpcaHeaderSize;
-  ASSERT_EQ(LoadU32(params + 16), 12u);
-  ASSERT_EQ(LoadU32(params + 48), 2u);
-  ASSERT_EQ(LoadU32(params + 52), 2u);
-  ASSERT_EQ(LoadU32(params + 63), 12u);
+  const std::size_t params = kCpcaHeaderSize;
+  ASSERT_EQ(LoadAt<uint32_t>(good, params + 16), 12u);
+  ASSERT_EQ(LoadAt<uint32_t>(good, params + 48), 2u);
+  ASSERT_EQ(LoadAt<uint32_t>(good, params + 52), 2u);
+  ASSERT_EQ(LoadAt<uint32_t>(good, params + 63), 12u);
   for (uint32_t rows : {12u, 13u, 1u << 20, 1u << 28, 0xFFFFFFFFu}) {
     for (uint32_t clusters : {1u, 2u, 3u, 12u, 13u, 1u << 20, 0xFFFFFFFFu}) {
       for (uint32_t bases : {0u, 1u, 2u, 3u, 24u, 25u, 256u, 0xFFFFFFFFu}) {
         std::vector<uint8_t> bad = good;
-        uint8_t* p = bad.data() + kCpcaHeaderSize;
-        StoreU32(p + 16, rows);
-        StoreU32(p + 48, clusters);
-        StoreU32(p + 52, bases);
-        StoreU32(p + 63, rows);
-        StoreU64(bad.data() + kCpcaRowCount, rows);
-        StoreU32(bad.data() + kCpcaClusters, clusters);
-        StoreU32(bad.data() + kCpcaBases, bases);
+        StoreAt<uint32_t>(bad, params + 16, rows);
+        StoreAt<uint32_t>(bad, params + 48, clusters);
+        StoreAt<uint32_t>(bad, params + 52, bases);
+        StoreAt<uint32_t>(bad, params + 63, rows);
+        StoreAt<uint64_t>(bad, kCpcaRowCount, rows);
+        StoreAt<uint32_t>(bad, kCpcaClusters, clusters);
+        StoreAt<uint32_t>(bad, kCpcaBases, bases);
         const std::string error = expect_clean(
             pack_with(bad), "rows " + std::to_string(rows) + ", clusters " +
                                 std::to_string(clusters) + ", bases " + std::to_string(bases));
@@ -243,10 +242,11 @@ TEST(PrtpackCorruption, HostileVisibilityPayloadsAreRefusedClearly) {
     in.extra_sections.push_back({"XVIS", 0, 0, mesh0});
     in.extra_sections.push_back({"XVIS", 0, 1, glossy.visibility->per_mesh[1]});
     std::vector<uint8_t> file = WritePack(in);
-    const uint32_t sections = LoadU32(file.data() + kHdrSectionCount);
+    const uint32_t sections = LoadAt<uint32_t>(file, kHdrSectionCount);
     for (uint32_t i = 0; i < sections; ++i) {
-      uint8_t* entry = file.data() + kHeaderSize + std::size_t(i) * kEntrySize;
-      if (LoadU32(entry + kSecType) == FourCC("XVIS")) StoreU32(entry + kSecType, kTypeVisibility);
+      const std::size_t type = kHeaderSize + std::size_t(i) * kEntrySize + kSecType;
+      if (LoadAt<uint32_t>(file, type) == FourCC("XVIS"))
+        StoreAt<uint32_t>(file, type, kTypeVisibility);
     }
     ResealChecksums(file);
     return file;

@@ -1,14 +1,16 @@
-// Byte layout of a .prtpack file (docs/prtpack-format.md): constants, field offsets and the
-// little-endian load/store helpers shared by the writer, the reader and the fuzz harness.
+// Byte layout of a .prtpack file (docs/prtpack-format.md): constants and field offsets shared by
+// the writer, the reader and the fuzz harness; their values are read and written with
+// vocabulary/bytes.h (LoadAt, StoreAt: little-endian, bounds-checked).
 // Internal to packager/: applications use prtpack_reader.h or prtpack.h.
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 #include <string>
 #include <vector>
+
+#include "vocabulary/bytes.h"
 
 namespace prt::pack {
 
@@ -85,38 +87,6 @@ inline std::string FourCCString(uint32_t v) {
     s[static_cast<std::size_t>(i)] = (c >= 32 && c < 127) ? c : '?';
   }
   return s;
-}
-
-// Little-endian loads and stores from unaligned byte pointers (the callers check the range).
-inline uint16_t LoadU16(const uint8_t* p) {
-  return static_cast<uint16_t>(p[0] | p[1] << 8);
-}
-inline uint32_t LoadU32(const uint8_t* p) {
-  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
-}
-inline uint64_t LoadU64(const uint8_t* p) {
-  return uint64_t(LoadU32(p)) | uint64_t(LoadU32(p + 4)) << 32;
-}
-inline float LoadF32(const uint8_t* p) {
-  const uint32_t u = LoadU32(p);
-  float f;
-  std::memcpy(&f, &u, 4);
-  return f;
-}
-inline void StoreU16(uint8_t* p, uint16_t v) {
-  p[0] = static_cast<uint8_t>(v);
-  p[1] = static_cast<uint8_t>(v >> 8);
-}
-inline void StoreU32(uint8_t* p, uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
-inline void StoreU64(uint8_t* p, uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
-inline void StoreF32(uint8_t* p, float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, 4);
-  StoreU32(p, u);
 }
 
 inline constexpr uint64_t AlignUp(uint64_t v, uint64_t a) {

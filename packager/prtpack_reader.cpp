@@ -1,7 +1,8 @@
 // .prtpack reader (docs/prtpack-format.md). Every offset, size, count and index read from the
 // file is range-checked before it is used, in 64-bit arithmetic that cannot overflow (sizes are
 // compared against the remaining length, never added blindly), and every decoded size is
-// bounded before anything is allocated.
+// bounded before anything is allocated. Fields are read with vocabulary/bytes.h's LoadAt and
+// SliceAt, bounded themselves: a check forgotten here would throw, not read outside the file.
 #include "packager/prtpack_reader.h"
 
 #include <fcntl.h>
@@ -139,6 +140,7 @@ struct PackReader::Impl {
 void PackReader::Impl::Parse() {
   const uint8_t* d = data();
   const uint64_t n = storage->size;
+  const std::span<const uint8_t> file(d, n);
   if (n < kMagic.size() || std::memcmp(d, kMagic.data(), kMagic.size()) != 0) {
     if (n == 0) Fail("empty file: not a .prtpack");
     if (n < kMagic.size() && std::memcmp(d, kMagic.data(), n) == 0) {
@@ -149,18 +151,18 @@ void PackReader::Impl::Parse() {
   if (n < kHeaderSize) {
     Fail("truncated: " + std::to_string(n) + " bytes, shorter than the 64-byte header");
   }
-  major = LoadU16(d + kHdrMajor);
-  minor = LoadU16(d + kHdrMinor);
+  major = LoadAt<uint16_t>(file, kHdrMajor);
+  minor = LoadAt<uint16_t>(file, kHdrMinor);
   if (major != kVersionMajor) {
     Fail("unsupported .prtpack major version " + std::to_string(major) + " (this reader reads " +
          std::to_string(kVersionMajor) + ".x)");
   }
-  const uint32_t header_size = LoadU32(d + kHdrHeaderSize);
-  const uint32_t count = LoadU32(d + kHdrSectionCount);
-  const uint32_t entry_size = LoadU32(d + kHdrEntrySize);
-  const uint64_t table_offset = LoadU64(d + kHdrTableOffset);
-  const uint64_t file_size = LoadU64(d + kHdrFileSize);
-  const uint32_t alignment = LoadU32(d + kHdrAlignment);
+  const uint32_t header_size = LoadAt<uint32_t>(file, kHdrHeaderSize);
+  const uint32_t count = LoadAt<uint32_t>(file, kHdrSectionCount);
+  const uint32_t entry_size = LoadAt<uint32_t>(file, kHdrEntrySize);
+  const uint64_t table_offset = LoadAt<uint64_t>(file, kHdrTableOffset);
+  const uint64_t file_size = LoadAt<uint64_t>(file, kHdrFileSize);
+  const uint32_t alignment = LoadAt<uint32_t>(file, kHdrAlignment);
   if (file_size > n) {
     Fail("truncated: " + std::to_string(n) + " bytes, the header says " +
          std::to_string(file_size));
@@ -178,7 +180,7 @@ void PackReader::Impl::Parse() {
   }
   const uint64_t table_size = uint64_t(count) * entry_size;
   if (!InRange(table_offset, table_size, n)) Fail("truncated inside the section table");
-  const uint64_t expect = LoadU64(d + kHdrChecksum);
+  const uint64_t expect = LoadAt<uint64_t>(file, kHdrChecksum);
   const uint64_t got = HeaderChecksum(d, d + table_offset, table_size);
   if (expect != got) {
     Fail("header checksum mismatch (stored " + Hex(expect) + ", computed " + Hex(got) +
@@ -188,17 +190,18 @@ void PackReader::Impl::Parse() {
   int metas = 0, transports = 0, images = 0, cpcas = 0;
   std::vector<int64_t> mesh_by_id, material_by_id, visibility_by_id;
   for (uint32_t i = 0; i < count; ++i) {
-    const uint8_t* e = d + table_offset + uint64_t(i) * entry_size;
+    const std::span<const uint8_t> e =
+        SliceAt(file, table_offset + uint64_t(i) * entry_size, entry_size);
     SectionInfo s;
-    s.type_code = LoadU32(e + kSecType);
+    s.type_code = LoadAt<uint32_t>(e, kSecType);
     s.type = FourCCString(s.type_code);
-    s.flags = LoadU32(e + kSecFlags);
-    s.codec = LoadU32(e + kSecCodec);
-    s.id = LoadU32(e + kSecId);
-    s.offset = LoadU64(e + kSecOffset);
-    s.stored_size = LoadU64(e + kSecStored);
-    s.raw_size = LoadU64(e + kSecRaw);
-    s.checksum = LoadU64(e + kSecChecksum);
+    s.flags = LoadAt<uint32_t>(e, kSecFlags);
+    s.codec = LoadAt<uint32_t>(e, kSecCodec);
+    s.id = LoadAt<uint32_t>(e, kSecId);
+    s.offset = LoadAt<uint64_t>(e, kSecOffset);
+    s.stored_size = LoadAt<uint64_t>(e, kSecStored);
+    s.raw_size = LoadAt<uint64_t>(e, kSecRaw);
+    s.checksum = LoadAt<uint64_t>(e, kSecChecksum);
     s.known = IsKnownType(s.type_code);
     sections.push_back(s);
     const std::string where = SectionName(i);
@@ -327,16 +330,17 @@ MeshMaterial PackReader::Impl::Material(std::size_t i) const {
   const uint8_t* p = CheckedBytes(si);
   const std::string where = SectionName(si);
   if (s.stored_size < kMaterialHeaderSize) Fail(where + " is too short");
+  const std::span<const uint8_t> bytes(p, s.stored_size);
   MeshMaterial m;
   for (int c = 0; c < 3; ++c) {
-    const float a = LoadF32(p + 4 * c);
+    const float a = LoadAt<float>(bytes, std::size_t(4 * c));
     if (!(a >= 0.0f && a <= 1.0f)) Fail(where + " albedo outside [0, 1]");
     m.albedo[std::size_t(c)] = a;
   }
-  const uint32_t flags = LoadU32(p + 12);
+  const uint32_t flags = LoadAt<uint32_t>(bytes, 12);
   m.is_ground = (flags & kMaterialFlagGround) != 0;
-  m.grid_resolution = LoadU32(p + 16);
-  const uint32_t name_length = LoadU32(p + 20);
+  m.grid_resolution = LoadAt<uint32_t>(bytes, 16);
+  const uint32_t name_length = LoadAt<uint32_t>(bytes, 20);
   if (name_length > kMaxMeshNameLength || s.stored_size != kMaterialHeaderSize + name_length) {
     Fail(where + " name length disagrees with the section size");
   }
@@ -384,22 +388,23 @@ TransportIndex PackReader::Impl::Transport() const {
   const uint8_t* p = data() + s.offset;
   const uint64_t n = s.stored_size;
   if (n < kTransportHeaderSize) Fail(where + " is too short for its header");
+  const std::span<const uint8_t> sec(p, n);
   TransportIndex t;
-  t.encoding = LoadU32(p + kTransportEncoding);
-  const uint32_t block_count = LoadU32(p + kTransportBlockCount);
-  t.row_count = LoadU64(p + kTransportRowCount);
-  t.column_count = LoadU64(p + kTransportColumnCount);
-  const uint32_t params_size = LoadU32(p + kTransportParamsSize);
+  t.encoding = LoadAt<uint32_t>(sec, kTransportEncoding);
+  const uint32_t block_count = LoadAt<uint32_t>(sec, kTransportBlockCount);
+  t.row_count = LoadAt<uint64_t>(sec, kTransportRowCount);
+  t.column_count = LoadAt<uint64_t>(sec, kTransportColumnCount);
+  const uint32_t params_size = LoadAt<uint32_t>(sec, kTransportParamsSize);
   if (params_size > kMaxTransportParams) Fail(where + " parameters exceed 1 GiB");
   const uint64_t index_offset = AlignUp(kTransportHeaderSize + uint64_t(params_size), 8);
   const uint64_t index_size = uint64_t(block_count) * kBlockEntrySize;
   if (!InRange(index_offset, index_size, n)) Fail(where + " block index extends past the section");
-  const uint64_t expect = LoadU64(p + kTransportIndexChecksum);
+  const uint64_t expect = LoadAt<uint64_t>(sec, kTransportIndexChecksum);
   const uint64_t got = TransportIndexChecksum(p, params_size, index_offset, block_count);
   if (expect != got) Fail(where + " index checksum mismatch: the transport index is corrupted");
   // The channel count (1.1; a reserved field that 1.0 readers ignore, so 1 in a 1.0 pack).
   if (minor >= kVersionMinorChannels) {
-    const uint32_t channels = LoadU32(p + kTransportChannels);
+    const uint32_t channels = LoadAt<uint32_t>(sec, kTransportChannels);
     if (channels != 1 && channels != 3) {
       Fail(where + " channel count " + std::to_string(channels) + " is not 1 or 3");
     }
@@ -414,16 +419,17 @@ TransportIndex PackReader::Impl::Transport() const {
   uint64_t next_column = 0;
   uint64_t previous_end = index_offset + index_size;
   for (uint32_t b = 0; b < block_count; ++b) {
-    const uint8_t* e = p + index_offset + uint64_t(b) * kBlockEntrySize;
+    const std::span<const uint8_t> e =
+        SliceAt(sec, index_offset + uint64_t(b) * kBlockEntrySize, kBlockEntrySize);
     const std::string bw = where + " block " + std::to_string(b);
     TransportBlockInfo info;
-    info.first_column = LoadU64(e + 0);
-    info.column_count = LoadU32(e + 8);
-    info.codec = LoadU32(e + 12);
-    const uint64_t offset = LoadU64(e + 16);
-    info.stored_size = LoadU64(e + 24);
-    info.raw_size = LoadU64(e + 32);
-    info.checksum = LoadU64(e + 40);
+    info.first_column = LoadAt<uint64_t>(e, 0);
+    info.column_count = LoadAt<uint32_t>(e, 8);
+    info.codec = LoadAt<uint32_t>(e, 12);
+    const uint64_t offset = LoadAt<uint64_t>(e, 16);
+    info.stored_size = LoadAt<uint64_t>(e, 24);
+    info.raw_size = LoadAt<uint64_t>(e, 32);
+    info.checksum = LoadAt<uint64_t>(e, 40);
     if (info.first_column != next_column || info.column_count == 0) {
       Fail(bw + " columns are not contiguous with the previous block");
     }
@@ -540,14 +546,13 @@ PackReader::Impl::CpcaPayload PackReader::Impl::CpcaBytes() const {
   }
   const uint64_t n = c.raw.size();
   if (n < kCpcaHeaderSize) Fail(where + " is too short for its header");
-  const uint8_t* h = c.raw.data();
-  c.params_size = LoadU32(h + kCpcaParamsSize);
+  c.params_size = LoadAt<uint32_t>(c.raw, kCpcaParamsSize);
   const uint32_t params_size = c.params_size;
-  c.channels = LoadU32(h + kCpcaChannels);
-  c.row_count = LoadU64(h + kCpcaRowCount);
-  c.clusters = LoadU32(h + kCpcaClusters);
-  c.bases = LoadU32(h + kCpcaBases);
-  const uint64_t body_size = LoadU64(h + kCpcaBodySize);
+  c.channels = LoadAt<uint32_t>(c.raw, kCpcaChannels);
+  c.row_count = LoadAt<uint64_t>(c.raw, kCpcaRowCount);
+  c.clusters = LoadAt<uint32_t>(c.raw, kCpcaClusters);
+  c.bases = LoadAt<uint32_t>(c.raw, kCpcaBases);
+  const uint64_t body_size = LoadAt<uint64_t>(c.raw, kCpcaBodySize);
   if (!InRange(kCpcaHeaderSize, params_size, n) || body_size != n - kCpcaHeaderSize - params_size) {
     Fail(where + " parameter and body sizes (" + std::to_string(params_size) + " + " +
          std::to_string(body_size) + ") disagree with its size " + std::to_string(n));

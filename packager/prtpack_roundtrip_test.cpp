@@ -149,8 +149,9 @@ TEST(PrtpackRoundTrip, VisibilitySectionsAreLossless) {
   // Mesh 1's VISB relabelled as a second id 0: refused at open.
   std::vector<uint8_t> twice = bytes;
   for (std::size_t i = 0; i < r.sections().size(); ++i) {
-    uint8_t* entry = twice.data() + kHeaderSize + i * kEntrySize;
-    if (r.sections()[i].type == "VISB" && r.sections()[i].id == 1) StoreU32(entry + kSecId, 0);
+    const std::size_t entry = kHeaderSize + i * kEntrySize;
+    if (r.sections()[i].type == "VISB" && r.sections()[i].id == 1)
+      StoreAt<uint32_t>(twice, entry + kSecId, 0);
   }
   ResealChecksums(twice);
   EXPECT_THROW(PackReader::OpenMemory(twice.data(), twice.size()), InputError);
@@ -233,12 +234,12 @@ uint64_t TransportOffset(const std::vector<uint8_t>& bytes) {
 TEST(PrtpackRoundTrip, UnknownMajorVersionIsRefusedAndMinorIsRead) {
   std::vector<uint8_t> bytes = WritePack(MakeSmallInput());
   std::vector<uint8_t> minor = bytes;
-  StoreU16(minor.data() + kHdrMinor, 5);
+  StoreAt<uint16_t>(minor, kHdrMinor, 5);
   // From 1.1 on TRNS states its channel count (1.0 writers left 0 there).
-  StoreU32(minor.data() + TransportOffset(bytes) + kTransportChannels, 1);
+  StoreAt<uint32_t>(minor, TransportOffset(bytes) + kTransportChannels, 1);
   ResealChecksums(minor);
   EXPECT_EQ(ErrorOf(minor), "");
-  StoreU16(bytes.data() + kHdrMajor, 2);
+  StoreAt<uint16_t>(bytes, kHdrMajor, 2);
   ResealChecksums(bytes);
   EXPECT_EQ(ErrorOf(bytes),
             "<memory>: unsupported .prtpack major version 2 (this reader reads 1.x)");
@@ -269,25 +270,25 @@ TEST(PrtpackRoundTrip, DecodedSizesAreBoundedBeforeAllocation) {
   EXPECT_NE(e.find("above the limit 100"), std::string::npos) << e;
   // A META whose zstd frame claims a size other than raw_size is refused before decoding.
   std::vector<uint8_t> lie = bytes;
-  const uint8_t* entry = lie.data() + kHeaderSize;  // META is section 0
-  StoreU64(lie.data() + kHeaderSize + kSecRaw, LoadU64(entry + kSecRaw) + 1000);
+  const std::size_t entry = kHeaderSize;  // META is section 0
+  StoreAt<uint64_t>(lie, entry + kSecRaw, LoadAt<uint64_t>(lie, entry + kSecRaw) + 1000);
   ResealChecksums(lie);
   const std::string e2 = ErrorOf(lie);
   EXPECT_NE(e2.find("zstd frame holds"), std::string::npos) << e2;
   // A MESH whose raw size disagrees with its Draco header.
   std::vector<uint8_t> mesh = bytes;
-  StoreU64(mesh.data() + kHeaderSize + kEntrySize + kSecRaw, 24 * 1000000ull);
+  StoreAt<uint64_t>(mesh, kHeaderSize + kEntrySize + kSecRaw, 24 * 1000000ull);
   ResealChecksums(mesh);
   const std::string e3 = ErrorOf(mesh);
   EXPECT_NE(e3.find("disagrees with its raw size"), std::string::npos) << e3;
   // A MESH whose Draco header claims a million vertices, consistently with raw_size, from 156
   // stored bytes: refused before Draco sees it.
   std::vector<uint8_t> bomb = bytes;
-  uint8_t* mesh_entry = bomb.data() + kHeaderSize + kEntrySize;
-  uint8_t* draco = bomb.data() + LoadU64(mesh_entry + kSecOffset);
+  const std::size_t mesh_entry = kHeaderSize + kEntrySize;
+  uint8_t* draco = bomb.data() + LoadAt<uint64_t>(bomb, mesh_entry + kSecOffset);
   const uint8_t counts[4] = {0x00, 0xC0, 0x84, 0x3D};  // varint 0 faces, 1 000 000 points
   std::copy(counts, counts + 4, draco + 11);
-  StoreU64(mesh_entry + kSecRaw, 24 * 1000000ull);
+  StoreAt<uint64_t>(bomb, mesh_entry + kSecRaw, 24 * 1000000ull);
   ResealChecksums(bomb);
   const std::string e4 = ErrorOf(bomb);
   EXPECT_NE(e4.find("more than Draco can compress"), std::string::npos) << e4;
@@ -305,7 +306,7 @@ TEST(PrtpackRoundTrip, ThreeChannelTransportPacksAsVersion1_1) {
   const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
   EXPECT_EQ(r.version_major(), 1);
   EXPECT_EQ(r.version_minor(), 1);
-  EXPECT_EQ(LoadU32(bytes.data() + TransportOffset(bytes) + kTransportChannels), 3u);
+  EXPECT_EQ(LoadAt<uint32_t>(bytes, TransportOffset(bytes) + kTransportChannels), 3u);
   const TransportIndex index = r.ReadTransportIndex();
   EXPECT_EQ(index.channels, 3u);
   EXPECT_EQ(index.row_count, 36u);
@@ -341,7 +342,7 @@ TEST(PrtpackRoundTrip, BadChannelCountsAreRefusedClearly) {
   const uint64_t trns = TransportOffset(good);
   for (uint32_t channels : {0u, 2u, 4u, 0xffffffffu}) {
     std::vector<uint8_t> bad = good;
-    StoreU32(bad.data() + trns + kTransportChannels, channels);
+    StoreAt<uint32_t>(bad, trns + kTransportChannels, channels);
     ResealChecksums(bad);
     const std::string error = ErrorOf(bad);
     EXPECT_NE(error.find("TRNS"), std::string::npos) << error;
@@ -350,7 +351,7 @@ TEST(PrtpackRoundTrip, BadChannelCountsAreRefusedClearly) {
         << error;
   }
   std::vector<uint8_t> rows = good;
-  StoreU64(rows.data() + trns + kTransportRowCount, 35);
+  StoreAt<uint64_t>(rows, trns + kTransportRowCount, 35);
   ResealChecksums(rows);
   EXPECT_NE(ErrorOf(rows).find("row count 35 is not a multiple of its channel count 3"),
             std::string::npos)
@@ -365,14 +366,14 @@ TEST(PrtpackRoundTrip, BadChannelCountsAreRefusedClearly) {
     return "";
   };
   std::vector<uint8_t> one = good;
-  StoreU32(one.data() + trns + kTransportChannels, 1);
+  StoreAt<uint32_t>(one, trns + kTransportChannels, 1);
   ResealChecksums(one);
   EXPECT_EQ(ErrorOf(one), "");
   EXPECT_NE(transport_error(one).find("TRNS parameters have 3 colour channel(s), the section 1"),
             std::string::npos)
       << transport_error(one);
   std::vector<uint8_t> old = good;
-  StoreU16(old.data() + kHdrMinor, 0);
+  StoreAt<uint16_t>(old, kHdrMinor, 0);
   ResealChecksums(old);
   EXPECT_EQ(PackReader::OpenMemory(old.data(), old.size()).ReadTransportIndex().channels, 1u);
   EXPECT_NE(transport_error(old).find("TRNS parameters have 3 colour channel(s)"),
@@ -381,7 +382,7 @@ TEST(PrtpackRoundTrip, BadChannelCountsAreRefusedClearly) {
   // A 1.0 pack with anything in the reserved field reads as one channel.
   PackInput plain = MakeSmallInput();
   std::vector<uint8_t> reserved = WritePack(plain);
-  StoreU32(reserved.data() + TransportOffset(reserved) + kTransportChannels, 2);
+  StoreAt<uint32_t>(reserved, TransportOffset(reserved) + kTransportChannels, 2);
   ResealChecksums(reserved);
   EXPECT_EQ(ErrorOf(reserved), "");
   EXPECT_EQ(PackReader::OpenMemory(reserved.data(), reserved.size()).ReadTransportIndex().channels,
@@ -487,7 +488,7 @@ TEST(PrtpackRoundTrip, ImagePacksThatDisagreeWithTheirTransportAreRefused) {
   in.transport->row_count = 6;  // the writer's check passes; then the TRNS is made 12 rows
   std::vector<uint8_t> b = WritePack(in);
   const std::size_t at = TransportOffset(b) + kTransportRowCount;
-  StoreU64(b.data() + at, 12);
+  StoreAt<uint64_t>(b, at, 12);
   ResealChecksums(b);
   const std::string e = ErrorOf(b);
   EXPECT_NE(e.find("IMGE"), std::string::npos) << e;
@@ -715,9 +716,9 @@ TEST(PrtpackRoundTrip, CpcaReaderRefusesInconsistentSections) {
     int width;
     const char* expect;
   };
-  const uint32_t params = LoadU32(good.data() + kCpcaParamsSize);
+  const uint32_t params = LoadAt<uint32_t>(good, kCpcaParamsSize);
   const Patch patches[] = {
-      {kCpcaBodySize, LoadU64(good.data() + kCpcaBodySize) + 1, 8, "disagree with its size"},
+      {kCpcaBodySize, LoadAt<uint64_t>(good, kCpcaBodySize) + 1, 8, "disagree with its size"},
       {kCpcaBodySize, 0, 8, "disagree with its size"},
       {kCpcaParamsSize, params + 1, 4, "disagree with its size"},
       {kCpcaParamsSize, 0xFFFFFFFFu, 4, "disagree with its size"},
@@ -729,8 +730,8 @@ TEST(PrtpackRoundTrip, CpcaReaderRefusesInconsistentSections) {
   };
   for (const Patch& p : patches) {
     std::vector<uint8_t> bad = good;
-    if (p.width == 4) StoreU32(bad.data() + p.at, static_cast<uint32_t>(p.value));
-    if (p.width == 8) StoreU64(bad.data() + p.at, p.value);
+    if (p.width == 4) StoreAt<uint32_t>(bad, p.at, static_cast<uint32_t>(p.value));
+    if (p.width == 8) StoreAt<uint64_t>(bad, p.at, p.value);
     const std::string e = ErrorOf(testing::PackWithRawCpca(NoTransport(), bad));
     EXPECT_NE(e.find(p.expect), std::string::npos) << e;
     EXPECT_NE(e.find("CPCA"), std::string::npos) << e;

@@ -195,13 +195,13 @@ inline std::vector<uint8_t> PackWithRawCpca(PackInput in, const std::vector<uint
   in.cpca.reset();
   in.extra_sections.push_back({"XCPC", kFlagCritical, 0, payload});
   std::vector<uint8_t> file = WritePack(in);
-  const uint32_t sections = LoadU32(file.data() + kHdrSectionCount);
+  const uint32_t sections = LoadAt<uint32_t>(file, kHdrSectionCount);
   for (uint32_t i = 0; i < sections; ++i) {
-    uint8_t* entry = file.data() + kHeaderSize + std::size_t(i) * kEntrySize;
-    if (LoadU32(entry + kSecType) == FourCC("XCPC")) StoreU32(entry + kSecType, kTypeCpca);
+    const std::size_t type = kHeaderSize + std::size_t(i) * kEntrySize + kSecType;
+    if (LoadAt<uint32_t>(file, type) == FourCC("XCPC")) StoreAt<uint32_t>(file, type, kTypeCpca);
   }
   // A CPCA pack is 1.3 (with a TRNS too, as WritePack made it: its channel field stays 1.0's).
-  if (!in.transport) StoreU16(file.data() + kHdrMinor, kVersionMinorCpca);
+  if (!in.transport) StoreAt<uint16_t>(file, kHdrMinor, kVersionMinorCpca);
   ResealChecksums(file);
   return file;
 }

@@ -15,7 +15,7 @@ TransportInput MakeTransportInput(const CompressedTransport& t, uint32_t columns
   TransportInput in;
   in.params = EncodeHeader(t.header);
   // EncodeHeader writes its magic (8 bytes) then its format version (u32).
-  in.encoding = in.params.size() >= 12 ? LoadU32(in.params.data() + 8) : 0;
+  in.encoding = in.params.size() >= 12 ? LoadAt<uint32_t>(in.params, 8) : 0;
   in.row_count = t.header.sample_count;
   in.channels = t.header.channels;
   const uint32_t ncol = t.header.column_count();

@@ -109,10 +109,10 @@ PendingSection MaterialSection(const PackMeshInput& m, uint32_t id) {
   s.type = kTypeMaterial;
   s.id = id;
   s.bytes.assign(kMaterialHeaderSize + m.name.size(), 0);
-  for (int c = 0; c < 3; ++c) StoreF32(&s.bytes[std::size_t(4 * c)], m.albedo[std::size_t(c)]);
-  StoreU32(&s.bytes[12], m.is_ground ? kMaterialFlagGround : 0u);
-  StoreU32(&s.bytes[16], m.grid_resolution);
-  StoreU32(&s.bytes[20], static_cast<uint32_t>(m.name.size()));
+  for (int c = 0; c < 3; ++c) StoreAt<float>(s.bytes, std::size_t(4 * c), m.albedo[std::size_t(c)]);
+  StoreAt<uint32_t>(s.bytes, 12, m.is_ground ? kMaterialFlagGround : 0u);
+  StoreAt<uint32_t>(s.bytes, 16, m.grid_resolution);
+  StoreAt<uint32_t>(s.bytes, 20, static_cast<uint32_t>(m.name.size()));
   std::copy(m.name.begin(), m.name.end(), s.bytes.begin() + kMaterialHeaderSize);
   s.raw_size = s.bytes.size();
   return s;
@@ -165,29 +165,30 @@ PendingSection TransportSection(const TransportInput& t, const WriterOptions& o,
   s.type = kTypeTransport;
   s.bytes.assign(end, 0);
   uint8_t* p = s.bytes.data();
-  StoreU32(p + kTransportEncoding, t.encoding);
-  StoreU32(p + kTransportBlockCount, static_cast<uint32_t>(t.blocks.size()));
-  StoreU64(p + kTransportRowCount, t.row_count);
-  StoreU64(p + kTransportColumnCount, columns);
-  StoreU32(p + kTransportParamsSize, static_cast<uint32_t>(t.params.size()));
+  const std::span<uint8_t> sec(s.bytes);
+  StoreAt<uint32_t>(sec, kTransportEncoding, t.encoding);
+  StoreAt<uint32_t>(sec, kTransportBlockCount, static_cast<uint32_t>(t.blocks.size()));
+  StoreAt<uint64_t>(sec, kTransportRowCount, t.row_count);
+  StoreAt<uint64_t>(sec, kTransportColumnCount, columns);
+  StoreAt<uint32_t>(sec, kTransportParamsSize, static_cast<uint32_t>(t.params.size()));
   // 1.1: the channel count; a one-channel transport keeps 1.0's reserved 0 (and the pack 1.0).
-  StoreU32(p + kTransportChannels, minor < kVersionMinorChannels ? 0u : t.channels);
+  StoreAt<uint32_t>(sec, kTransportChannels, minor < kVersionMinorChannels ? 0u : t.channels);
   std::copy(t.params.begin(), t.params.end(), p + kTransportHeaderSize);
   uint64_t first = 0;
   for (std::size_t b = 0; b < t.blocks.size(); ++b) {
-    uint8_t* e = p + index_offset + b * kBlockEntrySize;
-    StoreU64(e + 0, first);
-    StoreU32(e + 8, t.blocks[b].column_count);
-    StoreU32(e + 12, static_cast<uint32_t>(codecs[b]));
-    StoreU64(e + 16, offsets[b]);
-    StoreU64(e + 24, stored[b].size());
-    StoreU64(e + 32, t.blocks[b].bytes.size());
-    StoreU64(e + 40, Checksum(stored[b].data(), stored[b].size()));
+    const std::span<uint8_t> e = SliceAt(sec, index_offset + b * kBlockEntrySize, kBlockEntrySize);
+    StoreAt<uint64_t>(e, 0, first);
+    StoreAt<uint32_t>(e, 8, t.blocks[b].column_count);
+    StoreAt<uint32_t>(e, 12, static_cast<uint32_t>(codecs[b]));
+    StoreAt<uint64_t>(e, 16, offsets[b]);
+    StoreAt<uint64_t>(e, 24, stored[b].size());
+    StoreAt<uint64_t>(e, 32, t.blocks[b].bytes.size());
+    StoreAt<uint64_t>(e, 40, Checksum(stored[b].data(), stored[b].size()));
     std::copy(stored[b].begin(), stored[b].end(), p + offsets[b]);
     first += t.blocks[b].column_count;
   }
-  StoreU64(p + kTransportIndexChecksum,
-           TransportIndexChecksum(p, t.params.size(), index_offset, t.blocks.size()));
+  StoreAt<uint64_t>(sec, kTransportIndexChecksum,
+                    TransportIndexChecksum(p, t.params.size(), index_offset, t.blocks.size()));
   s.raw_size = s.bytes.size();
   return s;
 }
@@ -221,12 +222,12 @@ std::vector<uint8_t> EncodeCpcaSection(const CpcaTransport& t) {
   }
   std::vector<uint8_t> out(kCpcaHeaderSize + params.size() + body.size(), 0);
   uint8_t* p = out.data();
-  StoreU32(p + kCpcaParamsSize, static_cast<uint32_t>(params.size()));
-  StoreU32(p + kCpcaChannels, t.header.channels);
-  StoreU64(p + kCpcaRowCount, t.header.sample_count);
-  StoreU32(p + kCpcaClusters, t.header.cpca_clusters);
-  StoreU32(p + kCpcaBases, t.header.cpca_bases);
-  StoreU64(p + kCpcaBodySize, body.size());
+  StoreAt<uint32_t>(out, kCpcaParamsSize, static_cast<uint32_t>(params.size()));
+  StoreAt<uint32_t>(out, kCpcaChannels, t.header.channels);
+  StoreAt<uint64_t>(out, kCpcaRowCount, t.header.sample_count);
+  StoreAt<uint32_t>(out, kCpcaClusters, t.header.cpca_clusters);
+  StoreAt<uint32_t>(out, kCpcaBases, t.header.cpca_bases);
+  StoreAt<uint64_t>(out, kCpcaBodySize, body.size());
   std::copy(params.begin(), params.end(), p + kCpcaHeaderSize);
   std::copy(body.begin(), body.end(), p + kCpcaHeaderSize + params.size());
   return out;
@@ -258,7 +259,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
   for (const ExtraSectionInput& x : input.extra_sections) {
     if (x.type.size() != 4) throw InputError("extra section", "type must be 4 bytes");
     PendingSection s;
-    s.type = LoadU32(reinterpret_cast<const uint8_t*>(x.type.data()));
+    s.type = LoadAt<uint32_t>(x.type, 0);
     if (s.type == kTypeMeta || s.type == kTypeMesh || s.type == kTypeMaterial ||
         s.type == kTypeTransport || s.type == kTypeVisibility || s.type == kTypeImage ||
         s.type == kTypeCpca) {
@@ -338,29 +339,30 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
   std::vector<uint8_t> file(file_size, 0);
   uint8_t* h = file.data();
   std::copy(kMagic.begin(), kMagic.end(), h);
-  StoreU16(h + kHdrMajor, kVersionMajor);
-  StoreU16(h + kHdrMinor, MinorVersionOf(input));
-  StoreU32(h + kHdrHeaderSize, kHeaderSize);
-  StoreU32(h + kHdrSectionCount, static_cast<uint32_t>(sections.size()));
-  StoreU32(h + kHdrEntrySize, kEntrySize);
-  StoreU64(h + kHdrTableOffset, kHeaderSize);
-  StoreU64(h + kHdrFileSize, file_size);
-  StoreU32(h + kHdrAlignment, a);
+  StoreAt<uint16_t>(file, kHdrMajor, kVersionMajor);
+  StoreAt<uint16_t>(file, kHdrMinor, MinorVersionOf(input));
+  StoreAt<uint32_t>(file, kHdrHeaderSize, kHeaderSize);
+  StoreAt<uint32_t>(file, kHdrSectionCount, static_cast<uint32_t>(sections.size()));
+  StoreAt<uint32_t>(file, kHdrEntrySize, kEntrySize);
+  StoreAt<uint64_t>(file, kHdrTableOffset, kHeaderSize);
+  StoreAt<uint64_t>(file, kHdrFileSize, file_size);
+  StoreAt<uint32_t>(file, kHdrAlignment, a);
   for (std::size_t i = 0; i < sections.size(); ++i) {
     const PendingSection& s = sections[i];
-    uint8_t* e = h + kHeaderSize + i * kEntrySize;
-    StoreU32(e + kSecType, s.type);
-    StoreU32(e + kSecFlags, s.flags);
-    StoreU32(e + kSecCodec, static_cast<uint32_t>(s.codec));
-    StoreU32(e + kSecId, s.id);
-    StoreU64(e + kSecOffset, offsets[i]);
-    StoreU64(e + kSecStored, s.bytes.size());
-    StoreU64(e + kSecRaw, s.raw_size);
-    StoreU64(e + kSecChecksum, Checksum(s.bytes.data(), s.bytes.size()));
+    const std::span<uint8_t> e =
+        SliceAt(std::span<uint8_t>(file), kHeaderSize + i * kEntrySize, kEntrySize);
+    StoreAt<uint32_t>(e, kSecType, s.type);
+    StoreAt<uint32_t>(e, kSecFlags, s.flags);
+    StoreAt<uint32_t>(e, kSecCodec, static_cast<uint32_t>(s.codec));
+    StoreAt<uint32_t>(e, kSecId, s.id);
+    StoreAt<uint64_t>(e, kSecOffset, offsets[i]);
+    StoreAt<uint64_t>(e, kSecStored, s.bytes.size());
+    StoreAt<uint64_t>(e, kSecRaw, s.raw_size);
+    StoreAt<uint64_t>(e, kSecChecksum, Checksum(s.bytes.data(), s.bytes.size()));
     std::copy(s.bytes.begin(), s.bytes.end(), h + offsets[i]);
   }
-  StoreU64(h + kHdrChecksum,
-           HeaderChecksum(h, h + kHeaderSize, std::size_t(sections.size()) * kEntrySize));
+  StoreAt<uint64_t>(file, kHdrChecksum,
+                    HeaderChecksum(h, h + kHeaderSize, std::size_t(sections.size()) * kEntrySize));
   return file;
 }
 

@@ -165,20 +165,15 @@ TEST(FarmMpiTest, OneTwoAndThreeRanksGiveByteIdenticalFilesEqualToTheKernels) {
   }
 }
 
-// The variance sums of two runs: the same rows covered, the same sums up to the order they were
-// added in (jobs finish in any order).
+// The variance sums of two runs: the same bytes (the sums are exact, so the order jobs finish in
+// does not matter; docs/farm.md, "Determinism"), and not all zero.
 void ExpectSameVariance(const std::string& a, const std::string& b) {
   const TransportVariance va = DecodeTransportVariance(ReadWholeFile(a), a);
-  const TransportVariance vb = DecodeTransportVariance(ReadWholeFile(b), b);
-  ASSERT_EQ(va.rows_covered, vb.rows_covered);
-  ASSERT_EQ(va.sums.size(), vb.sums.size());
   double largest = 0;
-  for (const auto& s : va.sums)
-    for (double x : s) largest = std::max(largest, x);
-  ASSERT_GT(largest, 0.0);
   for (std::size_t m = 0; m < va.sums.size(); ++m)
-    for (std::size_t t = 0; t < va.sums[m].size(); ++t)
-      ASSERT_NEAR(va.sums[m][t], vb.sums[m][t], 1e-12 * largest) << "mesh " << m << " texel " << t;
+    for (double x : va.MeshSums(m)) largest = std::max(largest, x);
+  ASSERT_GT(largest, 0.0);
+  EXPECT_TRUE(ReadWholeFile(a) == ReadWholeFile(b)) << a << " and " << b << " differ";
 }
 
 // Rows stay where they are computed (docs/farm.md, "Where the rows go"): with 3 ranks sharing the

@@ -20,8 +20,10 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
 
@@ -177,41 +179,32 @@ float RgbeComponent(std::uint8_t c, std::uint8_t e) {
   return e == 0 ? 0.0f : static_cast<float>(std::ldexp(c + 0.5, static_cast<int>(e) - 136));
 }
 
-class ByteReader {
- public:
-  ByteReader(const std::string& path, const std::string& data) : path_(path), data_(data) {}
-  bool AtEnd() const { return pos_ >= data_.size(); }
-  std::size_t Remaining() const { return data_.size() - pos_; }
-  std::uint8_t Byte(const char* what) {
-    if (pos_ >= data_.size()) throw InputError(path_, std::string("truncated in ") + what);
-    return static_cast<std::uint8_t>(data_[pos_++]);
-  }
-  std::uint8_t Peek(std::size_t k) const { return static_cast<std::uint8_t>(data_[pos_ + k]); }
-  // One header line without its '\n'; lines longer than 64 KiB are corrupt.
-  std::string Line() {
-    const std::size_t end = data_.find('\n', pos_);
-    if (end == std::string::npos) throw InputError(path_, "truncated header");
-    if (end - pos_ > 65536) throw InputError(path_, "header line too long");
-    std::string line = data_.substr(pos_, end - pos_);
-    pos_ = end + 1;
-    return line;
-  }
+// The file's reader: a read past the end is an InputError naming the file and the field.
+ByteReader RadianceReader(const std::string& path, const std::string& data) {
+  return ByteReader(data, [&path](const char* what, std::size_t) {
+    throw InputError(path, std::string("truncated in ") + what);
+  });
+}
 
- private:
-  const std::string& path_;
-  const std::string& data_;
-  std::size_t pos_ = 0;
-};
+// One header line without its '\n'; lines longer than 64 KiB are corrupt.
+std::string Line(ByteReader& in, const std::string& path) {
+  const std::size_t end = in.rest().find('\n');
+  if (end == std::string_view::npos) throw InputError(path, "truncated header");
+  if (end > 65536) throw InputError(path, "header line too long");
+  std::string line(in.Take(end, "header"));
+  in.Skip(1, "header");
+  return line;
+}
 
 }  // namespace
 
 EnvironmentImage ReadRadianceHdr(const std::string& path, EnvironmentLoadInfo* info_out) {
   const std::string data = ReadWholeFile(path);
-  ByteReader in(path, data);
-  const std::string magic = in.Line();
+  ByteReader in = RadianceReader(path, data);
+  const std::string magic = Line(in, path);
   if (magic.rfind("#?", 0) != 0) throw InputError(path, "not a Radiance file (no #? line)");
   for (;;) {
-    const std::string line = in.Line();
+    const std::string line = Line(in, path);
     if (line.empty() || line == "\r") break;
     if (line.rfind("FORMAT=", 0) == 0) {
       const std::string f = line.substr(7);
@@ -223,7 +216,7 @@ EnvironmentImage ReadRadianceHdr(const std::string& path, EnvironmentLoadInfo* i
       spdlog::debug("{}: {} (ignored)", path, line);
     }
   }
-  const std::string res = in.Line();
+  const std::string res = Line(in, path);
   std::istringstream rs(res);
   std::string ys, xs;
   long long h = 0, w = 0;
@@ -239,12 +232,15 @@ EnvironmentImage ReadRadianceHdr(const std::string& path, EnvironmentLoadInfo* i
   std::vector<std::uint8_t> scan(static_cast<std::size_t>(W) * 4);
   for (int y = 0; y < img.height; ++y) {
     const std::string where = "scanline " + std::to_string(y);
-    const bool new_rle = W >= 8 && W < 32768 && in.Remaining() >= 4 && in.Peek(0) == 2 &&
-                         in.Peek(1) == 2 && (in.Peek(2) & 0x80) == 0;
+    const std::string_view ahead = in.rest();
+    const bool new_rle = W >= 8 && W < 32768 && ahead.size() >= 4 && ahead[0] == 2 &&
+                         ahead[1] == 2 && (static_cast<std::uint8_t>(ahead[2]) & 0x80) == 0;
     if (new_rle) {
-      in.Byte(where.c_str());
-      in.Byte(where.c_str());
-      const int enc_w = (in.Byte(where.c_str()) << 8) | in.Byte(where.c_str());
+      in.Get<std::uint8_t>(where.c_str());
+      in.Get<std::uint8_t>(where.c_str());
+      // Big-endian, read in two statements (the operands of | are unsequenced).
+      const int enc_hi = in.Get<std::uint8_t>(where.c_str());
+      const int enc_w = (enc_hi << 8) | in.Get<std::uint8_t>(where.c_str());
       if (enc_w != W) {
         throw InputError(path, where + ": RLE width " + std::to_string(enc_w) +
                                    " does not match the image width " + std::to_string(W));
@@ -252,18 +248,18 @@ EnvironmentImage ReadRadianceHdr(const std::string& path, EnvironmentLoadInfo* i
       for (int c = 0; c < 4; ++c) {
         int x = 0;
         while (x < W) {
-          int count = in.Byte(where.c_str());
+          int count = in.Get<std::uint8_t>(where.c_str());
           if (count > 128) {
             count -= 128;
             if (count > W - x) throw InputError(path, where + ": RLE run overflows the scanline");
-            const std::uint8_t v = in.Byte(where.c_str());
+            const std::uint8_t v = in.Get<std::uint8_t>(where.c_str());
             for (int i = 0; i < count; ++i) scan[4 * static_cast<std::size_t>(x++) + c] = v;
           } else {
             if (count == 0 || count > W - x) {
               throw InputError(path, where + ": bad RLE literal count " + std::to_string(count));
             }
             for (int i = 0; i < count; ++i) {
-              scan[4 * static_cast<std::size_t>(x++) + c] = in.Byte(where.c_str());
+              scan[4 * static_cast<std::size_t>(x++) + c] = in.Get<std::uint8_t>(where.c_str());
             }
           }
         }
@@ -272,7 +268,7 @@ EnvironmentImage ReadRadianceHdr(const std::string& path, EnvironmentLoadInfo* i
       int x = 0, shift = 0;
       while (x < W) {
         std::uint8_t p[4];
-        for (auto& b : p) b = in.Byte(where.c_str());
+        for (auto& b : p) b = in.Get<std::uint8_t>(where.c_str());
         if (p[0] == 1 && p[1] == 1 && p[2] == 1) {  // old-style run: repeat the previous pixel
           if (x == 0) throw InputError(path, where + ": repeat run with no previous pixel");
           if (shift > 16) throw InputError(path, where + ": repeat run too long");

@@ -25,13 +25,6 @@ bool IsStorableFloat(double v) {
   return std::isfinite(v) && std::fabs(v) <= FLT_MAX;
 }
 
-uint32_t FromLittleEndian(uint32_t u) {
-  if constexpr (std::endian::native == std::endian::big) {
-    u = (u >> 24) | ((u >> 8) & 0xFF00u) | ((u << 8) & 0xFF0000u) | (u << 24);
-  }
-  return u;
-}
-
 bool IsSpace(char c) {
   return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
 }

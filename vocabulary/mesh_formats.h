@@ -32,8 +32,6 @@ bool ParseInt(std::string_view tok, int64_t& v);
 // A coordinate must be finite and representable as float32 (storage downstream is float32).
 bool IsStorableFloat(double v);
 
-uint32_t FromLittleEndian(uint32_t u);
-
 // Splits text into lines (without the line break), counting from 1.
 class LineReader {
  public:

@@ -5,6 +5,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "vocabulary/bytes.h"
 #include "vocabulary/mesh_formats.h"
 
 namespace prt::mesh_import {
@@ -58,23 +59,29 @@ RawMesh ReadStlBinary(std::string_view bytes, const std::string& name, uint32_t 
   raw.report.format = "stl-binary";
   Welder welder(raw);
   raw.triangles.reserve(count);
-  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data()) + 84;
-  for (uint32_t t = 0; t < count; ++t, p += 50) {
+  // ReadStl checked that 84 + 50 · count bytes are there: no read below runs out.
+  ByteReader in(
+      bytes,
+      [&name](const char* what, std::size_t at) {
+        throw InputError(name,
+                         std::string("truncated: ") + what + " at byte " + std::to_string(at));
+      },
+      84);
+  for (uint32_t t = 0; t < count; ++t) {
+    in.Skip(12, "triangle normal");
     uint32_t idx[3];
     for (int c = 0; c < 3; ++c) {
       float xyz[3];
-      for (int k = 0; k < 3; ++k) {
-        uint32_t u;
-        std::memcpy(&u, p + 12 + 12 * c + 4 * k, 4);
-        u = FromLittleEndian(u);
-        xyz[k] = std::bit_cast<float>(u);
-        if (!std::isfinite(xyz[k])) {
+      for (float& x : xyz) {
+        x = in.Get<float>("triangle corner");
+        if (!std::isfinite(x)) {
           throw InputError(name, "triangle " + std::to_string(t) + " of " + std::to_string(count) +
                                      ": corner " + std::to_string(c) + " is not finite");
         }
       }
       idx[c] = welder.Add(xyz[0], xyz[1], xyz[2]);
     }
+    in.Skip(2, "triangle attribute");
     AddPolygon(raw, idx, 3);
   }
   welder.Finish();
@@ -147,9 +154,7 @@ RawMesh ReadStlAscii(std::string_view text, const std::string& name) {
 
 RawMesh ReadStl(std::string_view bytes, const std::string& name) {
   if (bytes.size() >= 84) {
-    uint32_t count;
-    std::memcpy(&count, bytes.data() + 80, 4);
-    count = FromLittleEndian(count);
+    const auto count = LoadAt<uint32_t>(bytes, 80);
     if (84 + 50 * static_cast<uint64_t>(count) == bytes.size()) {
       return ReadStlBinary(bytes, name, count);
     }
@@ -164,9 +169,7 @@ RawMesh ReadStl(std::string_view bytes, const std::string& name) {
     throw InputError(name, "truncated: " + std::to_string(bytes.size()) +
                                " bytes is shorter than a binary STL header (84 bytes)");
   }
-  uint32_t count;
-  std::memcpy(&count, bytes.data() + 80, 4);
-  count = FromLittleEndian(count);
+  const auto count = LoadAt<uint32_t>(bytes, 80);
   throw InputError(name, "truncated or not an STL: binary header declares " +
                              std::to_string(count) + " triangles (" +
                              std::to_string(84 + 50 * static_cast<uint64_t>(count)) +

@@ -144,7 +144,7 @@ std::vector<float> CoarsenLight(const CubemapLayout& fine, const CubemapLayout& 
 namespace prt {
 
 // Every bounce in one process, in parallel over vertices with TBB (tests, benchmarks; the farm
-// runs the same kernels as jobs, farm/bounce_phase.cpp). `direct` holds the samples' T⁰ rows at
+// runs the same kernels as jobs, farm/bounce/gathering.cpp). `direct` holds the samples' T⁰ rows at
 // `fine` (samples.size() rows); returns bounces 1 … K, each channels × samples.size() rows of
 // coarse.texel_count() floats, channel-major. stats and seconds (optional) receive one entry per
 // bounce (its counters, its wall time).

@@ -160,7 +160,7 @@ SparseOutcome ReconstructIndirectRow(const IndirectComponent& component, const S
 // A non-dense sample's row (§5): its dense neighbours within `radius` (at most max_neighbors,
 // nearest first, from `dense_index` over the dense samples), whose rows row_of(d) gives (channels
 // × cols each), then ReconstructIndirectRow. What RunSparseIndirect and the farm's -sparse phases
-// (farm/bounce_phase.cpp) do per vertex.
+// (farm/bounce/features.cpp) do per vertex.
 template <class RowOf>
 SparseOutcome ReconstructIndirectAt(const IndirectComponent& component,
                                     std::span<const SpatialSample> samples, uint32_t s,

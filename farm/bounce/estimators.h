@@ -1,0 +1,41 @@
+// The indirect stage's estimators (docs/interreflection.md), one phase class and one file each,
+// all running their jobs on the shared driver (farm/bounce/driver.h); MakeBouncePhase
+// (AddBouncePhases, farm/bounce/driver.cpp) picks them. What one estimator's file lends another is here too: the features
+// step evaluates a sparse vertex's feature texels with the gathering or path-tracing settings.
+// Internal to farm/bounce/.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "farm/farm_context.h"
+#include "vocabulary/cubemap.h"
+#include "worker/bounce_gather.h"
+#include "worker/path_trace_reference.h"
+
+namespace prt {
+
+// farm/bounce/gathering.cpp: bounce k ≥ 1 ("bounce-<k>").
+// Each shares `figures`, report.json "interreflection" (farm/bounce/driver.h).
+std::unique_ptr<FarmPhase> MakeGatheringPhase(int k,
+                                              std::shared_ptr<nlohmann::ordered_json> figures);
+// farm/bounce/path_tracing.cpp: every bounce at once (k = 0, "path-trace").
+std::unique_ptr<FarmPhase> MakePathTracingPhase(std::shared_ptr<nlohmann::ordered_json> figures);
+// farm/bounce/features.cpp: the step after bounce k (k = 0: after path tracing) with [sparse]
+// indirect = "features" ("bounce-<k>-sparse", "path-trace-sparse").
+std::unique_ptr<FarmPhase> MakeFeaturesPhase(int k,
+                                             std::shared_ptr<nlohmann::ordered_json> figures);
+
+// The gather estimator's settings of the run ([sampling] gather_paths, seed, indirect_n,
+// near_field).
+BounceGatherOptions GatherOptionsOf(const FarmContext& ctx);
+// The rows bounce k gathers from, on the indirect grid: T⁰ coarsened (k = 1, prev_channels 1) or
+// bounce k − 1's (channels rows per vertex), read from the run folder.
+std::vector<float> ReadPreviousBounce(const FarmContext& ctx, int k, const CubemapLayout& fine,
+                                      const CubemapLayout& coarse, int prev_channels);
+
+// The path tracer's settings of the run ([sampling] bounces, gather_paths, rays_per_texel, seed;
+// one ray per texel for the direct row at each path vertex).
+PathTraceOptions PathOptionsOf(const FarmContext& ctx);
+
+}  // namespace prt
