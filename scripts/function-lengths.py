@@ -18,6 +18,7 @@ what it is for: the numbers issue 37 asks for before and after a split.
 import argparse
 import os
 import re
+import signal
 import sys
 
 
@@ -159,6 +160,7 @@ def measure(path):
 
 
 def main():
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # quiet under `| head`
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("paths", nargs="+", help="files or folders (*.cpp, *.h, *.hpp)")
     ap.add_argument("-n", type=int, default=10, help="how many to list (0: all)")
