@@ -2,10 +2,10 @@
 // or every sub-phase of the sparse method, then finalize, compress, estimate), each with a
 // predicted duration. A step's prediction is its amount of work (rows, candidates, bytes) times
 // a cost per unit; the costs start from priors measured on a 2-core machine
-// (PredictRunSteps) and are replaced, as the run goes, by what this run measured: a finished
-// step gives its kind's cost, and scales the priors of the kinds not yet seen by how much
-// slower or faster than its prior it ran (the machine's speed today). The step running now
-// counts with its own progress ETA. Thread-safe.
+// (each phase's PredictSteps, farm_context.h) and are replaced, as the run goes, by what this run
+// measured: a finished step gives its kind's cost, and scales the priors of the kinds not yet seen
+// by how much slower or faster than its prior it ran (the machine's speed today). The step running
+// now counts with its own progress ETA. Thread-safe.
 #pragma once
 
 #include <functional>

@@ -1,7 +1,8 @@
 // The indirect stage's estimators (docs/interreflection.md), one phase class and one file each,
-// all running their jobs on the shared driver (farm/bounce/driver.h); MakeBouncePhase
-// (AddBouncePhases, farm/bounce/driver.cpp) picks them. What one estimator's file lends another is here too: the features
-// step evaluates a sparse vertex's feature texels with the gathering or path-tracing settings.
+// all running their jobs on the shared driver (farm/bounce/driver.h); AddBouncePhases
+// (farm/bounce/driver.cpp, in the phase list) picks them. What one estimator's file lends
+// another is here too: the features step evaluates a sparse vertex's feature texels with the
+// gathering or path-tracing settings.
 // Internal to farm/bounce/.
 #pragma once
 
