@@ -34,7 +34,7 @@ struct BruteResultHeader {
 // Traces samples `range` into the result payload: the header, the rows (unless `in_place`: then
 // they go into its file, durably, before the result leaves), then their variance sums (an encoded
 // TransportVariance).
-void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string& out,
+void ComputeBruteJob(FarmContext& ctx, const RowRange& range, std::string& out,
                      TransportFileWriter* in_place) {
   const uint64_t cols = ctx.sampler->layout().texel_count();
   const std::size_t at = out.size();
@@ -77,9 +77,9 @@ void ComputeBruteJob(const FarmContext& ctx, const RowRange& range, std::string&
   if (in_place) {
     // Rows and variance record durable before the result that lets rank 0 journal them.
     in_place->WriteRows(range.first, range.count, rows);
-    ctx.rank_variance->Record(ctx.method, range.first, range.count, sums);
+    RowsStage(ctx).rank_variance->Record(ctx.method, range.first, range.count, sums);
     in_place->Sync();
-    ctx.rank_variance->Sync();
+    RowsStage(ctx).rank_variance->Sync();
     h.in_place = 1;
     std::memcpy(out.data() + at, &h, sizeof h);
     return;
@@ -107,7 +107,7 @@ class BrutePhase final : public FarmPhase {
         [&ctx, &rows_out](const RowRange& range, std::string_view, std::string& out) {
           if (ctx.rows_in_place && !rows_out) {
             rows_out.emplace(TransportFileWriter::OpenRows(ctx.folder.partial, ctx.RowsFileInfo()));
-            ctx.rank_variance =
+            RowsStage(ctx).rank_variance =
                 std::make_unique<RankVarianceLog>(ctx.folder, ctx.rank, ctx.EmptyVarianceSums());
           }
           ComputeBruteJob(ctx, range, out, rows_out ? &*rows_out : nullptr);
@@ -124,14 +124,15 @@ class BrutePhase final : public FarmPhase {
     // The journaled jobs setup verified against the rows of transport.prtt.partial.
     JobBatch batch;
     uint64_t uncovered = 0;
-    for (const JournalEntry& e : ctx.journal_entries) {
-      if (!ctx.variance->Reuse(ctx.method, e.rows.first, e.rows.count)) uncovered += e.rows.count;
+    for (const JournalEntry& e : RowsStage(ctx).journal_entries) {
+      if (!RowsStage(ctx).variance->Reuse(ctx.method, e.rows.first, e.rows.count))
+        uncovered += e.rows.count;
       batch.done.push_back(e.rows);
       rep.rows_reused += e.rows.count;
       rep.rays_traced_all += e.rays_traced;
       rep.texels_below_horizon_all += e.texels_below_horizon;
     }
-    rep.jobs_reused = ctx.journal_entries.size();
+    rep.jobs_reused = RowsStage(ctx).journal_entries.size();
     if (uncovered > 0) {
       spdlog::warn(
           "{} re-used row(s) have no logged variance: the Monte-Carlo estimate leaves "
@@ -165,8 +166,9 @@ class BrutePhase final : public FarmPhase {
         } catch (const InputError& e) {
           throw RankFailure(e.what());
         }
-        ctx.writer->WriteRows(range.first, range.count, reinterpret_cast<const float*>(rows));
-        ctx.variance->Record(ctx.method, range.first, range.count, sums);
+        RowsStage(ctx).writer->WriteRows(range.first, range.count,
+                                         reinterpret_cast<const float*>(rows));
+        RowsStage(ctx).variance->Record(ctx.method, range.first, range.count, sums);
       } else if (payload.size() != sizeof h) {
         throw RankFailure("rank " + std::to_string(rank) + " returned " +
                           std::to_string(payload.size()) + " bytes for rows it wrote itself");
@@ -181,8 +183,8 @@ class BrutePhase final : public FarmPhase {
       return e;
     };
     batch.sync = [&ctx] {
-      ctx.writer->Sync();
-      ctx.variance->Sync();
+      RowsStage(ctx).writer->Sync();
+      RowsStage(ctx).variance->Sync();
     };
     batch.committed = [&rep](const JournalEntry& e) {
       rep.rows_done += e.rows.count;

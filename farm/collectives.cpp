@@ -7,8 +7,8 @@
 #include <climits>
 #include <cstdlib>
 
-#include "farm/mpi_support.h"
 #include "farm/farm_options.h"
+#include "farm/mpi_support.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -61,8 +61,8 @@ void ReduceToRank0(int comm, int rank, std::span<T> v, MPI_Op op, const char* wh
   for (std::size_t at = 0; at < v.size(); at += kPiece) {
     const int n = static_cast<int>(std::min(kPiece, v.size() - at));
     // Rank 0 receives in place; the others send their values and keep them.
-    CheckMpi(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : v.data() + at, rank == 0 ? v.data() + at : nullptr,
-                        n, TypeOf<T>(), op, 0, Comm(comm)),
+    CheckMpi(MPI_Reduce(rank == 0 ? MPI_IN_PLACE : v.data() + at,
+                        rank == 0 ? v.data() + at : nullptr, n, TypeOf<T>(), op, 0, Comm(comm)),
              what);
   }
 }
@@ -73,8 +73,8 @@ void Concatenate(int comm, int rank, int size, std::span<const T> mine, std::spa
   std::vector<int> c, displs;
   if (rank == 0) {
     if (counts.size() != static_cast<std::size_t>(size))
-      throw RankFailure(std::string(what) + ": " + std::to_string(counts.size()) +
-                        " counts for " + std::to_string(size) + " ranks");
+      throw RankFailure(std::string(what) + ": " + std::to_string(counts.size()) + " counts for " +
+                        std::to_string(size) + " ranks");
     uint64_t at = 0;
     for (uint64_t k : counts) {
       if (k > INT_MAX || at > INT_MAX)
@@ -108,9 +108,9 @@ Collectives::Collectives() {
 void Collectives::ShareFromRank0(void* data, std::size_t bytes, const char* what) const {
   char* p = static_cast<char*>(data);
   for (std::size_t at = 0; at < bytes; at += kPiece)
-    CheckMpi(MPI_Bcast(p + at, static_cast<int>(std::min(kPiece, bytes - at)), MPI_BYTE, 0,
-                       Comm(comm_)),
-             what);
+    CheckMpi(
+        MPI_Bcast(p + at, static_cast<int>(std::min(kPiece, bytes - at)), MPI_BYTE, 0, Comm(comm_)),
+        what);
 }
 
 void Collectives::ShareFromRank0(std::string& bytes, const char* what) const {

@@ -226,8 +226,9 @@ void SetUpOnRank0(FarmContext& ctx, CompressionSetup& s) {
   try {
     s.reader = OpenComposedRows(ctx);
     // The plan setup keyed the compression stage with (nothing is read again but the rows).
-    if (!ctx.compression_plan) throw std::logic_error("compression phase without a plan");
-    CompressionPlan plan = *ctx.compression_plan;
+    const CompressionPlan* keyed = ctx.results.Find<CompressionPlan>();
+    if (!keyed) throw std::logic_error("compression phase without a plan");
+    CompressionPlan plan = *keyed;
     if (plan.header.cubemap_n != s.reader->direct_info().cubemap_n)
       throw InputError(folder.transport,
                        "cubemap n " + std::to_string(s.reader->direct_info().cubemap_n) +
@@ -689,8 +690,8 @@ class CompressionPhase final : public FarmPhase {
   const char* stage() const override { return kStageCompression; }
   // ~100 MB/s of float32 rows per rank (the 2-core VM's prior; docs/farm-compression.md).
   void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
-    const double raw_bytes =
-        static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n * 4.0;
+    const double raw_bytes = static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n *
+                             ctx.params.cubemap_n * 4.0;
     steps.push_back({"compress", "compress", raw_bytes, 1.0 / (1e8 * std::max(1, ctx.size))});
   }
   void Run(FarmContext& ctx) override { Compress(ctx); }

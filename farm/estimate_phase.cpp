@@ -141,8 +141,8 @@ class EstimatePhase final : public FarmPhase {
   // Over the raw rows' bytes: nearly free when the compression phase accumulated Σ B² as the
   // rows passed, else one read of transport.prtt (~400 MB/s on the 2-core VM).
   void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
-    const double raw_bytes =
-        static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n * ctx.params.cubemap_n * 4.0;
+    const double raw_bytes = static_cast<double>(ctx.params.rows) * 6.0 * ctx.params.cubemap_n *
+                             ctx.params.cubemap_n * 4.0;
     steps.push_back(
         {"estimate", "estimate", raw_bytes, ctx.params.run_compression ? 1e-11 : 2.5e-9});
   }
@@ -181,10 +181,9 @@ class EstimatePhase final : public FarmPhase {
       rec["environments"] = rec_envs;
       rec["worst_relative_rms"] = rec_worst;
       out["reconstruction"] = rec;
-      const auto [tot_envs, tot_worst] =
-          ErrorTable(ctx, estimate, ev, [&](std::size_t l, std::size_t m) {
-            return ev.mc[l][m] + ev.reconstruction[l][m];
-          });
+      const auto [tot_envs, tot_worst] = ErrorTable(
+          ctx, estimate, ev,
+          [&](std::size_t l, std::size_t m) { return ev.mc[l][m] + ev.reconstruction[l][m]; });
       out["total"] = {{"environments", tot_envs}, {"worst_relative_rms", tot_worst}};
     }
     WriteFileDurably(f.accuracy, out.dump(2) + "\n");
@@ -336,9 +335,8 @@ class EstimatePhase final : public FarmPhase {
         per_mesh.push_back(
             {{"name", ctx.GroupName(m)},
              {"relative_rms", Ratio(var_m, ev.norm[l][m])},
-             {"rms_radiance", mesh_rows[m]
-                                  ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m])))
-                                  : 0.0}});
+             {"rms_radiance",
+              mesh_rows[m] ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m]))) : 0.0}});
       }
       const double rel = Ratio(var_all, norm_all);
       worst = std::max(worst, rel);

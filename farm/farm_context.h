@@ -147,6 +147,24 @@ class PhaseResults {
   std::unordered_map<std::type_index, std::shared_ptr<void>> values_;
 };
 
+// The rows stage's state (a typed result, ctx.results): setup opens it, the rows phase (brute
+// force, the sparse method or the visibility job) fills it, finalize closes it.
+struct RowsStageState {
+  // Rank 0: transport.prtt.partial while sampling.
+  std::optional<TransportFileWriter> writer;
+  // Rank 0: the sampling jobs' Monte-Carlo variance sums (transport runs).
+  std::unique_ptr<VarianceAccumulator> variance;
+  // Rank 0: the journal's lines of the method's phase, verified by that phase before it re-uses
+  // them (brute force: already verified against the rows by setup).
+  std::vector<JournalEntry> journal_entries;
+  // A computing rank with rows in place: its variance records and their sum, which finalize
+  // reduces.
+  std::unique_ptr<RankVarianceLog> rank_variance;
+};
+struct FarmContext;
+// The rows stage's state of this rank (created empty the first time it is asked for).
+RowsStageState& RowsStage(FarmContext& ctx);
+
 struct FarmContext {
   // ---- every rank
   FarmOptions options;
@@ -174,28 +192,17 @@ struct FarmContext {
   // rank 0 only their checksums and counters; finalize and the compression's transpose read
   // each rank's share of the rows where it runs (docs/farm.md, "Where the rows go").
   bool rows_in_place = false;
-  // rows_in_place brute force: this computing rank's variance records and their sum.
-  std::unique_ptr<RankVarianceLog> rank_variance;
 
   // ---- rank 0 only
-  bool folder_ready = false;  // the run folder is this run's (a report can be written)
-  SceneDescription scene;     // as parsed by setup (the estimate reads its environments)
-  // The compression the manifest's compression stage is keyed with (transport runs): what the
-  // compression phase writes transport.prtc with.
-  std::optional<CompressionPlan> compression_plan;
+  bool folder_ready = false;    // the run folder is this run's (a report can be written)
+  SceneDescription scene;       // as parsed by setup (the estimate reads its environments)
   StagePlan stage_plan;         // what setup decided for each stage (report.json "stages")
   std::string previous_report;  // report.json of the run being continued ("" if none)
   std::string estimate_key;     // the estimate stage's key (accuracy.json "key")
-  RunEta run_eta;                             // the whole run's ETA on every progress line (rank 0)
-  std::optional<TransportFileWriter> writer;  // transport.prtt.partial while sampling
+  RunEta run_eta;               // the whole run's ETA on every progress line (rank 0)
   std::unique_ptr<CheckpointJournal> journal;
   // The indirect stage's key (its journal, checkpoints/indirect-journal.txt, is keyed by it).
   uint64_t indirect_key = 0;
-  // The sampling jobs' Monte-Carlo variance sums (transport runs while the rows are sampled).
-  std::unique_ptr<VarianceAccumulator> variance;
-  // The journal's lines of the method's phase, verified by that phase before it re-uses them
-  // (brute force: already verified against the rows by setup).
-  std::vector<JournalEntry> journal_entries;
   FarmReport report;
 
   std::vector<uint64_t> RowGroups() const { return RowGroupsOf(params, geometry); }
@@ -246,6 +253,11 @@ struct FarmContext {
 // time to its stage, asks each for its share of the run's ETA, and lets each write its section of
 // report.json at the end. A phase keeps its own state; what a later phase needs reaches it
 // through the run folder or a typed result (PhaseResults).
+inline RowsStageState& RowsStage(FarmContext& ctx) {
+  if (RowsStageState* state = ctx.results.Find<RowsStageState>()) return *state;
+  return ctx.results.Put(RowsStageState{});
+}
+
 class FarmPhase {
  public:
   virtual ~FarmPhase() = default;

@@ -133,8 +133,7 @@ Json VisibilityJson(const VisibilityFarmReport& visibility) {
       {"vertices", v.vertices},
       {"raw_bytes", v.raw_bytes},
       {"encoded_bytes", v.encoded_bytes},
-      {"encoded_bytes_per_vertex",
-       v.vertices ? double(v.encoded_bytes) / double(v.vertices) : 0.0},
+      {"encoded_bytes_per_vertex", v.vertices ? double(v.encoded_bytes) / double(v.vertices) : 0.0},
       {"blocks", {{"zero", v.blocks_zero}, {"one", v.blocks_one}, {"mixed", v.blocks_mixed}}},
       {"changes", v.changes},
   };
@@ -197,18 +196,18 @@ Json CompressionJson(const CompressionFarmReport& compression) {
 Json JobTimesJson(const JobTimesReport& job_times) {
   const JobTimesReport& t = job_times;
   return {{"target_seconds", t.target_seconds},
-                    {"jobs", t.jobs},
-                    {"over_4x_target", t.over_4x_target},
-                    {"over_4x_planned", t.over_4x_planned},
-                    {"longest",
-                     {{"seconds", t.longest_seconds},
-                      {"planned_seconds", t.longest_planned_seconds},
-                      {"batch", t.longest_batch},
-                      {"rank", t.longest_rank},
-                      {"first", t.longest_first},
-                      {"count", t.longest_count}}},
-                    {"longest_seconds_by_rank", t.longest_by_rank},
-                    {"longest_silence_seconds", t.longest_silence_seconds}};
+          {"jobs", t.jobs},
+          {"over_4x_target", t.over_4x_target},
+          {"over_4x_planned", t.over_4x_planned},
+          {"longest",
+           {{"seconds", t.longest_seconds},
+            {"planned_seconds", t.longest_planned_seconds},
+            {"batch", t.longest_batch},
+            {"rank", t.longest_rank},
+            {"first", t.longest_first},
+            {"count", t.longest_count}}},
+          {"longest_seconds_by_rank", t.longest_by_rank},
+          {"longest_silence_seconds", t.longest_silence_seconds}};
 }
 
 }  // namespace

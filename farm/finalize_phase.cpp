@@ -37,18 +37,19 @@ namespace {
 // the run's variance sums. Collective. The sums travel as 32-bit digits (TransportVariance::Digits)
 // whose MPI_SUM is exact in any reduction order: the same bytes for any number of ranks.
 void ReduceRankVariance(FarmContext& ctx) {
-  const TransportVariance mine =
-      ctx.rank_variance ? ctx.rank_variance->total() : ctx.EmptyVarianceSums();
-  ctx.rank_variance.reset();
+  const TransportVariance mine = RowsStage(ctx).rank_variance
+                                     ? RowsStage(ctx).rank_variance->total()
+                                     : ctx.EmptyVarianceSums();
+  RowsStage(ctx).rank_variance.reset();
   std::vector<uint64_t> digits = mine.Digits();
   std::vector<uint64_t> covered = mine.rows_covered;
   ctx.collectives.SumOnRank0(digits, "sum the variance digits");
   ctx.collectives.SumOnRank0(covered, "sum the variance rows");
-  if (ctx.rank != 0 || !ctx.variance) return;
+  if (ctx.rank != 0 || !RowsStage(ctx).variance) return;
   TransportVariance all = ctx.EmptyVarianceSums();
   all.AddDigits(digits);
   all.rows_covered = covered;
-  ctx.variance->AddTotal(all);
+  RowsStage(ctx).variance->AddTotal(all);
 }
 
 class FinalizePhase final : public FarmPhase {
@@ -65,12 +66,13 @@ class FinalizePhase final : public FarmPhase {
     if (ctx.rank != 0 && !ctx.rows_in_place) return;
     const TransportFileInfo info = ctx.RowsFileInfo();
     if (ctx.rank == 0) {
-      if (!(ctx.writer->info() == info)) throw std::logic_error("finalize: rows file differs");
-      ctx.writer->Sync();
+      if (!(RowsStage(ctx).writer->info() == info))
+        throw std::logic_error("finalize: rows file differs");
+      RowsStage(ctx).writer->Sync();
       // The rows' Monte-Carlo variance sums, for the estimate stage.
-      if (ctx.variance) {
-        ctx.variance->WriteFile();
-        ctx.variance.reset();
+      if (RowsStage(ctx).variance) {
+        RowsStage(ctx).variance->WriteFile();
+        RowsStage(ctx).variance.reset();
       }
     }
     // Blocks are read, checksummed and compressed a group at a time: enough blocks for every
@@ -101,7 +103,7 @@ class FinalizePhase final : public FarmPhase {
         if (out_fd < 0) throw FileIoError(tmp, SystemReason("cannot open"));
       }
     }
-    const TransportFileWriter& source = ctx.rank == 0 ? *ctx.writer : *rows_in;
+    const TransportFileWriter& source = ctx.rank == 0 ? *RowsStage(ctx).writer : *rows_in;
     const std::string out_path = ctx.folder.transport + ".tmp";
     std::vector<std::vector<float>> rows(static_cast<std::size_t>(group));
     std::vector<std::string> frames(static_cast<std::size_t>(group));
@@ -169,7 +171,7 @@ class FinalizePhase final : public FarmPhase {
     const uint64_t bytes = packed.Finish();
     progress.Finish();
     ctx.run_eta.StepFinished("pack");
-    ctx.writer.reset();
+    RowsStage(ctx).writer.reset();
     std::filesystem::remove(ctx.folder.partial);
     SyncDirectory(ctx.folder.dir);
     spdlog::info(

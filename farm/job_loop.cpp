@@ -710,8 +710,7 @@ class JobLoop::BatchRun {
     for (const State::Slot& s : st_.slots) {
       if (s.local || (s.ready && s.jobs.empty()) || now - s.heard <= timeout_) continue;
       const std::string what = !s.ready ? std::string(" never reported ready")
-                                        : " has not returned its job (" + batch_.name +
-                                              " items " +
+                                        : " has not returned its job (" + batch_.name + " items " +
                                               std::to_string(s.jobs.front().range.first) + ".." +
                                               std::to_string(s.jobs.front().range.end() - 1) +
                                               ") and has been silent";

@@ -434,14 +434,14 @@ void RemoveStaleOutputs(FarmContext& ctx, const RunManifest& manifest, bool fres
   if (fresh || plan.Runs(kStageEstimate)) fs::remove(f.accuracy, ec);
 }
 
-// transport.prtt.partial reopened (ctx.writer) and its journal read: a sparse run keeps every
-// journaled job for its phases to verify; a brute-force run's jobs are verified here against
+// transport.prtt.partial reopened (RowsStage(ctx).writer) and its journal read: a sparse run keeps
+// every journaled job for its phases to verify; a brute-force run's jobs are verified here against
 // the rows' checksums, and those that verify are returned (the others counted as rejected).
 std::vector<JournalEntry> ReopenPartialRows(FarmContext& ctx, const RunManifest& manifest,
                                             const TransportFileInfo& info) {
   const RunFolder& f = ctx.folder;
   std::vector<JournalEntry> reused;
-  ctx.writer.emplace(TransportFileWriter::Reopen(f.partial, info));
+  RowsStage(ctx).writer.emplace(TransportFileWriter::Reopen(f.partial, info));
   const JournalContents journal = ReadJournal(f.journal);
   if (journal.has_header && journal.run_key != manifest.Key()) {
     throw InputError(f.journal, "journal of a different run; use --force to start over");
@@ -455,7 +455,7 @@ std::vector<JournalEntry> ReopenPartialRows(FarmContext& ctx, const RunManifest&
   for (const JournalEntry& e : journal.entries) {
     if (ctx.params.sparse) {
       // Verified against the files when its phase is planned (SparseSamplingPhase).
-      if (!e.phase.empty()) ctx.journal_entries.push_back(e);
+      if (!e.phase.empty()) RowsStage(ctx).journal_entries.push_back(e);
       continue;
     }
     if (e.rows.end() > info.rows || e.rows.count * info.row_bytes() > kMaxJobBytes * 4) {
@@ -463,7 +463,7 @@ std::vector<JournalEntry> ReopenPartialRows(FarmContext& ctx, const RunManifest&
       continue;
     }
     rows.resize(static_cast<std::size_t>(e.rows.count * info.cols()));
-    ctx.writer->ReadRows(e.rows.first, e.rows.count, rows.data());
+    RowsStage(ctx).writer->ReadRows(e.rows.first, e.rows.count, rows.data());
     if (Checksum64(rows.data(), rows.size() * sizeof(float)) == e.rows_checksum) {
       reused.push_back(e);
     } else {
@@ -498,7 +498,7 @@ void ReopenCheckpoints(FarmContext& ctx, const RunManifest& manifest, const Scen
     }
     ctx.report.damaged_journal_lines = journal.damaged_lines;
     for (const JournalEntry& e : journal.entries) {
-      if (e.phase == kVisibilityPhaseName) ctx.journal_entries.push_back(e);
+      if (e.phase == kVisibilityPhaseName) RowsStage(ctx).journal_entries.push_back(e);
     }
     fs::remove(f.visibility, ec);  // written again by the finalize phase
   } else if (!fresh) {
@@ -508,30 +508,31 @@ void ReopenCheckpoints(FarmContext& ctx, const RunManifest& manifest, const Scen
       spdlog::warn("--resume: {} is missing; every job is redone", f.partial);
     }
   }
-  if (!ctx.writer && !ctx.params.visibility) {
-    ctx.writer.emplace(TransportFileWriter::Create(f.partial, info));
+  if (!RowsStage(ctx).writer && !ctx.params.visibility) {
+    RowsStage(ctx).writer.emplace(TransportFileWriter::Create(f.partial, info));
   }
   if (!ctx.params.visibility) {
-    ctx.variance = std::make_unique<VarianceAccumulator>(f, RowGroupsOf(ctx.params, geometry),
-                                                         ctx.params.cubemap_n,
-                                                         ctx.params.rays_per_texel, fresh);
+    RowsStage(ctx).variance = std::make_unique<VarianceAccumulator>(
+        f, RowGroupsOf(ctx.params, geometry), ctx.params.cubemap_n, ctx.params.rays_per_texel,
+        fresh);
   }
   ctx.journal = std::make_unique<CheckpointJournal>(
       f.journal, manifest.Key(),
-      ctx.params.sparse || ctx.params.visibility ? ctx.journal_entries : reused);
+      ctx.params.sparse || ctx.params.visibility ? RowsStage(ctx).journal_entries : reused);
   // Brute force: the jobs whose rows verified are the method's re-used checkpoints.
-  if (!ctx.params.sparse && !ctx.params.visibility) ctx.journal_entries = std::move(reused);
+  if (!ctx.params.sparse && !ctx.params.visibility)
+    RowsStage(ctx).journal_entries = std::move(reused);
   if (!fresh && ctx.params.visibility) {
     spdlog::info("--resume: {} journaled visibility job(s) are verified against {}",
-                 ctx.journal_entries.size(), f.visibility_chunks);
+                 RowsStage(ctx).journal_entries.size(), f.visibility_chunks);
   } else if (!fresh && ctx.params.sparse) {
     spdlog::info("--resume: {} journaled sparse job(s) are verified phase by phase",
-                 ctx.journal_entries.size());
+                 RowsStage(ctx).journal_entries.size());
   } else if (!fresh) {
     uint64_t rows_reused = 0;
-    for (const JournalEntry& e : ctx.journal_entries) rows_reused += e.rows.count;
+    for (const JournalEntry& e : RowsStage(ctx).journal_entries) rows_reused += e.rows.count;
     spdlog::info("--resume: {} finished job(s) ({} of {} samples) re-used from checkpoints",
-                 ctx.journal_entries.size(), rows_reused, info.rows);
+                 RowsStage(ctx).journal_entries.size(), rows_reused, info.rows);
   }
 }
 
@@ -592,7 +593,7 @@ void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes) {
   const bool visibility = resolved.job == "visibility";
   const RunManifest manifest =
       MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, ctx.options,
-                      visibility ? nullptr : &ctx.compression_plan.emplace());
+                      visibility ? nullptr : &ctx.results.Put(CompressionPlan{}));
   StartReport(ctx, scene, resolved);
 
   ctx.scene = std::move(scene);  // the compression phase reads its [compression] settings
@@ -683,6 +684,9 @@ class SetupPhase final : public FarmPhase {
     }
     AgreeOrStop(ctx, local);
     AgreeOnSharedFolder(ctx);
+    // The rows stage's state exists on every rank before any job runs: the job threads then only
+    // look it up (ctx.results is not written while they run).
+    RowsStage(ctx);
   }
 };
 

@@ -75,7 +75,7 @@ void FarmSparseSteps::CrossValidate(const NeighborIndex& index, std::span<const 
       throw RankFailure("a cross-validation job came back with the wrong number of rows");
     const std::vector<char> bytes = CrossValidationRecords(
         T_, r.outcomes, r.transport.data(), [&](std::size_t i, float* traced) {
-          ctx_.writer->ReadRows(cv[r.header.first + i], 1, traced);
+          RowsStage(ctx_).writer->ReadRows(cv[r.header.first + i], 1, traced);
         });
     file.Write(bytes.data(), bytes.size(), r.header.first * record);
     return Checksum64(bytes.data(), bytes.size());

@@ -41,7 +41,7 @@ void FarmSparseSteps::Dense(const std::string& name, std::span<const uint32_t> i
     std::vector<char> buf(aux_row);
     for (std::size_t i = 0; i < c; ++i) {
       const uint32_t s = ids[e.rows.first + i];
-      ctx_.writer->ReadRows(s, 1, tr.data() + i * T_);
+      RowsStage(ctx_).writer->ReadRows(s, 1, tr.data() + i * T_);
       if (!aux_->Read(buf.data(), aux_row, s * aux_row)) return false;
       std::memcpy(vis.data() + i * T_, buf.data(), T_ * sizeof(float));
       std::memcpy(feat.data() + i * T_, buf.data() + T_ * sizeof(float), T_);
@@ -73,7 +73,7 @@ void FarmSparseSteps::Dense(const std::string& name, std::span<const uint32_t> i
     std::vector<char> buf(aux_row);
     for (std::size_t i = 0; i < c; ++i) {
       const uint32_t s = ids[r.header.first + i];
-      ctx_.writer->WriteRows(s, 1, r.transport.data() + i * T_);
+      RowsStage(ctx_).writer->WriteRows(s, 1, r.transport.data() + i * T_);
       std::memcpy(buf.data(), r.visibility.data() + i * T_, T_ * sizeof(float));
       std::memcpy(buf.data() + T_ * sizeof(float), r.feature.data() + i * T_, T_);
       aux_->Write(buf.data(), aux_row, s * aux_row);
@@ -83,7 +83,7 @@ void FarmSparseSteps::Dense(const std::string& name, std::span<const uint32_t> i
     return DenseResultChecksum(c, T_, r.transport.data(), r.visibility.data(), r.feature.data());
   };
   p.sync = [&] {
-    ctx_.writer->Sync();
+    RowsStage(ctx_).writer->Sync();
     aux_->Sync();
     if (low_file_) low_file_->Sync();
   };

@@ -323,10 +323,10 @@ void ComputeDenseJob(SparseJobWork& job, ByteReader& r, SparseJobResult& res) {
     for (std::size_t i = 0; i < ids.size(); ++i) {
       DownsampleRow(res.transport.data() + i * T, n, m, low.data());
       job.files->WriteDense(ids[i], res.transport.data() + i * T, res.visibility.data() + i * T,
-                        res.feature.data() + i * T, low.data());
+                            res.feature.data() + i * T, low.data());
     }
-    res.checksum = DenseResultChecksum(ids.size(), T, res.transport.data(),
-                                       res.visibility.data(), res.feature.data());
+    res.checksum = DenseResultChecksum(ids.size(), T, res.transport.data(), res.visibility.data(),
+                                       res.feature.data());
     res.in_place = 1;
     res.transport = {};
     res.visibility = {};
@@ -408,7 +408,7 @@ void ComputeSparseRows(SparseJobWork& job, ByteReader& r, SparseJobResult& res) 
       if (union_ids[k] >= job.samples.size())
         throw std::runtime_error("sparse job names a missing sample");
       job.files->ReadDense(union_ids[k], tr.data() + k * T, vis.data() + k * T,
-                       feat.data() + k * T);
+                           feat.data() + k * T);
     }
   }
   const std::size_t rows = tr.size() / T;
@@ -469,7 +469,7 @@ void ComputeSparseRows(SparseJobWork& job, ByteReader& r, SparseJobResult& res) 
     res.transport = {};
   } else if (job.in_place & kCrossValidateInPlace) {
     res.checksum = job.files->WriteCrossValidation(res.header.first, vertices, res.outcomes,
-                                               res.transport.data());
+                                                   res.transport.data());
     res.in_place = 1;
     res.transport = {};
     res.combination = {};

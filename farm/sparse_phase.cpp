@@ -70,11 +70,11 @@ class FarmSparseRowFiles final : public SparseRowFiles {
         aux_((fs::path(ctx.folder.sparse) / "dense_aux.bin").string()),
         low_((fs::path(ctx.folder.sparse) / "dense_low.bin").string()),
         cross_path_((fs::path(ctx.folder.sparse) / "cross_validation.bin").string()) {
-    if (!ctx.rank_variance) {
-      ctx.rank_variance =
+    if (!RowsStage(ctx).rank_variance) {
+      RowsStage(ctx).rank_variance =
           std::make_unique<RankVarianceLog>(ctx.folder, ctx.rank, ctx.EmptyVarianceSums());
     }
-    variance_ = ctx.rank_variance.get();
+    variance_ = RowsStage(ctx).rank_variance.get();
   }
   void ReadDense(uint32_t s, float* transport, float* visibility, uint8_t* feature) override {
     rows_.ReadRows(s, 1, transport);
@@ -182,7 +182,7 @@ void FarmSparseSteps::RunStep(StepJobs& p, double t0) {
   FarmReport& rep = ctx_.report;
   JobBatch batch;
   uint64_t reused_jobs = 0;
-  for (const JournalEntry& e : ctx_.journal_entries) {
+  for (const JournalEntry& e : RowsStage(ctx_).journal_entries) {
     if (e.phase != p.name || e.rows.end() > p.items) continue;
     const bool overlaps = std::any_of(batch.done.begin(), batch.done.end(), [&](const RowRange& d) {
       return e.rows.first < d.end() && d.first < e.rows.end();
@@ -193,7 +193,7 @@ void FarmSparseSteps::RunStep(StepJobs& p, double t0) {
       continue;
     }
     if (p.kind != SparseJobKind::kRank && !p.cross_validation &&
-        !ctx_.variance->Reuse(p.name, e.rows.first, e.rows.count))
+        !RowsStage(ctx_).variance->Reuse(p.name, e.rows.first, e.rows.count))
       ++variance_uncovered_jobs_;
     batch.done.push_back(e.rows);
     ++reused_jobs;
@@ -241,7 +241,7 @@ void FarmSparseSteps::RunStep(StepJobs& p, double t0) {
     e.rows_checksum = p.accept(r, rows_written);
     if (p.kind != SparseJobKind::kRank && !p.cross_validation && !r.in_place) {
       try {
-        ctx_.variance->Record(
+        RowsStage(ctx_).variance->Record(
             p.name, range.first, range.count,
             DecodeTransportVariance(r.variance, "variance sums from rank " + std::to_string(rank)));
       } catch (const InputError& err) {
@@ -256,7 +256,7 @@ void FarmSparseSteps::RunStep(StepJobs& p, double t0) {
   };
   batch.sync = [&] {
     p.sync();
-    ctx_.variance->Sync();
+    RowsStage(ctx_).variance->Sync();
   };
   batch.committed = [&](const JournalEntry& e) {
     rep.rows_done += e.texels_below_horizon;

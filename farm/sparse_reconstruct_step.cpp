@@ -58,7 +58,7 @@ std::vector<uint32_t> FarmSparseSteps::Reconstruct(const std::string& name,
     for (std::size_t i = 0; i < o.size(); ++i) {
       if (o[i] != ok) continue;
       rows.resize(rows.size() + T_);
-      ctx_.writer->ReadRows(order[e.rows.first + i], 1, rows.data() + rows.size() - T_);
+      RowsStage(ctx_).writer->ReadRows(order[e.rows.first + i], 1, rows.data() + rows.size() - T_);
     }
     std::vector<uint32_t> comb(o.size() * rec);
     if (!comb_file.Read(comb.data(), comb.size() * sizeof(uint32_t),
@@ -84,7 +84,7 @@ std::vector<uint32_t> FarmSparseSteps::Reconstruct(const std::string& name,
       }
       if ((k + 1) * T_ > r.transport.size())
         throw RankFailure("a sparse job came back with too few rows");
-      ctx_.writer->WriteRows(order[r.header.first + i], 1, r.transport.data() + k * T_);
+      RowsStage(ctx_).writer->WriteRows(order[r.header.first + i], 1, r.transport.data() + k * T_);
       ++k;
     }
     if (r.in_place ? !r.transport.empty() || !ctx_.rows_in_place : k * T_ != r.transport.size())
@@ -104,7 +104,7 @@ std::vector<uint32_t> FarmSparseSteps::Reconstruct(const std::string& name,
     return r.in_place ? r.checksum : SparseResultChecksum(r.outcomes, r.transport, r.combination);
   };
   p.sync = [&] {
-    ctx_.writer->Sync();
+    RowsStage(ctx_).writer->Sync();
     file.Sync();
     comb_file.Sync();
   };
@@ -146,7 +146,7 @@ std::string FarmSparseSteps::MakeSparseJob(SparseJobHeader& h, std::string prefi
   std::vector<char> buf(5 * T_);
   for (std::size_t k = 0; k < u; ++k) {
     const uint32_t d = union_ids[k];
-    ctx_.writer->ReadRows(d, 1, job.transport.data() + k * T_);
+    RowsStage(ctx_).writer->ReadRows(d, 1, job.transport.data() + k * T_);
     if (!aux_->Read(buf.data(), buf.size(), d * 5 * T_))
       throw FileIoError(ctx_.folder.sparse,
                         "dense_aux.bin lacks dense sample " + std::to_string(d));

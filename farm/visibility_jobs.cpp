@@ -19,7 +19,6 @@ namespace {
 constexpr char kResultMagic[8] = {'P', 'R', 'T', 'V', 'J', 'O', 'B', '1'};
 constexpr std::size_t kResultHeader = 8 + 8 * 7;  // magic, 6 u64 fields + busy seconds
 
-
 }  // namespace
 
 VisibilityJobResult ComputeVisibilityJob(const VisibilitySampler& sampler,

@@ -69,7 +69,7 @@ class VisibilityPhase final : public FarmPhase {
     // Journaled chunks that still verify are re-used (overlapping lines: the first wins).
     JobBatch batch;
     std::vector<uint8_t> buffer;
-    for (const JournalEntry& e : ctx.journal_entries) {
+    for (const JournalEntry& e : RowsStage(ctx).journal_entries) {
       VisibilityChunkRef ref;
       const bool overlaps = std::any_of(
           batch.done.begin(), batch.done.end(),
@@ -92,7 +92,7 @@ class VisibilityPhase final : public FarmPhase {
       rep.texels_below_horizon_all += ref.texels_below_horizon;
       ++rep.jobs_reused;
     }
-    if (!ctx.journal_entries.empty()) {
+    if (!RowsStage(ctx).journal_entries.empty()) {
       spdlog::info("--resume: {} visibility job(s) re-used, {} rejected", rep.jobs_reused,
                    rep.checkpoints_rejected);
     }

@@ -470,8 +470,8 @@ void ReportIndirectShare(FarmContext& ctx, nlohmann::ordered_json& figures) {
         ind += rho * Dot(indirect.data() + (tc * V + v) * cols, L.data(), cols);
       }
     }
-    share.push_back({{"light", estimate.names[l]},
-                     {"indirect_share", d + ind > 0 ? ind / (d + ind) : 0.0}});
+    share.push_back(
+        {{"light", estimate.names[l]}, {"indirect_share", d + ind > 0 ? ind / (d + ind) : 0.0}});
     spdlog::info("interreflection: {:.1f}% of B is bounce light under {}",
                  d + ind > 0 ? 100 * ind / (d + ind) : 0.0, estimate.names[l]);
   }
@@ -513,8 +513,7 @@ void BounceDriver::PredictSteps(const FarmContext& ctx, std::vector<RunStep>& st
   const SetupParams& p = ctx.params;
   const double rows = static_cast<double>(p.rows);
   const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
-  const double dense_share =
-      p.sparse_indirect ? std::min(1.0, ctx.plan.dense_budget + 0.05) : 1.0;
+  const double dense_share = p.sparse_indirect ? std::min(1.0, ctx.plan.dense_budget + 0.05) : 1.0;
   const double share = step_ ? 1 - dense_share : dense_share;
   if (k_ == 0) {
     const double cols = 6.0 * p.cubemap_n * p.cubemap_n;
