@@ -36,6 +36,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "farm/farm_context.h"
@@ -154,6 +155,23 @@ class BounceDriver {
   std::vector<uint8_t> mask_;    // per vertex: 1 = combined (every rank)
   std::vector<uint32_t> pairs_;  // rank 0: combination.bin's pairs
   uint64_t slots_ = 0;
+};
+
+// What the bounce phases (gathering, path tracing, features) say of themselves alike: their
+// driver's name, the indirect stage, its cost model and report section.
+class BouncePhase : public FarmPhase {
+ public:
+  BouncePhase(int k, bool features_step, std::shared_ptr<nlohmann::ordered_json> figures)
+      : driver_(k, features_step, std::move(figures)) {}
+  const char* name() const override { return driver_.name().c_str(); }
+  const char* stage() const override { return kStageIndirect; }
+  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
+    driver_.PredictSteps(ctx, steps);
+  }
+  void Report(FarmReport& report) const override { driver_.Report(report); }
+
+ protected:
+  BounceDriver driver_;
 };
 
 // Rank 0, after the indirect stage's last phase: Σ_v ρ·(indirect · L) / Σ_v ρ·(T · L) under

@@ -38,16 +38,10 @@ struct FeatureEvaluator {
   std::vector<float> by_vertex;  // C rows of cols per vertex
 };
 
-class FeaturesPhase final : public FarmPhase {
+class FeaturesPhase final : public BouncePhase {
  public:
   FeaturesPhase(int k, std::shared_ptr<nlohmann::ordered_json> figures)
-      : k_(k), driver_(k, true, std::move(figures)) {}
-  const char* name() const override { return driver_.name().c_str(); }
-  const char* stage() const override { return kStageIndirect; }
-  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
-    driver_.PredictSteps(ctx, steps);
-  }
-  void Report(FarmReport& report) const override { driver_.Report(report); }
+      : BouncePhase(k, true, std::move(figures)), k_(k) {}
 
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
@@ -191,7 +185,6 @@ class FeaturesPhase final : public FarmPhase {
   }
 
   int k_;
-  BounceDriver driver_;
 };
 
 }  // namespace

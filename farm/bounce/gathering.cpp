@@ -27,16 +27,10 @@ namespace prt {
 
 namespace {
 
-class GatheringPhase final : public FarmPhase {
+class GatheringPhase final : public BouncePhase {
  public:
   GatheringPhase(int k, std::shared_ptr<nlohmann::ordered_json> figures)
-      : k_(k), driver_(k, false, std::move(figures)) {}
-  const char* name() const override { return driver_.name().c_str(); }
-  const char* stage() const override { return kStageIndirect; }
-  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
-    driver_.PredictSteps(ctx, steps);
-  }
-  void Report(FarmReport& report) const override { driver_.Report(report); }
+      : BouncePhase(k, false, std::move(figures)), k_(k) {}
 
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
@@ -107,7 +101,6 @@ class GatheringPhase final : public FarmPhase {
   }
 
   int k_;
-  BounceDriver driver_;
 };
 
 }  // namespace

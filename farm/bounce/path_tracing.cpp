@@ -24,16 +24,10 @@ namespace prt {
 
 namespace {
 
-class PathTracingPhase final : public FarmPhase {
+class PathTracingPhase final : public BouncePhase {
  public:
   explicit PathTracingPhase(std::shared_ptr<nlohmann::ordered_json> figures)
-      : driver_(0, false, std::move(figures)) {}
-  const char* name() const override { return driver_.name().c_str(); }
-  const char* stage() const override { return kStageIndirect; }
-  void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {
-    driver_.PredictSteps(ctx, steps);
-  }
-  void Report(FarmReport& report) const override { driver_.Report(report); }
+      : BouncePhase(0, false, std::move(figures)) {}
 
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
@@ -146,7 +140,6 @@ class PathTracingPhase final : public FarmPhase {
     driver_.figures()["path_trace"] = TracedFigures(totals, 0);
   }
 
-  BounceDriver driver_;
 };
 
 }  // namespace
