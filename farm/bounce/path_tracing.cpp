@@ -139,7 +139,6 @@ class PathTracingPhase final : public BouncePhase {
     }
     driver_.figures()["path_trace"] = TracedFigures(totals, 0);
   }
-
 };
 
 }  // namespace
