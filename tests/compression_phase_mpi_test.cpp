@@ -367,13 +367,11 @@ TEST(CompressionPhase, EveryEditReRunsOnlyWhatItTouchesAndNeverLeavesAStaleAsset
     // The same files as a fresh run of the edited scene.
     const std::string fresh = dir + "/" + e.name + "-fresh";
     ASSERT_EQ(Farm(1, scene + " --out " + fresh + args + e.extra).exit_code, 0);
-    for (const char* file : {"transport.prtt", "transport.prtc", "geometry.prtg", "scene.toml"})
+    // accuracy.json too, to the byte: its sums are exact (docs/farm.md, "Determinism"), so a
+    // resumed 2-rank run and a fresh 1-rank run write the same text.
+    for (const char* file :
+         {"transport.prtt", "transport.prtc", "geometry.prtg", "scene.toml", "accuracy.json"})
       EXPECT_TRUE(ReadWholeFile(run + "/" + file) == ReadWholeFile(fresh + "/" + file)) << file;
-    const nlohmann::json a = nlohmann::json::parse(ReadWholeFile(run + "/accuracy.json"));
-    const nlohmann::json b = nlohmann::json::parse(ReadWholeFile(fresh + "/accuracy.json"));
-    EXPECT_EQ(a["key"], b["key"]);
-    EXPECT_NEAR(a["monte_carlo"]["worst_relative_rms"].get<double>(),
-                b["monte_carlo"]["worst_relative_rms"].get<double>(), 1e-9);
   }
 }
 
