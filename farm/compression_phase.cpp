@@ -19,6 +19,7 @@
 #include <span>
 
 #include "farm/collectives.h"
+#include "farm/compressed_file.h"
 #include "farm/cpca_phase.h"
 #include "farm/distributed_transpose.h"
 #include "farm/farm_context.h"
@@ -524,20 +525,6 @@ CompressedTransport CollectColumnsOnRank0(const FarmContext& ctx,
       t.columns.push_back(std::move(c));
   }
   return t;
-}
-
-// Rank 0 writes transport.prtc durably (temp, fsync, rename, fsync of the folder).
-void WriteCompressedFile(const FarmContext& ctx, const std::vector<uint8_t>& file) {
-  const FarmOptions& options = ctx.options;
-  const std::string& prtc = ctx.folder.compressed;
-  if (options.fail_in == "write" && options.fail_rank == 0) {
-    // As if killed inside WriteFileDurably: half of its temporary file is on disk.
-    std::ofstream(prtc + ".tmp", std::ios::binary)
-        .write(reinterpret_cast<const char*>(file.data()),
-               static_cast<std::streamsize>(file.size() / 2));
-    ExitAbruptly(ctx.rank, "halfway through writing " + prtc);
-  }
-  WriteFileDurably(prtc, std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
 }
 
 // Rank 0's report.json "compression" (CompressionFarmReport) once transport.prtc is durable,

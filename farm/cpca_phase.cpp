@@ -8,12 +8,12 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "farm/collectives.h"
+#include "farm/compressed_file.h"
 #include "farm/farm_context.h"
 #include "farm/progress.h"
 #include "farm/sparse_jobs.h"
@@ -187,14 +187,7 @@ void WriteCpcaFileAndReport(FarmContext& ctx, const CpcaTransport& t, const Cpca
   const uint64_t R = header.sample_count;
   const uint32_t S = header.cpca_bases;
   const std::vector<uint8_t> file = EncodeCpcaTransport(t);
-  const std::string& prtc = ctx.folder.compressed;
-  if (options.fail_in == "write" && options.fail_rank == 0) {
-    std::ofstream(prtc + ".tmp", std::ios::binary)
-        .write(reinterpret_cast<const char*>(file.data()),
-               static_cast<std::streamsize>(file.size() / 2));
-    ExitAbruptly(ctx.rank, "halfway through writing " + prtc);
-  }
-  WriteFileDurably(prtc, std::string_view(reinterpret_cast<const char*>(file.data()), file.size()));
+  WriteCompressedFile(ctx, file);
   rep.write_seconds = FarmNow() - tw;
   rep.every_rank_reads = fig.every_rank_reads && ctx.size > 1;
   rep.rank0_bytes_read = fig.rank0_rows_bytes + (fig.every_rank_reads ? 0 : fig.bytes_sent);
@@ -226,10 +219,10 @@ void WriteCpcaFileAndReport(FarmContext& ctx, const CpcaTransport& t, const Cpca
         "compression: {} in {}: {:.1f} MB raw -> {:.2f} MB ({:.3f}% of raw), relative Frobenius "
         "error {:.3f}%, cpca {} ({} clusters x {} bases, {} LBG iterations over {} of {} rows, "
         "{} basis terms)",
-        prtc, Progress::FormatDuration(rep.wall_seconds), static_cast<double>(rep.raw_bytes) / 1e6,
-        static_cast<double>(rep.compressed_bytes) / 1e6, 100 * rep.Ratio(),
-        100 * rep.relative_frobenius_error, rep.cpca.method, rep.cpca.clusters, rep.cpca.bases,
-        rep.cpca.lbg_iterations, rep.cpca.rows_dense_pass, R, rep.cpca.basis_terms);
+        ctx.folder.compressed, Progress::FormatDuration(rep.wall_seconds),
+        static_cast<double>(rep.raw_bytes) / 1e6, static_cast<double>(rep.compressed_bytes) / 1e6,
+        100 * rep.Ratio(), 100 * rep.relative_frobenius_error, rep.cpca.method, rep.cpca.clusters,
+        rep.cpca.bases, rep.cpca.lbg_iterations, rep.cpca.rows_dense_pass, R, rep.cpca.basis_terms);
 }
 
 }  // namespace

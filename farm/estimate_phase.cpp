@@ -128,7 +128,6 @@ EstimateLights& LoadEstimateLights(FarmContext& ctx) {
     }
   }
   e.left_out_json = skipped.dump();
-  e.loaded = true;
   return e;
 }
 

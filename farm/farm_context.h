@@ -108,7 +108,6 @@ struct CollectiveStop {
 // environments as lighting cubemaps, and Σ B² over each mesh's rows under each of them (no
 // albedo), which the compression phase accumulates while the rows pass through it.
 struct EstimateLights {
-  bool loaded = false;
   std::vector<std::string> names;
   std::vector<CubemapRgb> lights;
   std::string left_out_json = "[]";  // environments that could not be read, and why

@@ -279,6 +279,16 @@ struct SparseJobWork {
   }
 };
 
+// The traced-ray counters a dense and a sparse job report alike (AngularStats, SparseStats).
+template <class Stats>
+void CountTraced(const Stats& total, SparseJobCounters& c) {
+  c.rays_traced = total.trace.rays_traced;
+  c.texels_traced = total.trace.texels_traced;
+  c.texels_below_horizon = total.trace.texels_below_horizon;
+  c.rays_below_horizon = total.trace.rays_below_horizon;
+  c.texels_above_horizon = total.texels_above_horizon;
+}
+
 std::string StepOf(ByteReader& r) {
   const std::vector<char> name = r.GetVector<char>("message");
   return std::string(name.begin(), name.end());
@@ -333,11 +343,7 @@ void ComputeDenseJob(SparseJobWork& job, ByteReader& r, SparseJobResult& res) {
     res.feature = {};
   }
   SparseJobCounters& c = res.counters;
-  c.rays_traced = total.trace.rays_traced;
-  c.texels_traced = total.trace.texels_traced;
-  c.texels_below_horizon = total.trace.texels_below_horizon;
-  c.rays_below_horizon = total.trace.rays_below_horizon;
-  c.texels_above_horizon = total.texels_above_horizon;
+  CountTraced(total, c);
   c.grid_texels = total.grid_texels;
   c.feature_texels = total.feature_texels;
   c.borrowed_texels = total.borrowed_texels;
@@ -475,11 +481,7 @@ void ComputeSparseRows(SparseJobWork& job, ByteReader& r, SparseJobResult& res) 
     res.combination = {};
   }
   SparseJobCounters& c = res.counters;
-  c.rays_traced = total.trace.rays_traced;
-  c.texels_traced = total.trace.texels_traced;
-  c.texels_below_horizon = total.trace.texels_below_horizon;
-  c.rays_below_horizon = total.trace.rays_below_horizon;
-  c.texels_above_horizon = total.texels_above_horizon;
+  CountTraced(total, c);
   c.reconstructed = total.reconstructed;
   c.fallback_too_few_neighbors = total.fallback_too_few_neighbors;
   c.fallback_solve_failed = total.fallback_solve_failed;
