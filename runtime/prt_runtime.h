@@ -1,0 +1,169 @@
+/* prt_runtime: relight a .prtpack inside your own program (docs/runtime.md).
+ *
+ * One C99 header over prtfarm's relighter, the same code prt-view runs: environment map → lighting
+ * cubemap (integrated over each texel's solid angle), its Haar wavelet projection, exact lighting
+ * or a budget of wavelet terms (NWA, BI, PBI: Ng et al. 2003; Overbeck et al. 2006), and the
+ * pack's transport: 2D, 4D and adaptive 4D compressed columns (Cheslack-Postava et al. 2008 §4.5,
+ * Eq. 8), clustered PCA (Overbeck et al. 2006 §6.3), vertex or image packs, one or three colour
+ * channels. The library links the C++ standard library, Draco, zstd and xxHash only.
+ *
+ * Conventions
+ * - Every function that can fail returns a status (PRT_RUNTIME_OK = 0, else a PRT_RUNTIME_ERROR_*
+ *   code) or NULL, and leaves a message naming the pack and the problem, readable on the same
+ *   thread with prt_runtime_last_error(). No function aborts, throws or prints.
+ * - The caller owns every output buffer and says how large it is; a wrong size is an error,
+ *   never a write past it.
+ * - Radiance is linear RGB, 3 floats per sample: albedo × (T·L), what prt-view --radiance-out
+ *   writes. Samples are the pack's, in the pack's order (meshes in pack order, each mesh's
+ *   vertices in order; an image pack's pixels row-major from the top), unless
+ *   prt_runtime_set_sample_order() chose the runtime's order.
+ * - Threads: a handle is used by one thread at a time, except prt_runtime_relight_range(), which
+ *   any number of threads may call at once on one handle between prt_runtime_prepare() and the
+ *   next call of anything else. Different handles are independent. prt_runtime_set_task_runner()
+ *   is process-wide: call it before opening handles.
+ */
+#ifndef PRT_RUNTIME_PRT_RUNTIME_H_
+#define PRT_RUNTIME_PRT_RUNTIME_H_
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define PRT_RUNTIME_VERSION 1
+
+/* Status codes. */
+#define PRT_RUNTIME_OK 0
+#define PRT_RUNTIME_ERROR_ARGUMENT 1 /* a NULL pointer, a wrong size, a value out of range */
+#define PRT_RUNTIME_ERROR_STATE 2    /* a call out of order (relight before an environment) */
+#define PRT_RUNTIME_ERROR_INPUT 3    /* an unreadable or corrupt pack, or a bad environment map */
+#define PRT_RUNTIME_ERROR_NUMERIC 4  /* a radiance that is not a finite float (overflow) */
+#define PRT_RUNTIME_ERROR_MEMORY 5   /* out of memory */
+
+/* Lighting approximations for terms > 0 (prt_runtime_set_lighting_mode). */
+#define PRT_RUNTIME_LIGHTING_NWA 0 /* the N largest area-weighted terms of each frame, afresh */
+#define PRT_RUNTIME_LIGHTING_BI 1  /* basic incremental: N terms of the change per frame */
+#define PRT_RUNTIME_LIGHTING_PBI 2 /* per-band incremental (the default) */
+
+/* Sample orders (prt_runtime_set_sample_order). */
+#define PRT_RUNTIME_ORDER_PACK 0    /* the pack's order (the default) */
+#define PRT_RUNTIME_ORDER_RUNTIME 1 /* the relighter's own order: no gather per frame */
+
+typedef struct prt_runtime prt_runtime; /* opaque */
+
+/* ---- Opening ------------------------------------------------------------------------------ */
+
+/* Reads the pack (meshes, materials, metadata, the whole compressed transport) and readies it
+ * for relighting. Needs: a readable .prtpack with a transport (TRNS or CPCA section).
+ * Returns NULL on error: an unreadable file, a corrupt or truncated pack (every checksum and
+ * size is checked), a pack with no transport, memory. Safe on hostile input. */
+prt_runtime* prt_runtime_open_file(const char* path);
+/* The same from bytes in memory (copied as needed: `data` may be freed after the call). */
+prt_runtime* prt_runtime_open_memory(const void* data, size_t size);
+/* Frees the handle and everything it owns. NULL is allowed. */
+void prt_runtime_close(prt_runtime* rt);
+
+/* This thread's last error message, "" if none. Valid until the next prt_runtime call on this
+ * thread. */
+const char* prt_runtime_last_error(void);
+
+/* ---- What the pack holds ------------------------------------------------------------------ */
+
+/* Spatial samples: vertices of all meshes, or an image pack's pixels. 0 for NULL. */
+size_t prt_runtime_sample_count(const prt_runtime* rt);
+/* 1 for an image pack (samples are the pixels of a fixed camera), else 0. */
+int prt_runtime_is_image(const prt_runtime* rt);
+/* Colour channels of the transport (1, or 3 with coloured interreflection). */
+unsigned prt_runtime_transport_channels(const prt_runtime* rt);
+/* Lighting cubemap face size n, and its 6·n² wavelet coefficients (the largest useful term
+ * budget). */
+unsigned prt_runtime_cubemap_size(const prt_runtime* rt);
+unsigned prt_runtime_coefficient_count(const prt_runtime* rt);
+
+/* Geometry of a vertex pack, for drawing: positions (3 floats per sample, the pack's order and
+ * coordinates) and triangles (3 sample indices each, into the same order, all meshes).
+ * prt_runtime_triangle_count is 0 for an image pack. The output sizes must match exactly
+ * (PRT_RUNTIME_ERROR_ARGUMENT otherwise). Unaffected by prt_runtime_set_sample_order. */
+size_t prt_runtime_triangle_count(const prt_runtime* rt);
+int prt_runtime_get_positions(const prt_runtime* rt, float* xyz, size_t samples);
+int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t triangles);
+
+/* The camera the pack was baked with (an image pack's fixed view; a vertex pack's scene camera,
+ * or prt-view's default when its scene had none): eye, target, up, vertical field of view in
+ * degrees, width and height in pixels. Any pointer may be NULL. */
+int prt_runtime_get_camera(const prt_runtime* rt, float eye[3], float target[3], float up[3],
+                           float* fov_deg, int* width, int* height);
+
+/* ---- Lighting ----------------------------------------------------------------------------- */
+
+/* Linear RGB float lat-long map, rows from the top, width = 2 x height, OpenEXR's LatLongMap
+   convention (+Y up), as prt-view reads an EXR. 0 on success.
+ * rgb: width·height·3 floats, pixel (x, y) at 3·(y·width + x). Needs height ≥ 2, every value
+ * finite (PRT_RUNTIME_ERROR_INPUT naming the pixel otherwise; negative values count as 0 light,
+ * as prt-view clamps them). The map is copied; the lighting is resampled under the current
+ * rotation. On error the previous environment stays. */
+int prt_runtime_set_environment_latlong(prt_runtime* rt, const float* rgb, int width, int height);
+
+/* Rotation of the environment: a direction d of the map lights from rotation·d. Row-major 3×3,
+ * orthonormal with determinant +1 (to 1e-4; PRT_RUNTIME_ERROR_ARGUMENT otherwise). The identity
+ * by default. Resamples the lighting when an environment is set (the cost of a frame's lighting:
+ * see docs/runtime.md). */
+int prt_runtime_set_rotation(prt_runtime* rt, const float rotation[9]); /* row-major */
+/* The same, as an angle in radians about +Y (+Z turns towards +X), prt-view's --rotate. */
+int prt_runtime_set_rotation_y(prt_runtime* rt, double radians);
+
+/* PRT_RUNTIME_LIGHTING_NWA, _BI or _PBI (the default) for relights with terms > 0. Switching
+ * restarts the incremental state (its next frame starts from no light). */
+int prt_runtime_set_lighting_mode(prt_runtime* rt, int mode);
+
+/* PRT_RUNTIME_ORDER_PACK (the default) or PRT_RUNTIME_ORDER_RUNTIME: the order of the samples in
+ * every radiance output and in relight ranges. The runtime's order (each mesh along its Hilbert
+ * curve) is the one the relighter produces, so a frame in it skips a gather; remap your vertex
+ * buffer once with prt_runtime_get_sample_order. */
+int prt_runtime_set_sample_order(prt_runtime* rt, int order);
+/* pack_index[p] = the pack sample at position p of the runtime's order (`samples` entries). */
+int prt_runtime_get_sample_order(const prt_runtime* rt, uint32_t* pack_index, size_t samples);
+
+/* ---- Relighting --------------------------------------------------------------------------- */
+
+/* Radiance per sample (RGB, samples x 3 floats): terms = 0 exact lighting, else that many
+   wavelet terms (NWA, or PBI frames after prt_runtime_set_lighting_mode). 0 on success.
+ * Needs an environment (PRT_RUNTIME_ERROR_STATE otherwise) and out_samples equal to
+ * prt_runtime_sample_count (PRT_RUNTIME_ERROR_ARGUMENT). With BI or PBI each call is one frame:
+ * it spends `terms` terms on the change since the last frame, so calls under still lighting
+ * converge to the exact radiance. PRT_RUNTIME_ERROR_NUMERIC when a radiance overflows float. */
+int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t out_samples);
+
+/* A frame split across the host's threads, in two calls:
+ * 1. prt_runtime_prepare(rt, terms) on one thread: chooses the frame's lighting terms (as
+ *    prt_runtime_relight would; for BI and PBI it advances the incremental state).
+ * 2. prt_runtime_relight_range(rt, first, count, out_rgb) for ranges of samples that together
+ *    cover every sample exactly once, from any threads at the same time. Writes samples
+ *    [first, first + count) of the current order to out_rgb[3·first … 3·(first + count)): the
+ *    same numbers prt_runtime_relight writes there. Ranges are cheapest when they follow the
+ *    runtime's order (see docs/runtime.md, "Splitting a frame").
+ * prepare returns PRT_RUNTIME_ERROR_STATE when the previous prepared frame of an incremental
+ * mode was not relit in full (its state would be torn). */
+int prt_runtime_prepare(prt_runtime* rt, unsigned terms);
+int prt_runtime_relight_range(prt_runtime* rt, size_t first, size_t count, float* out_rgb,
+                              size_t out_samples);
+
+/* A host job system for the runtime's own parallel loops (process-wide; NULL: run on the calling
+ * thread, the default). run(user, count, task, task_data) must call task(task_data, i) once for
+ * every i in [0, count), on any threads, and return when all have returned. `concurrency` is
+ * how many threads run will use (the runtime splits work into about that many parts). */
+typedef void (*prt_runtime_task_runner)(void* user, size_t count,
+                                        void (*task)(void* task_data, size_t index),
+                                        void* task_data);
+void prt_runtime_set_task_runner(prt_runtime_task_runner run, void* user, unsigned concurrency);
+
+/* Bytes the handle holds (pack data, relighter, lighting and incremental state). */
+size_t prt_runtime_memory_bytes(const prt_runtime* rt);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* PRT_RUNTIME_PRT_RUNTIME_H_ */
