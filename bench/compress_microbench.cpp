@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "formats/transport_file.h"
+#include "vocabulary/tbb_parallel.h"
 #include "vocabulary/wavelets.h"
 #include "worker/adaptive_column_transform.h"
 
@@ -90,6 +91,7 @@ BENCHMARK(BM_MeasureApproximation)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_TransformColumnAdaptive)->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   benchmark::Initialize(&argc, argv);
   if (argc > 1) g_raw = argv[1];
   if (g_raw.empty() || !std::filesystem::exists(g_raw)) {

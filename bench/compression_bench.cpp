@@ -41,12 +41,13 @@
 #include "bench/bench_scene.h"
 #include "bench/bench_transport.h"
 #include "formats/compressed_transport.h"
-#include "viewer/compressed_relight.h"
+#include "runtime/compressed_relight.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/scene.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/row_transform.h"
 #include "worker/transport_compressor.h"
 
@@ -364,6 +365,7 @@ void RunOne(const Transport& tr, const std::vector<prt::CompressionScheme>& sche
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   std::string run, scenes_arg = "default,dragon,armadillo", n_arg = "32", cache, out_dir;
   std::string keep_arg = "0.0025,0.005,0.01,0.02,0.04,0.08", budget = "both";
   std::string schemes_arg = "2d,4d,adaptive4d", column_keep_arg;

@@ -11,7 +11,7 @@
 //      adaptive 4D and 2D (global budget, 9 bits, a few keep fractions; EncodeCompressedTransport)
 //      on the same T. Relit error: relative RMS of B = albedo ⊙ (T·L) over the environments
 //      (sunrise, city, studio, interior) and the three channels, against the uncompressed T under
-//      exact lighting in double, for exact lighting and for NWA-N lighting (viewer/lighting.h,
+//      exact lighting in double, for exact lighting and for NWA-N lighting (runtime/lighting.h,
 //      N = 30, 100, 300; its error is against the exact T·L too, so it includes the lighting
 //      approximation's: the row "uncompressed" is that floor).
 //   2. Relight time against error: one frame B = T·L of sunrise through each representation's
@@ -62,14 +62,15 @@
 #include "bench/bench_transport.h"
 #include "formats/compressed_transport.h"
 #include "formats/cpca_transport.h"
-#include "viewer/compressed_relight.h"
-#include "viewer/cpca_relight.h"
-#include "viewer/lighting.h"
-#include "viewer/relight.h"
+#include "runtime/compressed_relight.h"
+#include "runtime/cpca_relight.h"
+#include "runtime/lighting.h"
+#include "runtime/relight.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene_geometry.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/column_order.h"
 #include "worker/cpca.h"
 #include "worker/embree_scene.h"
@@ -973,6 +974,7 @@ void RunScene(const Settings& st, const std::string& name, std::ofstream* sparse
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   Settings st;
   bool quick = false;
   std::string scenes;

@@ -30,6 +30,7 @@
 
 #include "bench/bench_scenes.h"
 #include "vocabulary/hash.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/bounce_gather.h"
 #include "worker/path_trace_reference.h"
 
@@ -45,6 +46,7 @@ double Seconds(Clock::time_point t0) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   std::string scene_name = "default", out_dir = "gi-bench", ground_albedo;
   int n = 32, bounces = 2, paths = 1024, indirect_n = 0, ref_paths = 256, threads = 0;
   std::size_t ref_vertices = 64;

@@ -31,13 +31,14 @@
 #include <vector>
 
 #include "bench/bench_scenes.h"
+#include "formats/visibility_blocks.h"
 #include "viewer/block_lighting.h"
 #include "viewer/brdf.h"
 #include "viewer/rasterizer.h"
 #include "viewer/triple_product.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/image_io.h"
-#include "formats/visibility_blocks.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"
 #include "worker/visibility_sampler.h"
@@ -326,6 +327,7 @@ Attribution Attribute(const GlossyScene& gs, const CubemapBlocks& blocks,
 }  // namespace prt
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   using namespace prt;
   std::vector<std::string> scenes = {"default", "armadillo"};
   int n = 64, views = 3;

@@ -27,6 +27,7 @@
 #include "vocabulary/durable_file.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/scene.h"
+#include "vocabulary/tbb_parallel.h"
 
 namespace {
 
@@ -40,6 +41,7 @@ struct Sums {
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   std::string run_a, run_b;
   std::vector<std::string> data_dirs;
   CLI::App app("prt-mc-check: the farm's Monte-Carlo error estimate against two seeds");

@@ -51,12 +51,14 @@
 #include "bench/prt_bench_report.h"
 #include "bench/prt_bench_sweep.h"
 #include "farm/mpi_session.h"
+#include "vocabulary/tbb_parallel.h"
 
 using namespace prt;
 using namespace prt::bench;
 namespace fs = std::filesystem;
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   Options o;
   std::string scenes = "default,armadillo,dragon", envs = "sunrise,city,studio,interior";
   std::string out_dir = "bench-out/prt-bench", check_dir;

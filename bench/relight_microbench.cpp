@@ -21,9 +21,10 @@
 #include <vector>
 
 #include "bench/bench_scenes.h"
-#include "viewer/lighting.h"
+#include "runtime/compressed_relight.h"
+#include "runtime/lighting.h"
 #include "viewer/viewer_session.h"
-#include "viewer/compressed_relight.h"
+#include "vocabulary/tbb_parallel.h"
 #include "vocabulary/wavelets.h"
 
 namespace {
@@ -173,6 +174,7 @@ BENCHMARK(BM_Relight_128bit)->Arg(1)->Arg(30)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_InverseSteps_128bit)->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   benchmark::Initialize(&argc, argv);
   if (argc > 1) g_pack = argv[1];
   if (!std::filesystem::exists(g_pack)) {

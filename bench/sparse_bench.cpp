@@ -25,6 +25,7 @@
 #include "bench/sparse_variant.h"
 #include "vocabulary/hash.h"
 #include "vocabulary/image_io.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/embree_scene.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
@@ -41,6 +42,7 @@ using Variant = bench::SparseVariant;
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   CLI::App app{"prt-sparse-bench: sparse precomputation against brute force"};
   std::string scenes_arg = "default,armadillo,dragon";
   std::string out_dir = "bench-out/sparse";

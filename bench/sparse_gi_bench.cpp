@@ -38,6 +38,7 @@
 #include "bench/bench_scenes.h"
 #include "bench/sparse_variant.h"
 #include "vocabulary/hash.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/bounce_gather.h"
 #include "worker/path_trace_reference.h"
 #include "worker/sparse_indirect.h"
@@ -88,6 +89,7 @@ struct Light {
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   std::string scenes_arg = "default,dragon,armadillo", estimators_arg = "gather",
               out_dir = "bench-out/sparse-gi", envs_arg = "sunrise,city,studio,interior";
   int n = 32, bounces = 2, gather_paths = 1024, path_paths = 16, indirect_n = 0, threads = 0;

@@ -30,6 +30,7 @@
 #include "vocabulary/mesh.h"
 #include "vocabulary/mesh_io.h"
 #include "vocabulary/scene.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"
 
@@ -90,6 +91,7 @@ prt::TriangleMesh ProceduralSphere(int rings, int segments) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   std::string mesh_path = std::string(PRT_DATA_DIR) + "/meshes/bunny00.off";
   int n = 32, k = 4, wanted = 96, passes = 5;
   CLI::App app{"transport_bench: ComputeRows against raw Embree occlusion on the same rays"};

@@ -43,13 +43,14 @@
 #include "formats/transport_file.h"
 #include "packager/prtpack_transport.h"
 #include "packager/prtpack_writer.h"
-#include "viewer/compressed_relight.h"
-#include "viewer/lighting.h"
-#include "viewer/per_band_incremental.h"
+#include "runtime/compressed_relight.h"
+#include "runtime/lighting.h"
+#include "runtime/per_band_incremental.h"
 #include "viewer/rotation_plot.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/tbb_parallel.h"
 #include "worker/column_order.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_compressor.h"
@@ -601,6 +602,7 @@ int Run(int argc, char** argv) {
 // Bad input (a missing or foreign --raw / --truth file, a bad pack) ends with one line naming the
 // file and what is wrong.
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   try {
     return Run(argc, argv);
   } catch (const std::exception& e) {

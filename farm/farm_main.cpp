@@ -8,8 +8,10 @@
 
 #include "farm/farm_options.h"
 #include "farm/farm_run.h"
+#include "vocabulary/tbb_parallel.h"
 
 int main(int argc, char** argv) {
+  prt::UseTbbParallelism();  // the core vocabulary's and the runtime's loops on TBB
   // Blocks up to 32 MiB (glibc's largest mmap threshold) come from the heap and stay there when
   // freed, instead of fresh zero pages per allocation: a farm run allocates, fills and frees
   // job and result buffers of 1–24 MiB thousands of times, and on a VM every first touch of a

@@ -22,6 +22,7 @@
 #include "farm/run_manifest.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/tbb_parallel.h"
 
 namespace prt {
 
@@ -211,6 +212,7 @@ std::string RunSummary(const FarmContext& ctx) {
 }  // namespace
 
 int RunFarm(const FarmOptions& options) {
+  UseTbbParallelism();  // the core vocabulary's loops (resampling) on TBB
   FarmContext ctx;
   ctx.options = options;
   ctx.folder = RunFolder(options.out_dir);

@@ -8,12 +8,14 @@
    including a header that includes compressed_transport.h is a cycle the header split hides).
 4. No library source starts another program (std::system, popen) outside the executables'
    files (*_main.cpp, bench/, viewer/rotation_plot.cpp).
+5. The embeddable floor (runtime/, the pack reader, formats/, the core vocabulary) includes none
+   of the heavier libraries' headers (TBB, OpenEXR, libpng, toml++, spdlog, Embree, MPI).
 Prints every violation and exits 1 if there is any.
 """
 import os, re, sys
 
 ROOT = sys.argv[1] if len(sys.argv) > 1 else os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FLOOR = {"vocabulary": 1, "formats": 2, "worker": 3, "packager": 3, "farm": 4, "viewer": 4,
+FLOOR = {"vocabulary": 1, "formats": 2, "worker": 3, "packager": 3, "runtime": 3, "farm": 4, "viewer": 4,
          "bench": 5, "tests": 6}
 INCLUDE = re.compile(r'^\s*#\s*include\s*([<"])([^>"]+)[>"]', re.M)
 
@@ -23,6 +25,11 @@ def sources():
             for n in names:
                 if n.endswith((".h", ".cpp", ".c")):
                     yield os.path.relpath(os.path.join(dirpath, n), ROOT)
+
+HEAVY = re.compile(r'^\s*#\s*include\s*<((?:tbb|OpenEXR|Imath|toml\+\+|spdlog|embree3)/[^>]*|png\.h|mpi\.h)>', re.M)
+def kind_heavy(text):
+    m = HEAVY.search(text)
+    return m.group(1) if m else None
 
 def is_program(path):
     n = os.path.basename(path)
@@ -47,6 +54,8 @@ for path in sources():
         graph[path].append(inc)
         if FLOOR[top] > FLOOR[folder] and not is_program(path):
             problems.append(f"{path}: includes {inc} from a floor above ({top} over {folder})")
+    if (folder == "runtime" and not is_program(path)) and kind_heavy(text):
+        problems.append(f"{path}: includes {kind_heavy(text)} (runtime/ links the embeddable reader's libraries only)")
     if re.search(r"std::system\s*\(|\bpopen\s*\(", text) and not (
             is_program(path) or path == "viewer/rotation_plot.cpp"):
         problems.append(f"{path}: starts another program (only executables may)")

@@ -6,8 +6,9 @@
 #include <stdexcept>
 
 #include "packager/prtpack_reader.h"
-#include "viewer/camera_metadata.h"
+#include "runtime/camera_metadata.h"
 #include "viewer/rasterizer.h"
+#include "viewer/viewer_session.h"
 #include "vocabulary/errors.h"
 
 namespace prt {
@@ -97,7 +98,7 @@ std::unique_ptr<GlossySession> GlossySession::FromReader(const pack::PackReader&
   std::unique_ptr<GlossySession> s(new GlossySession());
   s->path_ = pack_path;
   const std::string meta = reader.ReadMetadata();
-  CameraFromMetadata(meta, pack_path, s->camera_);
+  CameraFromMetadata(meta, pack_path, s->camera_, SceneTomlCamera);
   std::vector<Rgb> albedo;
   std::size_t offset = 0;
   for (std::size_t m = 0; m < reader.mesh_count(); ++m) {

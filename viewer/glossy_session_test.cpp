@@ -21,7 +21,7 @@
 
 #include "packager/prtpack_writer.h"
 #include "viewer/environment_background.h"
-#include "viewer/error_test_support.h"
+#include "runtime/error_test_support.h"
 #include "viewer/rasterizer.h"
 #include "viewer/window_test_support.h"
 #include "vocabulary/cubemap_resample.h"

@@ -13,7 +13,7 @@
 #include <string>
 
 #include "packager/prtpack_reader.h"
-#include "viewer/camera_metadata.h"
+#include "runtime/camera_metadata.h"
 #include "viewer/environment_background.h"
 #include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"

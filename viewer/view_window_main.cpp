@@ -20,7 +20,7 @@
 #include "viewer/environment_background.h"
 #include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"
-#include "viewer/per_band_incremental.h"
+#include "runtime/per_band_incremental.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/image_io.h"

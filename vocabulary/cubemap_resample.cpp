@@ -1,8 +1,6 @@
 // Resampling an environment to the lighting vector L (see cubemap_resample.h).
 #include "vocabulary/cubemap_resample.h"
 
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -17,6 +15,7 @@
 
 #include "vocabulary/cubemap.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
@@ -180,9 +179,17 @@ constexpr double kLeavesPerTexel = 1.0;
 constexpr double kSplitRatio = 6.0;
 constexpr int kMaxSplitDepth = 5;
 
-// Lat-long leaf φ ∈ [f0, f1] (rotation included), θ ∈ [t0, t1], split in four and added.
+// A general rotation (row-major 3×3) applied to a direction; `r` null: the identity.
+Vec3 Rotate(const double* r, const Vec3& v) {
+  if (r == nullptr) return v;
+  return {r[0] * v.x + r[1] * v.y + r[2] * v.z, r[3] * v.x + r[4] * v.y + r[5] * v.z,
+          r[6] * v.x + r[7] * v.y + r[8] * v.z};
+}
+
+// Lat-long leaf φ ∈ [f0, f1] (a rotation about +Y included), θ ∈ [t0, t1], split in four and
+// added; `r` (nullable) a general rotation applied after.
 void RefineLatLongLeaf(TexelAccumulator& a, double f0, double f1, double t0, double t1,
-                       const float* rgb, int depth, double split) {
+                       const float* rgb, int depth, double split, const double* r) {
   const double fm = 0.5 * (f0 + f1), tm = 0.5 * (t0 + t1);
   const double quads[4][4] = {
       {f0, fm, t0, tm}, {fm, f1, t0, tm}, {f0, fm, tm, t1}, {fm, f1, tm, t1}};
@@ -190,19 +197,19 @@ void RefineLatLongLeaf(TexelAccumulator& a, double f0, double f1, double t0, dou
     const double fc = 0.5 * (q[0] + q[1]), tc = 0.5 * (q[2] + q[3]);
     const double sf = std::sin(fc), cf = std::cos(fc), st = std::sin(tc), ct = std::cos(tc);
     const double dw = q[1] - q[0], dh = q[3] - q[2];
-    const Vec3 p{sf * ct, st, cf * ct};
-    const Vec3 ta{cf * ct * dw, 0, -sf * ct * dw};
-    const Vec3 tb{-sf * st * dh, ct * dh, -cf * st * dh};
+    const Vec3 p = Rotate(r, {sf * ct, st, cf * ct});
+    const Vec3 ta = Rotate(r, {cf * ct * dw, 0, -sf * ct * dw});
+    const Vec3 tb = Rotate(r, {-sf * st * dh, ct * dh, -cf * st * dh});
     const double omega = dw * (std::sin(q[3]) - std::sin(q[2]));
     if (!a.AddLeaf(p, ta, tb, omega, rgb, depth < kMaxSplitDepth ? split : 0)) {
-      RefineLatLongLeaf(a, q[0], q[1], q[2], q[3], rgb, depth + 1, split);
+      RefineLatLongLeaf(a, q[0], q[1], q[2], q[3], rgb, depth + 1, split, r);
     }
   }
 }
 
 // Cube leaf [u0, u1] × [v0, v1] of a source face, rotated by rot about +Y, split in four.
 void RefineCubeLeaf(TexelAccumulator& a, int face, double u0, double u1, double v0, double v1,
-                    double rot, const float* rgb, int depth, double split) {
+                    double rot, const float* rgb, int depth, double split, const double* r) {
   const double um = 0.5 * (u0 + u1), vm = 0.5 * (v0 + v1);
   const double quads[4][4] = {
       {u0, um, v0, vm}, {um, u1, v0, vm}, {u0, um, vm, v1}, {um, u1, vm, v1}};
@@ -210,13 +217,14 @@ void RefineCubeLeaf(TexelAccumulator& a, int face, double u0, double u1, double 
   const Vec3 eu = CubemapLayout::FacePoint(face, 1, 0) - p00;
   const Vec3 ev = CubemapLayout::FacePoint(face, 0, 1) - p00;
   for (const auto& q : quads) {
-    const Vec3 p =
-        RotateAboutY(CubemapLayout::FacePoint(face, 0.5 * (q[0] + q[1]), 0.5 * (q[2] + q[3])), rot);
-    const Vec3 ta = RotateAboutY(eu * (q[1] - q[0]), rot);
-    const Vec3 tb = RotateAboutY(ev * (q[3] - q[2]), rot);
+    const Vec3 p = Rotate(
+        r, RotateAboutY(CubemapLayout::FacePoint(face, 0.5 * (q[0] + q[1]), 0.5 * (q[2] + q[3])),
+                        rot));
+    const Vec3 ta = Rotate(r, RotateAboutY(eu * (q[1] - q[0]), rot));
+    const Vec3 tb = Rotate(r, RotateAboutY(ev * (q[3] - q[2]), rot));
     const double omega = FaceRectSolidAngle(q[0], q[1], q[2], q[3]);
     if (!a.AddLeaf(p, ta, tb, omega, rgb, depth < kMaxSplitDepth ? split : 0)) {
-      RefineCubeLeaf(a, face, q[0], q[1], q[2], q[3], rot, rgb, depth + 1, split);
+      RefineCubeLeaf(a, face, q[0], q[1], q[2], q[3], rot, rgb, depth + 1, split, r);
     }
   }
 }
@@ -237,8 +245,9 @@ double MinTexelAngle(int n) {
 namespace {
 
 // Σ ω·R, Σ ω·G, Σ ω·B, Σ ω per texel (4 doubles per texel).
+// `r` (nullable): a general rotation applied after the one about +Y.
 std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapLayout& layout,
-                                     double rotation_y) {
+                                     double rotation_y, const double* r) {
   const int n = layout.n();
   if (env.width <= 0 || env.height <= 0 || env.r.size() != env.PixelCount() ||
       env.g.size() != env.PixelCount() || env.b.size() != env.PixelCount()) {
@@ -295,7 +304,8 @@ std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapL
       }
     }
     const int k_theta = std::max(1, static_cast<int>(std::ceil(kPi / (h - 1) / leaf_max)));
-    tbb::parallel_for(0, chunks, [&](int chunk) {
+    ParallelFor(static_cast<std::size_t>(chunks), [&](std::size_t chunk_index) {
+      const int chunk = static_cast<int>(chunk_index);
       auto a = std::make_unique<TexelAccumulator>(layout);
       const int y0 = static_cast<int>(static_cast<std::int64_t>(h) * chunk / chunks);
       const int y1 = static_cast<int>(static_cast<std::int64_t>(h) * (chunk + 1) / chunks);
@@ -317,11 +327,11 @@ std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapL
           for (const PhiLeaf& l : leaves) {
             const float rgb[3] = {row_r[l.x], row_g[l.x], row_b[l.x]};
             // d(φ, θ) = (sin φ cos θ, sin θ, cos φ cos θ); ∂d/∂φ and ∂d/∂θ times the extents.
-            const Vec3 p{l.sin_c * ct, st, l.cos_c * ct};
-            const Vec3 dphi_v{l.cos_c * ct * l.width, 0, -l.sin_c * ct * l.width};
-            const Vec3 dth_v{-l.sin_c * st * lh, ct * lh, -l.cos_c * st * lh};
+            const Vec3 p = Rotate(r, {l.sin_c * ct, st, l.cos_c * ct});
+            const Vec3 dphi_v = Rotate(r, {l.cos_c * ct * l.width, 0, -l.sin_c * ct * l.width});
+            const Vec3 dth_v = Rotate(r, {-l.sin_c * st * lh, ct * lh, -l.cos_c * st * lh});
             if (!a->AddLeaf(p, dphi_v, dth_v, l.width * band, rgb, split)) {
-              RefineLatLongLeaf(*a, l.phi_lo, l.phi_lo + l.width, t_lo, t_hi, rgb, 1, split);
+              RefineLatLongLeaf(*a, l.phi_lo, l.phi_lo + l.width, t_lo, t_hi, rgb, 1, split, r);
             }
           }
         }
@@ -332,7 +342,8 @@ std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapL
     const int s = w;
     const double cell = s > 1 ? 2.0 / (s - 1) : 2.0;
     const int k = std::max(1, static_cast<int>(std::ceil(cell / leaf_max)));
-    tbb::parallel_for(0, chunks, [&](int chunk) {
+    ParallelFor(static_cast<std::size_t>(chunks), [&](std::size_t chunk_index) {
+      const int chunk = static_cast<int>(chunk_index);
       auto a = std::make_unique<TexelAccumulator>(layout);
       const int y0 = static_cast<int>(static_cast<std::int64_t>(h) * chunk / chunks);
       const int y1 = static_cast<int>(static_cast<std::int64_t>(h) * (chunk + 1) / chunks);
@@ -348,17 +359,18 @@ std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapL
           const Vec3 p00 = CubemapLayout::FacePoint(face, 0, 0);
           eu = CubemapLayout::FacePoint(face, 1, 0) - p00;
           ev = CubemapLayout::FacePoint(face, 0, 1) - p00;
-          const Vec3 ta = RotateAboutY(eu * du, rotation_y);
-          const Vec3 tb = RotateAboutY(ev * dv, rotation_y);
+          const Vec3 ta = Rotate(r, RotateAboutY(eu * du, rotation_y));
+          const Vec3 tb = Rotate(r, RotateAboutY(ev * dv, rotation_y));
           for (int jv = 0; jv < k; ++jv) {
             const double v0 = cv.lo + jv * dv;
             for (int iu = 0; iu < k; ++iu) {
               const double u0 = cu.lo + iu * du;
               const double omega = FaceRectSolidAngle(u0, u0 + du, v0, v0 + dv);
-              const Vec3 p = RotateAboutY(
-                  CubemapLayout::FacePoint(face, u0 + 0.5 * du, v0 + 0.5 * dv), rotation_y);
+              const Vec3 p = Rotate(
+                  r, RotateAboutY(CubemapLayout::FacePoint(face, u0 + 0.5 * du, v0 + 0.5 * dv),
+                                  rotation_y));
               if (!a->AddLeaf(p, ta, tb, omega, rgb, split)) {
-                RefineCubeLeaf(*a, face, u0, u0 + du, v0, v0 + dv, rotation_y, rgb, 1, split);
+                RefineCubeLeaf(*a, face, u0, u0 + du, v0, v0 + dv, rotation_y, rgb, 1, split, r);
               }
             }
           }
@@ -381,15 +393,17 @@ std::vector<double> AccumulateTexels(const EnvironmentImage& env, const CubemapL
 std::vector<double> ResampledTexelSolidAngles(const EnvironmentImage& env, int n,
                                               double rotation_y) {
   const CubemapLayout layout(n);
-  const std::vector<double> total = AccumulateTexels(env, layout, rotation_y);
+  const std::vector<double> total = AccumulateTexels(env, layout, rotation_y, nullptr);
   std::vector<double> w(layout.texel_count());
   for (std::size_t t = 0; t < w.size(); ++t) w[t] = total[4 * t + 3];
   return w;
 }
 
-CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation_y) {
+namespace {
+
+CubemapRgb Resample(const EnvironmentImage& env, int n, double rotation_y, const double* r) {
   const CubemapLayout layout(n);
-  const std::vector<double> total = AccumulateTexels(env, layout, rotation_y);
+  const std::vector<double> total = AccumulateTexels(env, layout, rotation_y, r);
   const int w = env.width, h = env.height;
   CubemapRgb out;
   out.n = n;
@@ -400,7 +414,11 @@ CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation
       for (int c = 0; c < 3; ++c) out.Channel(c)[t] = static_cast<float>(s[c] / s[3]);
     } else {
       // Unreachable with leaves smaller than texels; point-sample the nearest pixel.
-      const Vec3 d = RotateAboutY(layout.TexelCenter(t), -rotation_y);
+      Vec3 d = layout.TexelCenter(t);
+      if (r != nullptr)  // Rᵀ·d
+        d = {r[0] * d.x + r[3] * d.y + r[6] * d.z, r[1] * d.x + r[4] * d.y + r[7] * d.z,
+             r[2] * d.x + r[5] * d.y + r[8] * d.z};
+      d = RotateAboutY(d, -rotation_y);
       double px, py;
       if (env.layout == EnvmapLayout::kLatLong) {
         LatLongPixelPosition(w, h, d, px, py);
@@ -413,6 +431,19 @@ CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation
     }
   }
   return out;
+}
+
+}  // namespace
+
+CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation_y) {
+  return Resample(env, n, rotation_y, nullptr);
+}
+
+CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n,
+                             const std::array<double, 9>& rotation) {
+  for (double v : rotation)
+    if (!std::isfinite(v)) throw std::invalid_argument("ResampleToCubemap: rotation");
+  return Resample(env, n, 0.0, rotation.data());
 }
 
 }  // namespace prt

@@ -3,6 +3,7 @@
 // angle (no point sampling, no aliasing of a small bright sun).
 #pragma once
 
+#include <array>
 #include <vector>
 
 #include "vocabulary/envmap.h"
@@ -16,8 +17,13 @@ namespace prt {
 // texel divides its accumulated radiance × solid angle by its accumulated solid angle. A constant
 // map stays constant; a one-pixel sun keeps its power. n: power of two in [1, 256]
 // (std::invalid_argument otherwise). A NaN/Inf pixel throws prt::NumericalError naming it.
-// Parallel (TBB) and deterministic (independent of the thread count).
+// Parallel (vocabulary/parallel.h) and deterministic (independent of the thread count).
 CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n, double rotation_y = 0.0);
+// The same under a general rotation (row-major 3×3, orthonormal): the map's direction d lights
+// from rotation·d, each leaf of the integration rotated as a whole (its point and both edges).
+// A rotation about +Y gives ResampleToCubemap(env, n, angle) to rounding.
+CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n,
+                             const std::array<double, 9>& rotation);
 
 // Diagnostic: the source solid angle credited to each texel by ResampleToCubemap's integration
 // (6·n² values). Equals CubemapLayout::TexelSolidAngle up to the integration error, which bounds

@@ -151,7 +151,7 @@ void InverseWavelet2DStep(WaveletFilter filter, float* data, int width, int heig
 
 // The same inverse step t on a width×height region whose elements are `channels` interleaved
 // floats (data[(y·width + x)·channels + c]), computed in float for all channels at once: the
-// runtime's Eq. 8 (viewer/compressed_relight.h), where a step runs once per level per frame
+// runtime's Eq. 8 (runtime/compressed_relight.h), where a step runs once per level per frame
 // and float keeps well inside the 9-bit quantisation of the terms it sums. The double transforms
 // above stay the reference. `scratch` holds at least width·height·channels floats.
 void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int width, int height,
@@ -163,7 +163,7 @@ void InverseWavelet2DStepInterleaved(WaveletFilter filter, float* data, int widt
 // out[0, len): the same numbers as InverseWavelet2DStepInterleaved on a length×1 region, without
 // its copy back. `out` may be `high − ⌈len/2⌉·channels` (the high band's own buffer, whose low
 // band then lives elsewhere), so a caller can alternate two buffers from step to step
-// (Cheslack-Postava et al. 2008 §4.5 Eq. 8 in viewer/compressed_relight.cpp). LeGall 5/3
+// (Cheslack-Postava et al. 2008 §4.5 Eq. 8 in runtime/compressed_relight.cpp). LeGall 5/3
 // with 1 or 4 channels only (InverseWavelet1DStepSplitSupported).
 bool InverseWavelet1DStepSplitSupported(WaveletFilter filter, int channels);
 void InverseWavelet1DStepSplit(WaveletFilter filter, const float* low, const float* high,

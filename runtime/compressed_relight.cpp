@@ -1,10 +1,6 @@
 // Relighting from compressed columns (Cheslack-Postava et al. 2008 §4.5, Eq. 5–8); see
 // compressed_relight.h and docs/compression.md.
-#include "viewer/compressed_relight.h"
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
+#include "runtime/compressed_relight.h"
 
 #include <algorithm>
 #include <array>
@@ -20,6 +16,7 @@
 
 #include "vocabulary/errors.h"
 #include "vocabulary/huge_pages.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 namespace {
@@ -311,8 +308,7 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
       std::partition_point(lights.begin(), lights.end(),
                            [&](const Light& l) { return columns_[l.slot].depth > 0; }) -
       lights.begin());
-  const std::size_t threads = std::clamp<std::size_t>(
-      static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()), 1, tiles_);
+  const std::size_t threads = std::clamp<std::size_t>(ParallelConcurrency(), 1, tiles_);
   const std::size_t stride = tiles_ + 1;
   std::array<std::size_t, kMaxTiles + 1> tile_work{};
   // Software prefetch 2 KB ahead in the column being added, and the first 2 KB of the next
@@ -421,7 +417,7 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
     if (ranges == 1) {
       body(0);
     } else {
-      tbb::parallel_for(std::size_t{0}, ranges, body);
+      ParallelFor(ranges, body);
     }
   };
   const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
@@ -518,13 +514,22 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
     if (serial) {
       gather(lo, hi, base);
     } else {
-      tbb::parallel_for(
-          tbb::blocked_range<std::size_t>(lo, hi, 4096),
-          [&](const tbb::blocked_range<std::size_t>& r) { gather(r.begin(), r.end(), base); });
+      ParallelForRange(lo, hi, 4096, [&](std::size_t a, std::size_t b) { gather(a, b, base); });
     }
   }
   ReturnBuffers(std::move(buffers));
   if (non_finite.load(std::memory_order_relaxed)) ThrowNonFinite(channels, out);
+}
+
+std::size_t CompressedRelighter::memory_bytes() const {
+  std::size_t b =
+      sizeof(Term) * (terms_.capacity() + late_terms_.capacity()) +
+      sizeof(Column) * columns_.capacity() + sizeof(int32_t) * slot_.capacity() +
+      sizeof(uint32_t) * (coefficient_of_sample_.capacity() + tile_offsets_.capacity()) +
+      sizeof(Segment) * segments_.capacity();
+  const std::lock_guard<std::mutex> lock(pool_mutex_);
+  for (const auto& f : pool_) b += sizeof(float) * (f->x.capacity() + f->scratch.capacity());
+  return b;
 }
 
 std::unique_ptr<CompressedRelighter::FrameBuffers> CompressedRelighter::TakeBuffers() const {

@@ -1,6 +1,6 @@
 // Wavelet lighting and its non-linear approximation (Ng et al. 2003 §5, "non-linear wavelet
 // lighting approximation" with area-weighted selection; Overbeck et al. 2006 §3 Eq. 2, §5.1).
-#include "viewer/lighting.h"
+#include "runtime/lighting.h"
 
 #include <algorithm>
 #include <bit>

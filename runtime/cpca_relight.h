@@ -5,7 +5,7 @@
 //
 //   CpcaRelighter             the two steps; a TransportOperator, so NWA, BI, PBI and every
 //                             consumer of a transport can use it "blindly" (§6.3, first paragraph)
-//   CpcaIncrementalRelighter  both steps incremental (§6.3): PBI (viewer/per_band_incremental.h)
+//   CpcaIncrementalRelighter  both steps incremental (§6.3): PBI (runtime/per_band_incremental.h)
 //                             on the lighting for step 1, through the projection operator, and
 //                             the basic incremental update of Eq. 10 for step 2: per cluster only
 //                             the `basis_terms` (default S/4) coefficients P_{c,i} that changed
@@ -20,9 +20,9 @@
 #include <vector>
 
 #include "formats/cpca_transport.h"
-#include "viewer/lighting.h"
-#include "viewer/per_band_incremental.h"
-#include "viewer/relight.h"
+#include "runtime/lighting.h"
+#include "runtime/per_band_incremental.h"
+#include "runtime/relight.h"
 
 namespace prt {
 
@@ -37,6 +37,11 @@ class CpcaProjection final : public TransportOperator {
   std::size_t sample_count() const override { return vectors_; }
   std::size_t coefficient_count() const override { return columns_; }
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+  std::size_t memory_bytes() const {
+    return sizeof(uint32_t) * (column_begin_.size() + entry_vector_.size() + vector_begin_.size() +
+                               row_column_.size()) +
+           sizeof(float) * (entry_value_.size() + row_value_.size());
+  }
 
  private:
   std::size_t vectors_ = 0, columns_ = 0;
@@ -75,6 +80,8 @@ class CpcaRelighter final : public TransportOperator {
   // (vector k, ΔP_k) listed; vectors of one cluster touch only that cluster's rows.
   void BlendDelta(std::span<const uint32_t> vectors, std::span<const std::array<double, 3>> delta,
                   SampleRadiance& out) const;
+  // Bytes held: the projection's two layouts, the rows' clusters and weights.
+  std::size_t memory_bytes() const;
   // The cluster of spatial sample s (in channel 0's rows).
   uint32_t ClusterOf(std::size_t sample) const { return cluster_of_[sample]; }
 

@@ -1,5 +1,5 @@
 // The scene's camera from a pack's metadata, and the --camera override (see camera_metadata.h).
-#include "viewer/camera_metadata.h"
+#include "runtime/camera_metadata.h"
 
 #include <cmath>
 #include <cstdlib>
@@ -33,7 +33,8 @@ Vec3 JsonVec3(const nlohmann::json& j, const std::string& name, const char* key)
 
 }  // namespace
 
-bool CameraFromMetadata(const std::string& metadata_json, const std::string& name, Camera& camera) {
+bool CameraFromMetadata(const std::string& metadata_json, const std::string& name, Camera& camera,
+                        const SceneTomlCameraFn& scene_toml_camera) {
   const nlohmann::json meta = nlohmann::json::parse(metadata_json, nullptr, false);
   if (meta.is_discarded() || !meta.is_object() || !meta.contains("scene")) return false;
   const nlohmann::json& scene = meta["scene"];
@@ -42,15 +43,8 @@ bool CameraFromMetadata(const std::string& metadata_json, const std::string& nam
   if (scene.contains("camera") && scene["camera"].is_object()) {
     cam = scene["camera"];
   } else if (scene.contains("toml") && scene["toml"].is_string()) {
-    // scene.toml kept as text (run_folder_pack.cpp's fallback): parse it with the scene parser.
-    try {
-      const SceneDescription d =
-          ParseScene(scene["toml"].get<std::string>(), name + ":scene.toml", "");
-      camera = d.camera;
-      return true;
-    } catch (const InputError&) {
-      return false;
-    }
+    // scene.toml kept as text (run_folder_pack.cpp's fallback): the caller's scene parser.
+    return scene_toml_camera && scene_toml_camera(scene["toml"].get<std::string>(), name, camera);
   } else {
     return false;
   }

@@ -15,7 +15,7 @@
 #include <span>
 #include <vector>
 
-#include "viewer/relight.h"
+#include "runtime/relight.h"
 #include "vocabulary/envmap.h"
 
 namespace prt {

@@ -1,4 +1,4 @@
-#include "viewer/compressed_relight.h"
+#include "runtime/compressed_relight.h"
 
 #include <gtest/gtest.h>
 

@@ -9,7 +9,7 @@
 //
 // TransportOperator is the seam where other representations plug in: DenseTransport and
 // SparseTransport here, CompressedTransportOperator for the adaptive 4D compressed columns of
-// viewer/compressed_relight.h (Cheslack-Postava et al. 2008 Eq. 8).
+// runtime/compressed_relight.h (Cheslack-Postava et al. 2008 Eq. 8).
 #pragma once
 
 #include <array>
@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "viewer/compressed_relight.h"
+#include "runtime/compressed_relight.h"
 #include "vocabulary/scene.h"
 
 namespace prt {
@@ -69,7 +69,7 @@ class TransportOperator {
 
 // Dense rows: T stored in blocks of kBlockSamples samples, column-major inside a block, so that
 // applying one term is a contiguous, vectorisable axpy over the block. Blocks run in parallel
-// (TBB).
+// (vocabulary/parallel.h).
 class DenseTransport final : public TransportOperator {
  public:
   static constexpr std::size_t kBlockSamples = 256;
@@ -95,7 +95,7 @@ class DenseTransport final : public TransportOperator {
 
 // Sparse rows (CSR: row_offsets has samples + 1 entries, indices/values hold the non-zeros of each
 // row). Stored as one compressed-column block per kBlockSamples samples, so a term visits only the
-// non-zeros of its column; blocks run in parallel (TBB).
+// non-zeros of its column; blocks run in parallel (vocabulary/parallel.h).
 class SparseTransport final : public TransportOperator {
  public:
   static constexpr std::size_t kBlockSamples = 1024;
@@ -123,7 +123,7 @@ class SparseTransport final : public TransportOperator {
 };
 
 // Relighting straight from adaptively compressed columns (Cheslack-Postava et al. 2008 §4.5,
-// Eq. 8) through viewer/compressed_relight.h. The relighter must outlive the operator and
+// Eq. 8) through runtime/compressed_relight.h. The relighter must outlive the operator and
 // its row wavelet must be Haar (the lighting basis here; std::invalid_argument otherwise).
 // Lighting values pass to the compressed path in float, and its radiance comes back in float:
 // expect 1–2e-7 relative rounding per Accumulate of tens of terms, ~2e-6 for all 6,144 of n = 32
@@ -133,7 +133,7 @@ class SparseTransport final : public TransportOperator {
 // exception `out` may hold non-finite values and must be discarded.
 // A 3-channel compressed transport relights channel c of each sample from its channel-c row
 // (sample_count() is the relighter's V, not its rows).
-// Its outputs are in the relighter's sample order `order` (viewer/compressed_relight.h):
+// Its outputs are in the relighter's sample order `order` (runtime/compressed_relight.h):
 // kSamples, the pack's order, or kCoefficients, the depth-0 coefficient layout, which spares the
 // frame the gather through the Hilbert permutation (ViewerSession renders in that order).
 class CompressedTransportOperator final : public TransportOperator {

@@ -1,9 +1,6 @@
 // Relighting from Haar-basis transport rows (Ng et al. 2003 Eq. 1; Overbeck et al. 2006 Eq. 4:
 // ΔB = T·ΔL touches only the columns named by ΔL's terms).
-#include "viewer/relight.h"
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include "runtime/relight.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,8 +9,9 @@
 #include <stdexcept>
 #include <string>
 
-#include "viewer/compressed_relight.h"
+#include "runtime/compressed_relight.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
@@ -101,7 +99,7 @@ DenseTransport::DenseTransport(std::span<const float> rows, std::size_t samples,
   blocks_.assign(channels * nb * coefficients * kBlockSamples, 0.0f);
   // Transpose each block of rows into column-major order (parallel over blocks of every channel:
   // block (c, b) holds rows c·samples + [b·kBlockSamples, …)).
-  tbb::parallel_for(std::size_t{0}, channels * nb, [&](std::size_t cb) {
+  ParallelFor(channels * nb, [&](std::size_t cb) {
     const std::size_t c = cb / nb, b = cb % nb;
     const std::size_t s0 = b * kBlockSamples;
     const std::size_t s1 = std::min(samples, s0 + kBlockSamples);
@@ -125,8 +123,8 @@ void DenseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadia
   CheckTerms(terms, coefficients_, out, samples_);
   if (terms.empty() || samples_ == 0) return;
   const std::size_t nb = BlockCount(samples_, kBlockSamples);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb), [&](const auto& range) {
-    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+  ParallelForRange(0, nb, 1, [&](std::size_t range_begin, std::size_t range_end) {
+    for (std::size_t b = range_begin; b != range_end; ++b) {
       const std::size_t s0 = b * kBlockSamples;
       const std::size_t len = std::min(samples_, s0 + kBlockSamples) - s0;
       // Accumulate the block locally (fixed size, stays in L1), then add once.
@@ -204,7 +202,7 @@ SparseTransport::SparseTransport(std::span<const uint64_t> row_offsets,
   // Counting sort of each block's non-zeros by column; blocks occupy the same value range as in
   // the CSR input (rows of a block are contiguous there), so blocks fill independently. Block
   // (c, b) holds rows c·samples + [b·kBlockSamples, …).
-  tbb::parallel_for(std::size_t{0}, channels * nb, [&](std::size_t cb) {
+  ParallelFor(channels * nb, [&](std::size_t cb) {
     const std::size_t row0 = (cb / nb) * samples_;
     const std::size_t s0 = row0 + (cb % nb) * kBlockSamples;
     const std::size_t s1 = std::min(row0 + samples_, s0 + kBlockSamples);
@@ -234,8 +232,8 @@ void SparseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadi
   if (channels_ != 1) {
     // Block (c, b) adds lighting channel c to radiance channel c only; blocks of one b in
     // different channels write different arrays, so they run in parallel too.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, channels_ * nb), [&](const auto& range) {
-      for (std::size_t cb = range.begin(); cb != range.end(); ++cb) {
+    ParallelForRange(0, channels_ * nb, 1, [&](std::size_t range_begin, std::size_t range_end) {
+      for (std::size_t cb = range_begin; cb != range_end; ++cb) {
         const std::size_t c = cb / nb;
         double* __restrict o = out.channel[c].data() + (cb % nb) * kBlockSamples;
         const uint64_t* start = column_start_.data() + cb * stride;
@@ -248,8 +246,8 @@ void SparseTransport::Accumulate(std::span<const LightingTerm> terms, SampleRadi
     });
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nb), [&](const auto& range) {
-    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+  ParallelForRange(0, nb, 1, [&](std::size_t range_begin, std::size_t range_end) {
+    for (std::size_t b = range_begin; b != range_end; ++b) {
       const std::size_t s0 = b * kBlockSamples;
       double* __restrict r = out.channel[0].data() + s0;
       double* __restrict g = out.channel[1].data() + s0;

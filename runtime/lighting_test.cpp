@@ -1,6 +1,6 @@
 // Wavelet lighting and NWA (Ng et al. 2003): projection identities, band/area bookkeeping, NWA
 // with all terms = exact, monotone error on a real environment, area-weighted vs magnitude.
-#include "viewer/lighting.h"
+#include "runtime/lighting.h"
 
 #include <gtest/gtest.h>
 
@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "viewer/relight.h"
+#include "runtime/relight.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"

@@ -1,6 +1,6 @@
 // Transport operators against brute-force products: dense and sparse rows, partial blocks,
 // duplicates, the orthonormal-basis identity T·L = T̂·L̂, the B = 1 convention, albedo.
-#include "viewer/relight.h"
+#include "runtime/relight.h"
 
 #include <gtest/gtest.h>
 
@@ -16,10 +16,10 @@
 
 #include "formats/column_coding.h"
 #include "formats/compressed_transport.h"
-#include "viewer/compressed_relight.h"
-#include "viewer/error_test_support.h"
-#include "viewer/lighting.h"
-#include "viewer/per_band_incremental.h"
+#include "runtime/compressed_relight.h"
+#include "runtime/error_test_support.h"
+#include "runtime/lighting.h"
+#include "runtime/per_band_incremental.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/wavelets.h"

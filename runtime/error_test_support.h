@@ -1,4 +1,4 @@
-// For the viewer's tests: the message of the prt::NumericalError a call throws.
+// For the runtime's and the viewer's tests: the message of the prt::NumericalError a call throws.
 #pragma once
 
 #include <string>

@@ -23,8 +23,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "viewer/lighting.h"
-#include "viewer/relight.h"
+#include "runtime/lighting.h"
+#include "runtime/relight.h"
 
 namespace prt {
 

@@ -1,14 +1,13 @@
 // Basic incremental (BI, Overbeck et al. 2006 §3, Eq. 3–6) and per-band incremental (PBI, §5,
 // Figure 6, with the simple per-band L1 test of §5.2.2) wavelet lighting for relighting.
-#include "viewer/per_band_incremental.h"
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+#include "runtime/per_band_incremental.h"
 
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
+
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
@@ -204,13 +203,13 @@ const SampleRadiance& PerBandIncrementalRelighter::Radiance() {
   const std::size_t samples = transport_.sample_count();
   if (composed_.size() != samples) composed_ = SampleRadiance(samples);
   // Line 20: B = Σ_i B_i.
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples, 4096), [&](const auto& range) {
+  ParallelForRange(0, samples, 4096, [&](std::size_t range_begin, std::size_t range_end) {
     for (int c = 0; c < 3; ++c) {
       double* __restrict out = composed_.channel[c].data();
-      for (std::size_t s = range.begin(); s != range.end(); ++s) out[s] = 0.0;
+      for (std::size_t s = range_begin; s != range_end; ++s) out[s] = 0.0;
       for (const SampleRadiance& band : band_image_) {
         const double* __restrict in = band.channel[c].data();
-        for (std::size_t s = range.begin(); s != range.end(); ++s) out[s] += in[s];
+        for (std::size_t s = range_begin; s != range_end; ++s) out[s] += in[s];
       }
     }
   });

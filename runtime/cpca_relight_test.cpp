@@ -2,7 +2,7 @@
 // with the lighting, for exact and sparse (NWA) lighting, one and three channels; Eq. 10's
 // incremental step 2 reaches the exact image under static lighting; BlendDelta of every entry
 // equals Blend.
-#include "viewer/cpca_relight.h"
+#include "runtime/cpca_relight.h"
 
 #include <gtest/gtest.h>
 

@@ -1,9 +1,6 @@
 // Relighting from a clustered-PCA transport (Overbeck et al. 2006 §6.3, Eq. 7, 8, 10); see
-// viewer/cpca_relight.h and docs/cpca.md.
-#include "viewer/cpca_relight.h"
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
+// runtime/cpca_relight.h and docs/cpca.md.
+#include "runtime/cpca_relight.h"
 
 #include <algorithm>
 #include <atomic>
@@ -12,6 +9,7 @@
 #include <string>
 
 #include "vocabulary/errors.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
@@ -77,8 +75,8 @@ void CpcaProjection::Accumulate(std::span<const LightingTerm> terms, SampleRadia
     std::vector<double> L(3 * columns_, 0.0);
     for (const LightingTerm& t : terms)
       for (int c = 0; c < 3; ++c) L[3 * t.index + c] += t.value[c];
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, vectors_, 64), [&](const auto& range) {
-      for (std::size_t k = range.begin(); k < range.end(); ++k) {
+    ParallelForRange(0, vectors_, 64, [&](std::size_t range_begin, std::size_t range_end) {
+      for (std::size_t k = range_begin; k < range_end; ++k) {
         double a0 = 0, a1 = 0, a2 = 0;
         for (uint32_t e = vector_begin_[k]; e < vector_begin_[k + 1]; ++e) {
           const double v = row_value_[e];
@@ -149,9 +147,9 @@ void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
   for (std::size_t k = 0; k < K * S1; ++k)
     for (int ch = 0; ch < 3; ++ch) Pi[4 * k + ch] = P.channel[ch][k];
   std::atomic<bool> finite{true};
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, spatial_, 2048), [&](const auto& range) {
+  ParallelForRange(0, spatial_, 2048, [&](std::size_t range_begin, std::size_t range_end) {
     bool ok = true;
-    for (std::size_t s = range.begin(); s < range.end(); ++s) {
+    for (std::size_t s = range_begin; s < range_end; ++s) {
       if (channels_ == 1) {
         const float* w = weights_.data() + s * S1;
         const double* p = Pi.data() + 4 * static_cast<std::size_t>(cluster_of_[s]) * S1;
@@ -209,7 +207,7 @@ void CpcaRelighter::BlendDelta(std::span<const uint32_t> vectors,
     if (n == order.size() || vectors[order[n]] / S1 != vectors[order[n - 1]] / S1)
       group.push_back(n);
   if (order.empty()) return;
-  tbb::parallel_for(std::size_t{0}, group.size() - 1, [&](std::size_t g) {
+  ParallelFor(group.size() - 1, [&](std::size_t g) {
     const uint32_t c = static_cast<uint32_t>(vectors[order[group[g]]] / S1);
     // The group's entries once: which weight each takes, and its ΔP.
     const std::size_t m = group[g + 1] - group[g];
@@ -346,6 +344,12 @@ std::vector<float> ClusterColours(const CpcaRelighter& relighter) {
     rgb[3 * s + 2] = static_cast<float>(v * b);
   }
   return rgb;
+}
+
+std::size_t CpcaRelighter::memory_bytes() const {
+  return projection_.memory_bytes() +
+         sizeof(uint32_t) * (cluster_of_.size() + cluster_begin_.size() + rows_of_cluster_.size()) +
+         sizeof(float) * weights_.size();
 }
 
 }  // namespace prt

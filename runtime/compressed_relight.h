@@ -31,10 +31,11 @@ enum class SampleOrder : uint8_t { kSamples, kCoefficients };
 // by adding the lights of depth-l columns into one column-wavelet-domain buffer per channel
 // (float) and running one single-step inverse per level from the deepest level down (one full
 // inverse transform in all, whatever the number of lights); the terms no earlier inverse step
-// touches are added in one pass before the first step (RelightLights). Parallel inside (TBB: the
-// scatter over tiles of coefficients, from 2^15 terms; the inverse steps and, below 4 MB of X,
-// the gather back to sample order run on the calling thread, where X is cached). Thread-compatible
-// (const methods are safe to call from several threads with separate outputs).
+// touches are added in one pass before the first step (RelightLights). Parallel inside
+// (vocabulary/parallel.h: the scatter over tiles of coefficients, from 2^15 terms; the inverse
+// steps and, below 4 MB of X, the gather back to sample order run on the calling thread, where X is
+// cached). Thread-compatible (const methods are safe to call from several threads with separate
+// outputs).
 //
 // Colour channels of T (formats/compressed_transport.h): with a one-channel transport every
 // lighting channel c relights the same rows, B_c = T̂·L̂_c. With a 3-channel transport (rows
@@ -69,6 +70,8 @@ class CompressedRelighter {
   int ColumnDepth(uint32_t column) const;
   // Stored terms of a column (0 for absent columns).
   std::size_t ColumnTermCount(uint32_t column) const;
+  // Bytes held: the dequantised terms (8 per term), the tables, the per-frame buffers pooled.
+  std::size_t memory_bytes() const;
 
   // Sample (global order, V of them) → its position in the depth-0 coefficient layout, the
   // position its radiance takes in SampleOrder::kCoefficients outputs (the same in every colour

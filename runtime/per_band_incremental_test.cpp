@@ -1,7 +1,7 @@
 // BI and PBI (Overbeck et al. 2006 §3, §5): exact convergence under static lighting within the
 // ⌈non-zeros / N⌉ bound, the §5.2.2 reset test, no drift after 10,000 rotating frames, and PBI
 // with 30 terms against NWA with 90 terms over a rotation of a real environment.
-#include "viewer/per_band_incremental.h"
+#include "runtime/per_band_incremental.h"
 
 #include <gtest/gtest.h>
 
@@ -12,12 +12,12 @@
 #include <numbers>
 #include <random>
 
-#include "viewer/lighting.h"
-#include "viewer/relight.h"
+#include "runtime/lighting.h"
+#include "runtime/relight.h"
 #include "vocabulary/cubemap.h"
-#include "vocabulary/envmap.h"
-#include "vocabulary/environment_io.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/environment_io.h"
+#include "vocabulary/envmap.h"
 #include "vocabulary/wavelets.h"
 
 namespace prt {

@@ -1,0 +1,501 @@
+// The C API of runtime/prt_runtime.h over RelightSession (runtime/relight_session.h): the same
+// calls prt-view makes (ResampleToCubemap, ProjectLighting, RelightExact / NWA / BI / PBI, Shade,
+// ToPackOrder), behind opaque handles, status codes and a per-thread message. No exception
+// leaves this file.
+#include "runtime/prt_runtime.h"
+
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <new>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "packager/prtpack_reader.h"
+#include "runtime/lighting.h"
+#include "runtime/per_band_incremental.h"
+#include "runtime/relight.h"
+#include "runtime/relight_session.h"
+#include "vocabulary/cubemap.h"
+#include "vocabulary/cubemap_resample.h"
+#include "vocabulary/envmap.h"
+#include "vocabulary/errors.h"
+#include "vocabulary/parallel.h"
+
+namespace {
+
+thread_local std::string g_error;
+
+// A call made out of order (PRT_RUNTIME_ERROR_STATE).
+class StateError : public std::logic_error {
+ public:
+  using std::logic_error::logic_error;
+};
+// A caller's argument (PRT_RUNTIME_ERROR_ARGUMENT).
+class ArgumentError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+// Runs f, turning every exception into a status and this thread's message.
+template <class F>
+int Guard(const char* function, F&& f) {
+  g_error.clear();
+  try {
+    f();
+    return PRT_RUNTIME_OK;
+  } catch (const StateError& e) {
+    g_error = std::string(function) + ": " + e.what();
+    return PRT_RUNTIME_ERROR_STATE;
+  } catch (const ArgumentError& e) {
+    g_error = std::string(function) + ": " + e.what();
+    return PRT_RUNTIME_ERROR_ARGUMENT;
+  } catch (const prt::NumericalError& e) {
+    g_error = std::string(function) + ": " + e.what();
+    return PRT_RUNTIME_ERROR_NUMERIC;
+  } catch (const std::bad_alloc&) {
+    g_error = std::string(function) + ": out of memory";
+    return PRT_RUNTIME_ERROR_MEMORY;
+  } catch (const std::invalid_argument& e) {
+    g_error = std::string(function) + ": " + e.what();
+    return PRT_RUNTIME_ERROR_ARGUMENT;
+  } catch (const std::exception& e) {  // InputError, FileIoError, a corrupt section's error
+    g_error = std::string(function) + ": " + e.what();
+    return PRT_RUNTIME_ERROR_INPUT;
+  } catch (...) {
+    g_error = std::string(function) + ": unknown error";
+    return PRT_RUNTIME_ERROR_INPUT;
+  }
+}
+
+void Require(bool ok, const std::string& what) {
+  if (!ok) throw ArgumentError(what);
+}
+
+// The host's job system as the parallel backend (prt_runtime_set_task_runner).
+struct TaskRunner {
+  prt_runtime_task_runner run = nullptr;
+  void* user = nullptr;
+};
+TaskRunner g_runner;
+
+}  // namespace
+
+struct prt_runtime {
+  std::unique_ptr<prt::RelightSession> session;
+  std::string name;  // the pack, in messages
+
+  // Lighting: the environment, its rotation, and the lighting they make.
+  prt::EnvironmentImage env;
+  bool has_env = false;
+  // The rotation: about +Y by `angle_y` (prt-view's, bit for bit), or a general matrix.
+  bool general_rotation = false;
+  double angle_y = 0;
+  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  prt::WaveletLighting lighting;
+
+  int mode = PRT_RUNTIME_LIGHTING_PBI;
+  int order = PRT_RUNTIME_ORDER_PACK;
+  // The incremental relighters of BI and PBI, made at the first frame of a budget.
+  std::unique_ptr<prt::BasicIncrementalRelighter> bi;
+  std::unique_ptr<prt::PerBandIncrementalRelighter> pbi;
+  std::size_t incremental_terms = 0;
+
+  // The prepared frame (prt_runtime_prepare): shaded radiance in the session's order.
+  bool prepared = false;
+  std::vector<float> frame_rgb;
+  std::atomic<std::size_t> relit{0};  // samples written by relight_range since prepare
+  bool incremental_frame = false;
+
+  std::size_t samples() const { return session->sample_count(); }
+};
+
+namespace {
+
+prt_runtime* Open(const char* function, const std::function<prt::pack::PackReader()>& read,
+                  const std::string& name) {
+  std::unique_ptr<prt_runtime> rt;
+  const int status = Guard(function, [&] {
+    rt = std::make_unique<prt_runtime>();
+    rt->name = name;
+    rt->session = prt::RelightSession::FromReader(read(), name);
+  });
+  return status == PRT_RUNTIME_OK ? rt.release() : nullptr;
+}
+
+void RequireHandle(const prt_runtime* rt) {
+  if (rt == nullptr || !rt->session) throw ArgumentError("the handle is NULL");
+}
+
+void UpdateLighting(prt_runtime& rt);
+
+prt::CubemapRgb Resample(const prt_runtime& rt, const prt::EnvironmentImage& env, int n) {
+  return rt.general_rotation ? prt::ResampleToCubemap(env, n, rt.rotation)
+                             : prt::ResampleToCubemap(env, n, rt.angle_y);
+}
+
+// Sets the rotation and resamples the lighting; on error the old rotation stays.
+void SetRotation(prt_runtime& rt, bool general, double angle_y, const std::array<double, 9>& r) {
+  const bool old_general = rt.general_rotation;
+  const double old_angle = rt.angle_y;
+  const std::array<double, 9> old = rt.rotation;
+  rt.general_rotation = general;
+  rt.angle_y = angle_y;
+  rt.rotation = r;
+  if (!rt.has_env) return;
+  try {
+    UpdateLighting(rt);
+  } catch (...) {
+    rt.general_rotation = old_general;
+    rt.angle_y = old_angle;
+    rt.rotation = old;
+    throw;
+  }
+}
+
+// Lighting from the environment under the current rotation (prt-view's ResampleToCubemap and
+// ProjectLighting).
+void UpdateLighting(prt_runtime& rt) {
+  const int n = static_cast<int>(rt.session->cubemap_n());
+  rt.lighting = prt::ProjectLighting(Resample(rt, rt.env, n));
+}
+
+// This frame's radiance (shaded, the session's order) into rt.frame_rgb.
+void ComputeFrame(prt_runtime& rt, unsigned terms) {
+  if (!rt.has_env)
+    throw StateError(rt.name + ": no environment yet (call prt_runtime_set_environment_latlong)");
+  const prt::RelightSession& s = *rt.session;
+  prt::SampleRadiance radiance;
+  rt.incremental_frame = false;
+  if (terms == 0) {
+    radiance = s.RelightExact(rt.lighting);
+  } else if (rt.mode == PRT_RUNTIME_LIGHTING_NWA) {
+    const prt::HaarLightingBasis basis(rt.lighting.n);
+    radiance = s.transport().Apply(prt::NonlinearLightingApproximation(rt.lighting, basis, terms));
+  } else {
+    // BI / PBI: one frame of `terms` terms on the change since the last frame; a new budget
+    // restarts from no light (the first frame then equals prt-view's RelightApproximate).
+    if (rt.incremental_terms != terms) {
+      rt.bi.reset();
+      rt.pbi.reset();
+      rt.incremental_terms = terms;
+    }
+    rt.incremental_frame = true;
+    if (rt.mode == PRT_RUNTIME_LIGHTING_BI) {
+      if (!rt.bi)
+        rt.bi =
+            std::make_unique<prt::BasicIncrementalRelighter>(s.transport(), rt.lighting.n, terms);
+      rt.bi->Update(rt.lighting);
+      radiance = rt.bi->Radiance();
+    } else {
+      if (!rt.pbi)
+        rt.pbi =
+            std::make_unique<prt::PerBandIncrementalRelighter>(s.transport(), rt.lighting.n, terms);
+      rt.pbi->Update(rt.lighting);
+      radiance = rt.pbi->Radiance();
+    }
+  }
+  rt.frame_rgb = s.Shade(radiance);
+}
+
+// Writes samples [first, first + count) of the current order from rt.frame_rgb.
+void CopyOut(const prt_runtime& rt, std::size_t first, std::size_t count, float* out) {
+  const float* src = rt.frame_rgb.data();
+  if (rt.order == PRT_RUNTIME_ORDER_RUNTIME) {
+    std::memcpy(out + 3 * first, src + 3 * first, sizeof(float) * 3 * count);
+    return;
+  }
+  // Pack order: the session position of pack sample v is its coefficient (inverse of
+  // pack_sample()).
+  const std::span<const uint32_t> pos = rt.session->session_position();
+  for (std::size_t v = first; v < first + count; ++v)
+    std::memcpy(out + 3 * v, src + 3 * static_cast<std::size_t>(pos[v]), sizeof(float) * 3);
+}
+
+}  // namespace
+
+extern "C" {
+
+prt_runtime* prt_runtime_open_file(const char* path) {
+  if (path == nullptr) {
+    g_error = "prt_runtime_open_file: the path is NULL";
+    return nullptr;
+  }
+  const std::string p(path);
+  return Open(
+      "prt_runtime_open_file", [&] { return prt::pack::PackReader::OpenFile(p); }, p);
+}
+
+prt_runtime* prt_runtime_open_memory(const void* data, size_t size) {
+  if (data == nullptr && size != 0) {
+    g_error = "prt_runtime_open_memory: data is NULL";
+    return nullptr;
+  }
+  return Open(
+      "prt_runtime_open_memory",
+      [&] { return prt::pack::PackReader::OpenMemory(data, size, "<memory>"); }, "<memory>");
+}
+
+void prt_runtime_close(prt_runtime* rt) {
+  delete rt;
+}
+
+const char* prt_runtime_last_error(void) {
+  return g_error.c_str();
+}
+
+size_t prt_runtime_sample_count(const prt_runtime* rt) {
+  return rt != nullptr && rt->session ? rt->samples() : 0;
+}
+
+int prt_runtime_is_image(const prt_runtime* rt) {
+  return rt != nullptr && rt->session && rt->session->image() != nullptr ? 1 : 0;
+}
+
+unsigned prt_runtime_transport_channels(const prt_runtime* rt) {
+  return rt != nullptr && rt->session ? rt->session->transport_header().channels : 0;
+}
+
+unsigned prt_runtime_cubemap_size(const prt_runtime* rt) {
+  return rt != nullptr && rt->session ? static_cast<unsigned>(rt->session->cubemap_n()) : 0;
+}
+
+unsigned prt_runtime_coefficient_count(const prt_runtime* rt) {
+  const unsigned n = prt_runtime_cubemap_size(rt);
+  return 6 * n * n;
+}
+
+size_t prt_runtime_triangle_count(const prt_runtime* rt) {
+  return rt != nullptr && rt->session ? rt->session->triangles().size() : 0;
+}
+
+int prt_runtime_get_positions(const prt_runtime* rt, float* xyz, size_t samples) {
+  return Guard("prt_runtime_get_positions", [&] {
+    RequireHandle(rt);
+    Require(xyz != nullptr, "xyz is NULL");
+    const std::size_t ns = rt->samples();
+    Require(rt->session->image() == nullptr, rt->name + " is an image pack: it has no positions");
+    Require(samples == ns,
+            "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
+    const std::span<const prt::Vec3> p = rt->session->positions();
+    const std::span<const uint32_t> pack_sample = rt->session->pack_sample();
+    for (std::size_t i = 0; i < ns; ++i) {
+      float* o = xyz + 3 * static_cast<std::size_t>(pack_sample[i]);
+      o[0] = static_cast<float>(p[i].x);
+      o[1] = static_cast<float>(p[i].y);
+      o[2] = static_cast<float>(p[i].z);
+    }
+  });
+}
+
+int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t triangles) {
+  return Guard("prt_runtime_get_triangles", [&] {
+    RequireHandle(rt);
+    Require(indices != nullptr, "indices is NULL");
+    const std::span<const std::array<uint32_t, 3>> t = rt->session->triangles();
+    Require(triangles == t.size(), "room for " + std::to_string(triangles) +
+                                       " triangles, the pack has " + std::to_string(t.size()));
+    const std::span<const uint32_t> pack_sample = rt->session->pack_sample();
+    for (std::size_t i = 0; i < t.size(); ++i)
+      for (int k = 0; k < 3; ++k) indices[3 * i + k] = pack_sample[t[i][k]];
+  });
+}
+
+int prt_runtime_get_camera(const prt_runtime* rt, float eye[3], float target[3], float up[3],
+                           float* fov_deg, int* width, int* height) {
+  return Guard("prt_runtime_get_camera", [&] {
+    RequireHandle(rt);
+    const prt::Camera& c = rt->session->camera();
+    const auto put = [](float* o, const prt::Vec3& v) {
+      if (o == nullptr) return;
+      o[0] = static_cast<float>(v.x);
+      o[1] = static_cast<float>(v.y);
+      o[2] = static_cast<float>(v.z);
+    };
+    put(eye, c.eye);
+    put(target, c.target);
+    put(up, c.up);
+    if (fov_deg != nullptr) *fov_deg = static_cast<float>(c.fov_deg);
+    if (width != nullptr) *width = c.width;
+    if (height != nullptr) *height = c.height;
+  });
+}
+
+int prt_runtime_set_environment_latlong(prt_runtime* rt, const float* rgb, int width, int height) {
+  return Guard("prt_runtime_set_environment_latlong", [&] {
+    RequireHandle(rt);
+    Require(rgb != nullptr, "rgb is NULL");
+    Require(height >= 2 && width == 2 * height,
+            "a lat-long map must be width = 2 x height with height >= 2, not " +
+                std::to_string(width) + " x " + std::to_string(height));
+    prt::EnvironmentImage env =
+        prt::EnvironmentImage::Zero(prt::EnvmapLayout::kLatLong, width, height);
+    const std::size_t pixels = env.PixelCount();
+    for (std::size_t i = 0; i < pixels; ++i)
+      for (int c = 0; c < 3; ++c) {
+        const float v = rgb[3 * i + c];
+        if (!std::isfinite(v))
+          throw prt::InputError("environment", "pixel (x=" + std::to_string(i % width) + ", y=" +
+                                                   std::to_string(i / width) + ") channel " +
+                                                   std::to_string(c) + " is not finite");
+        env.Channel(c)[i] = v < 0 ? 0.0f : v;  // as prt-view's readers clamp negatives
+      }
+    // Resample before replacing anything: on error the previous environment stays.
+    const int n = static_cast<int>(rt->session->cubemap_n());
+    prt::WaveletLighting lighting = prt::ProjectLighting(Resample(*rt, env, n));
+    rt->env = std::move(env);
+    rt->lighting = std::move(lighting);
+    rt->has_env = true;
+  });
+}
+
+int prt_runtime_set_rotation(prt_runtime* rt, const float rotation[9]) {
+  return Guard("prt_runtime_set_rotation", [&] {
+    RequireHandle(rt);
+    Require(rotation != nullptr, "rotation is NULL");
+    std::array<double, 9> r{};
+    for (int i = 0; i < 9; ++i) {
+      Require(std::isfinite(rotation[i]), "rotation[" + std::to_string(i) + "] is not finite");
+      r[i] = rotation[i];
+    }
+    // Orthonormal with determinant +1: R·Rᵀ = I to 1e-4.
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        double d = 0;
+        for (int k = 0; k < 3; ++k) d += r[3 * i + k] * r[3 * j + k];
+        Require(std::abs(d - (i == j ? 1.0 : 0.0)) <= 1e-4, "the matrix is not orthonormal");
+      }
+    const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
+                       r[2] * (r[3] * r[7] - r[4] * r[6]);
+    Require(det > 0, "the matrix is a reflection (determinant -1), not a rotation");
+    // A rotation about +Y (the identity included) takes prt-view's path: its angle.
+    const bool about_y = r[1] == 0 && r[3] == 0 && r[5] == 0 && r[7] == 0 && r[4] == 1;
+    SetRotation(*rt, !about_y, about_y ? std::atan2(r[2], r[0]) : 0.0, r);
+  });
+}
+
+int prt_runtime_set_rotation_y(prt_runtime* rt, double radians) {
+  if (!std::isfinite(radians)) {
+    g_error = "prt_runtime_set_rotation_y: the angle is not finite";
+    return PRT_RUNTIME_ERROR_ARGUMENT;
+  }
+  return Guard("prt_runtime_set_rotation_y", [&] {
+    RequireHandle(rt);
+    // RotateAboutY (vocabulary/envmap.h) as a matrix: x' = x cos + z sin, z' = −x sin + z cos.
+    const double c = std::cos(radians), s = std::sin(radians);
+    SetRotation(*rt, false, radians, {c, 0, s, 0, 1, 0, -s, 0, c});
+  });
+}
+
+int prt_runtime_set_lighting_mode(prt_runtime* rt, int mode) {
+  return Guard("prt_runtime_set_lighting_mode", [&] {
+    RequireHandle(rt);
+    Require(mode == PRT_RUNTIME_LIGHTING_NWA || mode == PRT_RUNTIME_LIGHTING_BI ||
+                mode == PRT_RUNTIME_LIGHTING_PBI,
+            "unknown lighting mode " + std::to_string(mode));
+    if (mode != rt->mode) {
+      rt->bi.reset();
+      rt->pbi.reset();
+      rt->incremental_terms = 0;
+    }
+    rt->mode = mode;
+  });
+}
+
+int prt_runtime_set_sample_order(prt_runtime* rt, int order) {
+  return Guard("prt_runtime_set_sample_order", [&] {
+    RequireHandle(rt);
+    Require(order == PRT_RUNTIME_ORDER_PACK || order == PRT_RUNTIME_ORDER_RUNTIME,
+            "unknown sample order " + std::to_string(order));
+    rt->order = order;
+  });
+}
+
+int prt_runtime_get_sample_order(const prt_runtime* rt, uint32_t* pack_index, size_t samples) {
+  return Guard("prt_runtime_get_sample_order", [&] {
+    RequireHandle(rt);
+    Require(pack_index != nullptr, "pack_index is NULL");
+    Require(samples == rt->samples(), "room for " + std::to_string(samples) +
+                                          " samples, the pack has " +
+                                          std::to_string(rt->samples()));
+    const std::span<const uint32_t> p = rt->session->pack_sample();
+    std::copy(p.begin(), p.end(), pack_index);
+  });
+}
+
+int prt_runtime_prepare(prt_runtime* rt, unsigned terms) {
+  return Guard("prt_runtime_prepare", [&] {
+    RequireHandle(rt);
+    if (rt->prepared && rt->incremental_frame && rt->relit.load() < rt->samples())
+      throw StateError("the previous frame relit " + std::to_string(rt->relit.load()) + " of " +
+                       std::to_string(rt->samples()) + " samples");
+    rt->prepared = false;
+    ComputeFrame(*rt, terms);
+    rt->relit.store(0);
+    rt->prepared = true;
+  });
+}
+
+int prt_runtime_relight_range(prt_runtime* rt, size_t first, size_t count, float* out_rgb,
+                              size_t out_samples) {
+  return Guard("prt_runtime_relight_range", [&] {
+    RequireHandle(rt);
+    Require(out_rgb != nullptr, "out_rgb is NULL");
+    const std::size_t ns = rt->samples();
+    Require(out_samples == ns, "room for " + std::to_string(out_samples) +
+                                   " samples, the pack has " + std::to_string(ns));
+    Require(first <= ns && count <= ns - first,
+            "range [" + std::to_string(first) + ", " + std::to_string(first) + " + " +
+                std::to_string(count) + ") is outside the " + std::to_string(ns) + " samples");
+    if (!rt->prepared) throw StateError("no prepared frame (call prt_runtime_prepare first)");
+    CopyOut(*rt, first, count, out_rgb);
+    rt->relit.fetch_add(count);
+  });
+}
+
+int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t out_samples) {
+  return Guard("prt_runtime_relight", [&] {
+    RequireHandle(rt);
+    Require(out_rgb != nullptr, "out_rgb is NULL");
+    Require(out_samples == rt->samples(), "room for " + std::to_string(out_samples) +
+                                              " samples, the pack has " +
+                                              std::to_string(rt->samples()));
+    rt->prepared = false;
+    ComputeFrame(*rt, terms);
+    CopyOut(*rt, 0, rt->samples(), out_rgb);
+  });
+}
+
+void prt_runtime_set_task_runner(prt_runtime_task_runner run, void* user, unsigned concurrency) {
+  g_runner = {run, user};
+  prt::ParallelBackend b;
+  if (run != nullptr && concurrency > 1) {
+    b.run = [](void*, std::size_t count, void (*task)(void*, std::size_t), void* data) {
+      g_runner.run(g_runner.user, count, task, data);
+    };
+    b.concurrency = concurrency;
+  }
+  prt::SetParallelBackend(b);
+}
+
+size_t prt_runtime_memory_bytes(const prt_runtime* rt) {
+  if (rt == nullptr || !rt->session) return 0;
+  std::size_t bytes = rt->session->memory_bytes();
+  bytes += sizeof(float) * (rt->env.r.size() * 3 + rt->frame_rgb.size());
+  bytes += sizeof(double) * 3 * rt->lighting.size();
+  const std::size_t ns = rt->samples();
+  if (rt->pbi) {  // band images, composed radiance, the represented lighting
+    bytes += sizeof(double) * 3 * ns * (rt->pbi->basis().band_count() + 1);
+    bytes += sizeof(double) * 3 * rt->lighting.size();
+  }
+  if (rt->bi) bytes += sizeof(double) * 3 * (ns + rt->lighting.size());
+  return bytes;
+}
+
+}  // extern "C"
