@@ -1,7 +1,7 @@
 // The column coding both ends of compressed transport share (formats/compressed_transport.h): the
 // column transform over the spatial domain and its coefficient layout, the dither sequence and
 // dequantisation (Cheslack-Postava et al. 2008 §4.2–4.3), and decompression to a dense T. The
-// farm's compressor (worker/) encodes with it; the viewer's relighter (viewer/compressed_relight.h,
+// farm's compressor (worker/) encodes with it; the viewer's relighter (runtime/compressed_relight.h,
 // §4.5 Eq. 8) decodes with it.
 //
 // Coefficient layout of a column (docs/compression.md): the column is a vector over the spatial

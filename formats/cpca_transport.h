@@ -13,7 +13,7 @@
 //
 // Relighting (Overbeck et al. 2006 §6.3, Eq. 7–8) projects the lighting on each cluster's mean
 // and basis once, P_{c,i} = u_{c,i}·L̂, then each row costs S multiply-adds: B_r = m_c·L̂ +
-// Σ_i w_{r,i} P_{c,i} (viewer/cpca_relight.h).
+// Σ_i w_{r,i} P_{c,i} (runtime/cpca_relight.h).
 //
 // Decoders are safe on untrusted input: every count, index and value is validated and no
 // allocation exceeds what the bytes read can describe; they throw prt::InputError naming `name`.

@@ -18,7 +18,7 @@
 #include "formats/transport_file.h"
 #include "tests/run_prt_farm.h"
 #include "viewer/environment_background.h"
-#include "viewer/lighting.h"
+#include "runtime/lighting.h"
 #include "viewer/viewer_session.h"
 #include "viewer/window_test_support.h"
 #include "vocabulary/cubemap_resample.h"

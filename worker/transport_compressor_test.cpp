@@ -10,7 +10,7 @@
 #include <numbers>
 #include <random>
 
-#include "viewer/compressed_relight.h"
+#include "runtime/compressed_relight.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/errors.h"
 #include "worker/block_spill.h"
