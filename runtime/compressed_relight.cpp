@@ -591,6 +591,25 @@ void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
   RelightLights(lights, channels, {radiance.data(), nullptr, order});
 }
 
+void CompressedRelighter::RelightSparseAddRange(std::span<const uint32_t> columns,
+                                                std::span<const float> weights, int channels,
+                                                std::size_t first, std::size_t count,
+                                                std::span<double* const> out, bool assign) const {
+  if (out.size() != static_cast<std::size_t>(channels))
+    throw std::invalid_argument("CompressedRelighter::RelightSparseAddRange: one array per channel");
+  if (first > spatial_ || count > spatial_ - first)
+    throw std::out_of_range("CompressedRelighter::RelightSparseAddRange: range outside the samples");
+  // The whole frame, then the range (a region-of-interest inverse is to replace this).
+  std::vector<std::vector<double>> full(static_cast<std::size_t>(channels),
+                                        std::vector<double>(spatial_));
+  std::vector<double*> ptr;
+  for (auto& f : full) ptr.push_back(f.data());
+  RelightSparseAdd(columns, weights, channels, ptr, SampleOrder::kCoefficients, true);
+  for (std::size_t c = 0; c < full.size(); ++c)
+    for (std::size_t p = first; p < first + count; ++p)
+      out[c][p] = assign ? full[c][p] : out[c][p] + full[c][p];
+}
+
 void CompressedRelighter::RelightSparseAdd(std::span<const uint32_t> columns,
                                            std::span<const float> weights, int channels,
                                            std::span<double* const> out, SampleOrder order,

@@ -94,6 +94,14 @@ class CompressedRelighter {
   void RelightSparseAdd(std::span<const uint32_t> columns, std::span<const float> weights,
                         int channels, std::span<double* const> out,
                         SampleOrder order = SampleOrder::kSamples, bool assign = false) const;
+  // A region of interest: RelightSparseAdd's values at positions [first, first + count) of the
+  // SampleOrder::kCoefficients order only (out[c] has sample_count() entries; only the range is
+  // read or written), equal to RelightSparseAdd's to float rounding. For a host that splits a
+  // frame into ranges across its threads (prt_runtime_relight_range): safe to call concurrently
+  // for any ranges, each with its own buffers.
+  void RelightSparseAddRange(std::span<const uint32_t> columns, std::span<const float> weights,
+                             int channels, std::size_t first, std::size_t count,
+                             std::span<double* const> out, bool assign = false) const;
 
  private:
   // A column's terms in two parts (see RelightLights): those no inverse step deeper than the
