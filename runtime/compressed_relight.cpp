@@ -596,9 +596,11 @@ void CompressedRelighter::RelightSparseAddRange(std::span<const uint32_t> column
                                                 std::size_t first, std::size_t count,
                                                 std::span<double* const> out, bool assign) const {
   if (out.size() != static_cast<std::size_t>(channels))
-    throw std::invalid_argument("CompressedRelighter::RelightSparseAddRange: one array per channel");
+    throw std::invalid_argument(
+        "CompressedRelighter::RelightSparseAddRange: one array per channel");
   if (first > spatial_ || count > spatial_ - first)
-    throw std::out_of_range("CompressedRelighter::RelightSparseAddRange: range outside the samples");
+    throw std::out_of_range(
+        "CompressedRelighter::RelightSparseAddRange: range outside the samples");
   // The whole frame, then the range (a region-of-interest inverse is to replace this).
   std::vector<std::vector<double>> full(static_cast<std::size_t>(channels),
                                         std::vector<double>(spatial_));

@@ -136,9 +136,16 @@ CpcaRelighter::CpcaRelighter(const CpcaTransport& t, std::string name)
 
 // Eq. 8: U_r = Σ_{i≤S} w_{r,i} P_{c(r),i} (i = 0 the mean, w = 1), per sample and channel.
 void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
+  for (auto& c : out.channel) c.resize(spatial_);
+  BlendRange(P, out, 0, spatial_, true);
+}
+
+void CpcaRelighter::BlendRange(const SampleRadiance& P, SampleRadiance& out, std::size_t first,
+                               std::size_t count, bool assign) const {
   if (P.size() != projection_.sample_count())
     throw std::invalid_argument("CpcaRelighter::Blend: projection of the wrong size");
-  for (auto& c : out.channel) c.resize(spatial_);
+  if (out.size() != spatial_ || first > spatial_ || count > spatial_ - first)
+    throw std::invalid_argument("CpcaRelighter::Blend: output or range of the wrong size");
   const std::size_t S1 = bases_ + 1;
   // P per cluster with the channels interleaved and padded (P_{c,i} as 4 doubles), so that a
   // one-channel row's three outputs take one vectorisable pass over its weights.
@@ -147,7 +154,7 @@ void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
   for (std::size_t k = 0; k < K * S1; ++k)
     for (int ch = 0; ch < 3; ++ch) Pi[4 * k + ch] = P.channel[ch][k];
   std::atomic<bool> finite{true};
-  ParallelForRange(0, spatial_, 2048, [&](std::size_t range_begin, std::size_t range_end) {
+  ParallelForRange(first, first + count, 2048, [&](std::size_t range_begin, std::size_t range_end) {
     bool ok = true;
     for (std::size_t s = range_begin; s < range_end; ++s) {
       if (channels_ == 1) {
@@ -158,10 +165,10 @@ void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
           const double wi = w[i];
           for (int ch = 0; ch < 4; ++ch) a[ch] += wi * p[4 * i + ch];
         }
-        out.channel[0][s] = a[0];
-        out.channel[1][s] = a[1];
-        out.channel[2][s] = a[2];
-        ok = ok && std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]);
+        for (int ch = 0; ch < 3; ++ch)
+          out.channel[ch][s] = assign ? a[ch] : out.channel[ch][s] + a[ch];
+        ok = ok && std::isfinite(out.channel[0][s]) && std::isfinite(out.channel[1][s]) &&
+             std::isfinite(out.channel[2][s]);
       } else {
         for (std::size_t ch = 0; ch < 3; ++ch) {
           const std::size_t r = ch * spatial_ + s;
@@ -169,8 +176,8 @@ void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
           const double* p = Pi.data() + 4 * static_cast<std::size_t>(cluster_of_[r]) * S1 + ch;
           double a = 0;
           for (std::size_t i = 0; i < S1; ++i) a += w[i] * p[4 * i];
-          out.channel[ch][s] = a;
-          ok = ok && std::isfinite(a);
+          out.channel[ch][s] = assign ? a : out.channel[ch][s] + a;
+          ok = ok && std::isfinite(out.channel[ch][s]);
         }
       }
     }
@@ -178,7 +185,7 @@ void CpcaRelighter::Blend(const SampleRadiance& P, SampleRadiance& out) const {
   });
   if (finite) return;
   for (int ch = 0; ch < 3; ++ch)
-    for (std::size_t s = 0; s < spatial_; ++s)
+    for (std::size_t s = first; s < first + count; ++s)
       if (!std::isfinite(out.channel[ch][s]))
         throw NumericalError(name_ + ": relit radiance of sample " + std::to_string(s) +
                              " is not finite");
@@ -239,6 +246,14 @@ void CpcaRelighter::Assign(std::span<const LightingTerm> terms, SampleRadiance& 
   SampleRadiance P(projection_.sample_count());
   projection_.Accumulate(terms, P);
   Blend(P, out);
+}
+
+void CpcaRelighter::AccumulateRange(std::span<const LightingTerm> terms, SampleRadiance& out,
+                                    std::size_t first, std::size_t count, bool assign) const {
+  // Step 1 whole (K·(S+1) projections: small), step 2 for the range's rows only.
+  SampleRadiance P(projection_.sample_count());
+  projection_.Accumulate(terms, P);
+  BlendRange(P, out, first, count, assign);
 }
 
 void CpcaRelighter::Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const {

@@ -71,11 +71,17 @@ class CpcaRelighter final : public TransportOperator {
   // out += CPCA(T)·L̂ for a list of lighting terms: step 1 then step 2.
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
   void Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+  void AccumulateRange(std::span<const LightingTerm> terms, SampleRadiance& out, std::size_t first,
+                       std::size_t count, bool assign) const override;
 
   const CpcaProjection& projection() const { return projection_; }
   // Step 2 (Eq. 8): out (V samples) = Σ over each row's mean and S basis terms of the
   // projection P (K·(S+1) samples, CpcaProjection's layout), overwriting out.
   void Blend(const SampleRadiance& P, SampleRadiance& out) const;
+  // The same for samples [first, first + count) of `out` (already sized), written (`assign`) or
+  // added; NumericalError naming the sample on a non-finite value.
+  void BlendRange(const SampleRadiance& P, SampleRadiance& out, std::size_t first,
+                  std::size_t count, bool assign) const;
   // Step 2 for a few changed projection entries (Eq. 10): out += W[:, k]·ΔP_k for every
   // (vector k, ΔP_k) listed; vectors of one cluster touch only that cluster's rows.
   void BlendDelta(std::span<const uint32_t> vectors, std::span<const std::array<double, 3>> delta,

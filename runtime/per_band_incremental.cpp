@@ -84,7 +84,7 @@ void BasicIncrementalRelighter::Rederive() {
   image_ = transport_.Apply(ExactLightingTerms(represented_));
 }
 
-IncrementalFrame BasicIncrementalRelighter::Update(const WaveletLighting& lighting) {
+IncrementalStep BasicIncrementalRelighter::Plan(const WaveletLighting& lighting) {
   CheckLighting(lighting, basis_);
   // Eq. 5: ΔL = Approx(L^new − L̃), the N largest area-weighted differences.
   std::vector<double> weight(basis_.size());
@@ -93,7 +93,9 @@ IncrementalFrame BasicIncrementalRelighter::Update(const WaveletLighting& lighti
   }
   std::vector<uint32_t> chosen = SelectLargest(weight, budget_);
   std::sort(chosen.begin(), chosen.end());
-  std::vector<LightingTerm> delta;
+  IncrementalStep step;
+  step.band_terms.resize(1);
+  std::vector<LightingTerm>& delta = step.band_terms[0];
   delta.reserve(chosen.size());
   for (uint32_t j : chosen) {
     LightingTerm t{j, {}};
@@ -104,12 +106,23 @@ IncrementalFrame BasicIncrementalRelighter::Update(const WaveletLighting& lighti
     }
     delta.push_back(t);
   }
+  step.frame.terms = delta.size();
+  step.frame.exact = SameLighting(represented_, lighting);
+  return step;
+}
+
+void BasicIncrementalRelighter::Apply(const IncrementalStep& step, std::size_t first,
+                                      std::size_t count) {
+  // Eq. 4 and 3: B += T·ΔL on the range.
+  if (!step.band_terms.empty() && !step.band_terms[0].empty())
+    transport_.AccumulateRange(step.band_terms[0], image_, first, count, false);
+}
+
+IncrementalFrame BasicIncrementalRelighter::Update(const WaveletLighting& lighting) {
+  const IncrementalStep step = Plan(lighting);
   // Eq. 4 and 3: B += T·ΔL.
-  transport_.Accumulate(delta, image_);
-  IncrementalFrame frame;
-  frame.terms = delta.size();
-  frame.exact = SameLighting(represented_, lighting);
-  return frame;
+  transport_.Accumulate(step.band_terms[0], image_);
+  return step.frame;
 }
 
 // ---- PBI -----------------------------------------------------------------------------------
@@ -141,10 +154,11 @@ void PerBandIncrementalRelighter::Rederive() {
   composed_valid_ = false;
 }
 
-IncrementalFrame PerBandIncrementalRelighter::Update(const WaveletLighting& lighting) {
+IncrementalStep PerBandIncrementalRelighter::Plan(const WaveletLighting& lighting) {
   CheckLighting(lighting, basis_);
   const int bands = basis_.band_count();
-  IncrementalFrame frame;
+  IncrementalStep step;
+  IncrementalFrame& frame = step.frame;
   frame.band_reset.assign(static_cast<std::size_t>(bands), 0);
 
   // SetupBands(), Figure 6 lines 1–4. IsIncr_i (§5.2.2): incremental when the band is closer, in
@@ -170,17 +184,17 @@ IncrementalFrame PerBandIncrementalRelighter::Update(const WaveletLighting& ligh
   std::sort(chosen.begin(), chosen.end());
   frame.terms = chosen.size();
 
-  // Lines 13–14: a reset band starts again from zero (lights and image).
+  // Lines 13–14: a reset band starts again from zero (its lights here, its image in Apply).
   for (int b = 0; b < bands; ++b) {
     if (!frame.band_reset[b]) continue;
     for (uint32_t j : basis_.BandMembers(b)) {
       for (int c = 0; c < 3; ++c) represented_.coefficient[c][j] = 0.0;
     }
-    band_image_[b].SetZero();
   }
   // Lines 8–11 (incremental: ΔL_j = L^new_j − L̃_j) and 15–17 (reset: L̃_j was just zeroed, so
   // the same difference is L^new_j); then L̃_j = L^new_j (lines 10, 16).
-  std::vector<std::vector<LightingTerm>> band_terms(static_cast<std::size_t>(bands));
+  std::vector<std::vector<LightingTerm>>& band_terms = step.band_terms;
+  band_terms.resize(static_cast<std::size_t>(bands));
   for (uint32_t j : chosen) {
     LightingTerm t{j, {}};
     for (int c = 0; c < 3; ++c) {
@@ -189,13 +203,45 @@ IncrementalFrame PerBandIncrementalRelighter::Update(const WaveletLighting& ligh
     }
     band_terms[basis_.Band(j)].push_back(t);
   }
-  // Lines 11 and 17: B_i += T_j ΔL_j, one band image per band.
-  for (int b = 0; b < bands; ++b) {
-    if (!band_terms[b].empty()) transport_.Accumulate(band_terms[b], band_image_[b]);
-  }
   composed_valid_ = false;
+  const std::size_t samples = transport_.sample_count();
+  if (composed_.size() != samples) composed_ = SampleRadiance(samples);
   frame.exact = SameLighting(represented_, lighting);
-  return frame;
+  return step;
+}
+
+void PerBandIncrementalRelighter::Apply(const IncrementalStep& step, std::size_t first,
+                                        std::size_t count) {
+  const int bands = basis_.band_count();
+  for (int b = 0; b < bands; ++b) {
+    SampleRadiance& image = band_image_[b];
+    // Line 14 on the range, then lines 11 and 17: B_i += T_j ΔL_j (written over a reset band).
+    const bool reset = step.frame.band_reset[b] != 0;
+    if (!step.band_terms[b].empty()) {
+      transport_.AccumulateRange(step.band_terms[b], image, first, count, reset);
+    } else if (reset) {
+      for (auto& c : image.channel) std::fill_n(c.data() + first, count, 0.0);
+    }
+  }
+  // Line 20 on the range: B = Σ_i B_i.
+  for (int c = 0; c < 3; ++c) {
+    double* __restrict out = composed_.channel[c].data();
+    for (std::size_t s = first; s != first + count; ++s) out[s] = 0.0;
+    for (const SampleRadiance& band : band_image_) {
+      const double* __restrict in = band.channel[c].data();
+      for (std::size_t s = first; s != first + count; ++s) out[s] += in[s];
+    }
+  }
+}
+
+IncrementalFrame PerBandIncrementalRelighter::Update(const WaveletLighting& lighting) {
+  const IncrementalStep step = Plan(lighting);
+  for (int b = 0; b < basis_.band_count(); ++b) {
+    // Line 14: a reset band's image starts again from zero; lines 11 and 17: B_i += T_j ΔL_j.
+    if (step.frame.band_reset[b]) band_image_[b].SetZero();
+    if (!step.band_terms[b].empty()) transport_.Accumulate(step.band_terms[b], band_image_[b]);
+  }
+  return step.frame;
 }
 
 const SampleRadiance& PerBandIncrementalRelighter::Radiance() {

@@ -35,6 +35,16 @@ struct IncrementalFrame {
   bool exact = false;               // L̃ equals L^new in every coefficient after the frame
 };
 
+// One frame's decisions apart from its work on the images, so that a host can split the work
+// into ranges of samples across its threads (prt_runtime_relight_range): Plan chooses the terms
+// and moves L̃ (on one thread); Apply then updates the images for samples [first, first + count)
+// (concurrently for disjoint ranges; every sample exactly once per plan). Update is Plan then
+// Apply over every sample, with the whole-frame operator (the same numbers as before the split).
+struct IncrementalStep {
+  IncrementalFrame frame;
+  std::vector<std::vector<LightingTerm>> band_terms;  // ΔL per band (BI: one band)
+};
+
 class BasicIncrementalRelighter {
  public:
   // n: cubemap face size of the lighting; transport.coefficient_count() must be 6·n².
@@ -46,6 +56,9 @@ class BasicIncrementalRelighter {
   void Clear();
   // One frame: Eq. 5, 6, 4, 3.
   IncrementalFrame Update(const WaveletLighting& lighting);
+  // Eq. 5 and 6 (the terms, L̃ += ΔL), then Eq. 4 and 3 for a range (B += T·ΔL there).
+  IncrementalStep Plan(const WaveletLighting& lighting);
+  void Apply(const IncrementalStep& step, std::size_t first, std::size_t count);
   // Recomputes B = T·L̃ from scratch.
   void Rederive();
 
@@ -70,6 +83,12 @@ class PerBandIncrementalRelighter {
   void Clear();
   // One frame of Figure 6 with the simple per-band L1 test (§5.2.2).
   IncrementalFrame Update(const WaveletLighting& lighting);
+  // Figure 6's decisions (bands reset, the N terms, L̃), then its image work for a range: reset
+  // bands' images zeroed there, B_i += T·ΔL_i there, and B = Σ_i B_i composed there (Composed()).
+  IncrementalStep Plan(const WaveletLighting& lighting);
+  void Apply(const IncrementalStep& step, std::size_t first, std::size_t count);
+  // B as the last Apply calls composed it (valid in the ranges they covered).
+  const SampleRadiance& Composed() const { return composed_; }
   // Recomputes every band image B_i = T·L̃_{band i} from scratch.
   void Rederive();
 

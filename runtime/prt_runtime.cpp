@@ -10,6 +10,7 @@
 #include <cstring>
 #include <exception>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <new>
@@ -107,11 +108,17 @@ struct prt_runtime {
   std::unique_ptr<prt::PerBandIncrementalRelighter> pbi;
   std::size_t incremental_terms = 0;
 
-  // The prepared frame (prt_runtime_prepare): shaded radiance in the session's order.
-  bool prepared = false;
+  // The last whole frame (prt_runtime_relight): shaded radiance in the session's order.
   std::vector<float> frame_rgb;
-  std::atomic<std::size_t> relit{0};  // samples written by relight_range since prepare
   bool incremental_frame = false;
+  // The prepared frame (prt_runtime_prepare), applied range by range: its lighting terms
+  // (exact, NWA) into frame_radiance, or an incremental step of BI / PBI.
+  enum class Prepared { kNone, kTerms, kBi, kPbi };
+  Prepared prepared = Prepared::kNone;
+  std::vector<prt::LightingTerm> frame_terms;
+  prt::SampleRadiance frame_radiance;
+  prt::IncrementalStep step;
+  std::atomic<std::size_t> relit{0};  // samples written by relight_range since prepare
 
   std::size_t samples() const { return session->sample_count(); }
 };
@@ -166,6 +173,8 @@ void UpdateLighting(prt_runtime& rt) {
   rt.lighting = prt::ProjectLighting(Resample(rt, rt.env, n));
 }
 
+void EnsureIncremental(prt_runtime& rt, unsigned terms);
+
 // This frame's radiance (shaded, the session's order) into rt.frame_rgb.
 void ComputeFrame(prt_runtime& rt, unsigned terms) {
   if (!rt.has_env)
@@ -202,6 +211,86 @@ void ComputeFrame(prt_runtime& rt, unsigned terms) {
     }
   }
   rt.frame_rgb = s.Shade(radiance);
+}
+
+// Makes (or restarts) the incremental relighter of the mode for a budget of `terms`.
+void EnsureIncremental(prt_runtime& rt, unsigned terms) {
+  if (rt.incremental_terms != terms) {
+    rt.bi.reset();
+    rt.pbi.reset();
+    rt.incremental_terms = terms;
+  }
+  const prt::RelightSession& s = *rt.session;
+  if (rt.mode == PRT_RUNTIME_LIGHTING_BI && !rt.bi)
+    rt.bi = std::make_unique<prt::BasicIncrementalRelighter>(s.transport(), rt.lighting.n, terms);
+  if (rt.mode == PRT_RUNTIME_LIGHTING_PBI && !rt.pbi)
+    rt.pbi =
+        std::make_unique<prt::PerBandIncrementalRelighter>(s.transport(), rt.lighting.n, terms);
+}
+
+// prt_runtime_prepare's work: the frame's decisions, none of its per-sample work.
+void PrepareFrame(prt_runtime& rt, unsigned terms) {
+  if (!rt.has_env)
+    throw StateError(rt.name + ": no environment yet (call prt_runtime_set_environment_latlong)");
+  const prt::RelightSession& s = *rt.session;
+  if (terms == 0 || rt.mode == PRT_RUNTIME_LIGHTING_NWA) {
+    if (terms == 0) {
+      rt.frame_terms = prt::ExactLightingTerms(rt.lighting);
+    } else {
+      const prt::HaarLightingBasis basis(rt.lighting.n);
+      rt.frame_terms = prt::NonlinearLightingApproximation(rt.lighting, basis, terms);
+    }
+    for (const prt::LightingTerm& t : rt.frame_terms)  // the relighters take float lighting
+      for (int c = 0; c < 3; ++c) prt::CheckFloatLighting(t.value[c], t.index, c, rt.name);
+    if (rt.frame_radiance.size() != s.sample_count())
+      rt.frame_radiance = prt::SampleRadiance(s.sample_count());
+    rt.prepared = prt_runtime::Prepared::kTerms;
+    return;
+  }
+  EnsureIncremental(rt, terms);
+  if (rt.mode == PRT_RUNTIME_LIGHTING_BI) {
+    rt.step = rt.bi->Plan(rt.lighting);
+    rt.prepared = prt_runtime::Prepared::kBi;
+  } else {
+    rt.step = rt.pbi->Plan(rt.lighting);
+    rt.prepared = prt_runtime::Prepared::kPbi;
+  }
+}
+
+// Radiance of positions [first, first + count) of the session's order for the prepared frame,
+// shaded (albedo ⊙ radiance, as ShadeSamples) into `out` in the current order.
+void RelightRange(prt_runtime& rt, std::size_t first, std::size_t count, float* out) {
+  const prt::SampleRadiance* radiance = nullptr;
+  switch (rt.prepared) {
+    case prt_runtime::Prepared::kTerms:
+      rt.session->transport().AccumulateRange(rt.frame_terms, rt.frame_radiance, first, count,
+                                              true);
+      radiance = &rt.frame_radiance;
+      break;
+    case prt_runtime::Prepared::kBi:
+      rt.bi->Apply(rt.step, first, count);
+      radiance = &rt.bi->Radiance();
+      break;
+    case prt_runtime::Prepared::kPbi:
+      rt.pbi->Apply(rt.step, first, count);
+      radiance = &rt.pbi->Composed();
+      break;
+    case prt_runtime::Prepared::kNone:
+      throw StateError("no prepared frame (call prt_runtime_prepare first)");
+  }
+  const std::vector<prt::Rgb>& albedo = rt.session->albedo();
+  const std::span<const uint32_t> pack_sample = rt.session->pack_sample();
+  const bool pack_order = rt.order == PRT_RUNTIME_ORDER_PACK;
+  for (std::size_t p = first; p < first + count; ++p) {
+    float* o = out + 3 * static_cast<std::size_t>(pack_order ? pack_sample[p] : p);
+    for (int c = 0; c < 3; ++c) {
+      const double v = static_cast<double>(albedo[p][c]) * radiance->channel[c][p];
+      if (!(std::abs(v) <= static_cast<double>(std::numeric_limits<float>::max())))
+        throw prt::NumericalError(rt.name + ": relit radiance of sample " +
+                                  std::to_string(pack_sample[p]) + " is not a finite float");
+      o[c] = static_cast<float>(v);
+    }
+  }
 }
 
 // Writes samples [first, first + count) of the current order from rt.frame_rgb.
@@ -432,13 +521,15 @@ int prt_runtime_get_sample_order(const prt_runtime* rt, uint32_t* pack_index, si
 int prt_runtime_prepare(prt_runtime* rt, unsigned terms) {
   return Guard("prt_runtime_prepare", [&] {
     RequireHandle(rt);
-    if (rt->prepared && rt->incremental_frame && rt->relit.load() < rt->samples())
+    const bool incremental =
+        rt->prepared == prt_runtime::Prepared::kBi || rt->prepared == prt_runtime::Prepared::kPbi;
+    if (incremental && rt->relit.load() < rt->samples())
       throw StateError("the previous frame relit " + std::to_string(rt->relit.load()) + " of " +
-                       std::to_string(rt->samples()) + " samples");
-    rt->prepared = false;
-    ComputeFrame(*rt, terms);
+                       std::to_string(rt->samples()) +
+                       " samples; its incremental state would be torn");
+    rt->prepared = prt_runtime::Prepared::kNone;
+    PrepareFrame(*rt, terms);
     rt->relit.store(0);
-    rt->prepared = true;
   });
 }
 
@@ -453,8 +544,7 @@ int prt_runtime_relight_range(prt_runtime* rt, size_t first, size_t count, float
     Require(first <= ns && count <= ns - first,
             "range [" + std::to_string(first) + ", " + std::to_string(first) + " + " +
                 std::to_string(count) + ") is outside the " + std::to_string(ns) + " samples");
-    if (!rt->prepared) throw StateError("no prepared frame (call prt_runtime_prepare first)");
-    CopyOut(*rt, first, count, out_rgb);
+    RelightRange(*rt, first, count, out_rgb);
     rt->relit.fetch_add(count);
   });
 }
@@ -466,7 +556,13 @@ int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t 
     Require(out_samples == rt->samples(), "room for " + std::to_string(out_samples) +
                                               " samples, the pack has " +
                                               std::to_string(rt->samples()));
-    rt->prepared = false;
+    const bool incremental =
+        rt->prepared == prt_runtime::Prepared::kBi || rt->prepared == prt_runtime::Prepared::kPbi;
+    if (incremental && rt->relit.load() < rt->samples())
+      throw StateError("the prepared frame relit " + std::to_string(rt->relit.load()) + " of " +
+                       std::to_string(rt->samples()) +
+                       " samples; its incremental state would be torn");
+    rt->prepared = prt_runtime::Prepared::kNone;
     ComputeFrame(*rt, terms);
     CopyOut(*rt, 0, rt->samples(), out_rgb);
   });

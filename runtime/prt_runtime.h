@@ -138,14 +138,18 @@ int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t 
 
 /* A frame split across the host's threads, in two calls:
  * 1. prt_runtime_prepare(rt, terms) on one thread: chooses the frame's lighting terms (as
- *    prt_runtime_relight would; for BI and PBI it advances the incremental state).
- * 2. prt_runtime_relight_range(rt, first, count, out_rgb) for ranges of samples that together
- *    cover every sample exactly once, from any threads at the same time. Writes samples
- *    [first, first + count) of the current order to out_rgb[3·first … 3·(first + count)): the
- *    same numbers prt_runtime_relight writes there. Ranges are cheapest when they follow the
- *    runtime's order (see docs/runtime.md, "Splitting a frame").
+ *    prt_runtime_relight would; for BI and PBI it advances the incremental state). Cheap: no
+ *    per-sample work.
+ * 2. prt_runtime_relight_range(rt, first, count, out_rgb, out_samples) for ranges that together
+ *    cover [0, sample count) exactly once, from any threads at the same time: each does its
+ *    range's share of the frame (the transport's region of interest, docs/runtime.md,
+ *    "Splitting a frame") and writes its samples' radiance into out_rgb (3 × sample count
+ *    floats). Ranges are positions of the runtime's order (prt_runtime_get_sample_order): in
+ *    that order a range writes out_rgb[3·first … 3·(first + count)); in the pack's order the
+ *    same samples land at their pack positions, so a partition of [0, n) still writes every
+ *    sample once. The values equal prt_runtime_relight's to float rounding (1e-6 relative).
  * prepare returns PRT_RUNTIME_ERROR_STATE when the previous prepared frame of an incremental
- * mode was not relit in full (its state would be torn). */
+ * mode was not relit in full (its state would be torn); so does prt_runtime_relight. */
 int prt_runtime_prepare(prt_runtime* rt, unsigned terms);
 int prt_runtime_relight_range(prt_runtime* rt, size_t first, size_t count, float* out_rgb,
                               size_t out_samples);

@@ -49,6 +49,17 @@ SampleRadiance TransportOperator::Apply(std::span<const LightingTerm> terms) con
   return out;
 }
 
+void TransportOperator::AccumulateRange(std::span<const LightingTerm> terms, SampleRadiance& out,
+                                        std::size_t first, std::size_t count, bool assign) const {
+  const std::size_t samples = sample_count();
+  if (out.size() != samples || first > samples || count > samples - first)
+    throw std::out_of_range("AccumulateRange: output or range outside the samples");
+  const SampleRadiance all = Apply(terms);
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t s = first; s < first + count; ++s)
+      out.channel[c][s] = assign ? all.channel[c][s] : out.channel[c][s] + all.channel[c][s];
+}
+
 namespace {
 
 void CheckTerms(std::span<const LightingTerm> terms, std::size_t coefficients,
@@ -297,13 +308,11 @@ void CompressedTransportOperator::Assign(std::span<const LightingTerm> terms,
   Relight(terms, out, true);
 }
 
-void CompressedTransportOperator::Relight(std::span<const LightingTerm> terms, SampleRadiance& out,
-                                          bool assign) const {
-  const std::size_t samples = sample_count();
-  CheckTerms(terms, coefficient_count(), out, samples);
-  if (samples == 0 || (terms.empty() && !assign)) return;
-  std::vector<uint32_t> columns(terms.size());
-  std::vector<float> weights(3 * terms.size());
+void CompressedTransportOperator::Weights(std::span<const LightingTerm> terms,
+                                          std::vector<uint32_t>& columns,
+                                          std::vector<float>& weights) const {
+  columns.resize(terms.size());
+  weights.resize(3 * terms.size());
   for (std::size_t k = 0; k < terms.size(); ++k) {
     columns[k] = terms[k].index;
     for (int c = 0; c < 3; ++c) {
@@ -312,6 +321,35 @@ void CompressedTransportOperator::Relight(std::span<const LightingTerm> terms, S
       weights[3 * k + c] = static_cast<float>(v);
     }
   }
+}
+
+void CompressedTransportOperator::AccumulateRange(std::span<const LightingTerm> terms,
+                                                  SampleRadiance& out, std::size_t first,
+                                                  std::size_t count, bool assign) const {
+  if (order_ != SampleOrder::kCoefficients) {
+    TransportOperator::AccumulateRange(terms, out, first, count, assign);
+    return;
+  }
+  const std::size_t samples = sample_count();
+  CheckTerms(terms, coefficient_count(), out, samples);
+  if (first > samples || count > samples - first)
+    throw std::out_of_range("AccumulateRange: range outside the samples");
+  if (count == 0 || (terms.empty() && !assign)) return;
+  std::vector<uint32_t> columns;
+  std::vector<float> weights;
+  Weights(terms, columns, weights);
+  double* const channels[3] = {out.channel[0].data(), out.channel[1].data(), out.channel[2].data()};
+  relighter_.RelightSparseAddRange(columns, weights, 3, first, count, channels, assign);
+}
+
+void CompressedTransportOperator::Relight(std::span<const LightingTerm> terms, SampleRadiance& out,
+                                          bool assign) const {
+  const std::size_t samples = sample_count();
+  CheckTerms(terms, coefficient_count(), out, samples);
+  if (samples == 0 || (terms.empty() && !assign)) return;
+  std::vector<uint32_t> columns;
+  std::vector<float> weights;
+  Weights(terms, columns, weights);
   double* const channels[3] = {out.channel[0].data(), out.channel[1].data(), out.channel[2].data()};
   relighter_.RelightSparseAdd(columns, weights, 3, channels, order_, assign);
 }

@@ -65,6 +65,14 @@ class TransportOperator {
 
   // T·L̂ for a lighting approximation, from zero.
   SampleRadiance Apply(std::span<const LightingTerm> terms) const;
+
+  // Samples [first, first + count) only (out already has sample_count() samples; the rest is
+  // neither read nor written): added, or with `assign` written. The same values as Accumulate /
+  // Assign there, to float rounding. Concurrent calls with disjoint ranges of one `out` are
+  // safe. This default computes every sample and keeps the range; the compressed and CPCA
+  // operators override it with work proportional to the range (prt_runtime_relight_range).
+  virtual void AccumulateRange(std::span<const LightingTerm> terms, SampleRadiance& out,
+                               std::size_t first, std::size_t count, bool assign) const;
 };
 
 // Dense rows: T stored in blocks of kBlockSamples samples, column-major inside a block, so that
@@ -145,8 +153,15 @@ class CompressedTransportOperator final : public TransportOperator {
   std::size_t coefficient_count() const override;
   void Accumulate(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
   void Assign(std::span<const LightingTerm> terms, SampleRadiance& out) const override;
+  // A range of SampleOrder::kCoefficients positions (RelightSparseAddRange); in kSamples order
+  // the default (every sample computed).
+  void AccumulateRange(std::span<const LightingTerm> terms, SampleRadiance& out, std::size_t first,
+                       std::size_t count, bool assign) const override;
 
  private:
+  // The terms as the relighter takes them: columns and float weights (3 per term).
+  void Weights(std::span<const LightingTerm> terms, std::vector<uint32_t>& columns,
+               std::vector<float>& weights) const;
   void Relight(std::span<const LightingTerm> terms, SampleRadiance& out, bool assign) const;
   const CompressedRelighter& relighter_;
   SampleOrder order_;
