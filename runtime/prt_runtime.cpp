@@ -4,6 +4,7 @@
 // leaves this file.
 #include "runtime/prt_runtime.h"
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
@@ -100,6 +101,9 @@ struct prt_runtime {
   double angle_y = 0;
   std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};
   prt::WaveletLighting lighting;
+  // The preview's reduced copy of env (made on first use, dropped with a new environment).
+  bool preview = false;
+  std::unique_ptr<prt::EnvironmentImage> reduced;
 
   int mode = PRT_RUNTIME_LIGHTING_PBI;
   int order = PRT_RUNTIME_ORDER_PACK;
@@ -142,6 +146,62 @@ void RequireHandle(const prt_runtime* rt) {
 
 void UpdateLighting(prt_runtime& rt);
 
+// The map reduced to at most 16·n pixels wide (2:1): each reduced pixel the exact mean radiance
+// over its own cell (OpenEXR's cells: centres on the poles and at both ends of the longitude
+// range, docs/conventions.md), from the source cells' overlaps in longitude and in sin θ (the
+// cells are separable), so the map's power is kept exactly.
+prt::EnvironmentImage Reduce(const prt::EnvironmentImage& env, int n) {
+  const int w = std::max(4, 16 * n), h = w / 2;
+  if (env.width <= w) return env;
+  // Overlap weights of source columns (rows) with each reduced column (row): a few each.
+  struct Piece {
+    int source;
+    double weight;
+  };
+  const auto overlaps = [](int src, int dst, bool rows) {
+    std::vector<std::vector<Piece>> out(static_cast<std::size_t>(dst));
+    for (int d = 0; d < dst; ++d) {
+      const prt::PixelInterval c =
+          rows ? prt::LatLongRowCell(dst, d) : prt::LatLongColumnCell(dst, d);
+      const double lo = std::min(c.lo, c.hi), hi = std::max(c.lo, c.hi);
+      for (int s = 0; s < src; ++s) {
+        const prt::PixelInterval e =
+            rows ? prt::LatLongRowCell(src, s) : prt::LatLongColumnCell(src, s);
+        const double elo = std::min(e.lo, e.hi), ehi = std::max(e.lo, e.hi);
+        const double a = std::max(lo, elo), b = std::min(hi, ehi);
+        if (b > a)  // rows: the solid angle's sin θ factor; columns: the longitude length
+          out[d].push_back({s, rows ? std::abs(std::sin(b) - std::sin(a)) : b - a});
+      }
+    }
+    return out;
+  };
+  const auto cols = overlaps(env.width, w, false), rows = overlaps(env.height, h, true);
+  prt::EnvironmentImage out = prt::EnvironmentImage::Zero(prt::EnvmapLayout::kLatLong, w, h);
+  std::vector<double> row_sum(3 * static_cast<std::size_t>(env.width));
+  for (int y = 0; y < h; ++y) {
+    std::fill(row_sum.begin(), row_sum.end(), 0.0);
+    double row_weight = 0;
+    for (const Piece& r : rows[y]) {
+      row_weight += r.weight;
+      for (int c = 0; c < 3; ++c) {
+        const float* src = env.Channel(c).data() + env.Index(0, r.source);
+        for (int x = 0; x < env.width; ++x) row_sum[3 * x + c] += r.weight * src[x];
+      }
+    }
+    for (int x = 0; x < w; ++x) {
+      double sum[3] = {0, 0, 0}, weight = 0;
+      for (const Piece& p : cols[x]) {
+        weight += p.weight;
+        for (int c = 0; c < 3; ++c) sum[c] += p.weight * row_sum[3 * p.source + c];
+      }
+      for (int c = 0; c < 3; ++c)
+        out.Channel(c)[out.Index(x, y)] =
+            weight * row_weight > 0 ? static_cast<float>(sum[c] / (weight * row_weight)) : 0.0f;
+    }
+  }
+  return out;
+}
+
 prt::CubemapRgb Resample(const prt_runtime& rt, const prt::EnvironmentImage& env, int n) {
   return rt.general_rotation ? prt::ResampleToCubemap(env, n, rt.rotation)
                              : prt::ResampleToCubemap(env, n, rt.angle_y);
@@ -170,7 +230,9 @@ void SetRotation(prt_runtime& rt, bool general, double angle_y, const std::array
 // ProjectLighting).
 void UpdateLighting(prt_runtime& rt) {
   const int n = static_cast<int>(rt.session->cubemap_n());
-  rt.lighting = prt::ProjectLighting(Resample(rt, rt.env, n));
+  if (rt.preview && !rt.reduced)
+    rt.reduced = std::make_unique<prt::EnvironmentImage>(Reduce(rt.env, n));
+  rt.lighting = prt::ProjectLighting(Resample(rt, rt.preview ? *rt.reduced : rt.env, n));
 }
 
 void EnsureIncremental(prt_runtime& rt, unsigned terms);
@@ -437,8 +499,12 @@ int prt_runtime_set_environment_latlong(prt_runtime* rt, const float* rgb, int w
       }
     // Resample before replacing anything: on error the previous environment stays.
     const int n = static_cast<int>(rt->session->cubemap_n());
-    prt::WaveletLighting lighting = prt::ProjectLighting(Resample(*rt, env, n));
+    std::unique_ptr<prt::EnvironmentImage> reduced;
+    if (rt->preview) reduced = std::make_unique<prt::EnvironmentImage>(Reduce(env, n));
+    prt::WaveletLighting lighting =
+        prt::ProjectLighting(Resample(*rt, rt->preview ? *reduced : env, n));
     rt->env = std::move(env);
+    rt->reduced = std::move(reduced);
     rt->lighting = std::move(lighting);
     rt->has_env = true;
   });
@@ -479,6 +545,22 @@ int prt_runtime_set_rotation_y(prt_runtime* rt, double radians) {
     // RotateAboutY (vocabulary/envmap.h) as a matrix: x' = x cos + z sin, z' = −x sin + z cos.
     const double c = std::cos(radians), s = std::sin(radians);
     SetRotation(*rt, false, radians, {c, 0, s, 0, 1, 0, -s, 0, c});
+  });
+}
+
+int prt_runtime_set_preview(prt_runtime* rt, int preview) {
+  return Guard("prt_runtime_set_preview", [&] {
+    RequireHandle(rt);
+    Require(preview == 0 || preview == 1, "preview is 0 or 1, not " + std::to_string(preview));
+    if ((preview == 1) == rt->preview) return;
+    rt->preview = preview == 1;
+    if (!rt->has_env) return;
+    try {
+      UpdateLighting(*rt);
+    } catch (...) {
+      rt->preview = !rt->preview;
+      throw;
+    }
   });
 }
 

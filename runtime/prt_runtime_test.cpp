@@ -11,6 +11,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -341,6 +342,39 @@ TEST(RuntimeRotation, MatricesAndAngles) {
   ASSERT_EQ(prt_runtime_set_rotation(b.rt, rxf), PRT_RUNTIME_OK) << prt_runtime_last_error();
   ASSERT_EQ(prt_runtime_relight(b.rt, 0, rb.data(), n), PRT_RUNTIME_OK);
   for (float v : rb) ASSERT_TRUE(std::isfinite(v));
+}
+
+// The preview lighting (a reduced map) keeps the map's power and stays close to the full map's
+// lighting; switching it off gives the full map's numbers back exactly.
+TEST(RuntimeRotation, PreviewIsCloseAndReversible) {
+  const prt::EnvironmentImage env = prt::ReadEnvironment(kEnv);
+  const std::vector<float> map = Interleaved(env);
+  Handle h(Pack("adaptive4d"));
+  ASSERT_NE(h.rt, nullptr);
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<float> full(3 * n), preview(3 * n), back(3 * n);
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), env.width, env.height),
+            PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_set_rotation_y(h.rt, 0.4), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, full.data(), n), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_set_preview(h.rt, 1), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, preview.data(), n), PRT_RUNTIME_OK);
+  double num = 0, den = 0, sum_full = 0, sum_preview = 0;
+  for (std::size_t i = 0; i < full.size(); ++i) {
+    num += (double(preview[i]) - full[i]) * (double(preview[i]) - full[i]);
+    den += double(full[i]) * full[i];
+    sum_full += full[i];
+    sum_preview += preview[i];
+  }
+  std::printf("preview (n = 8: a 128-pixel-wide map) vs full sunrise: relit rel. RMS %.4f\n",
+              std::sqrt(num / den));
+  EXPECT_LT(std::sqrt(num / den), 0.05);
+  EXPECT_GT(std::sqrt(num / den), 0.0) << "the preview should be a different map";
+  EXPECT_NEAR(sum_preview, sum_full, 0.02 * sum_full);
+  ASSERT_EQ(prt_runtime_set_preview(h.rt, 0), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, back.data(), n), PRT_RUNTIME_OK);
+  EXPECT_EQ(back, full);
+  EXPECT_EQ(prt_runtime_set_preview(h.rt, 2), PRT_RUNTIME_ERROR_ARGUMENT);
 }
 
 // Misuse and hostile input: a status and a message, never a crash.

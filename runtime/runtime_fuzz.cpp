@@ -46,6 +46,7 @@ void Exercise(const std::vector<uint8_t>& bytes) {
     if (prt_runtime_relight(rt, 7, rgb.data(), n) == PRT_RUNTIME_OK) RequireFinite(rgb, "NWA");
     prt_runtime_set_lighting_mode(rt, PRT_RUNTIME_LIGHTING_PBI);
     prt_runtime_set_rotation_y(rt, 0.5);
+    prt_runtime_set_preview(rt, static_cast<int>(bytes.size() & 1));
     if (prt_runtime_relight(rt, 9, rgb.data(), n) == PRT_RUNTIME_OK) RequireFinite(rgb, "PBI");
     if (prt_runtime_prepare(rt, 5) == PRT_RUNTIME_OK) {
       const bool ok =
