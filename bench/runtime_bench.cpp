@@ -157,11 +157,19 @@ int main(int argc, char** argv) {
     Check(prt_runtime_set_rotation_y(rt, 0.01 * f));
     rotation_ms.push_back(Ms(t0));
   }
+  Check(prt_runtime_set_preview(rt, 1));
+  std::vector<double> preview_ms;
+  for (int f = 0; f < frames; ++f) {
+    t0 = Clock::now();
+    Check(prt_runtime_set_rotation_y(rt, 0.01 * f));
+    preview_ms.push_back(Ms(t0));
+  }
+  Check(prt_runtime_set_preview(rt, 0));
   std::printf(
-      "%s: %zu samples, n = %u; open %.0f ms, environment %dx%d %.1f ms, lighting per "
-      "frame (set_rotation: resample + projection) %.2f ms\n",
+      "%s: %zu samples, n = %u; open %.0f ms, environment %dx%d %.1f ms, lighting per frame "
+      "(set_rotation: resample + projection) %.2f ms, with prt_runtime_set_preview %.2f ms\n",
       pack.c_str(), n, prt_runtime_cubemap_size(rt), open_ms, env.width, env.height, env_ms,
-      Median(rotation_ms));
+      Median(rotation_ms), Median(preview_ms));
 
   // One configuration's frame times per budget: rotate a little, relight (PBI for N > 0).
   const auto run_c = [&](const std::function<void(unsigned)>& relight) {
