@@ -310,6 +310,10 @@ std::string PackReader::Impl::Metadata() const {
   const SectionInfo& s = sections[meta];
   const uint8_t* p = CheckedBytes(meta);
   std::string text;
+  // Metadata is a JSON object of a few KiB; a claim of more than 64 MiB is a hostile size, not a
+  // scene (refused before the allocation).
+  if (s.raw_size > (uint64_t{64} << 20))
+    Fail("META claims " + std::to_string(s.raw_size) + " bytes decoded (at most 64 MiB)");
   if (s.codec == uint32_t(Codec::kZstd)) {
     text.resize(s.raw_size);
     Unzstd(p, s.stored_size, reinterpret_cast<uint8_t*>(text.data()), s.raw_size, "META");

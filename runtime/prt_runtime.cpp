@@ -86,6 +86,14 @@ struct TaskRunner {
   void* user = nullptr;
 };
 TaskRunner g_runner;
+// prt_runtime_set_max_section_bytes (0: the reader's default).
+std::atomic<uint64_t> g_max_section_bytes{0};
+
+prt::pack::ReaderOptions Options() {
+  prt::pack::ReaderOptions o;
+  if (const uint64_t m = g_max_section_bytes.load(); m > 0) o.max_section_bytes = m;
+  return o;
+}
 
 }  // namespace
 
@@ -390,7 +398,8 @@ prt_runtime* prt_runtime_open_memory(const void* data, size_t size) {
   }
   return Open(
       "prt_runtime_open_memory",
-      [&] { return prt::pack::PackReader::OpenMemory(data, size, "<memory>"); }, "<memory>");
+      [&] { return prt::pack::PackReader::OpenMemory(data, size, "<memory>", Options()); },
+      "<memory>");
 }
 
 void prt_runtime_close(prt_runtime* rt) {
@@ -660,6 +669,10 @@ void prt_runtime_set_task_runner(prt_runtime_task_runner run, void* user, unsign
     b.concurrency = concurrency;
   }
   prt::SetParallelBackend(b);
+}
+
+void prt_runtime_set_max_section_bytes(uint64_t bytes) {
+  g_max_section_bytes.store(bytes);
 }
 
 size_t prt_runtime_memory_bytes(const prt_runtime* rt) {

@@ -173,6 +173,12 @@ typedef void (*prt_runtime_task_runner)(void* user, size_t count,
                                         void* task_data);
 void prt_runtime_set_task_runner(prt_runtime_task_runner run, void* user, unsigned concurrency);
 
+/* The largest decoded size of any one pack section or transport block that opening accepts
+ * (process-wide; default 2 GiB, the reader's). A pack that claims more is refused with
+ * PRT_RUNTIME_ERROR_INPUT before anything of that size is allocated: a host on a memory budget
+ * (a browser tab, a console) sets its own. 0 restores the default. */
+void prt_runtime_set_max_section_bytes(uint64_t bytes);
+
 /* Bytes the handle holds (pack data, relighter, lighting and incremental state). */
 size_t prt_runtime_memory_bytes(const prt_runtime* rt);
 

@@ -75,6 +75,9 @@ void Exercise(const std::vector<uint8_t>& bytes) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
+  // A memory budget, as a browser tab would set one: sections claiming more are refused before
+  // they are allocated (the reader's default, 2 GiB, is the fuzzer's whole RSS limit).
+  prt_runtime_set_max_section_bytes(16 << 20);
   std::vector<uint8_t> bytes(data, data + size);
   Exercise(bytes);
   prt::pack::ResealChecksums(bytes);
