@@ -528,7 +528,8 @@ std::size_t CompressedRelighter::memory_bytes() const {
       sizeof(uint32_t) * (coefficient_of_sample_.capacity() + tile_offsets_.capacity()) +
       sizeof(Segment) * segments_.capacity();
   const std::lock_guard<std::mutex> lock(pool_mutex_);
-  for (const auto& f : pool_) b += sizeof(float) * (f->x.capacity() + f->scratch.capacity());
+  for (const auto& f : pool_)
+    b += sizeof(float) * (f->x.capacity() + f->scratch.capacity() + f->scratch2.capacity());
   return b;
 }
 
@@ -591,6 +592,27 @@ void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
   RelightLights(lights, channels, {radiance.data(), nullptr, order});
 }
 
+namespace {
+
+// Elements of margin, at each level, between what a range needs of a 1D inverse step's output
+// and the ends of the window the step is run on as a signal of its own: a window end that is not
+// the signal's end gets a false symmetric extension, which changes the outputs within the
+// filter's reach of it (LeGall 5/3's two lifting steps: 2 elements; CDF 9/7's four: 4).
+constexpr std::size_t RangeMargin(WaveletFilter f) {
+  return f == WaveletFilter::kLeGall53 ? 8 : 16;
+}
+
+}  // namespace
+
+bool CompressedRelighter::RangeIsLocal(std::size_t first, std::size_t count) const {
+  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
+  if (filter != WaveletFilter::kLeGall53 && filter != WaveletFilter::kCdf97) return false;
+  const std::size_t last = first + count;
+  for (const Segment& b : segments_)
+    if (b.lo < last && first < b.hi && b.h != 1) return false;
+  return true;
+}
+
 void CompressedRelighter::RelightSparseAddRange(std::span<const uint32_t> columns,
                                                 std::span<const float> weights, int channels,
                                                 std::size_t first, std::size_t count,
@@ -601,15 +623,209 @@ void CompressedRelighter::RelightSparseAddRange(std::span<const uint32_t> column
   if (first > spatial_ || count > spatial_ - first)
     throw std::out_of_range(
         "CompressedRelighter::RelightSparseAddRange: range outside the samples");
-  // The whole frame, then the range (a region-of-interest inverse is to replace this).
+  std::vector<Light> lights = LightsOf(columns, weights, channels);
+  if (count == 0) return;
+  if (RangeIsLocal(first, count)) {
+    RelightLightsRange(lights, channels, first, first + count, out.data(), assign);
+    return;
+  }
+  // The whole frame, then the range.
   std::vector<std::vector<double>> full(static_cast<std::size_t>(channels),
                                         std::vector<double>(spatial_));
   std::vector<double*> ptr;
   for (auto& f : full) ptr.push_back(f.data());
-  RelightSparseAdd(columns, weights, channels, ptr, SampleOrder::kCoefficients, true);
+  RelightLights(lights, channels, {nullptr, ptr.data(), SampleOrder::kCoefficients, true});
   for (std::size_t c = 0; c < full.size(); ++c)
     for (std::size_t p = first; p < first + count; ++p)
       out[c][p] = assign ? full[c][p] : out[c][p] + full[c][p];
+}
+
+// Eq. 8 (Cheslack-Postava et al. 2008 §4.5, Eq. 6–7, as RelightLights runs it) for the positions
+// [first, last) of the coefficient order only, every segment they touch a mesh (1D). Output
+// element i of inverse step t (depth t → t − 1) needs the low and high coefficients near i/2, so
+// the positions a range needs at each depth are an interval, about half the one below plus the
+// filter's reach: R_0 = the range ∩ the segment; step t runs on the window
+// W_{t−1} = [R_{t−1}.lo − m, R_{t−1}.hi + m) (start even, clipped to the signal) as on a signal
+// of its own (its outputs exact but near a clipped-off end, which the margin m keeps outside
+// R_{t−1}), reading low coefficients [W.lo/2, W.lo/2 + ⌈|W|/2⌉) =: R_t and as many high ones
+// (⌊|W|/2⌋). A frame then:
+//   1. zeroes, in X, the high-band windows of every step and R_top (the deepest step's low
+//      band), and adds the early terms that fall in them (binary searches in each column's
+//      sorted terms, narrowed by the tile offsets);
+//   2. from the deepest light's depth up, adds a depth's late terms that fall in R_t to the low
+//      band, then runs step t on its window, the low band alternating between two scratch
+//      buffers (the high bands stay in X);
+//   3. adds the depth-0 columns' terms in R_0, and writes R_0 out.
+// The work is the range's share of the terms and of the steps plus about 2m per level: a host
+// that splits a frame into ranges splits its cost. Runs on the calling thread.
+void CompressedRelighter::RelightLightsRange(std::vector<Light>& lights, int channels,
+                                             std::size_t first, std::size_t last,
+                                             double* const* out, bool assign) const {
+  struct Interval {
+    std::size_t lo = 0, hi = 0;
+  };
+  // One segment the range touches: R_t (local, t = 0 … top), the windows W_{t−1} of steps
+  // t = 1 … top, and where its low band lives (0 = X, 1 and 2 the scratch buffers).
+  struct Plan {
+    std::size_t si = 0;
+    int top = 0;
+    std::vector<Interval> need, window;
+    int at = 0;
+  };
+  const std::size_t S = spatial_;
+  const std::size_t P = header_.channels;
+  const bool per_channel = P != 1;
+  const auto C = static_cast<std::size_t>(channels);
+  const std::size_t K = C == 3 ? 4 : C;
+  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
+  const std::size_t m = RangeMargin(filter);
+  const bool split = InverseWavelet1DStepSplitSupported(filter, static_cast<int>(K));
+  std::stable_sort(lights.begin(), lights.end(), [&](const Light& a, const Light& b) {
+    return columns_[a.slot].depth > columns_[b.slot].depth;
+  });
+  const auto deep_end = static_cast<std::size_t>(
+      std::partition_point(lights.begin(), lights.end(),
+                           [&](const Light& l) { return columns_[l.slot].depth > 0; }) -
+      lights.begin());
+  const int d_max = lights.empty() ? 0 : columns_[lights[0].slot].depth;
+
+  std::vector<Plan> plans;
+  std::vector<Interval> early;  // global elements of X that receive early terms
+  for (std::size_t si = 0; si < segments_.size(); ++si) {
+    const Segment& b = segments_[si];
+    if (!(b.lo < last && first < b.hi)) continue;
+    Plan plan;
+    plan.si = si;
+    plan.top = std::min(b.max_depth, d_max);
+    plan.need.resize(static_cast<std::size_t>(plan.top) + 1);
+    plan.window.resize(static_cast<std::size_t>(plan.top));
+    plan.need[0] = {std::max(first, b.lo) - b.lo, std::min(last, b.hi) - b.lo};
+    for (int t = 1; t <= plan.top; ++t) {
+      const Interval r = plan.need[t - 1];
+      const auto len = static_cast<std::size_t>(SizeAtDepth(b.w, t - 1));
+      const std::size_t lo = (r.lo > m ? r.lo - m : 0) & ~std::size_t{1};
+      const std::size_t hi = std::min(len, r.hi + m);
+      plan.window[t - 1] = {lo, hi};
+      plan.need[t] = {lo / 2, lo / 2 + (hi - lo + 1) / 2};
+      // The high band of depth t starts at SizeAtDepth(w, t) = ⌈len/2⌉.
+      const std::size_t high = b.lo + static_cast<std::size_t>(SizeAtDepth(b.w, t)) + lo / 2;
+      early.push_back({high, high + (hi - lo) / 2});
+    }
+    early.push_back({b.lo + plan.need[plan.top].lo, b.lo + plan.need[plan.top].hi});
+    plans.push_back(std::move(plan));
+  }
+
+  std::unique_ptr<FrameBuffers> buffers = TakeBuffers();
+  for (auto* v : {&buffers->x, &buffers->scratch, &buffers->scratch2})
+    if (v->size() < S * K) v->resize(S * K);
+  float* const buf[3] = {buffers->x.data(), buffers->scratch.data(), buffers->scratch2.data()};
+  float* const x = buf[0];
+  for (const Interval& e : early) std::memset(x + K * e.lo, 0, sizeof(float) * K * (e.hi - e.lo));
+
+  // Adds the terms [b, e) whose element lies in [g0, g1), of T's channel ch, to `dst`.
+  const auto add_terms = [&](const Term* b, const Term* e, std::size_t ch, std::size_t g0,
+                             std::size_t g1, const float* w, float* dst) {
+    const std::size_t shift = ch * S;
+    const Term* p = std::lower_bound(b, e, shift + g0,
+                                     [](const Term& t, std::size_t v) { return t.index < v; });
+    for (; p != e && p->index < shift + g1; ++p) {
+      float* xi = dst + K * (static_cast<std::size_t>(p->index) - shift);
+      if (per_channel) {
+        xi[ch] += w[ch] * p->value;
+      } else {
+        for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * p->value;
+      }
+    }
+  };
+  const std::size_t stride = tiles_ + 1;
+  // Light k's terms_ in the global elements [g0, g1) of `dst`: the tiles' offsets bound the
+  // search.
+  const auto scatter = [&](std::size_t k, std::size_t g0, std::size_t g1, float* dst) {
+    for (std::size_t ch = 0; ch < P; ++ch) {
+      const uint32_t* off = tile_offsets_.data() + (lights[k].slot * P + ch) * stride;
+      const Term* b = terms_.data() + off[g0 / tile_];
+      const Term* e = terms_.data() + off[std::min(tiles_, (g1 - 1) / tile_ + 1)];
+      add_terms(b, e, ch, g0, g1, lights[k].weight, dst);
+    }
+  };
+
+  // Phase 1: the early terms (with no light deeper than 0, every light: R_0 is then in X).
+  const std::size_t early_end = deep_end > 0 ? deep_end : lights.size();
+  for (std::size_t k = 0; k < early_end; ++k)
+    for (const Interval& e : early) scatter(k, e.lo, e.hi, x);
+  // Phase 2.
+  std::vector<float> tmp, tmp_scratch;
+  std::size_t next = 0;
+  for (int d = d_max; d >= 1; --d) {
+    for (; next < deep_end && columns_[lights[next].slot].depth == d; ++next) {
+      const Column& col = columns_[lights[next].slot];
+      if (col.late_begin == col.late_end) continue;
+      for (const Plan& plan : plans) {
+        const Segment& b = segments_[plan.si];
+        if (d >= b.max_depth) continue;  // no late terms: the column is early here
+        const Interval r = plan.need[static_cast<std::size_t>(d)];
+        for (std::size_t ch = 0; ch < P; ++ch)
+          add_terms(late_terms_.data() + col.late_begin, late_terms_.data() + col.late_end, ch,
+                    b.lo + r.lo, b.lo + r.hi, lights[next].weight, buf[plan.at]);
+      }
+    }
+    for (Plan& plan : plans) {
+      if (d > plan.top) continue;
+      const Segment& b = segments_[plan.si];
+      const Interval win = plan.window[static_cast<std::size_t>(d) - 1];
+      const std::size_t n = win.hi - win.lo;
+      const float* low = buf[plan.at] + K * (b.lo + win.lo / 2);
+      const float* high =
+          x + K * (b.lo + static_cast<std::size_t>(SizeAtDepth(b.w, d)) + win.lo / 2);
+      const int to = plan.at == 1 ? 2 : 1;
+      float* dst = buf[to] + K * (b.lo + win.lo);
+      if (split) {
+        InverseWavelet1DStepSplit(filter, low, high, dst, static_cast<int>(n), static_cast<int>(K),
+                                  1);
+      } else {
+        // The window's bands side by side (a length-n signal at depth 1), one in-place step.
+        tmp.resize(K * n);
+        tmp_scratch.resize(K * n);
+        const std::size_t nl = (n + 1) / 2;
+        std::memcpy(tmp.data(), low, sizeof(float) * K * nl);
+        std::memcpy(tmp.data() + K * nl, high, sizeof(float) * K * (n - nl));
+        InverseWavelet2DStepInterleaved(filter, tmp.data(), static_cast<int>(n), 1,
+                                        static_cast<int>(K), 1, tmp_scratch.data());
+        std::memcpy(dst, tmp.data(), sizeof(float) * K * n);
+      }
+      plan.at = to;
+    }
+  }
+  // Phase 3.
+  if (deep_end > 0)
+    for (std::size_t k = deep_end; k < lights.size(); ++k)
+      for (const Plan& plan : plans) {
+        const Segment& b = segments_[plan.si];
+        scatter(k, b.lo + plan.need[0].lo, b.lo + plan.need[0].hi, buf[plan.at]);
+      }
+  // Out, with the finite check.
+  for (const Plan& plan : plans) {
+    const Segment& b = segments_[plan.si];
+    const float* src = buf[plan.at];
+    for (std::size_t p = b.lo + plan.need[0].lo; p < b.lo + plan.need[0].hi; ++p) {
+      const float* xi = src + K * p;
+      for (std::size_t c = 0; c < C; ++c) {
+        if (!std::isfinite(xi[c])) {
+          ReturnBuffers(std::move(buffers));
+          const std::size_t sample = static_cast<std::size_t>(
+              std::find(coefficient_of_sample_.begin(), coefficient_of_sample_.end(), p) -
+              coefficient_of_sample_.begin());
+          throw NumericalError(name_ + ": the relit radiance of sample " + std::to_string(sample) +
+                               " (channel " + std::to_string(c) + ") is " +
+                               (std::isnan(xi[c]) ? "NaN" : "Inf") +
+                               ": T·L overflows the relighter's float range (3.4e38); the "
+                               "lighting is too bright for this transport");
+        }
+        out[c][p] = assign ? static_cast<double>(xi[c]) : out[c][p] + static_cast<double>(xi[c]);
+      }
+    }
+  }
+  ReturnBuffers(std::move(buffers));
 }
 
 void CompressedRelighter::RelightSparseAdd(std::span<const uint32_t> columns,
