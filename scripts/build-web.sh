@@ -20,6 +20,9 @@ done
   exit 1
 }
 
+# Emscripten's JS optimiser needs acorn: Debian's node-acorn (a dependency of emscripten) lives in
+# /usr/share/nodejs, which a node not from Debian does not search by itself.
+export NODE_PATH="/usr/share/nodejs${NODE_PATH:+:$NODE_PATH}"
 if [ ! -f "$WASM_DIR/CMakeCache.txt" ]; then
   emcmake cmake -S "$ROOT/web/wasm" -B "$WASM_DIR" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release \
     -DPRT_WASM_DEPS_DIR="$WASM_DIR/src"
@@ -31,5 +34,6 @@ mkdir -p "$SITE/js" "$SITE/three"
 cp "$ROOT/web/index.html" "$ROOT/web/style.css" "$SITE/"
 cp "$ROOT"/web/js/*.js "$SITE/js/"
 cp "$WASM_DIR/prt_runtime.js" "$WASM_DIR/prt_runtime.wasm" "$SITE/js/"
-cp "$ROOT/web/node_modules/three/build/three.module.js" "$SITE/three/"
+cp "$ROOT/web/node_modules/three/build/three.module.js" \
+  "$ROOT/web/node_modules/three/build/three.core.js" "$SITE/three/"
 echo "build-web: $SITE"

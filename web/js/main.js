@@ -14,7 +14,7 @@ const kKeptFrames = 600;
 const stats = {
   state: 'empty', error: null, pack: null, env: null, samples: 0, triangles: 0, isImage: false,
   cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
-  loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
+  converged: false, preview: false, lastFrameAt: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
   lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
   bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,
 };
@@ -199,6 +199,8 @@ function exactFrame() {
   app.view.render();
   const t2 = performance.now();
   stats.exactRelightMs = t1 - t0;
+  stats.lastFrameAt = t2;
+  stats.converged = true;
   recordFrame({terms: 0, rotateMs: 0, relightMs: t1 - t0, drawMs: t2 - t1, totalMs: t2 - t0,
                preview: false});
   // An exact frame leaves the runtime's PBI state where it was: the next PBI frames go on
@@ -275,6 +277,8 @@ function attachDrag(canvas) {
     app.pack.setPreview(false);
     app.preview = false;
     app.framesLeft = framesToConverge();
+    stats.converged = false;
+    stats.preview = false;
   };
   canvas.addEventListener('pointerup', end);
   canvas.addEventListener('pointercancel', end);
@@ -309,6 +313,9 @@ function tick() {
                    drawMs: t3 - t2, totalMs: t3 - t0, preview: app.preview});
       if (app.dragging) ++app.drag.frames;
       if (!app.dragging && app.framesLeft > 0) --app.framesLeft;
+      stats.lastFrameAt = t3;
+      stats.converged = !app.dragging && app.framesLeft === 0;
+      stats.preview = app.preview;
       app.needsRender = false;
       updateStatsText();
     } else if (app.needsRender) {
@@ -333,6 +340,7 @@ function readControls() {
   if (b >= 1 && b <= maxB && b !== stats.budget) {
     stats.budget = b;  // the runtime restarts PBI from no light at a new budget
     app.framesLeft = app.envSet ? framesToConverge() : 0;
+    stats.converged = app.framesLeft === 0;
   }
   updateStatsText();
 }
