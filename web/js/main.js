@@ -356,31 +356,36 @@ window.prtPage = {
     return btoa(s);
   },
   /**
-   * Times the runtime in this page: `exact` exact relights, then `frames` PBI frames of the
-   * current budget under still lighting and `rotations` rotation steps (set_rotation_y, full
-   * map and preview). Medians in ms. Leaves the view as it found it (one exact frame).
+   * Times the runtime in this page as bench/runtime_bench.cpp times the native C API: frames of
+   * `terms` (0 exact, else PBI restarted from no light) under a rotating environment (rotate by
+   * 0.01 rad, untimed, then time the relight; the first 2 frames warm up), and set_rotation_y
+   * alone with the full map and with preview. Medians in ms. Leaves the view as it found it.
    */
-  benchmark({exact = 5, frames = 30, rotations = 10} = {}) {
+  benchmark({frames = 30, budgets = [0, 30, 100, 300]} = {}) {
     const p = app.pack;
+    const a0 = app.angle;
     const time = (fn) => {
       const t0 = performance.now();
       fn();
       return performance.now() - t0;
     };
-    const out = {budget: stats.budget, samples: stats.samples, n: stats.cubemapSize};
-    out.exactMs = median(Array.from({length: exact}, () => time(() => p.relight(0))));
-    out.pbiMs = median(Array.from({length: frames}, () => time(() => p.relight(stats.budget))));
-    const a0 = app.angle;
+    const out = {budget: stats.budget, samples: stats.samples, n: stats.cubemapSize, frames,
+                 relightMs: {}};
+    for (const terms of budgets) {
+      p.setLightingMode(0);  // NWA then PBI: restarts PBI from no light
+      p.setLightingMode(2);
+      const t = [];
+      for (let f = 0; f < frames + 2; ++f) {
+        p.setRotationY(a0 + 0.01 * f);
+        const ms = time(() => p.relight(terms));
+        if (f >= 2) t.push(ms);
+      }
+      out.relightMs[terms] = median(t);
+    }
     for (const preview of [false, true]) {
       p.setPreview(preview);
-      const ts = Array.from({length: rotations}, (_, i) =>
-        time(() => p.setRotationY(a0 + 0.05 * (i + 1))));
-      out[preview ? 'rotatePreviewMs' : 'rotateFullMs'] = median(ts);
-      const tr = Array.from({length: rotations}, (_, i) => time(() => {
-        p.setRotationY(a0 - 0.05 * (i + 1));
-        p.relight(stats.budget);
-      }));
-      out[preview ? 'rotateFramePreviewMs' : 'rotateFrameFullMs'] = median(tr);
+      const t = Array.from({length: frames}, (_, f) => time(() => p.setRotationY(a0 + 0.01 * f)));
+      out[preview ? 'rotatePreviewMs' : 'rotateFullMs'] = median(t);
     }
     p.setPreview(app.preview);
     p.setRotationY(a0);

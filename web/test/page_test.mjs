@@ -8,10 +8,12 @@
 //  (c) frame times come back from the page (window.prtStats and the #stats text) after a drag
 //      that rotates the environment (preview and PBI frames), and the page converges after it.
 // With --measure it prints the figures of docs/web.md instead (prtPage.benchmark(), load to first
-// frame, bytes downloaded, fps while dragging) and checks nothing.
+// frame, bytes downloaded, fps while dragging) and checks nothing; --screenshot PATH then saves
+// the whole page after the drag (docs/images/web-runtime.png).
 //
 // node web/test/page_test.mjs --site build-wasm/site --pack P.prtpack --env E.hdr
-//     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR] [--measure]
+//     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR]
+//     [--measure [--screenshot PATH]]
 import {createServer} from 'node:http';
 import {readFileSync, writeFileSync, mkdirSync, existsSync, statSync} from 'node:fs';
 import {extname, join, resolve, normalize} from 'node:path';
@@ -61,7 +63,7 @@ async function openPage(browser, url, log) {
   const page = await browser.newPage();
   page.on('console', (m) => log.push(`[console.${m.type()}] ${m.text()}`));
   page.on('pageerror', (e) => log.push(`[pageerror] ${e.message}`));
-  await page.setViewport({width: 1200, height: 900, deviceScaleFactor: 1});
+  await page.setViewport({width: 1180, height: 560, deviceScaleFactor: 1});
   await page.goto(url, {waitUntil: 'load'});
   await page.waitForFunction(
       () => ['ready', 'error'].includes(document.body.dataset.state), {timeout: 60000});
@@ -132,11 +134,12 @@ async function main() {
     await (await page.$(s0.isImage ? '#image' : '#gl')).screenshot({path: shot});
 
     if (a.measure) {
-      const bench = await page.evaluate(() => window.prtPage.benchmark({exact: 9, frames: 60,
-                                                                        rotations: 15}));
+      const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30}));
       await drag(page, 120, 16);
       await page.waitForFunction(() => window.prtStats.dragFps !== null, {timeout: 30000});
+      await page.waitForFunction(() => window.prtStats.converged, {timeout: 60000});
       const s = await page.evaluate(() => window.prtStats);
+      if (a.screenshot) await page.screenshot({path: a.screenshot});
       const dragFrames = s.frames.filter((f) => f.rotateMs > 0);
       const med = (xs) => [...xs].sort((p, q) => p - q)[Math.floor(xs.length / 2)];
       console.log(JSON.stringify({
