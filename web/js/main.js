@@ -141,7 +141,7 @@ function makeView() {
   if (pack.isImage) {
     gl.hidden = true;
     img.hidden = false;
-    app.view = new ImageView(img, cam.width, cam.height);
+    app.view = new ImageView(img, cam, pack.imageBackground());
   } else {
     img.hidden = true;
     gl.hidden = false;
@@ -347,13 +347,23 @@ function readControls() {
 
 // ---- Test and measurement hooks (web/test/page_test.mjs, docs/web.md) -------------------------
 
+function base64(bytes) {
+  let s = '';
+  for (let i = 0; i < bytes.length; i += 8192) {
+    s += String.fromCharCode(...bytes.subarray(i, i + 8192));
+  }
+  return btoa(s);
+}
+
 window.prtPage = {
   /** Which pixels the mesh covers (base64 of one byte per pixel, rows from the top). */
   meshMask() {
-    const m = app.view.meshMask();
-    let s = '';
-    for (let i = 0; i < m.length; i += 8192) s += String.fromCharCode(...m.subarray(i, i + 8192));
-    return btoa(s);
+    return base64(app.view.meshMask());
+  },
+  /** An image pack's drawn pixels: {width, height, rgb: base64 of RGB bytes, rows from the top}. */
+  imagePixels() {
+    const v = app.view;
+    return {width: v.width, height: v.height, rgb: base64(v.pixels())};
   },
   /**
    * Times the runtime in this page as bench/runtime_bench.cpp times the native C API: frames of

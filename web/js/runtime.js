@@ -81,6 +81,18 @@ export class Pack {
     }
   }
 
+  /** An image pack's pixels that see the environment: 1 byte per sample, 1 = background. */
+  imageBackground() {
+    const M = this.M;
+    const ptr = M._malloc(Math.max(1, this.samples));
+    try {
+      this.check(M._prt_runtime_get_image_background(this.rt, ptr, this.samples), 'background');
+      return M.HEAPU8.slice(ptr, ptr + this.samples);
+    } finally {
+      M._free(ptr);
+    }
+  }
+
   /** The baked camera: {eye, target, up, fov (degrees, vertical), width, height}. */
   camera() {
     const M = this.M;

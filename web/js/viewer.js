@@ -204,45 +204,133 @@ export class MeshView {
   }
 }
 
-/** An image pack: its samples are the pixels of the baked camera, row-major from the top. */
+/**
+ * The environment's radiance seen along direction d under a rotation about +Y, as prt-view's
+ * EnvironmentBackground: L(R⁻¹d) from the lat-long map (envmap.cpp LatLongPixelPosition),
+ * bilinear between the pixel centres around it (EnvironmentLookup::Bilinear). Writes out[0..2].
+ */
+function environmentRadiance(env, d, rotation, out) {
+  const c = Math.cos(-rotation), s = Math.sin(-rotation);
+  const x = c * d[0] + s * d[2], y = d[1], z = -s * d[0] + c * d[2];
+  const w = env.width, h = env.height;
+  const lat = Math.atan2(y, Math.sqrt(z * z + x * x));
+  const lon = z === 0 && x === 0 ? 0 : Math.atan2(x, z);
+  const px = Math.min(Math.max((lon / (-2 * Math.PI) + 0.5) * (w - 1), 0), w - 1);
+  const py = Math.min(Math.max((lat / -Math.PI + 0.5) * (h - 1), 0), h - 1);
+  const x0 = Math.min(Math.floor(px), w - 2), y0 = Math.min(Math.floor(py), h - 2);
+  const fx = px - x0, fy = py - y0;
+  const i00 = 3 * (y0 * w + x0), i10 = i00 + 3, i01 = i00 + 3 * w, i11 = i01 + 3;
+  const w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
+  for (let k = 0; k < 3; ++k) {
+    out[k] = w00 * env.rgb[i00 + k] + w10 * env.rgb[i10 + k] + w01 * env.rgb[i01 + k] +
+             w11 * env.rgb[i11 + k];
+  }
+}
+
+/**
+ * An image pack: its samples are the pixels of the baked camera, row-major from the top. Pixels
+ * that see no surface (prt_runtime_get_image_background) show the environment, as in prt-view.
+ */
 export class ImageView {
-  constructor(canvas, width, height) {
+  constructor(canvas, camera, background) {
+    const {width, height} = camera;
     this.canvas = canvas;
     canvas.width = width;
     canvas.height = height;
+    // Shown at a whole multiple of its size, pixels as squares (image packs are often small).
+    const scale = Math.max(1, Math.floor(640 / Math.max(width, (height * 4) / 3)));
+    canvas.style.width = `${scale * width}px`;
+    canvas.style.imageRendering = 'pixelated';
     this.width = width;
     this.height = height;
     this.ctx = canvas.getContext('2d');
     this.image = this.ctx.createImageData(width, height);
     this.exposure = 1;
     this.rgb = new Float32Array(3 * width * height);
+    this.background = background;  // 1 byte per pixel
+    this.env = null;
+    this.rotation = 0;
+    this.backgroundRgb = null;  // the environment at the background pixels, for this rotation
+    // The pixel rays (vocabulary/camera_projection.cpp PixelDirection).
+    const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                             a[0] * b[1] - a[1] * b[0]];
+    const norm = (a) => {
+      const l = Math.hypot(a[0], a[1], a[2]);
+      return [a[0] / l, a[1] / l, a[2] / l];
+    };
+    const f = norm(sub(camera.target, camera.eye));
+    const r = norm(cross(f, camera.up));
+    const u = cross(r, f);
+    const t = Math.tan((camera.fov * Math.PI) / 360);
+    const aspect = width / height;
+    this.direction = (x, y) => {
+      const sx = ((2 * (x + 0.5)) / width - 1) * aspect * t;
+      const sy = (1 - (2 * (y + 0.5)) / height) * t;
+      return norm([f[0] + sx * r[0] + sy * u[0], f[1] + sx * r[1] + sy * u[1],
+                   f[2] + sx * r[2] + sy * u[2]]);
+    };
   }
 
   setExposure(e) {
     this.exposure = e;
   }
 
-  setRotation() {}
-  setEnvironment() {}
+  setRotation(radians) {
+    if (radians !== this.rotation) this.backgroundRgb = null;
+    this.rotation = radians;
+  }
+
+  setEnvironment(env) {
+    this.env = env;
+    this.backgroundRgb = null;
+  }
 
   setRadiance(rgb) {
     this.rgb.set(rgb);
   }
 
+  updateBackground() {
+    const n = this.width * this.height;
+    this.backgroundRgb = new Float32Array(3 * n);
+    if (!this.env) return;
+    const out = [0, 0, 0];
+    for (let p = 0; p < n; ++p) {
+      if (!this.background[p]) continue;
+      environmentRadiance(this.env, this.direction(p % this.width, Math.floor(p / this.width)),
+                          this.rotation, out);
+      this.backgroundRgb.set(out, 3 * p);
+    }
+  }
+
   render() {
+    if (!this.backgroundRgb) this.updateBackground();
     const d = this.image.data;
     const e = this.exposure;
     const n = this.width * this.height;
     for (let i = 0; i < n; ++i) {
-      d[4 * i] = Math.round(255 * srgbEncode(this.rgb[3 * i] * e));
-      d[4 * i + 1] = Math.round(255 * srgbEncode(this.rgb[3 * i + 1] * e));
-      d[4 * i + 2] = Math.round(255 * srgbEncode(this.rgb[3 * i + 2] * e));
+      const src = this.background[i] ? this.backgroundRgb : this.rgb;
+      d[4 * i] = Math.round(255 * srgbEncode(src[3 * i] * e));
+      d[4 * i + 1] = Math.round(255 * srgbEncode(src[3 * i + 1] * e));
+      d[4 * i + 2] = Math.round(255 * srgbEncode(src[3 * i + 2] * e));
       d[4 * i + 3] = 255;
     }
     this.ctx.putImageData(this.image, 0, 0);
   }
 
+  /** Every pixel is the image's (the test compares them all). */
   meshMask() {
     return new Uint8Array(this.width * this.height).fill(1);
+  }
+  /** The drawn pixels, RGB, rows from the top. */
+  pixels() {
+    const d = this.ctx.getImageData(0, 0, this.width, this.height).data;
+    const rgb = new Uint8Array(3 * this.width * this.height);
+    for (let i = 0; i < this.width * this.height; ++i) {
+      rgb[3 * i] = d[4 * i];
+      rgb[3 * i + 1] = d[4 * i + 1];
+      rgb[3 * i + 2] = d[4 * i + 2];
+    }
+    return rgb;
   }
 }

@@ -6,13 +6,16 @@
 //      over the mesh's pixels less a one-pixel border (edges rasterise differently);
 //  (b) a corrupt pack shows the runtime's error message on the page (no blank canvas, no hang);
 //  (c) frame times come back from the page (window.prtStats and the #stats text) after a drag
-//      that rotates the environment (preview and PBI frames), and the page converges after it.
+//      that rotates the environment (preview and PBI frames), and the page converges after it;
+//  (d) an image pack and the map chosen through the page's file inputs: the pack is drawn as an
+//      image (2D canvas), its pixels within the tolerance of (a) of prt-view's image of it.
 // With --measure it prints the figures of docs/web.md instead (prtPage.benchmark(), load to first
 // frame, bytes downloaded, fps while dragging) and checks nothing; --screenshot PATH then saves
 // the whole page after the drag (docs/images/web-runtime.png).
 //
 // node web/test/page_test.mjs --site build-wasm/site --pack P.prtpack --env E.hdr
 //     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR]
+//     [--image-pack I.prtpack --image-reference prt-view-image.png]
 //     [--measure [--screenshot PATH]]
 import {createServer} from 'node:http';
 import {readFileSync, writeFileSync, mkdirSync, existsSync, statSync} from 'node:fs';
@@ -59,24 +62,28 @@ function serve(site, files) {
   return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
 }
 
-async function openPage(browser, url, log) {
+async function openPage(browser, url, log, waitForPack = true) {
   const page = await browser.newPage();
   page.on('console', (m) => log.push(`[console.${m.type()}] ${m.text()}`));
   page.on('pageerror', (e) => log.push(`[pageerror] ${e.message}`));
   await page.setViewport({width: 1180, height: 560, deviceScaleFactor: 1});
   await page.goto(url, {waitUntil: 'load'});
-  await page.waitForFunction(
-      () => ['ready', 'error'].includes(document.body.dataset.state), {timeout: 60000});
+  if (waitForPack) {
+    await page.waitForFunction(
+        () => ['ready', 'error'].includes(document.body.dataset.state), {timeout: 60000});
+  }
   return page;
 }
 
-// Mean and spread of |a − b| over the mask's pixels less a one-pixel border.
-function compareMesh(page, ref, mask, w, h) {
+// Mean and spread of |a − b| over the mask's pixels, less a one-pixel border when `erode`.
+function compareMesh(page, ref, mask, w, h, erode = true) {
   let n = 0, sum = 0, within = 0, max = 0;
-  for (let y = 1; y < h - 1; ++y) {
-    for (let x = 1; x < w - 1; ++x) {
+  const b = erode ? 1 : 0;
+  for (let y = b; y < h - b; ++y) {
+    for (let x = b; x < w - b; ++x) {
       const i = y * w + x;
-      if (!(mask[i] && mask[i - 1] && mask[i + 1] && mask[i - w] && mask[i + w])) continue;
+      if (!mask[i]) continue;
+      if (erode && !(mask[i - 1] && mask[i + 1] && mask[i - w] && mask[i + w])) continue;
       let worst = 0;
       for (let c = 0; c < 3; ++c) {
         const d = Math.abs(page[3 * i + c] - ref[3 * i + c]);
@@ -198,6 +205,36 @@ async function main() {
           'frame time and term budget in the #stats text');
     check(s.converged && !s.preview, 'converged to the full map after the drag');
     await page.close();
+
+    // (d) an image pack, opened through the file inputs (the map first, then the pack).
+    if (a.imagePack) {
+      const p = await openPage(browser, `${base}/index.html?exposure=${a.exposure}`, log, false);
+      await (await p.$('#env-file')).uploadFile(resolve(a.env));
+      await p.waitForFunction(() => window.prtStats.env !== null, {timeout: 30000});
+      await (await p.$('#pack-file')).uploadFile(resolve(a.imagePack));
+      await p.waitForFunction(() => ['ready', 'error'].includes(window.prtStats.state) &&
+                                    window.prtStats.pack !== null, {timeout: 60000});
+      const st = await p.evaluate(() => ({state: window.prtStats.state, error: window.prtStats.error,
+                                          isImage: window.prtStats.isImage,
+                                          image: !document.getElementById('image').hidden,
+                                          gl: !document.getElementById('gl').hidden}));
+      check(st.state === 'ready' && st.isImage && st.image && !st.gl,
+            `an image pack from the file inputs is drawn as an image (${st.state}${st.error ? `: ${st.error}` : ''})`);
+      if (st.state === 'ready' && a.imageReference) {
+        const img = await p.evaluate(() => window.prtPage.imagePixels());
+        const ref = decodePng(readFileSync(a.imageReference));
+        const rgb = Buffer.from(img.rgb, 'base64');
+        check(img.width === ref.width && img.height === ref.height,
+              `image ${img.width}×${img.height} = prt-view ${ref.width}×${ref.height}`);
+        const all = new Uint8Array(img.width * img.height).fill(1);
+        const r = compareMesh(rgb, ref.rgb, all, img.width, img.height, false);
+        console.log(`image pixels ${r.pixels}: mean |page − prt-view| ${(100 * r.mean).toFixed(3)} %, ` +
+                    `${(100 * r.within).toFixed(2)} % within ${kPixelTolerance}/255, max ${r.max}/255`);
+        check(r.mean <= kMeanTolerance && r.within >= kPixelFraction,
+              'the image pack matches prt-view within the tolerance');
+      }
+      await p.close();
+    }
 
     // (b) a corrupt pack: the runtime's message on the page.
     if (a.corrupt) {
