@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/image_file.h"
 #include "packager/prtpack_reader.h"
 #include "runtime/lighting.h"
 #include "runtime/per_band_incremental.h"
@@ -464,6 +465,21 @@ int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t t
     const std::span<const uint32_t> pack_sample = rt->session->pack_sample();
     for (std::size_t i = 0; i < t.size(); ++i)
       for (int k = 0; k < 3; ++k) indices[3 * i + k] = pack_sample[t[i][k]];
+  });
+}
+
+int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background, size_t samples) {
+  return Guard("prt_runtime_get_image_background", [&] {
+    RequireHandle(rt);
+    Require(background != nullptr, "background is NULL");
+    const prt::ImageSamplesInfo* image = rt->session->image();
+    Require(image != nullptr, rt->name + " is a vertex pack: it has no background pixels");
+    const std::size_t ns = rt->samples();
+    Require(samples == ns,
+            "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
+    Require(image->pixel_mesh.size() == ns, rt->name + ": pixel count differs from samples");
+    for (std::size_t p = 0; p < ns; ++p)
+      background[p] = image->pixel_mesh[p] == prt::kImageBackground ? 1 : 0;
   });
 }
 

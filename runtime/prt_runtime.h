@@ -90,6 +90,13 @@ size_t prt_runtime_triangle_count(const prt_runtime* rt);
 int prt_runtime_get_positions(const prt_runtime* rt, float* xyz, size_t samples);
 int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t triangles);
 
+/* Which pixels of an image pack see the environment rather than a surface: background[i] = 1 for
+ * such a pixel, 0 for a surface pixel, one byte per sample in the pack's order (pixels row-major
+ * from the top; unaffected by prt_runtime_set_sample_order). Their radiance is always 0: a viewer
+ * draws the environment there, as prt-view does. `samples` must equal prt_runtime_sample_count;
+ * PRT_RUNTIME_ERROR_ARGUMENT for a vertex pack. */
+int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background, size_t samples);
+
 /* The camera the pack was baked with (an image pack's fixed view; a vertex pack's scene camera,
  * or prt-view's default when its scene had none): eye, target, up, vertical field of view in
  * degrees, width and height in pixels. Any pointer may be NULL. */

@@ -488,4 +488,32 @@ TEST(RuntimeGeometry, PositionsTrianglesAndOrders) {
   EXPECT_GT(hgt, 0);
 }
 
+// An image pack's background pixels: the ones its pixel_mesh marks, radiance 0 under any map;
+// a vertex pack and a wrong size are argument errors.
+TEST(RuntimeGeometry, ImageBackground) {
+  Handle h(Pack("image"));
+  ASSERT_NE(h.rt, nullptr) << prt_runtime_last_error();
+  ASSERT_EQ(prt_runtime_is_image(h.rt), 1);
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<uint8_t> bg(n, 7);
+  ASSERT_EQ(prt_runtime_get_image_background(h.rt, bg.data(), n), PRT_RUNTIME_OK);
+  const int w = 24;  // Pack("image"): rows y < 3 see the environment
+  for (std::size_t p = 0; p < n; ++p) ASSERT_EQ(bg[p], p / w < 3 ? 1 : 0) << p;
+  std::vector<float> map(3 * 32 * 16, 1.0f), rgb(3 * n);
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, rgb.data(), n), PRT_RUNTIME_OK);
+  for (std::size_t p = 0; p < n; ++p) {
+    if (bg[p] == 1) {
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(rgb[3 * p + c], 0.0f);
+    }
+  }
+  EXPECT_EQ(prt_runtime_get_image_background(h.rt, bg.data(), n + 1), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_get_image_background(h.rt, nullptr, n), PRT_RUNTIME_ERROR_ARGUMENT);
+  Handle v(Pack("adaptive4d"));
+  const std::size_t nv = prt_runtime_sample_count(v.rt);
+  std::vector<uint8_t> vb(nv);
+  EXPECT_EQ(prt_runtime_get_image_background(v.rt, vb.data(), nv), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(std::string(prt_runtime_last_error()).find("vertex pack"), std::string::npos);
+}
+
 }  // namespace

@@ -36,3 +36,6 @@ echo "Results:"
 echo "  run folder (transport, report.json): $OUT/run"
 echo "  packed asset:                        $OUT/default.prtpack"
 for env in sunrise city; do printf '  relit image (%s):%*s%s\n' "$env" $((20 - ${#env})) "" "$OUT/$env.png"; done
+echo
+echo "The pack in the browser (docs/web.md): builds the WebAssembly page, serves it on localhost:"
+echo "  $ROOT/scripts/serve-web.sh"

@@ -19,5 +19,9 @@ if command -v clang++ >/dev/null 2>&1; then
   (cd "$FUZZ_DIR" && ctest --output-on-failure -R '^(prtpack_reader_fuzz|prt_runtime_fuzz)$')
 fi
 
+# The web page's WebAssembly build (docs/web.md), before CTest so that the web_page test does not
+# spend its time compiling Draco: a no-op when it is up to date.
+"$ROOT/scripts/build-web.sh"
+
 cd "$BUILD_DIR"
 ctest --output-on-failure -j "$JOBS" --timeout 900

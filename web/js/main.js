@@ -1,0 +1,436 @@
+// The page (docs/web.md): opens a .prtpack and a Radiance .hdr (file inputs, drag and drop, or
+// ?pack=URL&env=URL), relights the pack with the WebAssembly runtime and draws it (viewer.js).
+// Dragging rotates the environment: preview lighting and PBI frames of `budget` terms while it
+// moves, frames until PBI has converged when it stops, then nothing until the next change.
+// Figures are kept in window.prtStats and shown in #stats; window.prtPage has the test hooks.
+import {loadRuntimeModule, Pack} from './runtime.js';
+import {parseRadianceHdr} from './hdr.js';
+import {MeshView, ImageView} from './viewer.js';
+
+const params = new URLSearchParams(location.search);
+const $ = (id) => document.getElementById(id);
+const kKeptFrames = 600;
+
+const stats = {
+  state: 'empty', error: null, pack: null, env: null, samples: 0, triangles: 0, isImage: false,
+  cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
+  converged: false, preview: false, lastFrameAt: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
+  lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
+  bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,
+};
+window.prtStats = stats;
+
+const app = {
+  M: null, pack: null, packName: null, env: null, envName: null, view: null, angle: 0,
+  appliedAngle: 0, dragging: false, preview: false, framesLeft: 0, needsRender: false,
+  drag: null, envSet: false, firstFrameDone: false,
+};
+
+function setState(s) {
+  stats.state = s;
+  document.body.dataset.state = s;
+}
+
+function showError(msg) {
+  const el = $('error');
+  el.textContent = msg;
+  el.hidden = false;
+  stats.error = msg;
+  setState('error');
+  console.error(msg);
+  updateStatsText();
+}
+
+function clearError() {
+  $('error').hidden = true;
+  stats.error = null;
+}
+
+function median(xs) {
+  if (!xs.length) return null;
+  const s = [...xs].sort((a, b) => a - b);
+  return s[Math.floor(s.length / 2)];
+}
+
+function fmt(x, digits = 2) {
+  return x == null ? '–' : x.toFixed(digits);
+}
+
+function measureDownloads() {
+  let bytes = 0;
+  for (const e of performance.getEntriesByType('navigation')) bytes += e.encodedBodySize || 0;
+  for (const e of performance.getEntriesByType('resource')) bytes += e.encodedBodySize || 0;
+  stats.bytesDownloaded = bytes;
+}
+
+function updateStatsText() {
+  const pbi = stats.frames.filter((f) => f.terms > 0).map((f) => f.relightMs);
+  const rot = stats.frames.filter((f) => f.rotateMs > 0).map((f) => f.rotateMs);
+  const lines = [
+    `pack         ${stats.pack ?? '–'}`,
+    `environment  ${stats.env ?? '–'}`,
+    `samples      ${stats.samples}${stats.isImage ? ' (image pack)' : ''}, ` +
+        `${stats.triangles} triangles, n = ${stats.cubemapSize}`,
+    `term budget  ${stats.budget} of ${stats.coefficients} (PBI)`,
+    `exposure     ${stats.exposure}`,
+    `rotation     ${fmt(stats.rotationDeg, 1)}°`,
+    `frame time   ${fmt(stats.lastFrameMs)} ms (relight ${fmt(stats.lastRelightMs)} ms, ` +
+        `rotate ${fmt(stats.lastRotateMs)} ms)`,
+    `PBI frame    ${fmt(median(pbi))} ms median of ${pbi.length}`,
+    `rotate       ${fmt(median(rot))} ms median of ${rot.length} (env → cubemap)`,
+    `exact        ${fmt(stats.exactRelightMs)} ms`,
+    `drag fps     ${fmt(stats.dragFps, 1)}`,
+    `open         ${fmt(stats.openMs, 0)} ms`,
+    `first frame  ${fmt(stats.loadToFirstFrameMs, 0)} ms after page load`,
+    `downloaded   ${(stats.bytesDownloaded / 1e6).toFixed(2)} MB`,
+    `memory       ${(stats.memoryBytes / 1048576).toFixed(1)} MiB in the handle, ` +
+        `${(stats.wasmHeapBytes / 1048576).toFixed(0)} MiB wasm heap`,
+  ];
+  if (stats.error) lines.push(`error        ${stats.error}`);
+  $('stats').textContent = lines.join('\n');
+}
+
+function recordFrame(f) {
+  stats.frames.push(f);
+  if (stats.frames.length > kKeptFrames) stats.frames.shift();
+  stats.lastFrameMs = f.totalMs;
+  stats.lastRelightMs = f.relightMs;
+  stats.lastRotateMs = f.rotateMs;
+}
+
+// ---- Loading ---------------------------------------------------------------------------------
+
+async function fetchBytes(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(`${url}: HTTP ${r.status} ${r.statusText}`);
+  return new Uint8Array(await r.arrayBuffer());
+}
+
+async function openPack(bytes, name) {
+  if (app.pack) {
+    app.pack.close();
+    app.pack = null;
+  }
+  app.envSet = false;
+  app.M = app.M ?? await loadRuntimeModule();
+  const t0 = performance.now();
+  try {
+    app.pack = new Pack(app.M, bytes);
+  } catch (e) {
+    throw new Error(`Cannot open ${name}: ${e.message}`);
+  }
+  stats.openMs = performance.now() - t0;
+  app.packName = name;
+  stats.pack = name;
+  stats.samples = app.pack.samples;
+  stats.triangles = app.pack.triangles;
+  stats.isImage = app.pack.isImage;
+  stats.cubemapSize = app.pack.cubemapSize;
+  stats.coefficients = app.pack.coefficients;
+  $('budget').max = String(app.pack.coefficients);
+  makeView();
+}
+
+function makeView() {
+  const pack = app.pack;
+  const cam = pack.camera();
+  const width = Number(params.get('width')) || cam.width;
+  const height = Number(params.get('height')) || cam.height;
+  const gl = $('gl');
+  const img = $('image');
+  if (pack.isImage) {
+    gl.hidden = true;
+    img.hidden = false;
+    app.view = new ImageView(img, cam, pack.imageBackground());
+  } else {
+    img.hidden = true;
+    gl.hidden = false;
+    if (!app.meshView) {
+      app.meshView = new MeshView(gl, {...cam, width, height}, pack.positions(),
+                                  pack.triangleIndices());
+    } else {  // a second pack: a fresh WebGL view on a fresh canvas
+      const fresh = gl.cloneNode();
+      gl.replaceWith(fresh);
+      attachDrag(fresh);
+      app.meshView = new MeshView(fresh, {...cam, width, height}, pack.positions(),
+                                  pack.triangleIndices());
+    }
+    app.view = app.meshView;
+  }
+  app.view.setExposure(stats.exposure);
+  if (app.env) app.view.setEnvironment(app.env);
+}
+
+function setEnvironment(env, name) {
+  app.env = env;
+  app.envName = name;
+  stats.env = `${name} (${env.width}×${env.height})`;
+  if (app.view) app.view.setEnvironment(env);
+}
+
+// Both inputs present: the environment into the runtime and the first frame, exact.
+function start() {
+  if (!app.pack || !app.env) {
+    updateStatsText();
+    return;
+  }
+  app.pack.setEnvironment(app.env.rgb, app.env.width, app.env.height);
+  app.pack.setRotationY(app.angle);
+  app.appliedAngle = app.angle;
+  app.view.setRotation(app.angle);
+  app.envSet = true;
+  exactFrame();
+  if (!app.firstFrameDone) {
+    app.firstFrameDone = true;
+    stats.loadToFirstFrameMs = performance.now();
+  }
+  stats.memoryBytes = app.pack.memoryBytes();
+  stats.wasmHeapBytes = app.M.HEAPU8.length;
+  setState('ready');
+  measureDownloads();
+  updateStatsText();
+}
+
+function exactFrame() {
+  const t0 = performance.now();
+  const rgb = app.pack.relight(0);
+  const t1 = performance.now();
+  app.view.setRadiance(rgb);
+  app.view.render();
+  const t2 = performance.now();
+  stats.exactRelightMs = t1 - t0;
+  stats.lastFrameAt = t2;
+  stats.converged = true;
+  recordFrame({terms: 0, rotateMs: 0, relightMs: t1 - t0, drawMs: t2 - t1, totalMs: t2 - t0,
+               preview: false});
+  // An exact frame leaves the runtime's PBI state where it was: the next PBI frames go on
+  // from it.
+  app.framesLeft = 0;
+}
+
+async function loadFromUrl() {
+  const packUrl = params.get('pack');
+  const envUrl = params.get('env');
+  if (!packUrl && !envUrl) return;
+  setState('loading');
+  try {
+    const [packBytes, envBytes] = await Promise.all([
+      packUrl ? fetchBytes(packUrl) : null, envUrl ? fetchBytes(envUrl) : null]);
+    if (envBytes) setEnvironment(parseRadianceHdr(envBytes.buffer, envUrl), envUrl);
+    if (packBytes) await openPack(packBytes, packUrl);
+    start();
+  } catch (e) {
+    showError(e.message);
+  }
+}
+
+async function loadFiles(files) {
+  clearError();
+  setState('loading');
+  try {
+    for (const f of files) {
+      const bytes = new Uint8Array(await f.arrayBuffer());
+      if (/\.(hdr|pic)$/i.test(f.name)) {
+        setEnvironment(parseRadianceHdr(bytes.buffer, f.name), f.name);
+      } else {
+        await openPack(bytes, f.name);
+      }
+    }
+    if (app.pack && app.env) {
+      start();
+    } else {
+      setState('empty');
+      updateStatsText();
+    }
+  } catch (e) {
+    showError(e.message);
+  }
+}
+
+// ---- Interaction and the frame loop ----------------------------------------------------------
+
+function attachDrag(canvas) {
+  canvas.addEventListener('pointerdown', (ev) => {
+    if (!app.envSet) return;
+    canvas.setPointerCapture(ev.pointerId);
+    app.dragging = true;
+    app.drag = {x0: ev.clientX, angle0: app.angle, t0: performance.now(), frames: 0};
+    if (!app.preview) {
+      app.pack.setPreview(true);  // resampled from the reduced map while the user drags
+      app.preview = true;
+    }
+  });
+  canvas.addEventListener('pointermove', (ev) => {
+    if (!app.dragging) return;
+    const w = canvas.clientWidth || canvas.width;
+    app.angle = app.drag.angle0 + (2 * Math.PI * (ev.clientX - app.drag.x0)) / w;
+  });
+  const end = () => {
+    if (!app.dragging) return;
+    app.dragging = false;
+    const dt = (performance.now() - app.drag.t0) / 1000;
+    if (dt > 0 && app.drag.frames > 0) {
+      stats.dragFps = app.drag.frames / dt;
+      stats.dragFrames = app.drag.frames;
+    }
+    // Back to the full map: the lighting changes once more, PBI converges to the exact frame.
+    app.pack.setPreview(false);
+    app.preview = false;
+    app.framesLeft = framesToConverge();
+    stats.converged = false;
+    stats.preview = false;
+  };
+  canvas.addEventListener('pointerup', end);
+  canvas.addEventListener('pointercancel', end);
+}
+
+function framesToConverge() {
+  // Under still lighting PBI reaches the exact radiance within ⌈6n²/N⌉ frames (runtime.md).
+  return Math.ceil(stats.coefficients / stats.budget) + 1;
+}
+
+function tick() {
+  requestAnimationFrame(tick);
+  if (!app.envSet || stats.state === 'error') return;
+  try {
+    const rotate = app.angle !== app.appliedAngle;
+    if (rotate || app.framesLeft > 0 || app.dragging) {
+      const t0 = performance.now();
+      if (rotate) {
+        app.pack.setRotationY(app.angle);
+        app.appliedAngle = app.angle;
+        app.view.setRotation(app.angle);
+        stats.rotationDeg = ((app.angle * 180) / Math.PI) % 360;
+        app.framesLeft = framesToConverge();
+      }
+      const t1 = performance.now();
+      const rgb = app.pack.relight(stats.budget);
+      const t2 = performance.now();
+      app.view.setRadiance(rgb);
+      app.view.render();
+      const t3 = performance.now();
+      recordFrame({terms: stats.budget, rotateMs: rotate ? t1 - t0 : 0, relightMs: t2 - t1,
+                   drawMs: t3 - t2, totalMs: t3 - t0, preview: app.preview});
+      if (app.dragging) ++app.drag.frames;
+      if (!app.dragging && app.framesLeft > 0) --app.framesLeft;
+      stats.lastFrameAt = t3;
+      stats.converged = !app.dragging && app.framesLeft === 0;
+      stats.preview = app.preview;
+      app.needsRender = false;
+      updateStatsText();
+    } else if (app.needsRender) {
+      app.view.render();
+      app.needsRender = false;
+      updateStatsText();
+    }
+  } catch (e) {
+    showError(e.message);
+  }
+}
+
+function readControls() {
+  const e = Number($('exposure').value);
+  if (e > 0 && Number.isFinite(e)) {
+    stats.exposure = e;
+    if (app.view) app.view.setExposure(e);
+    app.needsRender = true;
+  }
+  const b = Math.round(Number($('budget').value));
+  const maxB = stats.coefficients || Infinity;
+  if (b >= 1 && b <= maxB && b !== stats.budget) {
+    stats.budget = b;  // the runtime restarts PBI from no light at a new budget
+    app.framesLeft = app.envSet ? framesToConverge() : 0;
+    stats.converged = app.framesLeft === 0;
+  }
+  updateStatsText();
+}
+
+// ---- Test and measurement hooks (web/test/page_test.mjs, docs/web.md) -------------------------
+
+function base64(bytes) {
+  let s = '';
+  for (let i = 0; i < bytes.length; i += 8192) {
+    s += String.fromCharCode(...bytes.subarray(i, i + 8192));
+  }
+  return btoa(s);
+}
+
+window.prtPage = {
+  /** Which pixels the mesh covers (base64 of one byte per pixel, rows from the top). */
+  meshMask() {
+    return base64(app.view.meshMask());
+  },
+  /** An image pack's drawn pixels: {width, height, rgb: base64 of RGB bytes, rows from the top}. */
+  imagePixels() {
+    const v = app.view;
+    return {width: v.width, height: v.height, rgb: base64(v.pixels())};
+  },
+  /**
+   * Times the runtime in this page as bench/runtime_bench.cpp times the native C API: frames of
+   * `terms` (0 exact, else PBI restarted from no light) under a rotating environment (rotate by
+   * 0.01 rad, untimed, then time the relight; the first 2 frames warm up), and set_rotation_y
+   * alone with the full map and with preview. Medians in ms. Leaves the view as it found it.
+   */
+  benchmark({frames = 30, budgets = [0, 30, 100, 300]} = {}) {
+    const p = app.pack;
+    const a0 = app.angle;
+    const time = (fn) => {
+      const t0 = performance.now();
+      fn();
+      return performance.now() - t0;
+    };
+    const out = {budget: stats.budget, samples: stats.samples, n: stats.cubemapSize, frames,
+                 relightMs: {}};
+    for (const terms of budgets) {
+      p.setLightingMode(0);  // NWA then PBI: restarts PBI from no light
+      p.setLightingMode(2);
+      const t = [];
+      for (let f = 0; f < frames + 2; ++f) {
+        p.setRotationY(a0 + 0.01 * f);
+        const ms = time(() => p.relight(terms));
+        if (f >= 2) t.push(ms);
+      }
+      out.relightMs[terms] = median(t);
+    }
+    for (const preview of [false, true]) {
+      p.setPreview(preview);
+      const t = Array.from({length: frames}, (_, f) => time(() => p.setRotationY(a0 + 0.01 * f)));
+      out[preview ? 'rotatePreviewMs' : 'rotateFullMs'] = median(t);
+    }
+    p.setPreview(app.preview);
+    p.setRotationY(a0);
+    exactFrame();
+    return out;
+  },
+};
+
+// ---- Wiring ----------------------------------------------------------------------------------
+
+for (const [key, id] of [['exposure', 'exposure'], ['budget', 'budget']]) {
+  if (params.has(key)) $(id).value = params.get(key);
+}
+if (params.has('rotate')) app.angle = (Number(params.get('rotate')) * Math.PI) / 180 || 0;
+stats.exposure = Number($('exposure').value) || 1;
+stats.budget = Math.max(1, Math.round(Number($('budget').value)) || 100);
+$('exposure').addEventListener('input', readControls);
+$('budget').addEventListener('change', readControls);
+$('pack-file').addEventListener('change', (ev) => loadFiles([...ev.target.files]));
+$('env-file').addEventListener('change', (ev) => loadFiles([...ev.target.files]));
+document.addEventListener('dragover', (ev) => {
+  ev.preventDefault();
+  document.body.classList.add('dragover');
+});
+document.addEventListener('dragleave', () => document.body.classList.remove('dragover'));
+document.addEventListener('drop', (ev) => {
+  ev.preventDefault();
+  document.body.classList.remove('dragover');
+  // The environment first, so that a pack dropped with it starts at once.
+  const files = [...ev.dataTransfer.files].sort((a, b) =>
+    Number(/\.(hdr|pic)$/i.test(b.name)) - Number(/\.(hdr|pic)$/i.test(a.name)));
+  loadFiles(files);
+});
+attachDrag($('gl'));
+attachDrag($('image'));
+updateStatsText();
+requestAnimationFrame(tick);
+loadFromUrl();

@@ -1,0 +1,268 @@
+// The web page's test (ctest web_page; docs/web.md "The test"): Debian's headless Chromium, driven
+// by puppeteer-core, over build-wasm/site with a small pack.
+//  (a) the page's image of the pack (its baked camera, exact lighting, the same exposure) matches
+//      prt-view's PNG of the same view and lighting on the mesh's pixels: mean |difference| at
+//      most 1 % of full scale (2.55 of 255) and 99 % of the pixels within 10/255 in every channel,
+//      over the mesh's pixels less a one-pixel border (edges rasterise differently);
+//  (b) a corrupt pack shows the runtime's error message on the page (no blank canvas, no hang);
+//  (c) frame times come back from the page (window.prtStats and the #stats text) after a drag
+//      that rotates the environment (preview and PBI frames), and the page converges after it;
+//  (d) an image pack and the map chosen through the page's file inputs: the pack is drawn as an
+//      image (2D canvas), its pixels within the tolerance of (a) of prt-view's image of it.
+// With --measure it prints the figures of docs/web.md instead (prtPage.benchmark(), load to first
+// frame, bytes downloaded, fps while dragging) and checks nothing; --screenshot PATH then saves
+// the whole page after the drag (docs/images/web-runtime.png).
+//
+// node web/test/page_test.mjs --site build-wasm/site --pack P.prtpack --env E.hdr
+//     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR]
+//     [--image-pack I.prtpack --image-reference prt-view-image.png]
+//     [--measure [--screenshot PATH]]
+import {createServer} from 'node:http';
+import {readFileSync, writeFileSync, mkdirSync, existsSync, statSync} from 'node:fs';
+import {extname, join, resolve, normalize} from 'node:path';
+import puppeteer from 'puppeteer-core';
+import {decodePng} from './png.mjs';
+
+const kMeanTolerance = 0.01;     // mean |page − prt-view| over mesh pixels, fraction of 255
+const kPixelTolerance = 10;      // per channel, out of 255 ...
+const kPixelFraction = 0.99;     // ... for at least this fraction of the mesh pixels
+
+function parseArgs(argv) {
+  const a = {chromium: '/usr/bin/chromium', exposure: '1', outDir: 'web_page_out', timeout: 90};
+  for (let i = 2; i < argv.length; ++i) {
+    const k = argv[i];
+    if (k === '--measure') a.measure = true;
+    else if (k.startsWith('--')) a[k.slice(2).replace(/-(\w)/g, (_, c) => c.toUpperCase())] = argv[++i];
+    else throw new Error(`unknown argument ${k}`);
+  }
+  for (const k of ['site', 'pack', 'env']) if (!a[k]) throw new Error(`--${k} is required`);
+  return a;
+}
+
+const kTypes = {'.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript',
+                '.css': 'text/css', '.wasm': 'application/wasm'};
+
+// The site, plus the test's files under /data/<name>.
+function serve(site, files) {
+  const server = createServer((req, res) => {
+    const path = decodeURIComponent(new URL(req.url, 'http://x').pathname);
+    let file = files[path];
+    if (!file) {
+      file = normalize(join(site, path === '/' ? 'index.html' : path));
+      if (!file.startsWith(resolve(site)) || !existsSync(file) || !statSync(file).isFile()) {
+        res.writeHead(404).end('not found');
+        return;
+      }
+    }
+    const body = readFileSync(file);
+    res.writeHead(200, {'Content-Type': kTypes[extname(file)] ?? 'application/octet-stream',
+                        'Content-Length': body.length, 'Cache-Control': 'no-store'});
+    res.end(body);
+  });
+  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
+}
+
+async function openPage(browser, url, log, waitForPack = true) {
+  const page = await browser.newPage();
+  page.on('console', (m) => log.push(`[console.${m.type()}] ${m.text()}`));
+  page.on('pageerror', (e) => log.push(`[pageerror] ${e.message}`));
+  await page.setViewport({width: 1180, height: 560, deviceScaleFactor: 1});
+  await page.goto(url, {waitUntil: 'load'});
+  if (waitForPack) {
+    await page.waitForFunction(
+        () => ['ready', 'error'].includes(document.body.dataset.state), {timeout: 60000});
+  }
+  return page;
+}
+
+// Mean and spread of |a − b| over the mask's pixels, less a one-pixel border when `erode`.
+function compareMesh(page, ref, mask, w, h, erode = true) {
+  let n = 0, sum = 0, within = 0, max = 0;
+  const b = erode ? 1 : 0;
+  for (let y = b; y < h - b; ++y) {
+    for (let x = b; x < w - b; ++x) {
+      const i = y * w + x;
+      if (!mask[i]) continue;
+      if (erode && !(mask[i - 1] && mask[i + 1] && mask[i - w] && mask[i + w])) continue;
+      let worst = 0;
+      for (let c = 0; c < 3; ++c) {
+        const d = Math.abs(page[3 * i + c] - ref[3 * i + c]);
+        sum += d;
+        worst = Math.max(worst, d);
+      }
+      max = Math.max(max, worst);
+      if (worst <= kPixelTolerance) ++within;
+      ++n;
+    }
+  }
+  return {pixels: n, mean: n ? sum / (3 * n * 255) : NaN, within: n ? within / n : 0, max};
+}
+
+async function drag(page, steps, stepMs) {
+  const box = await (await page.$('#gl')).boundingBox();
+  const y = box.y + box.height / 2;
+  const x0 = box.x + box.width * 0.3;
+  await page.mouse.move(x0, y);
+  await page.mouse.down();
+  for (let i = 1; i <= steps; ++i) {
+    await page.mouse.move(x0 + (box.width * 0.4 * i) / steps, y);
+    await new Promise((r) => setTimeout(r, stepMs));
+  }
+  await page.mouse.up();
+}
+
+async function main() {
+  const a = parseArgs(process.argv);
+  mkdirSync(a.outDir, {recursive: true});
+  const files = {'/data/pack.prtpack': resolve(a.pack), '/data/env.hdr': resolve(a.env)};
+  if (a.corrupt) files['/data/corrupt.prtpack'] = resolve(a.corrupt);
+  const server = await serve(resolve(a.site), files);
+  const base = `http://127.0.0.1:${server.address().port}`;
+  const browser = await puppeteer.launch({
+    executablePath: a.chromium,
+    headless: true,
+    args: ['--headless=new', '--no-sandbox', '--use-gl=angle', '--use-angle=swiftshader',
+           '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist', '--window-size=1200,900'],
+  });
+  const log = [];
+  const failures = [];
+  const check = (ok, what) => {
+    console.log(`${ok ? 'ok  ' : 'FAIL'} ${what}`);
+    if (!ok) failures.push(what);
+  };
+  try {
+    const url = `${base}/index.html?pack=/data/pack.prtpack&env=/data/env.hdr` +
+                `&exposure=${a.exposure}${a.budget ? `&budget=${a.budget}` : ''}`;
+    const page = await openPage(browser, url, log);
+    const s0 = await page.evaluate(() => window.prtStats);
+    check(s0.state === 'ready', `the page opens the pack (state ${s0.state}${s0.error ? `: ${s0.error}` : ''})`);
+    if (s0.state !== 'ready') throw new Error('the page did not open the pack');
+    const shot = join(a.outDir, 'page.png');
+    await (await page.$(s0.isImage ? '#image' : '#gl')).screenshot({path: shot});
+
+    if (a.measure) {
+      const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30}));
+      await drag(page, 120, 16);
+      await page.waitForFunction(() => window.prtStats.dragFps !== null, {timeout: 30000});
+      await page.waitForFunction(() => window.prtStats.converged, {timeout: 60000});
+      const s = await page.evaluate(() => window.prtStats);
+      if (a.screenshot) await page.screenshot({path: a.screenshot});
+      const dragFrames = s.frames.filter((f) => f.rotateMs > 0);
+      const med = (xs) => [...xs].sort((p, q) => p - q)[Math.floor(xs.length / 2)];
+      console.log(JSON.stringify({
+        pack: a.pack, samples: s.samples, n: s.cubemapSize, budget: s.budget, ...bench,
+        loadToFirstFrameMs: s0.loadToFirstFrameMs, openMs: s0.openMs,
+        bytesDownloaded: s0.bytesDownloaded, dragFps: s.dragFps, dragFrames: s.dragFrames,
+        dragFrameMedianMs: med(dragFrames.map((f) => f.totalMs)),
+        dragRotateMedianMs: med(dragFrames.map((f) => f.rotateMs)),
+        dragRelightMedianMs: med(dragFrames.map((f) => f.relightMs)),
+        dragDrawMedianMs: med(dragFrames.map((f) => f.drawMs)),
+        memoryBytes: s0.memoryBytes, wasmHeapBytes: s0.wasmHeapBytes,
+      }, null, 1));
+      return;
+    }
+
+    // (a) the image against prt-view's.
+    if (a.reference) {
+      const got = decodePng(readFileSync(shot));
+      const ref = decodePng(readFileSync(a.reference));
+      check(got.width === ref.width && got.height === ref.height,
+            `page ${got.width}×${got.height} = prt-view ${ref.width}×${ref.height}`);
+      const mask = Buffer.from(await page.evaluate(() => window.prtPage.meshMask()), 'base64');
+      const r = compareMesh(got.rgb, ref.rgb, mask, got.width, got.height);
+      console.log(`mesh pixels ${r.pixels}: mean |page − prt-view| ${(100 * r.mean).toFixed(3)} % ` +
+                  `of full scale, ${(100 * r.within).toFixed(2)} % within ${kPixelTolerance}/255, ` +
+                  `max ${r.max}/255`);
+      check(r.pixels > 0.05 * got.width * got.height, 'the mesh covers > 5 % of the image');
+      check(r.mean <= kMeanTolerance, `mean difference ≤ ${100 * kMeanTolerance} %`);
+      check(r.within >= kPixelFraction,
+            `≥ ${100 * kPixelFraction} % of mesh pixels within ${kPixelTolerance}/255`);
+    }
+
+    // (c) frame times after a drag that rotates the environment.
+    await drag(page, 30, 20);
+    await page.waitForFunction(() => window.prtStats.dragFps !== null, {timeout: 30000});
+    // Converged: no frame for a while once PBI has reached the exact lighting.
+    await page.waitForFunction(() => {
+      const f = window.prtStats.frames;
+      return f.length && window.prtStats.converged &&
+             performance.now() - window.prtStats.lastFrameAt > 500;
+    }, {timeout: 60000, polling: 100});
+    const s = await page.evaluate(() => window.prtStats);
+    const text = await page.$eval('#stats', (e) => e.textContent);
+    const rotated = s.frames.filter((f) => f.rotateMs > 0);
+    const pbi = s.frames.filter((f) => f.terms > 0);
+    console.log(`frames ${s.frames.length}: ${rotated.length} rotated (preview ${rotated.filter((f) => f.preview).length}), ` +
+                `drag ${s.dragFps.toFixed(1)} fps, last frame ${s.lastFrameMs.toFixed(2)} ms, ` +
+                `exact ${s.exactRelightMs.toFixed(2)} ms`);
+    check(rotated.length > 0 && rotated.every((f) => f.preview),
+          'dragging rotated the environment in preview frames');
+    check(pbi.length > rotated.length, 'PBI frames went on after the drag');
+    check(s.frames.every((f) => Number.isFinite(f.totalMs) && f.totalMs >= 0),
+          'every frame time is a finite number');
+    check(s.dragFps > 0 && Number.isFinite(s.exactRelightMs), 'fps and exact time in prtStats');
+    check(/frame time\s+[\d.]+ ms/.test(text) && /term budget\s+\d+/.test(text),
+          'frame time and term budget in the #stats text');
+    check(s.converged && !s.preview, 'converged to the full map after the drag');
+    await page.close();
+
+    // (d) an image pack, opened through the file inputs (the map first, then the pack).
+    if (a.imagePack) {
+      const p = await openPage(browser, `${base}/index.html?exposure=${a.exposure}`, log, false);
+      await (await p.$('#env-file')).uploadFile(resolve(a.env));
+      await p.waitForFunction(() => window.prtStats.env !== null, {timeout: 30000});
+      await (await p.$('#pack-file')).uploadFile(resolve(a.imagePack));
+      await p.waitForFunction(() => ['ready', 'error'].includes(window.prtStats.state) &&
+                                    window.prtStats.pack !== null, {timeout: 60000});
+      const st = await p.evaluate(() => ({state: window.prtStats.state, error: window.prtStats.error,
+                                          isImage: window.prtStats.isImage,
+                                          image: !document.getElementById('image').hidden,
+                                          gl: !document.getElementById('gl').hidden}));
+      check(st.state === 'ready' && st.isImage && st.image && !st.gl,
+            `an image pack from the file inputs is drawn as an image (${st.state}${st.error ? `: ${st.error}` : ''})`);
+      if (st.state === 'ready' && a.imageReference) {
+        const img = await p.evaluate(() => window.prtPage.imagePixels());
+        const ref = decodePng(readFileSync(a.imageReference));
+        const rgb = Buffer.from(img.rgb, 'base64');
+        check(img.width === ref.width && img.height === ref.height,
+              `image ${img.width}×${img.height} = prt-view ${ref.width}×${ref.height}`);
+        const all = new Uint8Array(img.width * img.height).fill(1);
+        const r = compareMesh(rgb, ref.rgb, all, img.width, img.height, false);
+        console.log(`image pixels ${r.pixels}: mean |page − prt-view| ${(100 * r.mean).toFixed(3)} %, ` +
+                    `${(100 * r.within).toFixed(2)} % within ${kPixelTolerance}/255, max ${r.max}/255`);
+        check(r.mean <= kMeanTolerance && r.within >= kPixelFraction,
+              'the image pack matches prt-view within the tolerance');
+      }
+      await p.close();
+    }
+
+    // (b) a corrupt pack: the runtime's message on the page.
+    if (a.corrupt) {
+      const bad = await openPage(browser, `${base}/index.html?pack=/data/corrupt.prtpack` +
+                                              '&env=/data/env.hdr', log);
+      const e = await bad.evaluate(() => ({state: window.prtStats.state,
+                                           error: window.prtStats.error,
+                                           shown: !document.getElementById('error').hidden,
+                                           text: document.getElementById('error').textContent}));
+      console.log(`corrupt pack: ${e.text}`);
+      check(e.state === 'error' && e.shown, 'a corrupt pack shows an error');
+      check(/^Cannot open .*corrupt\.prtpack: .{10,}/.test(e.text) && e.text === e.error,
+            'the error names the pack and carries the runtime\'s message');
+      await bad.close();
+    }
+  } finally {
+    await browser.close();
+    server.close();
+    writeFileSync(join(a.outDir, 'console.log'), log.join('\n') + '\n');
+    if (failures.length) {
+      console.log(log.join('\n'));
+      console.log(`web_page: ${failures.length} check(s) failed`);
+      process.exitCode = 1;
+    }
+  }
+}
+
+main().catch((e) => {
+  console.error(`web_page: ${e.stack ?? e}`);
+  process.exitCode = 1;
+});
