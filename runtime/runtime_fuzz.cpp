@@ -67,6 +67,13 @@ void Exercise(const std::vector<uint8_t>& bytes) {
           std::abort();
         }
   }
+  std::vector<uint8_t> background(n);
+  if (prt_runtime_get_image_background(rt, background.data(), n) == PRT_RUNTIME_OK)
+    for (uint8_t b : background)
+      if (b > 1) {
+        std::fprintf(stderr, "runtime_fuzz: background flag %u\n", unsigned{b});
+        std::abort();
+      }
   std::vector<uint32_t> order(n);
   prt_runtime_get_sample_order(rt, order.data(), n);
   prt_runtime_close(rt);

@@ -1,9 +1,9 @@
 #!/bin/sh
 # Fixture of the web_page test (tests/CMakeLists.txt, docs/web.md): bakes tests/data/web_bunny.toml
 # with prt-farm on 2 ranks and packs it, writes sunrise.exr as the page's .hdr, renders prt-view's
-# reference image of the pack (its camera, exact lighting, exposure 0.45) from that .hdr, and a
-# copy of the pack with one byte of a transport block flipped; and prt-view's image of a small
-# image pack (runtime/fuzz_corpus/image.prtpack, 24 × 16 pixels) under the same map.
+# reference image of the pack (its camera, exact lighting, exposure 0.45) from that .hdr and its
+# image of a small image pack (runtime/fuzz_corpus/image.prtpack, 24 × 16 pixels); a copy of the
+# pack with one byte of a transport block flipped, and the .hdr cut short.
 #   web_page_pack.sh MPIEXEC NUMPROC_FLAG PRT_FARM PRT_PACK PRT_VIEW PRT_ENV_HDR SCENE ENV_EXR
 #                    IMAGE_PACK WORK
 set -eu
@@ -28,4 +28,6 @@ byte=$(od -An -tu1 -j "$mid" -N1 "$work/web_bunny.prtpack" | tr -d ' ')
 printf "$(printf '\\%03o' $((byte ^ 90)))" |
   dd of="$work/corrupt.prtpack" bs=1 seek="$mid" count=1 conv=notrunc status=none
 cmp -s "$work/web_bunny.prtpack" "$work/corrupt.prtpack" && { echo "corrupt copy unchanged" >&2; exit 1; }
-echo "web_page_pack: $work/web_bunny.prtpack ($size bytes), sunrise.hdr, prt-view.png, prt-view-image.png, corrupt.prtpack"
+# A map cut short in its scanlines.
+head -c 100000 "$work/sunrise.hdr" >"$work/truncated.hdr"
+echo "web_page_pack: $work/web_bunny.prtpack ($size bytes), sunrise.hdr, prt-view.png, prt-view-image.png, corrupt.prtpack, truncated.hdr"

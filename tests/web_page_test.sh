@@ -23,5 +23,5 @@ fi
 site="${PRT_WASM_BUILD_DIR:-$src/build-wasm}/site"
 exec node "$src/web/test/page_test.mjs" --site "$site" --pack "$work/web_bunny.prtpack" \
   --env "$work/sunrise.hdr" --reference "$work/prt-view.png" --exposure 0.45 \
-  --corrupt "$work/corrupt.prtpack" --image-pack "$image_pack" \
+  --corrupt "$work/corrupt.prtpack" --bad-env "$work/truncated.hdr" --image-pack "$image_pack" \
   --image-reference "$work/prt-view-image.png" --out-dir "$out"

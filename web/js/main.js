@@ -14,7 +14,7 @@ const kKeptFrames = 600;
 const stats = {
   state: 'empty', error: null, pack: null, env: null, samples: 0, triangles: 0, isImage: false,
   cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
-  converged: false, preview: false, lastFrameAt: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
+  converged: false, preview: false, lastFrameAt: null, convergeMs: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
   lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
   bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,
 };
@@ -149,6 +149,7 @@ function makeView() {
       app.meshView = new MeshView(gl, {...cam, width, height}, pack.positions(),
                                   pack.triangleIndices());
     } else {  // a second pack: a fresh WebGL view on a fresh canvas
+      app.meshView.dispose();
       const fresh = gl.cloneNode();
       gl.replaceWith(fresh);
       attachDrag(fresh);
@@ -184,6 +185,7 @@ function start() {
     app.firstFrameDone = true;
     stats.loadToFirstFrameMs = performance.now();
   }
+  convergeSilently();
   stats.memoryBytes = app.pack.memoryBytes();
   stats.wasmHeapBytes = app.M.HEAPU8.length;
   setState('ready');
@@ -206,6 +208,16 @@ function exactFrame() {
   // An exact frame leaves the runtime's PBI state where it was: the next PBI frames go on
   // from it.
   app.framesLeft = 0;
+}
+
+// PBI starts from no light (at the first PBI frame, and again at a new budget): its first frames
+// under still lighting are dark. Run them here, without drawing, until PBI holds the exact
+// lighting (⌈6n²/N⌉ frames, each cheap when the lighting is still), so that a drag's frames only
+// spend their terms on the rotation's change. The view keeps showing the exact frame.
+function convergeSilently() {
+  const t0 = performance.now();
+  for (let i = 0; i < framesToConverge(); ++i) app.pack.relight(stats.budget);
+  stats.convergeMs = performance.now() - t0;
 }
 
 async function loadFromUrl() {
@@ -339,8 +351,16 @@ function readControls() {
   const maxB = stats.coefficients || Infinity;
   if (b >= 1 && b <= maxB && b !== stats.budget) {
     stats.budget = b;  // the runtime restarts PBI from no light at a new budget
-    app.framesLeft = app.envSet ? framesToConverge() : 0;
-    stats.converged = app.framesLeft === 0;
+    if (app.envSet && !app.dragging) {
+      try {
+        convergeSilently();
+      } catch (e) {
+        showError(e.message);
+      }
+    } else {
+      app.framesLeft = app.envSet ? framesToConverge() : 0;
+      stats.converged = app.framesLeft === 0;
+    }
   }
   updateStatsText();
 }
@@ -400,6 +420,7 @@ window.prtPage = {
     p.setPreview(app.preview);
     p.setRotationY(a0);
     exactFrame();
+    convergeSilently();
     return out;
   },
 };

@@ -155,6 +155,20 @@ export class MeshView {
     this.material.uniforms.exposure.value = e;
   }
 
+  /** Frees the GPU resources and the WebGL context (the page opens another pack). */
+  dispose() {
+    this.mesh.geometry.dispose();
+    this.material.dispose();
+    this.maskMaterial.dispose();
+    if (this.background) {
+      this.background.material.uniforms.map.value.dispose();
+      this.background.material.dispose();
+      this.background.geometry.dispose();
+    }
+    this.renderer.dispose();
+    this.renderer.forceContextLoss();
+  }
+
   setRotation(radians) {
     if (this.background) this.background.material.uniforms.rotation.value = radians;
   }

@@ -4,7 +4,8 @@
 //      prt-view's PNG of the same view and lighting on the mesh's pixels: mean |difference| at
 //      most 1 % of full scale (2.55 of 255) and 99 % of the pixels within 10/255 in every channel,
 //      over the mesh's pixels less a one-pixel border (edges rasterise differently);
-//  (b) a corrupt pack shows the runtime's error message on the page (no blank canvas, no hang);
+//  (b) a corrupt pack shows the runtime's error message on the page (no blank canvas, no hang),
+//      and so does a truncated .hdr (the page's reader's message);
 //  (c) frame times come back from the page (window.prtStats and the #stats text) after a drag
 //      that rotates the environment (preview and PBI frames), and the page converges after it;
 //  (d) an image pack and the map chosen through the page's file inputs: the pack is drawn as an
@@ -15,7 +16,7 @@
 //
 // node web/test/page_test.mjs --site build-wasm/site --pack P.prtpack --env E.hdr
 //     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR]
-//     [--image-pack I.prtpack --image-reference prt-view-image.png]
+//     [--image-pack I.prtpack --image-reference prt-view-image.png] [--bad-env TRUNCATED.hdr]
 //     [--measure [--screenshot PATH]]
 import {createServer} from 'node:http';
 import {readFileSync, writeFileSync, mkdirSync, existsSync, statSync} from 'node:fs';
@@ -116,6 +117,7 @@ async function main() {
   mkdirSync(a.outDir, {recursive: true});
   const files = {'/data/pack.prtpack': resolve(a.pack), '/data/env.hdr': resolve(a.env)};
   if (a.corrupt) files['/data/corrupt.prtpack'] = resolve(a.corrupt);
+  if (a.badEnv) files['/data/truncated.hdr'] = resolve(a.badEnv);
   const server = await serve(resolve(a.site), files);
   const base = `http://127.0.0.1:${server.address().port}`;
   const browser = await puppeteer.launch({
@@ -248,6 +250,17 @@ async function main() {
       check(e.state === 'error' && e.shown, 'a corrupt pack shows an error');
       check(/^Cannot open .*corrupt\.prtpack: .{10,}/.test(e.text) && e.text === e.error,
             'the error names the pack and carries the runtime\'s message');
+      await bad.close();
+    }
+    if (a.badEnv) {
+      const bad = await openPage(browser, `${base}/index.html?pack=/data/pack.prtpack` +
+                                              '&env=/data/truncated.hdr', log);
+      const e = await bad.evaluate(() => ({state: window.prtStats.state,
+                                           shown: !document.getElementById('error').hidden,
+                                           text: document.getElementById('error').textContent}));
+      console.log(`truncated map: ${e.text}`);
+      check(e.state === 'error' && e.shown && /truncated\.hdr: truncated in scanline \d+/.test(e.text),
+            'a truncated .hdr shows the reader\'s error');
       await bad.close();
     }
   } finally {
