@@ -27,6 +27,35 @@ using Float4 = float __attribute__((vector_size(16)));
 // The most tiles X is scattered in (see the constructor).
 constexpr std::size_t kMaxTiles = 64;
 
+// A light's weights as X's four lanes: a 3-channel T's channel ch lights lane ch only; else the
+// lighting's C channels.
+Float4 LaneWeights(bool per_channel, std::size_t ch, const float* w, std::size_t C) {
+  return per_channel
+             ? Float4{ch == 0 ? w[0] : 0.0f, ch == 1 ? w[1] : 0.0f, ch == 2 ? w[2] : 0.0f, 0.0f}
+             : Float4{w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
+}
+
+// Terms [b, e) (index − shift: the element of X, 4 floats each) times w4 added to X, a cache line
+// of terms at a time with the terms `ahead` terms on prefetched (the hardware prefetcher,
+// left alone, restarts on every short piece).
+template <class Term>
+inline void AddTerms4(float* x, const Term* b, const Term* e, Float4 w4, std::size_t shift,
+                      std::ptrdiff_t ahead) {
+  const auto add = [x, w4, shift](const Term& term) {
+    float* xi = x + 4 * (static_cast<std::size_t>(term.index) - shift);
+    Float4 xv;
+    std::memcpy(&xv, xi, sizeof xv);
+    xv += w4 * term.value;
+    std::memcpy(xi, &xv, sizeof xv);
+  };
+  const Term* p = b;
+  for (; e - p >= 8; p += 8) {
+    __builtin_prefetch(p + ahead);
+    for (int u = 0; u < 8; ++u) add(p[u]);
+  }
+  for (; p != e; ++p) add(*p);
+}
+
 // A value for an error message: 7 significant digits (std::to_string writes 1e39 in full).
 std::string Number(double v) {
   char b[32];
@@ -383,24 +412,7 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
           // Row index − shift is the element of X (0 for a one-channel T).
           const std::size_t shift = ch * S;
           if (K == 4) {
-            // A 3-channel T's channel ch lights lane ch only.
-            const Float4 w4 = per_channel ? Float4{ch == 0 ? w[0] : 0.0f, ch == 1 ? w[1] : 0.0f,
-                                                   ch == 2 ? w[2] : 0.0f, 0.0f}
-                                          : Float4{w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f,
-                                                   C > 3 ? w[3] : 0.0f};
-            const auto add = [xl, w4, shift](const Term& term) {
-              float* xi = xl + 4 * (static_cast<std::size_t>(term.index) - shift);
-              Float4 xv;
-              std::memcpy(&xv, xi, sizeof xv);
-              xv += w4 * term.value;
-              std::memcpy(xi, &xv, sizeof xv);
-            };
-            const Term* p = b;
-            for (; e - p >= 8; p += 8) {  // a cache line of terms at a time
-              __builtin_prefetch(p + kPrefetchTerms);
-              for (int u = 0; u < 8; ++u) add(p[u]);
-            }
-            for (; p != e; ++p) add(*p);
+            AddTerms4(xl, b, e, LaneWeights(per_channel, ch, w, C), shift, kPrefetchTerms);
           } else if (K == 1) {
             const float w0 = w[0];
             for (const Term* p = b; p != e; ++p) xl[p->index] += w0 * p->value;
@@ -855,24 +867,7 @@ void CompressedRelighter::RelightLightsRange(std::vector<Light>& lights, int cha
   const auto add = [&](const Term* b, const Term* e, std::size_t ch, const float* w, float* dst) {
     const std::size_t shift = ch * S;
     if (K == 4) {
-      const Float4 w4 =
-          per_channel
-              ? Float4{ch == 0 ? w[0] : 0.0f, ch == 1 ? w[1] : 0.0f, ch == 2 ? w[2] : 0.0f, 0.0f}
-              : Float4{w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
-      const auto one = [dst, w4, shift](const Term& term) {
-        float* xi = dst + 4 * (static_cast<std::size_t>(term.index) - shift);
-        Float4 xv;
-        std::memcpy(&xv, xi, sizeof xv);
-        xv += w4 * term.value;
-        std::memcpy(xi, &xv, sizeof xv);
-      };
-      // As RelightLights: a cache line of terms at a time, 2 KB ahead prefetched.
-      const Term* p = b;
-      for (; e - p >= 8; p += 8) {
-        __builtin_prefetch(p + kRangePrefetchTerms);
-        for (int u = 0; u < 8; ++u) one(p[u]);
-      }
-      for (; p != e; ++p) one(*p);
+      AddTerms4(dst, b, e, LaneWeights(per_channel, ch, w, C), shift, kRangePrefetchTerms);
     } else {
       for (const Term* p = b; p != e; ++p) {
         float* xi = dst + K * (static_cast<std::size_t>(p->index) - shift);
