@@ -33,6 +33,9 @@ const r = s.relightMs;
 console.log(`relight, median of ${s.frames} frames under a rotating map (as prt-runtime-bench):`);
 console.log(`  exact ${f(r[0], 2)} ms, PBI-30 ${f(r[30], 2)} ms, PBI-100 ${f(r[100], 2)} ms, PBI-300 ${f(r[300], 2)} ms`);
 console.log(`set_rotation_y           ${f(s.rotateFullMs)} ms full map, ${f(s.rotatePreviewMs)} ms with preview`);
+const byWidth = Object.entries(s.rotateByMapWidthMs).sort((x, y) => y[0] - x[0])
+    .map(([w, ms]) => `${w} × ${w / 2} ${f(ms)} ms`).join(", ");
+console.log(`set_rotation_y by map    ${byWidth} (no preview)`);
 console.log(`load → first frame       ${f(s.loadToFirstFrameMs, 0)} ms (open ${f(s.openMs, 0)} ms)`);
 console.log(`downloaded               ${f(s.bytesDownloaded / 1e6, 2)} MB`);
 console.log(`drag (${s.dragFrames} frames)       ${f(s.dragFps)} fps; median frame ${f(s.dragFrameMedianMs)} ms = rotate ${f(s.dragRotateMedianMs)} + relight ${f(s.dragRelightMedianMs)} + draw ${f(s.dragDrawMedianMs)} ms`);

@@ -367,6 +367,22 @@ function readControls() {
 
 // ---- Test and measurement hooks (web/test/page_test.mjs, docs/web.md) -------------------------
 
+// A lat-long map at half the width and height, each pixel the mean of 2 × 2 (for timing only).
+function halveMap(m) {
+  const w = m.width >> 1, h = m.height >> 1;
+  const rgb = new Float32Array(3 * w * h);
+  for (let y = 0; y < h; ++y) {
+    for (let x = 0; x < w; ++x) {
+      for (let c = 0; c < 3; ++c) {
+        const at = (xx, yy) => m.rgb[3 * (yy * m.width + xx) + c];
+        rgb[3 * (y * w + x) + c] = 0.25 * (at(2 * x, 2 * y) + at(2 * x + 1, 2 * y) +
+                                           at(2 * x, 2 * y + 1) + at(2 * x + 1, 2 * y + 1));
+      }
+    }
+  }
+  return {width: w, height: h, rgb};
+}
+
 function base64(bytes) {
   let s = '';
   for (let i = 0; i < bytes.length; i += 8192) {
@@ -389,9 +405,11 @@ window.prtPage = {
    * Times the runtime in this page as bench/runtime_bench.cpp times the native C API: frames of
    * `terms` (0 exact, else PBI restarted from no light) under a rotating environment (rotate by
    * 0.01 rad, untimed, then time the relight; the first 2 frames warm up), and set_rotation_y
-   * alone with the full map and with preview. Medians in ms. Leaves the view as it found it.
+   * alone with the full map and with preview; and set_rotation_y from the map averaged down to
+   * each width of `mapWidths` (where the rotation's time goes: docs/web.md, "Figures"). Medians
+   * in ms. Leaves the view as it found it.
    */
-  benchmark({frames = 30, budgets = [0, 30, 100, 300]} = {}) {
+  benchmark({frames = 30, budgets = [0, 30, 100, 300], mapWidths = []} = {}) {
     const p = app.pack;
     const a0 = app.angle;
     const time = (fn) => {
@@ -417,6 +435,16 @@ window.prtPage = {
       const t = Array.from({length: frames}, (_, f) => time(() => p.setRotationY(a0 + 0.01 * f)));
       out[preview ? 'rotatePreviewMs' : 'rotateFullMs'] = median(t);
     }
+    p.setPreview(false);
+    out.rotateByMapWidthMs = {};
+    let map = app.env;
+    for (const w of [...mapWidths].sort((x, y) => y - x)) {
+      while (map.width > w && map.height >= 4) map = halveMap(map);
+      p.setEnvironment(map.rgb, map.width, map.height);
+      const t = Array.from({length: 10}, (_, f) => time(() => p.setRotationY(a0 + 0.01 * f)));
+      out.rotateByMapWidthMs[map.width] = median(t);
+    }
+    if (mapWidths.length) p.setEnvironment(app.env.rgb, app.env.width, app.env.height);
     p.setPreview(app.preview);
     p.setRotationY(a0);
     exactFrame();

@@ -143,7 +143,8 @@ async function main() {
     await (await page.$(s0.isImage ? '#image' : '#gl')).screenshot({path: shot});
 
     if (a.measure) {
-      const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30}));
+      const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30,
+                                                                        mapWidths: [1024, 512, 256, 128]}));
       await drag(page, 120, 16);
       await page.waitForFunction(() => window.prtStats.dragFps !== null, {timeout: 30000});
       await page.waitForFunction(() => window.prtStats.converged, {timeout: 60000});
