@@ -4,7 +4,10 @@
 //   prt-view      ViewerSession (TBB, every core): what prt-view does per frame;
 //   C 1 thread    prt_runtime_relight with no task runner (the default);
 //   C runner ×2   prt_runtime_relight with a 2-thread host pool as the task runner;
-//   C ranges ×2   prt_runtime_prepare + 2 × prt_runtime_relight_range on 2 host threads.
+//   C ranges ×2   prt_runtime_prepare + 2 × prt_runtime_relight_range on 2 host threads;
+//                 and the same ranges timed one after the other on one thread: the frame ÷
+//                 (prepare + the slower range) is the split's speed-up on two free cores, and
+//                 (prepare + both ranges) ÷ the frame what splitting adds to the work.
 // Medians over the frames; ratios against "C 1 thread" of the same run. Also: the lighting per
 // frame (set_rotation: resample + projection), open time, prt_runtime_memory_bytes and the
 // process's peak RSS.
@@ -207,6 +210,33 @@ int main(int argc, char** argv) {
     other.join();
     Check(s1);
   });
+  // The same two ranges one after the other on this thread, each timed: the split's speed-up
+  // where the host has two free cores, whole frame ÷ the slower range (on a shared 2-core
+  // machine the two-thread row above also measures whoever else holds a core).
+  std::vector<double> split_bound, split_overhead;
+  for (std::size_t b = 0; b < std::size(budgets); ++b) {
+    Check(prt_runtime_set_lighting_mode(rt, PRT_RUNTIME_LIGHTING_NWA));
+    Check(prt_runtime_set_lighting_mode(rt, PRT_RUNTIME_LIGHTING_PBI));
+    std::vector<double> slower, both;
+    for (int f = 0; f < frames + 2; ++f) {
+      Check(prt_runtime_set_rotation_y(rt, 0.01 * f));
+      const auto s0 = Clock::now();
+      Check(prt_runtime_prepare(rt, budgets[b]));
+      const double prep = Ms(s0);
+      const auto s1 = Clock::now();
+      Check(prt_runtime_relight_range(rt, 0, n / 2, rgb.data(), n));
+      const double a = Ms(s1);
+      const auto s2 = Clock::now();
+      Check(prt_runtime_relight_range(rt, n / 2, n - n / 2, rgb.data(), n));
+      const double c = Ms(s2);
+      if (f >= 2) {
+        slower.push_back(prep + std::max(a, c));
+        both.push_back(prep + a + c);
+      }
+    }
+    split_bound.push_back(c1[b] / Median(slower));
+    split_overhead.push_back(Median(both) / c1[b]);
+  }
   prt_runtime_close(rt);
 
   // prt-view's relighter: ViewerSession on TBB, as prt-view runs a frame.
@@ -254,6 +284,11 @@ int main(int argc, char** argv) {
   ratio("prt-view (TBB)", view);
   ratio("C API, runner x2", runner);
   ratio("C API, 2 ranges x2", ranges);
+  std::printf("%-22s", "2 ranges, free cores");
+  for (double x : split_bound) std::printf(" %9.2fx", x);
+  std::printf("\n%-22s", "2 ranges' work / frame");
+  for (double x : split_overhead) std::printf(" %9.2fx", x);
+  std::printf("\n");
   std::printf(
       "\nprt_runtime_memory_bytes %.1f MiB (pack file %.1f MiB); peak RSS of this "
       "process %.1f MiB\n",

@@ -521,14 +521,62 @@ void CompressedRelighter::RelightLights(std::vector<Light>& lights, int channels
   if (non_finite.load(std::memory_order_relaxed)) ThrowNonFinite(channels, out);
 }
 
+// A range's plan (RelightLightsRange). Output element i of inverse step t (depth t → t − 1)
+// needs the low and high coefficients near i/2, so the positions a range needs at each depth of
+// a segment are an interval, about half the one below plus the filter's reach: R_0 = the range
+// ∩ the segment; step t runs on the window W_{t−1} = [R_{t−1}.lo − m, R_{t−1}.hi + m) (start
+// even, clipped to the signal) as on a signal of its own (its outputs exact but near a
+// clipped-off end, which the margin m keeps outside R_{t−1}), reading low coefficients
+// R_t = [W.lo/2, W.lo/2 + ⌈|W|/2⌉) and as many high ones (⌊|W|/2⌋) from the high band of depth
+// t, which starts at SizeAtDepth(w, t). Every step down from the segment's maximum depth D runs
+// (those deeper than a frame's deepest light transform zeros: no term of a shallower column
+// lies in their low bands), so the plan does not depend on the lights.
+struct CompressedRelighter::RangePlan {
+  struct Interval {
+    std::size_t lo = 0, hi = 0;
+  };
+  struct Seg {
+    std::size_t si = 0;
+    // R_0 … R_D and W_0 … W_{D−1} (step t's outputs): local positions of a mesh, rows of a
+    // grid (whose steps run on whole rows; its windows are bands of rows).
+    std::vector<Interval> need, window;
+    Interval out;  // the range's local positions in the segment
+  };
+  std::size_t first = 0, last = 0;
+  std::vector<Seg> segs;
+  // Global elements of X that the steps read before any step writes (every high-band window
+  // and R_D), merged where less than kMergeGap apart and cut into pieces of at most a scatter
+  // tile (so that all the lights' terms in one piece find it in cache): zeroed, then given the
+  // early terms.
+  std::vector<Interval> early;
+  // Per part k (the early pieces, then one per segment), stored column and T's channel, the
+  // [begin, end) of its terms in that part, at offsets[2·((k·columns + slot)·P + ch)]: in an
+  // early piece, its terms_ there; in a segment's part, the terms the column adds after the
+  // steps of its depth: for a depth-0 column those in R_0 (terms_), else its late terms in
+  // R_depth (late_terms_; none where the segment's D is at most the depth).
+  std::vector<uint32_t> offsets;
+  std::size_t bytes() const {
+    std::size_t b =
+        sizeof(*this) + sizeof(Interval) * early.capacity() + sizeof(uint32_t) * offsets.capacity();
+    for (const Seg& g : segs)
+      b += sizeof(Seg) + sizeof(Interval) * (g.need.capacity() + g.window.capacity());
+    return b;
+  }
+};
+
 std::size_t CompressedRelighter::memory_bytes() const {
   std::size_t b =
       sizeof(Term) * (terms_.capacity() + late_terms_.capacity()) +
       sizeof(Column) * columns_.capacity() + sizeof(int32_t) * slot_.capacity() +
       sizeof(uint32_t) * (coefficient_of_sample_.capacity() + tile_offsets_.capacity()) +
       sizeof(Segment) * segments_.capacity();
+  {
+    const std::lock_guard<std::mutex> lock(range_mutex_);
+    for (const auto& p : range_plans_) b += p->bytes();
+  }
   const std::lock_guard<std::mutex> lock(pool_mutex_);
-  for (const auto& f : pool_) b += sizeof(float) * (f->x.capacity() + f->scratch.capacity());
+  for (const auto& f : pool_)
+    b += sizeof(float) * (f->x.capacity() + f->scratch.capacity() + f->scratch2.capacity());
   return b;
 }
 
@@ -591,6 +639,23 @@ void CompressedRelighter::RelightSparse(std::span<const uint32_t> columns,
   RelightLights(lights, channels, {radiance.data(), nullptr, order});
 }
 
+namespace {
+
+// Elements of margin, at each level, between what a range needs of a 1D inverse step's output
+// and the ends of the window the step is run on as a signal of its own: a window end that is not
+// the signal's end gets a false symmetric extension, which changes the outputs within the
+// filter's reach of it (LeGall 5/3's two lifting steps: 2 elements; CDF 9/7's four: 4).
+constexpr std::size_t RangeMargin(WaveletFilter f) {
+  return f == WaveletFilter::kLeGall53 ? 8 : 16;
+}
+
+}  // namespace
+
+bool CompressedRelighter::RangesAreLocal() const {
+  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
+  return filter == WaveletFilter::kLeGall53 || filter == WaveletFilter::kCdf97;
+}
+
 void CompressedRelighter::RelightSparseAddRange(std::span<const uint32_t> columns,
                                                 std::span<const float> weights, int channels,
                                                 std::size_t first, std::size_t count,
@@ -601,15 +666,345 @@ void CompressedRelighter::RelightSparseAddRange(std::span<const uint32_t> column
   if (first > spatial_ || count > spatial_ - first)
     throw std::out_of_range(
         "CompressedRelighter::RelightSparseAddRange: range outside the samples");
-  // The whole frame, then the range (a region-of-interest inverse is to replace this).
+  std::vector<Light> lights = LightsOf(columns, weights, channels);
+  if (count == 0) return;
+  if (RangesAreLocal()) {
+    RelightLightsRange(lights, channels, first, first + count, out.data(), assign);
+    return;
+  }
+  // The whole frame, then the range.
   std::vector<std::vector<double>> full(static_cast<std::size_t>(channels),
                                         std::vector<double>(spatial_));
   std::vector<double*> ptr;
   for (auto& f : full) ptr.push_back(f.data());
-  RelightSparseAdd(columns, weights, channels, ptr, SampleOrder::kCoefficients, true);
+  RelightLights(lights, channels, {nullptr, ptr.data(), SampleOrder::kCoefficients, true});
   for (std::size_t c = 0; c < full.size(); ++c)
     for (std::size_t p = first; p < first + count; ++p)
       out[c][p] = assign ? full[c][p] : out[c][p] + full[c][p];
+}
+
+namespace {
+
+// Early intervals closer than this (elements) are one: fewer offsets per column, a few more
+// elements zeroed and terms added that no step reads.
+constexpr std::size_t kMergeGap = 32;
+// Ranges whose plans are kept (a host splits each frame the same way, into about as many
+// ranges as it has threads).
+constexpr std::size_t kRangePlans = 32;
+// Terms prefetched ahead, as RelightLights does.
+constexpr std::ptrdiff_t kRangePrefetchTerms = 256;
+
+}  // namespace
+
+std::shared_ptr<const CompressedRelighter::RangePlan> CompressedRelighter::BuildRangePlan(
+    std::size_t first, std::size_t last) const {
+  using Interval = RangePlan::Interval;
+  auto plan = std::make_shared<RangePlan>();
+  plan->first = first;
+  plan->last = last;
+  const std::size_t m = RangeMargin(ToWaveletFilter(header_.column_wavelet));
+  std::vector<Interval> early;
+  for (std::size_t si = 0; si < segments_.size(); ++si) {
+    const Segment& b = segments_[si];
+    if (!(b.lo < last && first < b.hi)) continue;
+    RangePlan::Seg g;
+    g.si = si;
+    const auto D = static_cast<std::size_t>(b.max_depth);
+    // A grid's intervals are rows (the unit of positions w); its length per depth the height.
+    const bool grid = b.h > 1;
+    const auto unit = grid ? static_cast<std::size_t>(b.w) : std::size_t{1};
+    const int axis = grid ? b.h : b.w;
+    g.need.resize(D + 1);
+    g.window.resize(D);
+    g.out = {std::max(first, b.lo) - b.lo, std::min(last, b.hi) - b.lo};
+    g.need[0] = {g.out.lo / unit, (g.out.hi + unit - 1) / unit};
+    const auto rows = [&](std::size_t lo, std::size_t hi) {
+      return Interval{b.lo + lo * unit, b.lo + hi * unit};
+    };
+    for (std::size_t t = 1; t <= D; ++t) {
+      const Interval r = g.need[t - 1];
+      const auto len = static_cast<std::size_t>(SizeAtDepth(axis, static_cast<int>(t) - 1));
+      const std::size_t lo = (r.lo > m ? r.lo - m : 0) & ~std::size_t{1};
+      const std::size_t hi = std::min(len, r.hi + m);
+      g.window[t - 1] = {lo, hi};
+      g.need[t] = {lo / 2, lo / 2 + (hi - lo + 1) / 2};
+      // The high band of depth t starts at SizeAtDepth(axis, t): a mesh's positions, a grid's
+      // rows (whose first rows' right-hand parts are high bands too: whole rows are taken).
+      const std::size_t high = static_cast<std::size_t>(SizeAtDepth(axis, static_cast<int>(t)));
+      if ((hi - lo) / 2 > 0) early.push_back(rows(high + lo / 2, high + lo / 2 + (hi - lo) / 2));
+      if (grid) early.push_back(rows(g.need[t].lo, g.need[t].hi));
+    }
+    early.push_back(rows(g.need[D].lo, g.need[D].hi));
+    plan->segs.push_back(std::move(g));
+  }
+  std::sort(early.begin(), early.end(),
+            [](const Interval& a, const Interval& b) { return a.lo < b.lo; });
+  std::vector<Interval> merged;
+  for (const Interval& e : early) {
+    if (!merged.empty() && e.lo <= merged.back().hi + kMergeGap) {
+      merged.back().hi = std::max(merged.back().hi, e.hi);
+    } else {
+      merged.push_back(e);
+    }
+  }
+  for (const Interval& e : merged)
+    for (std::size_t lo = e.lo; lo < e.hi; lo += tile_)
+      plan->early.push_back({lo, std::min(e.hi, lo + tile_)});
+  const std::size_t P = header_.channels, S = spatial_;
+  const std::size_t E = plan->early.size(), G = plan->segs.size();
+  const std::size_t per_part = columns_.size() * P;
+  plan->offsets.assign(2 * (E + G) * per_part, 0);
+  const auto bounds = [](const std::vector<Term>& terms, uint32_t b, uint32_t e, std::size_t lo,
+                         std::size_t hi, uint32_t* out) {
+    const auto less = [](const Term& t, std::size_t v) { return t.index < v; };
+    const Term* p0 = std::lower_bound(terms.data() + b, terms.data() + e, lo, less);
+    const Term* p1 = std::lower_bound(p0, terms.data() + e, hi, less);
+    out[0] = static_cast<uint32_t>(p0 - terms.data());
+    out[1] = static_cast<uint32_t>(p1 - terms.data());
+  };
+  for (std::size_t slot = 0; slot < columns_.size(); ++slot) {
+    const Column& c = columns_[slot];
+    for (std::size_t ch = 0; ch < P; ++ch) {
+      const auto part = [&](std::size_t k) {
+        return plan->offsets.data() + 2 * (k * per_part + slot * P + ch);
+      };
+      const std::size_t shift = ch * S;
+      if (c.depth > 0)
+        for (std::size_t k = 0; k < E; ++k)
+          bounds(terms_, c.begin, c.end, shift + plan->early[k].lo, shift + plan->early[k].hi,
+                 part(k));
+      for (std::size_t k = 0; k < G; ++k) {
+        const RangePlan::Seg& g = plan->segs[k];
+        const Segment& b = segments_[g.si];
+        const std::size_t unit = b.h > 1 ? static_cast<std::size_t>(b.w) : 1;
+        uint32_t* f = part(E + k);
+        if (c.depth == 0) {
+          bounds(terms_, c.begin, c.end, shift + b.lo + g.need[0].lo * unit,
+                 shift + b.lo + g.need[0].hi * unit, f);
+        } else if (c.depth < b.max_depth) {
+          // A grid's late terms are in the low band's columns of these rows.
+          const Interval r = g.need[c.depth];
+          bounds(late_terms_, c.late_begin, c.late_end, shift + b.lo + r.lo * unit,
+                 shift + b.lo + r.hi * unit, f);
+        }
+      }
+    }
+  }
+  return plan;
+}
+
+std::shared_ptr<const CompressedRelighter::RangePlan> CompressedRelighter::PlanRange(
+    std::size_t first, std::size_t last) const {
+  {
+    const std::lock_guard<std::mutex> lock(range_mutex_);
+    for (std::size_t i = range_plans_.size(); i-- > 0;) {
+      if (range_plans_[i]->first == first && range_plans_[i]->last == last) {
+        std::shared_ptr<const RangePlan> p = range_plans_[i];
+        range_plans_.erase(range_plans_.begin() + static_cast<std::ptrdiff_t>(i));
+        range_plans_.push_back(p);
+        return p;
+      }
+    }
+  }
+  // Built outside the lock: another thread may build the same plan meanwhile; both are equal.
+  std::shared_ptr<const RangePlan> p = BuildRangePlan(first, last);
+  const std::lock_guard<std::mutex> lock(range_mutex_);
+  if (range_plans_.size() >= kRangePlans) range_plans_.erase(range_plans_.begin());
+  range_plans_.push_back(p);
+  return p;
+}
+
+// Eq. 8 (Cheslack-Postava et al. 2008 §4.5, Eq. 6–7, as RelightLights runs it) for the positions
+// [first, last) of the coefficient order only, with the range's plan (RangePlan above):
+//   1. X's early intervals are zeroed and receive the terms of every column of depth ≥ 1 that
+//      fall in them;
+//   2. from each segment's maximum depth D up, a depth's late terms in R_t join the low band,
+//      then step t runs on its window W_{t−1}, the low band alternating between two scratch
+//      buffers (the high bands stay in X);
+//   3. the depth-0 columns' terms in R_0 join, and R_0 is written out.
+// The work is the range's share of the terms and of the steps plus about 2m elements per level
+// and segment: a host that splits a frame into ranges splits its cost. Runs on the calling
+// thread.
+void CompressedRelighter::RelightLightsRange(std::vector<Light>& lights, int channels,
+                                             std::size_t first, std::size_t last,
+                                             double* const* out, bool assign) const {
+  const std::shared_ptr<const RangePlan> plan_ptr = PlanRange(first, last);
+  const RangePlan& plan = *plan_ptr;
+  const std::size_t S = spatial_;
+  const std::size_t P = header_.channels;
+  const bool per_channel = P != 1;
+  const auto C = static_cast<std::size_t>(channels);
+  const std::size_t K = C == 3 ? 4 : C;
+  const WaveletFilter filter = ToWaveletFilter(header_.column_wavelet);
+  const bool split = InverseWavelet1DStepSplitSupported(filter, static_cast<int>(K));
+  const std::size_t E = plan.early.size(), G = plan.segs.size();
+  // Lights by depth, deepest first (stable: a depth's lights keep their order, as in
+  // RelightLights, so sums are reproducible).
+  std::stable_sort(lights.begin(), lights.end(), [&](const Light& a, const Light& b) {
+    return columns_[a.slot].depth > columns_[b.slot].depth;
+  });
+  std::unique_ptr<FrameBuffers> buffers = TakeBuffers();
+  for (auto* v : {&buffers->x, &buffers->scratch, &buffers->scratch2})
+    if (v->size() < S * K) v->resize(S * K);
+  float* const buf[3] = {buffers->x.data(), buffers->scratch.data(), buffers->scratch2.data()};
+  float* const x = buf[0];
+  for (const RangePlan::Interval& e : plan.early)
+    std::memset(x + K * e.lo, 0, sizeof(float) * K * (e.hi - e.lo));
+
+  // Terms [b, e) of T's channel ch (rows ch·S + element) with weights w, added to `dst`.
+  const auto add = [&](const Term* b, const Term* e, std::size_t ch, const float* w, float* dst) {
+    const std::size_t shift = ch * S;
+    if (K == 4) {
+      const Float4 w4 =
+          per_channel
+              ? Float4{ch == 0 ? w[0] : 0.0f, ch == 1 ? w[1] : 0.0f, ch == 2 ? w[2] : 0.0f, 0.0f}
+              : Float4{w[0], C > 1 ? w[1] : 0.0f, C > 2 ? w[2] : 0.0f, C > 3 ? w[3] : 0.0f};
+      const auto one = [dst, w4, shift](const Term& term) {
+        float* xi = dst + 4 * (static_cast<std::size_t>(term.index) - shift);
+        Float4 xv;
+        std::memcpy(&xv, xi, sizeof xv);
+        xv += w4 * term.value;
+        std::memcpy(xi, &xv, sizeof xv);
+      };
+      // As RelightLights: a cache line of terms at a time, 2 KB ahead prefetched.
+      const Term* p = b;
+      for (; e - p >= 8; p += 8) {
+        __builtin_prefetch(p + kRangePrefetchTerms);
+        for (int u = 0; u < 8; ++u) one(p[u]);
+      }
+      for (; p != e; ++p) one(*p);
+    } else {
+      for (const Term* p = b; p != e; ++p) {
+        float* xi = dst + K * (static_cast<std::size_t>(p->index) - shift);
+        if (per_channel) {
+          xi[ch] += w[ch] * p->value;
+        } else {
+          for (std::size_t c = 0; c < C; ++c) xi[c] += w[c] * p->value;
+        }
+      }
+    }
+  };
+  const std::size_t per_part = columns_.size() * P;
+  const auto part = [&](std::size_t k, const Light& l, std::size_t ch) {
+    return plan.offsets.data() + 2 * (k * per_part + static_cast<std::size_t>(l.slot) * P + ch);
+  };
+
+  // Phase 1, piece by piece (all lights per piece: the piece of X stays in cache), the next
+  // light's terms prefetched while one light's are added.
+  std::size_t deep_end = 0;
+  while (deep_end < lights.size() && columns_[lights[deep_end].slot].depth > 0) ++deep_end;
+  for (std::size_t k = 0; k < E; ++k)
+    for (std::size_t l = 0; l < deep_end; ++l)
+      for (std::size_t ch = 0; ch < P; ++ch) {
+        const uint32_t* o = part(k, lights[l], ch);
+        if (l + 1 < deep_end) {  // the next light's first 2 KB in this piece
+          const uint32_t* n = part(k, lights[l + 1], ch);
+          const std::ptrdiff_t len = std::min<std::ptrdiff_t>(kRangePrefetchTerms, n[1] - n[0]);
+          for (std::ptrdiff_t q = 0; q < len; q += 8) __builtin_prefetch(terms_.data() + n[0] + q);
+        }
+        add(terms_.data() + o[0], terms_.data() + o[1], ch, lights[l].weight, x);
+      }
+  // Phase 2. at[k]: where segment k's low band lives (0 = X, 1 and 2 the scratch buffers).
+  int d_top = 0;
+  for (const RangePlan::Seg& g : plan.segs) d_top = std::max(d_top, segments_[g.si].max_depth);
+  std::vector<uint8_t>& at = buffers->range_at;
+  at.assign(G, 0);
+  std::vector<float>& tmp = buffers->range_tmp;
+  std::size_t next = 0;
+  // Lights deeper than every segment of the range have no late terms in it.
+  while (next < deep_end && columns_[lights[next].slot].depth > d_top) ++next;
+  for (int d = d_top; d >= 1; --d) {
+    for (; next < deep_end && columns_[lights[next].slot].depth == d; ++next)
+      for (std::size_t ch = 0; ch < P; ++ch)
+        for (std::size_t k = 0; k < G; ++k) {
+          const uint32_t* o = part(E + k, lights[next], ch);
+          add(late_terms_.data() + o[0], late_terms_.data() + o[1], ch, lights[next].weight,
+              buf[at[k]]);
+        }
+    for (std::size_t k = 0; k < G; ++k) {
+      const RangePlan::Seg& g = plan.segs[k];
+      const Segment& b = segments_[g.si];
+      if (d > b.max_depth) continue;
+      const RangePlan::Interval win = g.window[static_cast<std::size_t>(d) - 1];
+      const std::size_t n = win.hi - win.lo;
+      const uint8_t to = at[k] == 1 ? 2 : 1;
+      if (b.h > 1) {
+        // A grid: the window's rows of the four bands (low rows: LL from the low band's buffer,
+        // HL from X; high rows: LH and HH from X) as a Wt × n region, one in-place step, and its
+        // n rows out. Rows are whole, so only the vertical direction meets a window end.
+        const auto w = static_cast<std::size_t>(b.w);
+        const auto wt = static_cast<std::size_t>(SizeAtDepth(b.w, d - 1));
+        const auto lw = static_cast<std::size_t>(SizeAtDepth(b.w, d));
+        const auto lh = static_cast<std::size_t>(SizeAtDepth(b.h, d));
+        const std::size_t nl = (n + 1) / 2, area = K * wt * n;
+        if (tmp.size() < 2 * area) tmp.resize(2 * area);
+        for (std::size_t r = 0; r < n; ++r) {
+          const std::size_t row = r < nl ? win.lo / 2 + r : lh + win.lo / 2 + (r - nl);
+          const float* src = (r < nl ? buf[at[k]] : x) + K * (b.lo + row * w);
+          std::memcpy(tmp.data() + K * r * wt, src, sizeof(float) * K * lw);
+          std::memcpy(tmp.data() + K * (r * wt + lw), x + K * (b.lo + row * w + lw),
+                      sizeof(float) * K * (wt - lw));
+        }
+        InverseWavelet2DStepInterleaved(filter, tmp.data(), static_cast<int>(wt),
+                                        static_cast<int>(n), static_cast<int>(K), 1,
+                                        tmp.data() + area);
+        for (std::size_t r = 0; r < n; ++r)
+          std::memcpy(buf[to] + K * (b.lo + (win.lo + r) * w), tmp.data() + K * r * wt,
+                      sizeof(float) * K * wt);
+        at[k] = to;
+        continue;
+      }
+      const float* low = buf[at[k]] + K * (b.lo + win.lo / 2);
+      const float* high =
+          x + K * (b.lo + static_cast<std::size_t>(SizeAtDepth(b.w, d)) + win.lo / 2);
+      float* dst = buf[to] + K * (b.lo + win.lo);
+      if (split) {
+        InverseWavelet1DStepSplit(filter, low, high, dst, static_cast<int>(n), static_cast<int>(K),
+                                  1);
+      } else {
+        // The window's bands side by side (a length-n signal at depth 1), one in-place step.
+        if (tmp.size() < 2 * K * n) tmp.resize(2 * K * n);
+        const std::size_t nl = (n + 1) / 2;
+        std::memcpy(tmp.data(), low, sizeof(float) * K * nl);
+        std::memcpy(tmp.data() + K * nl, high, sizeof(float) * K * (n - nl));
+        InverseWavelet2DStepInterleaved(filter, tmp.data(), static_cast<int>(n), 1,
+                                        static_cast<int>(K), 1, tmp.data() + K * n);
+        std::memcpy(dst, tmp.data(), sizeof(float) * K * n);
+      }
+      at[k] = to;
+    }
+  }
+  // Phase 3.
+  for (std::size_t k = 0; k < G; ++k)
+    for (std::size_t l = deep_end; l < lights.size(); ++l)
+      for (std::size_t ch = 0; ch < P; ++ch) {
+        const uint32_t* o = part(E + k, lights[l], ch);
+        add(terms_.data() + o[0], terms_.data() + o[1], ch, lights[l].weight, buf[at[k]]);
+      }
+  // Out, with the finite check.
+  for (std::size_t k = 0; k < G; ++k) {
+    const RangePlan::Seg& g = plan.segs[k];
+    const Segment& b = segments_[g.si];
+    const float* src = buf[at[k]];
+    for (std::size_t p = b.lo + g.out.lo; p < b.lo + g.out.hi; ++p) {
+      const float* xi = src + K * p;
+      for (std::size_t c = 0; c < C; ++c) {
+        if (!std::isfinite(xi[c])) {
+          ReturnBuffers(std::move(buffers));
+          const auto sample = static_cast<std::size_t>(
+              std::find(coefficient_of_sample_.begin(), coefficient_of_sample_.end(), p) -
+              coefficient_of_sample_.begin());
+          throw NumericalError(name_ + ": the relit radiance of sample " + std::to_string(sample) +
+                               " (channel " + std::to_string(c) + ") is " +
+                               (std::isnan(xi[c]) ? "NaN" : "Inf") +
+                               ": T·L overflows the relighter's float range (3.4e38); the "
+                               "lighting is too bright for this transport");
+        }
+        out[c][p] = assign ? static_cast<double>(xi[c]) : out[c][p] + static_cast<double>(xi[c]);
+      }
+    }
+  }
+  ReturnBuffers(std::move(buffers));
 }
 
 void CompressedRelighter::RelightSparseAdd(std::span<const uint32_t> columns,

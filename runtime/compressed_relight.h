@@ -99,9 +99,15 @@ class CompressedRelighter {
   // read or written), equal to RelightSparseAdd's to float rounding. For a host that splits a
   // frame into ranges across its threads (prt_runtime_relight_range): safe to call concurrently
   // for any ranges, each with its own buffers.
+  // Its cost is the range's share of the frame where the column wavelet is LeGall 5/3 or
+  // CDF 9/7 (RangesAreLocal): only the terms and the inverse steps' windows that reach the range
+  // are computed (a grid segment's windows are bands of whole rows). With the periodic Haar and
+  // D4 it computes the whole frame and copies the range out.
   void RelightSparseAddRange(std::span<const uint32_t> columns, std::span<const float> weights,
                              int channels, std::size_t first, std::size_t count,
                              std::span<double* const> out, bool assign = false) const;
+  // Whether RelightSparseAddRange computes only its range.
+  bool RangesAreLocal() const;
 
  private:
   // A column's terms in two parts (see RelightLights): those no inverse step deeper than the
@@ -121,6 +127,14 @@ class CompressedRelighter {
     bool assign = false;  // with `add`: write instead of adding
   };
   void RelightLights(std::vector<Light>& lights, int channels, Output out) const;
+  // RelightSparseAddRange's local frame: positions [first, last) into out[c] (RangesAreLocal).
+  void RelightLightsRange(std::vector<Light>& lights, int channels, std::size_t first,
+                          std::size_t last, double* const* out, bool assign) const;
+  // What a range needs, worked out once per range (the inverse steps' windows, where each
+  // column's terms in them begin and end) and kept for the next frames: see the .cpp.
+  struct RangePlan;
+  std::shared_ptr<const RangePlan> PlanRange(std::size_t first, std::size_t last) const;
+  std::shared_ptr<const RangePlan> BuildRangePlan(std::size_t first, std::size_t last) const;
   template <class Index>
   static void Copy(std::size_t lo, std::size_t hi, const float* base, const Index& index,
                    std::size_t C, std::size_t K, std::size_t S, const Output& out);
@@ -170,12 +184,20 @@ class CompressedRelighter {
   // parallel loop) each need their own.
   struct FrameBuffers {
     std::vector<float> x, scratch;
+    // RelightLightsRange: the second low-band buffer, where each segment's low band is, and
+    // the copy of a window's bands for filters without a split step.
+    std::vector<float> scratch2;
+    std::vector<uint8_t> range_at;
+    std::vector<float> range_tmp;
     std::vector<bool> low_in_scratch;  // per segment: its low band lives in `scratch`
   };
   std::unique_ptr<FrameBuffers> TakeBuffers() const;
   void ReturnBuffers(std::unique_ptr<FrameBuffers> b) const;
   mutable std::mutex pool_mutex_;
   mutable std::vector<std::unique_ptr<FrameBuffers>> pool_;
+  // The last ranges' plans, the most recently used last (at most kRangePlans of them).
+  mutable std::mutex range_mutex_;
+  mutable std::vector<std::shared_ptr<const RangePlan>> range_plans_;
 };
 
 }  // namespace prt

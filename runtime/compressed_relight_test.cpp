@@ -447,3 +447,138 @@ TEST(CompressedRelighter, TermsPiledIntoOneTileMatchDenseProduct) {
 
 }  // namespace
 }  // namespace prt
+
+namespace prt {
+namespace {
+
+// Two shuffled mesh segments (9001 and 2500 samples) at n = 2, columns of every depth, some
+// dense, some sparse, some absent; `channels` = 3: three channels of rows.
+// With `grid`, a 67×61 grid segment after them.
+CompressedTransport MeshTransport(ColumnWavelet wavelet, uint32_t channels, std::mt19937& rng,
+                                  bool grid) {
+  SpatialDomain d;
+  for (uint32_t count : {9001u, 2500u}) {
+    SpatialSegment mesh;
+    mesh.kind = SpatialSegment::Kind::kMesh1D;
+    mesh.count = count;
+    mesh.order.resize(count);
+    std::iota(mesh.order.begin(), mesh.order.end(), 0u);
+    std::shuffle(mesh.order.begin(), mesh.order.end(), rng);
+    d.segments.push_back(mesh);
+  }
+  if (grid) {
+    SpatialSegment g;
+    g.kind = SpatialSegment::Kind::kGrid2D;
+    g.width = 67;
+    g.height = 61;
+    g.count = 67 * 61;
+    d.segments.push_back(g);
+  }
+  CompressedTransport t;
+  t.header.cubemap_n = 2;
+  t.header.bits = 11;
+  t.header.column_wavelet = wavelet;
+  t.header.domain = PerChannelDomain(d, channels);
+  t.header.channels = channels;
+  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+  const uint32_t S = t.header.sample_count;
+  const auto M = static_cast<uint32_t>(t.header.column_count());
+  const int maxd = MaxColumnDepth(t.header.domain);
+  for (uint32_t j = 0; j < M; ++j) {
+    if (j % 7 == 3) continue;  // absent
+    CompressedColumn c;
+    c.column = j;
+    c.depth = static_cast<uint8_t>(j % static_cast<uint32_t>(maxd + 1));
+    c.scale = 1.0f;
+    const uint32_t keep = j % 3 == 0 ? 1 : (j % 3 == 1 ? 5 : 50);
+    for (uint32_t i = 0; i < S; ++i) {
+      if (rng() % keep != 0) continue;
+      c.index.push_back(i);
+      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
+      c.q.push_back(q == 0 ? 1 : q);
+    }
+    if (!c.index.empty()) t.columns.push_back(c);
+  }
+  return t;
+}
+
+// RelightSparseAddRange's region of interest (the windows of the inverse steps, the terms that
+// reach them) against the whole frame in the coefficient order: ranges of every size (one
+// position, ranges straddling segments, a whole segment; in a grid part rows and bands of
+// rows), meshes alone and with a grid, for both symmetric column
+// wavelets, 1- and 3-channel lighting, 3-channel transports, every column, a few columns of
+// every depth and a single depth-0 column; each range added onto what was there, or assigned.
+TEST(CompressedRelighter, RangesAreTheWholeFramesPositions) {
+  std::mt19937 rng(43);
+  for (bool grid : {false, true})
+    for (ColumnWavelet wavelet : {ColumnWavelet::kLeGall53, ColumnWavelet::kCdf97}) {
+      for (uint32_t transport_channels : {1u, 3u}) {
+        const CompressedTransport t = MeshTransport(wavelet, transport_channels, rng, grid);
+        const CompressedRelighter relighter(t);
+        const std::size_t V = relighter.sample_count(), M = relighter.column_count();
+        ASSERT_EQ(V, grid ? 15588u : 11501u);
+        EXPECT_TRUE(relighter.RangesAreLocal());
+        const int maxd = MaxColumnDepth(t.header.domain);
+        std::vector<std::vector<uint32_t>> light_sets(3);
+        for (uint32_t j = 0; j < M; ++j)
+          if (relighter.ColumnDepth(j) >= 0) light_sets[0].push_back(j);
+        for (int d = 0; d <= maxd; ++d)
+          for (uint32_t j = 0; j < M; ++j)
+            if (relighter.ColumnDepth(j) == d) {
+              light_sets[1].push_back(j);
+              break;
+            }
+        ASSERT_GE(light_sets[1].size(), 10u);
+        light_sets[2] = {light_sets[1][0]};  // depth 0
+        ASSERT_EQ(relighter.ColumnDepth(light_sets[2][0]), 0);
+        for (int channels : {1, 3}) {
+          if (transport_channels == 3 && channels != 3) continue;
+          for (const std::vector<uint32_t>& cols : light_sets) {
+            std::vector<float> w(cols.size() * static_cast<std::size_t>(channels));
+            for (float& v : w) v = std::uniform_real_distribution<float>(-1, 1)(rng);
+            std::vector<double> whole(V * channels);
+            std::vector<double*> out(channels);
+            for (int c = 0; c < channels; ++c) out[c] = whole.data() + c * V;
+            relighter.RelightSparseAdd(cols, w, channels, out, SampleOrder::kCoefficients, true);
+            double scale = 0;
+            for (double v : whole) scale = std::max(scale, std::abs(v));
+            ASSERT_GT(scale, 0.0);
+            const std::vector<std::pair<std::size_t, std::size_t>> ranges = {
+                {0, 1},       {17, 1},    {9000, 1},    {9001, 1}, {V - 1, 1},   {0, 4000},
+                {4000, 5001}, {8990, 40}, {9001, 2500}, {0, V},    {5555, 3333}, {123, 7}};
+            for (auto [first, count] : ranges) {
+              if (first + count > V) continue;
+              std::vector<double> got(V * channels, 0.25);
+              for (int c = 0; c < channels; ++c) out[c] = got.data() + c * V;
+              relighter.RelightSparseAddRange(cols, w, channels, first, count, out, false);
+              double worst = 0;
+              std::size_t outside = 0;
+              for (int c = 0; c < channels; ++c)
+                for (std::size_t p = 0; p < V; ++p) {
+                  const double g = got[c * V + p];
+                  if (p >= first && p < first + count) {
+                    worst = std::max(worst, std::abs(g - 0.25 - whole[c * V + p]));
+                  } else {
+                    outside += g != 0.25;
+                  }
+                }
+              EXPECT_LT(worst, 1e-6 * scale)
+                  << static_cast<int>(wavelet) << ' ' << transport_channels << ' ' << channels
+                  << ' ' << cols.size() << " [" << first << ", +" << count << ")";
+              EXPECT_EQ(outside, 0u);
+            }
+            // Ranges that tile the frame, assigned into NaN: the whole frame.
+            std::vector<double> tiled(V * channels, std::nan(""));
+            for (int c = 0; c < channels; ++c) out[c] = tiled.data() + c * V;
+            for (std::size_t p = 0; p < V; p += 1000)
+              relighter.RelightSparseAddRange(cols, w, channels, p,
+                                              std::min<std::size_t>(1000, V - p), out, true);
+            EXPECT_LT(RelErr(tiled, whole), 1e-7);
+          }
+        }
+      }
+    }
+}
+
+}  // namespace
+}  // namespace prt

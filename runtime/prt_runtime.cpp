@@ -110,8 +110,10 @@ struct prt_runtime {
   double angle_y = 0;
   std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};
   prt::WaveletLighting lighting;
-  // The preview's reduced copy of env (made on first use, dropped with a new environment).
+  // The preview's forms of env (made on first use, dropped with a new environment): for
+  // rotations about +Y the periodic grid's weights, for general ones the reduced copy.
   bool preview = false;
+  std::unique_ptr<prt::PeriodicLatLongResampler> periodic;
   std::unique_ptr<prt::EnvironmentImage> reduced;
 
   int mode = PRT_RUNTIME_LIGHTING_PBI;
@@ -237,11 +239,25 @@ void SetRotation(prt_runtime& rt, bool general, double angle_y, const std::array
 
 // Lighting from the environment under the current rotation (prt-view's ResampleToCubemap and
 // ProjectLighting).
-void UpdateLighting(prt_runtime& rt) {
+// With the preview: a rotation about +Y from the periodic 16·n-wide grid's weights (one sparse
+// pass, vocabulary/cubemap_resample.h), a general one from the map reduced to 16·n pixels wide;
+// either made from `env` into `periodic` / `reduced` when missing.
+prt::CubemapRgb Lighting(const prt_runtime& rt, const prt::EnvironmentImage& env,
+                         std::unique_ptr<prt::PeriodicLatLongResampler>& periodic,
+                         std::unique_ptr<prt::EnvironmentImage>& reduced) {
   const int n = static_cast<int>(rt.session->cubemap_n());
-  if (rt.preview && !rt.reduced)
-    rt.reduced = std::make_unique<prt::EnvironmentImage>(Reduce(rt.env, n));
-  rt.lighting = prt::ProjectLighting(Resample(rt, rt.preview ? *rt.reduced : rt.env, n));
+  if (!rt.preview) return Resample(rt, env, n);
+  if (!rt.general_rotation) {
+    if (!periodic)
+      periodic = std::make_unique<prt::PeriodicLatLongResampler>(env, n, std::max(4, 16 * n));
+    return periodic->Resample(rt.angle_y);
+  }
+  if (!reduced) reduced = std::make_unique<prt::EnvironmentImage>(Reduce(env, n));
+  return Resample(rt, *reduced, n);
+}
+
+void UpdateLighting(prt_runtime& rt) {
+  rt.lighting = prt::ProjectLighting(Lighting(rt, rt.env, rt.periodic, rt.reduced));
 }
 
 void EnsureIncremental(prt_runtime& rt, unsigned terms);
@@ -523,12 +539,11 @@ int prt_runtime_set_environment_latlong(prt_runtime* rt, const float* rgb, int w
         env.Channel(c)[i] = v < 0 ? 0.0f : v;  // as prt-view's readers clamp negatives
       }
     // Resample before replacing anything: on error the previous environment stays.
-    const int n = static_cast<int>(rt->session->cubemap_n());
+    std::unique_ptr<prt::PeriodicLatLongResampler> periodic;
     std::unique_ptr<prt::EnvironmentImage> reduced;
-    if (rt->preview) reduced = std::make_unique<prt::EnvironmentImage>(Reduce(env, n));
-    prt::WaveletLighting lighting =
-        prt::ProjectLighting(Resample(*rt, rt->preview ? *reduced : env, n));
+    prt::WaveletLighting lighting = prt::ProjectLighting(Lighting(*rt, env, periodic, reduced));
     rt->env = std::move(env);
+    rt->periodic = std::move(periodic);
     rt->reduced = std::move(reduced);
     rt->lighting = std::move(lighting);
     rt->has_env = true;
@@ -696,6 +711,8 @@ size_t prt_runtime_memory_bytes(const prt_runtime* rt) {
   std::size_t bytes = rt->session->memory_bytes();
   bytes += sizeof(float) * (rt->env.r.size() * 3 + rt->frame_rgb.size());
   bytes += sizeof(double) * 3 * rt->lighting.size();
+  if (rt->periodic) bytes += rt->periodic->memory_bytes();
+  if (rt->reduced) bytes += sizeof(float) * 3 * rt->reduced->PixelCount();
   const std::size_t ns = rt->samples();
   if (rt->pbi) {  // band images, composed radiance, the represented lighting
     bytes += sizeof(double) * 3 * ns * (rt->pbi->basis().band_count() + 1);

@@ -121,14 +121,17 @@ int prt_runtime_set_rotation(prt_runtime* rt, const float rotation[9]); /* row-m
 /* The same, as an angle in radians about +Y (+Z turns towards +X), prt-view's --rotate. */
 int prt_runtime_set_rotation_y(prt_runtime* rt, double radians);
 
-/* Interactive rotation. Resampling the full map under a new rotation costs in proportion to its
- * pixels (about 90 ms for 1024 × 512 on one core; docs/runtime.md, "Speed"). With preview = 1
- * the lighting is resampled from a reduced copy of the map instead (16·n pixels wide at most,
- * each pixel the exact mean over its cell: the same power), about 4× faster for such a map at
- * n = 32 (0.1 % from the full map's relit radiance); with preview = 0 (the default) from the
- * full map again. A viewer sets 1 while the user drags and 0 when the rotation stops, so that
- * PBI converges to the exact frame. Resamples the lighting when an environment is set and the
- * setting changes. */
+/* Interactive rotation. Resampling the full map under a new rotation integrates every pixel over
+ * the texels (tens of ms for 1024 × 512 at n = 32; docs/runtime.md, "Speed"). With preview = 1 a
+ * rotation about +Y (prt_runtime_set_rotation_y, or a matrix about +Y) is one sparse pass over
+ * precomputed weights instead: the map averaged onto a periodic grid 16·n cells wide (exact cell
+ * means: the same power), its cell → texel weights integrated once, then shifted by the angle
+ * (whole cells, blended linearly between them); about 1 ms native at n = 32. A general rotation
+ * resamples a copy of the map reduced to 16·n pixels wide. The first preview frame after a new
+ * map builds these (about the cost of one full resampling). With preview = 0 (the default) the
+ * full map is resampled exactly again: a viewer sets 1 while the user drags and 0 when the
+ * rotation stops, so that PBI converges to the exact frame. Resamples the lighting when an
+ * environment is set and the setting changes. */
 int prt_runtime_set_preview(prt_runtime* rt, int preview);
 
 /* PRT_RUNTIME_LIGHTING_NWA, _BI or _PBI (the default) for relights with terms > 0. Switching

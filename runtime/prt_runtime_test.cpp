@@ -375,6 +375,30 @@ TEST(RuntimeRotation, PreviewIsCloseAndReversible) {
   ASSERT_EQ(prt_runtime_relight(h.rt, 0, back.data(), n), PRT_RUNTIME_OK);
   EXPECT_EQ(back, full);
   EXPECT_EQ(prt_runtime_set_preview(h.rt, 2), PRT_RUNTIME_ERROR_ARGUMENT);
+  // Angles between whole cells of the periodic grid (blended), and a general rotation (the
+  // reduced map): each close to its exact frame.
+  const auto rel = [](const std::vector<float>& a, const std::vector<float>& b) {
+    double nu = 0, de = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      nu += (double(a[i]) - b[i]) * (double(a[i]) - b[i]);
+      de += double(b[i]) * b[i];
+    }
+    return std::sqrt(nu / de);
+  };
+  const float tilt[9] = {1, 0, 0, 0, 0.8f, -0.6f, 0, 0.6f, 0.8f};
+  for (int k = 0; k < 3; ++k) {
+    ASSERT_EQ(prt_runtime_set_preview(h.rt, 0), PRT_RUNTIME_OK);
+    if (k < 2) {
+      ASSERT_EQ(prt_runtime_set_rotation_y(h.rt, k == 0 ? -1.234 : 2.0), PRT_RUNTIME_OK);
+    } else {
+      ASSERT_EQ(prt_runtime_set_rotation(h.rt, tilt), PRT_RUNTIME_OK);
+    }
+    ASSERT_EQ(prt_runtime_relight(h.rt, 0, full.data(), n), PRT_RUNTIME_OK);
+    ASSERT_EQ(prt_runtime_set_preview(h.rt, 1), PRT_RUNTIME_OK);
+    ASSERT_EQ(prt_runtime_relight(h.rt, 0, preview.data(), n), PRT_RUNTIME_OK);
+    std::printf("preview, rotation %d: relit rel. RMS %.4f\n", k, rel(preview, full));
+    EXPECT_LT(rel(preview, full), 0.01) << k;
+  }
 }
 
 // Misuse and hostile input: a status and a message, never a crash.

@@ -66,6 +66,11 @@ class TexelAccumulator {
 
   const std::vector<double>& data() const { return acc_; }
 
+  // Recording instead of accumulating (PeriodicLatLongResampler): every share of a leaf's solid
+  // angle becomes an entry (texel, cell, ω) of `record`, for the cell set before its leaves.
+  void Record(std::vector<PeriodicLatLongResampler::Weight>* record) { record_ = record; }
+  void SetCell(uint32_t cell) { cell_ = cell; }
+
   // One leaf of a source pixel cell: centre p (any length, nonzero), edge vectors ta, tb (the
   // derivative of p along the leaf's two parameters times the leaf's extent in them), exact
   // solid angle omega and radiance rgb. The leaf is taken as the parallelogram p ± ta/2 ± tb/2
@@ -124,6 +129,10 @@ class TexelAccumulator {
 
  private:
   void Add(std::size_t t, double omega, const float* rgb) {
+    if (record_ != nullptr) {
+      record_->push_back({static_cast<uint32_t>(t), cell_, omega});
+      return;
+    }
     double* a = &acc_[4 * t];
     a[0] += omega * rgb[0];
     a[1] += omega * rgb[1];
@@ -163,6 +172,8 @@ class TexelAccumulator {
   const CubemapLayout& layout_;
   int n_;
   std::vector<double> acc_;  // per texel: Σ ω·R, Σ ω·G, Σ ω·B, Σ ω
+  std::vector<PeriodicLatLongResampler::Weight>* record_ = nullptr;
+  uint32_t cell_ = 0;
 };
 
 // Leaves per smallest texel edge: 1 keeps the parallelogram model of a leaf within one texel's
@@ -444,6 +455,189 @@ CubemapRgb ResampleToCubemap(const EnvironmentImage& env, int n,
   for (double v : rotation)
     if (!std::isfinite(v)) throw std::invalid_argument("ResampleToCubemap: rotation");
   return Resample(env, n, 0.0, rotation.data());
+}
+
+// ---- Rotations about +Y from a periodic grid ----
+
+PeriodicLatLongResampler::PeriodicLatLongResampler(const EnvironmentImage& env, int n, int width)
+    : n_(n), w_(width), h_(width / 2) {
+  if (env.layout != EnvmapLayout::kLatLong || env.width < 2 || env.height < 2 ||
+      env.r.size() != env.PixelCount() || env.g.size() != env.PixelCount() ||
+      env.b.size() != env.PixelCount())
+    throw std::invalid_argument("PeriodicLatLongResampler: a lat-long map is needed");
+  if (width < 4 || width % 2 != 0 || width > 65536)
+    throw std::invalid_argument("PeriodicLatLongResampler: width " + std::to_string(width));
+  const CubemapLayout layout(n);  // checks n
+  const double dphi = 2 * kPi / w_, dth = kPi / h_;
+  // The grid: each cell the exact mean of the map over it (separable: the overlap of the
+  // pixels' longitude intervals times that of their sin-latitude intervals), so the power is
+  // kept. Both partitions cover [−π, π] × [−π/2, π/2] (the map's end columns are half cells).
+  struct Piece {
+    int cell;
+    double weight;
+  };
+  std::vector<std::vector<Piece>> cols(static_cast<std::size_t>(env.width));
+  for (int xs = 0; xs < env.width; ++xs) {
+    const PixelInterval c = LatLongColumnCell(env.width, xs);
+    const double lo = std::min(c.lo, c.hi), hi = std::max(c.lo, c.hi);
+    // Grid column x spans φ ∈ [π − (x + 1)·Δ, π − x·Δ].
+    const int x0 = std::clamp(static_cast<int>(std::floor((kPi - hi) / dphi)), 0, w_ - 1);
+    const int x1 = std::clamp(static_cast<int>(std::floor((kPi - lo) / dphi)), 0, w_ - 1);
+    for (int x = x0; x <= x1; ++x) {
+      const double a = std::max(lo, kPi - (x + 1) * dphi), b = std::min(hi, kPi - x * dphi);
+      if (b > a) cols[xs].push_back({x, b - a});
+    }
+  }
+  std::vector<std::vector<Piece>> rows(static_cast<std::size_t>(env.height));
+  for (int ys = 0; ys < env.height; ++ys) {
+    const PixelInterval c = LatLongRowCell(env.height, ys);
+    const double lo = std::min(c.lo, c.hi), hi = std::max(c.lo, c.hi);
+    // Grid row y spans θ ∈ [π/2 − (y + 1)·δ, π/2 − y·δ].
+    const int y0 = std::clamp(static_cast<int>(std::floor((kPi / 2 - hi) / dth)), 0, h_ - 1);
+    const int y1 = std::clamp(static_cast<int>(std::floor((kPi / 2 - lo) / dth)), 0, h_ - 1);
+    for (int y = y0; y <= y1; ++y) {
+      const double a = std::max(lo, kPi / 2 - (y + 1) * dth);
+      const double b = std::min(hi, kPi / 2 - y * dth);
+      if (b > a) rows[ys].push_back({y, std::sin(b) - std::sin(a)});
+    }
+  }
+  const std::size_t cells = static_cast<std::size_t>(w_) * h_;
+  std::vector<double> sum(3 * cells, 0.0), area(cells, 0.0);
+  std::vector<double> row_sum(3 * static_cast<std::size_t>(w_)), row_area(w_);
+  for (int ys = 0; ys < env.height; ++ys) {
+    std::fill(row_sum.begin(), row_sum.end(), 0.0);
+    std::fill(row_area.begin(), row_area.end(), 0.0);
+    for (int xs = 0; xs < env.width; ++xs) {
+      const std::size_t i = env.Index(xs, ys);
+      const double v[3] = {env.r[i], env.g[i], env.b[i]};
+      for (const Piece& c : cols[xs]) {
+        for (int k = 0; k < 3; ++k) row_sum[3 * c.cell + k] += c.weight * v[k];
+        row_area[c.cell] += c.weight;
+      }
+    }
+    for (const Piece& r : rows[ys])
+      for (int x = 0; x < w_; ++x) {
+        const std::size_t cell = static_cast<std::size_t>(r.cell) * w_ + x;
+        for (int k = 0; k < 3; ++k) sum[3 * cell + k] += r.weight * row_sum[3 * x + k];
+        area[cell] += r.weight * row_area[x];
+      }
+  }
+  grid_.resize(3 * cells);
+  for (std::size_t c = 0; c < cells; ++c)
+    for (int k = 0; k < 3; ++k)
+      grid_[3 * c + k] = area[c] > 0 ? static_cast<float>(sum[3 * c + k] / area[c]) : 0.0f;
+
+  // The weights at rotation 0: every cell cut into leaves and refined as AccumulateTexels does
+  // a pixel, the shares recorded instead of accumulated; per row chunk, then merged.
+  const double leaf_max = MinTexelAngle(n) / kLeavesPerTexel;
+  const double split = 2.0 / n / kSplitRatio;
+  const int k_theta = std::max(1, static_cast<int>(std::ceil(dth / leaf_max)));
+  const int chunks = std::clamp(h_ / 8, 1, 32);
+  std::vector<std::vector<Weight>> parts(static_cast<std::size_t>(chunks));
+  const float dummy[3] = {0, 0, 0};
+  ParallelFor(static_cast<std::size_t>(chunks), [&](std::size_t chunk) {
+    TexelAccumulator a(layout);
+    a.Record(&parts[chunk]);
+    const int y0 = static_cast<int>(static_cast<std::int64_t>(h_) * chunk / chunks);
+    const int y1 = static_cast<int>(static_cast<std::int64_t>(h_) * (chunk + 1) / chunks);
+    for (int y = y0; y < y1; ++y) {
+      const double t_top = kPi / 2 - y * dth, t_bottom = t_top - dth;
+      const double cos_max =
+          t_bottom <= 0 && t_top >= 0 ? 1.0 : std::max(std::cos(t_bottom), std::cos(t_top));
+      const int k_phi = std::max(1, static_cast<int>(std::ceil(dphi * cos_max / leaf_max)));
+      const double lw = dphi / k_phi, lh = dth / k_theta;
+      for (int x = 0; x < w_; ++x) {
+        a.SetCell(static_cast<uint32_t>(y * w_ + x));
+        const double f_lo = kPi - (x + 1) * dphi;
+        for (int j = 0; j < k_theta; ++j) {
+          const double t_lo = t_bottom + j * lh, t_hi = t_lo + lh, tc = 0.5 * (t_lo + t_hi);
+          const double st = std::sin(tc), ct = std::cos(tc);
+          const double band = std::sin(t_hi) - std::sin(t_lo);
+          for (int i = 0; i < k_phi; ++i) {
+            const double f0 = f_lo + i * lw, fc = f0 + 0.5 * lw;
+            const double sf = std::sin(fc), cf = std::cos(fc);
+            const Vec3 p{sf * ct, st, cf * ct};
+            const Vec3 dphi_v{cf * ct * lw, 0, -sf * ct * lw};
+            const Vec3 dth_v{-sf * st * lh, ct * lh, -cf * st * lh};
+            if (!a.AddLeaf(p, dphi_v, dth_v, lw * band, dummy, split))
+              RefineLatLongLeaf(a, f0, f0 + lw, t_lo, t_hi, dummy, 1, split, nullptr);
+          }
+        }
+      }
+    }
+  });
+  std::vector<Weight> all;
+  std::size_t total = 0;
+  for (const auto& p : parts) total += p.size();
+  all.reserve(total);
+  for (auto& p : parts) {
+    all.insert(all.end(), p.begin(), p.end());
+    std::vector<Weight>().swap(p);
+  }
+  std::sort(all.begin(), all.end(), [](const Weight& a, const Weight& b) {
+    return a.texel != b.texel ? a.texel < b.texel : a.cell < b.cell;
+  });
+  // One entry per (texel, cell); per texel its entries' range and Σ ω.
+  texel_begin_.assign(layout.texel_count() + 1, 0);
+  texel_omega_.assign(layout.texel_count(), 0.0);
+  for (std::size_t i = 0; i < all.size();) {
+    std::size_t j = i;
+    double omega = 0;
+    for (; j < all.size() && all[j].texel == all[i].texel && all[j].cell == all[i].cell; ++j)
+      omega += all[j].omega;
+    const uint32_t cell = all[i].cell;
+    entries_.push_back({static_cast<uint32_t>(cell / w_) * static_cast<uint32_t>(w_),
+                        static_cast<uint32_t>(cell % w_), static_cast<float>(omega)});
+    texel_omega_[all[i].texel] += omega;
+    texel_begin_[all[i].texel + 1] = static_cast<uint32_t>(entries_.size());
+    i = j;
+  }
+  for (std::size_t t = 1; t < texel_begin_.size(); ++t)
+    texel_begin_[t] = std::max(texel_begin_[t], texel_begin_[t - 1]);
+}
+
+CubemapRgb PeriodicLatLongResampler::Resample(double rotation_y) const {
+  if (!std::isfinite(rotation_y)) throw std::invalid_argument("PeriodicLatLongResampler: rotation");
+  // The rotation in cells: k whole cells and a fraction f; the map's cell x then lies at grid
+  // cell x − k − f (φ decreases with x), so cell x' receives (1 − f)·g[x' + k] + f·g[x' + k + 1].
+  const double cells = rotation_y / (2 * kPi) * w_;
+  const double whole = std::floor(cells);
+  const auto f = static_cast<float>(cells - whole);
+  const auto w = static_cast<int64_t>(w_);
+  const auto k = static_cast<uint32_t>(((static_cast<int64_t>(whole) % w) + w) % w);
+  const auto uw = static_cast<uint32_t>(w_);
+  CubemapRgb out;
+  out.n = n_;
+  const std::size_t texels = texel_omega_.size();
+  for (int c = 0; c < 3; ++c) out.Channel(c).assign(texels, 0.0f);
+  const float* g = grid_.data();
+  for (std::size_t t = 0; t < texels; ++t) {
+    float s0 = 0, s1 = 0, s2 = 0;
+    for (uint32_t e = texel_begin_[t]; e < texel_begin_[t + 1]; ++e) {
+      const Entry& en = entries_[e];
+      uint32_t x = en.x + k;
+      if (x >= uw) x -= uw;
+      uint32_t x1 = x + 1;
+      if (x1 >= uw) x1 -= uw;
+      const float* a = g + 3 * static_cast<std::size_t>(en.row + x);
+      const float* b = g + 3 * static_cast<std::size_t>(en.row + x1);
+      s0 += en.omega * (a[0] + f * (b[0] - a[0]));
+      s1 += en.omega * (a[1] + f * (b[1] - a[1]));
+      s2 += en.omega * (a[2] + f * (b[2] - a[2]));
+    }
+    const double o = texel_omega_[t];
+    if (o > 0) {
+      out.r[t] = static_cast<float>(s0 / o);
+      out.g[t] = static_cast<float>(s1 / o);
+      out.b[t] = static_cast<float>(s2 / o);
+    }
+  }
+  return out;
+}
+
+std::size_t PeriodicLatLongResampler::memory_bytes() const {
+  return sizeof(float) * grid_.capacity() + sizeof(Entry) * entries_.capacity() +
+         sizeof(uint32_t) * texel_begin_.capacity() + sizeof(double) * texel_omega_.capacity();
 }
 
 }  // namespace prt
