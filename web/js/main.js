@@ -309,7 +309,7 @@ function framesToConverge() {
 
 function tick() {
   requestAnimationFrame(tick);
-  if (!app.envSet || stats.state === 'error') return;
+  if (!app.envSet || stats.state === 'error' || app.spinning) return;
   try {
     const rotate = app.angle !== app.appliedAngle;
     if (rotate || app.framesLeft > 0 || app.dragging) {
@@ -456,6 +456,62 @@ window.prtPage = {
     exactFrame();
     convergeSilently();
     return out;
+  },
+  /**
+   * The page's own loop rotating the environment, as a drag does but without input events: every
+   * animation frame for `ms` turns the map by `step` radians in preview (set_rotation_y), relights
+   * one PBI frame of the budget and draws it (`relight` false: only the background turns and the
+   * frame is drawn; `draw` false: nothing is drawn). Resolves to fps and per-frame medians in
+   * ms; then the page converges on the full map as after a drag.
+   */
+  spin({ms = 3000, step = 0.02, relight = true, draw = true} = {}) {
+    const p = app.pack;
+    app.spinning = true;
+    p.setPreview(true);
+    app.preview = true;
+    const split = {rotate: [], relight: [], draw: []};
+    let n = 0;
+    const t0 = performance.now();
+    return new Promise((resolve, reject) => {
+      const frame = () => {
+        try {
+          const t1 = performance.now();
+          app.angle += step;
+          if (relight) p.setRotationY(app.angle);
+          const t2 = performance.now();
+          if (relight) app.view.setRadiance(p.relight(stats.budget));
+          const t3 = performance.now();
+          app.view.setRotation(app.angle);
+          if (draw) app.view.render();
+          const t4 = performance.now();
+          split.rotate.push(t2 - t1);
+          split.relight.push(t3 - t2);
+          split.draw.push(t4 - t3);
+          ++n;
+          if (t4 - t0 < ms) {
+            requestAnimationFrame(frame);
+            return;
+          }
+          const seconds = (performance.now() - t0) / 1000;
+          p.setPreview(false);
+          app.preview = false;
+          if (relight) {
+            app.appliedAngle = app.angle;
+          } else {
+            app.appliedAngle = NaN;  // the lighting is behind the view: the loop catches up
+          }
+          app.framesLeft = framesToConverge();
+          stats.converged = false;
+          app.spinning = false;
+          resolve({fps: n / seconds, frames: n, rotateMs: median(split.rotate),
+                   relightMs: median(split.relight), drawMs: median(split.draw)});
+        } catch (e) {
+          app.spinning = false;
+          reject(e);
+        }
+      };
+      requestAnimationFrame(frame);
+    });
   },
 };
 
