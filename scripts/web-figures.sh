@@ -38,6 +38,8 @@ const byWidth = Object.entries(s.rotateByMapWidthMs).sort((x, y) => y[0] - x[0])
     .map(([w, ms]) => `${w} × ${w / 2} ${f(ms)} ms`).join(", ");
 console.log(`set_rotation_y by map    ${byWidth} (no preview)`);
 console.log(`load → first frame       ${f(s.loadToFirstFrameMs, 0)} ms (open ${f(s.openMs, 0)} ms)`);
+const L = s.load, at = (x) => f(x, 0);
+console.log(`  milestones (ms)        script ${at(L.scriptStart)}, wasm ready ${at(L.moduleReady)}, fetched ${at(L.fetched)}, map parsed ${at(L.mapParsed)}, pack opened ${at(L.opened)}, view ${at(L.viewReady)}, map set ${at(L.environmentSet)}, first frame ${at(L.firstFrame)}`);
 console.log(`downloaded               ${f(s.bytesDownloaded / 1e6, 2)} MB`);
 console.log(`drag (${s.dragFrames} frames)       ${f(s.dragFps)} fps; median frame ${f(s.dragFrameMedianMs)} ms = rotate ${f(s.dragRotateMedianMs)} + relight ${f(s.dragRelightMedianMs)} + draw ${f(s.dragDrawMedianMs)} ms`);
 const sp = s.spin, sd = s.spinDrawOnly;

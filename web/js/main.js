@@ -17,7 +17,11 @@ const stats = {
   converged: false, preview: false, lastFrameAt: null, convergeMs: null, previewSetupMs: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
   lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
   bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,
+  // Milestones of a URL load, ms after the page's navigation started (performance.now()).
+  load: {scriptStart: null, fetched: null, mapParsed: null, moduleReady: null, opened: null,
+         viewReady: null, environmentSet: null, firstFrame: null},
 };
+stats.load.scriptStart = performance.now();
 window.prtStats = stats;
 
 const app = {
@@ -120,6 +124,7 @@ async function openPack(bytes, name) {
     throw new Error(`Cannot open ${name}: ${e.message}`);
   }
   stats.openMs = performance.now() - t0;
+  stats.load.opened = performance.now();
   app.packName = name;
   stats.pack = name;
   stats.samples = app.pack.samples;
@@ -129,6 +134,7 @@ async function openPack(bytes, name) {
   stats.coefficients = app.pack.coefficients;
   $('budget').max = String(app.pack.coefficients);
   makeView();
+  stats.load.viewReady = performance.now();
 }
 
 function makeView() {
@@ -176,6 +182,7 @@ function start() {
     return;
   }
   app.pack.setEnvironment(app.env.rgb, app.env.width, app.env.height);
+  if (!app.firstFrameDone) stats.load.environmentSet = performance.now();
   app.pack.setRotationY(app.angle);
   app.appliedAngle = app.angle;
   app.view.setRotation(app.angle);
@@ -184,6 +191,7 @@ function start() {
   if (!app.firstFrameDone) {
     app.firstFrameDone = true;
     stats.loadToFirstFrameMs = performance.now();
+    stats.load.firstFrame = stats.loadToFirstFrameMs;
   }
   // The preview's weights are built at its first use after a new map (about one full
   // resampling): build them now, so that the first frame of a drag is as fast as the others.
@@ -233,8 +241,11 @@ async function loadFromUrl() {
   setState('loading');
   try {
     const [packBytes, envBytes] = await Promise.all([
-      packUrl ? fetchBytes(packUrl) : null, envUrl ? fetchBytes(envUrl) : null]);
+      packUrl ? fetchBytes(packUrl) : null, envUrl ? fetchBytes(envUrl) : null,
+      loadRuntimeModule().then(() => (stats.load.moduleReady = performance.now()))]);
+    stats.load.fetched = performance.now();
     if (envBytes) setEnvironment(parseRadianceHdr(envBytes.buffer, envUrl), envUrl);
+    stats.load.mapParsed = performance.now();
     if (packBytes) await openPack(packBytes, packUrl);
     start();
   } catch (e) {

@@ -166,7 +166,7 @@ async function main() {
       const med = (xs) => [...xs].sort((p, q) => p - q)[Math.floor(xs.length / 2)];
       console.log(JSON.stringify({
         pack: a.pack, samples: s.samples, n: s.cubemapSize, budget: s.budget, ...bench,
-        loadToFirstFrameMs: s0.loadToFirstFrameMs, openMs: s0.openMs,
+        loadToFirstFrameMs: s0.loadToFirstFrameMs, openMs: s0.openMs, load: s0.load,
         bytesDownloaded: s0.bytesDownloaded, dragFps: s.dragFps, dragFrames: s.dragFrames,
         dragFrameMedianMs: med(dragFrames.map((f) => f.totalMs)),
         dragRotateMedianMs: med(dragFrames.map((f) => f.rotateMs)),
