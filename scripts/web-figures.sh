@@ -3,7 +3,8 @@
 # against the native C API on one thread, on the demo pack under sunrise.hdr.
 #   in the page (web/test/page_test.mjs --measure): exact relight, a PBI frame at the default
 #     budget (100 terms), set_rotation_y with the full map and with preview, page load → first
-#     frame, bytes downloaded, fps and the split of a frame while a drag rotates the environment;
+#     frame, bytes downloaded, fps and the split of a frame while the page's loop rotates the
+#     environment (prtPage.spin), while it only draws, and while puppeteer drags;
 #   native (build/bench/prt-runtime-bench, the same pack and .hdr): the same relights and the
 #     rotation's lighting per frame.
 # Usage: scripts/web-figures.sh [PACK] (default demo-out/default.prtpack, from scripts/demo.sh).
@@ -33,9 +34,17 @@ const r = s.relightMs;
 console.log(`relight, median of ${s.frames} frames under a rotating map (as prt-runtime-bench):`);
 console.log(`  exact ${f(r[0], 2)} ms, PBI-30 ${f(r[30], 2)} ms, PBI-100 ${f(r[100], 2)} ms, PBI-300 ${f(r[300], 2)} ms`);
 console.log(`set_rotation_y           ${f(s.rotateFullMs)} ms full map, ${f(s.rotatePreviewMs)} ms with preview`);
+const byWidth = Object.entries(s.rotateByMapWidthMs).sort((x, y) => y[0] - x[0])
+    .map(([w, ms]) => `${w} × ${w / 2} ${f(ms)} ms`).join(", ");
+console.log(`set_rotation_y by map    ${byWidth} (no preview)`);
 console.log(`load → first frame       ${f(s.loadToFirstFrameMs, 0)} ms (open ${f(s.openMs, 0)} ms)`);
+const L = s.load, at = (x) => f(x, 0);
+console.log(`  milestones (ms)        script ${at(L.scriptStart)}, wasm ready ${at(L.moduleReady)}, fetched ${at(L.fetched)}, map parsed ${at(L.mapParsed)}, pack opened ${at(L.opened)}, view ${at(L.viewReady)}, map set ${at(L.environmentSet)}, first frame ${at(L.firstFrame)}`);
 console.log(`downloaded               ${f(s.bytesDownloaded / 1e6, 2)} MB`);
 console.log(`drag (${s.dragFrames} frames)       ${f(s.dragFps)} fps; median frame ${f(s.dragFrameMedianMs)} ms = rotate ${f(s.dragRotateMedianMs)} + relight ${f(s.dragRelightMedianMs)} + draw ${f(s.dragDrawMedianMs)} ms`);
+const sp = s.spin, sd = s.spinDrawOnly;
+console.log(`page loop rotating       ${f(sp.fps)} fps (${sp.frames} frames; median rotate ${f(sp.rotateMs, 2)} + relight ${f(sp.relightMs, 2)} + draw ${f(sp.drawMs, 2)} ms)`);
+console.log(`  drawing alone          ${f(sd.fps)} fps (no relight; draw ${f(sd.drawMs, 2)} ms); an empty animation frame loop ${f(s.rafOnlyFps)} fps`);
 console.log(`memory                   ${f(s.memoryBytes / 1048576)} MiB in the handle, ${f(s.wasmHeapBytes / 1048576, 0)} MiB wasm heap`);
 ' "$OUT/page.json"
 echo

@@ -14,10 +14,14 @@ const kKeptFrames = 600;
 const stats = {
   state: 'empty', error: null, pack: null, env: null, samples: 0, triangles: 0, isImage: false,
   cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
-  converged: false, preview: false, lastFrameAt: null, convergeMs: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
+  converged: false, preview: false, lastFrameAt: null, convergeMs: null, previewSetupMs: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
   lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
   bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,
+  // Milestones of a URL load, ms after the page's navigation started (performance.now()).
+  load: {scriptStart: null, fetched: null, mapParsed: null, moduleReady: null, opened: null,
+         viewReady: null, environmentSet: null, firstFrame: null},
 };
+stats.load.scriptStart = performance.now();
 window.prtStats = stats;
 
 const app = {
@@ -120,6 +124,7 @@ async function openPack(bytes, name) {
     throw new Error(`Cannot open ${name}: ${e.message}`);
   }
   stats.openMs = performance.now() - t0;
+  stats.load.opened = performance.now();
   app.packName = name;
   stats.pack = name;
   stats.samples = app.pack.samples;
@@ -129,6 +134,7 @@ async function openPack(bytes, name) {
   stats.coefficients = app.pack.coefficients;
   $('budget').max = String(app.pack.coefficients);
   makeView();
+  stats.load.viewReady = performance.now();
 }
 
 function makeView() {
@@ -176,6 +182,7 @@ function start() {
     return;
   }
   app.pack.setEnvironment(app.env.rgb, app.env.width, app.env.height);
+  if (!app.firstFrameDone) stats.load.environmentSet = performance.now();
   app.pack.setRotationY(app.angle);
   app.appliedAngle = app.angle;
   app.view.setRotation(app.angle);
@@ -184,7 +191,14 @@ function start() {
   if (!app.firstFrameDone) {
     app.firstFrameDone = true;
     stats.loadToFirstFrameMs = performance.now();
+    stats.load.firstFrame = stats.loadToFirstFrameMs;
   }
+  // The preview's weights are built at its first use after a new map (about one full
+  // resampling): build them now, so that the first frame of a drag is as fast as the others.
+  const t0 = performance.now();
+  app.pack.setPreview(true);
+  app.pack.setPreview(false);
+  stats.previewSetupMs = performance.now() - t0;
   convergeSilently();
   stats.memoryBytes = app.pack.memoryBytes();
   stats.wasmHeapBytes = app.M.HEAPU8.length;
@@ -227,8 +241,11 @@ async function loadFromUrl() {
   setState('loading');
   try {
     const [packBytes, envBytes] = await Promise.all([
-      packUrl ? fetchBytes(packUrl) : null, envUrl ? fetchBytes(envUrl) : null]);
+      packUrl ? fetchBytes(packUrl) : null, envUrl ? fetchBytes(envUrl) : null,
+      loadRuntimeModule().then(() => (stats.load.moduleReady = performance.now()))]);
+    stats.load.fetched = performance.now();
     if (envBytes) setEnvironment(parseRadianceHdr(envBytes.buffer, envUrl), envUrl);
+    stats.load.mapParsed = performance.now();
     if (packBytes) await openPack(packBytes, packUrl);
     start();
   } catch (e) {
@@ -303,7 +320,7 @@ function framesToConverge() {
 
 function tick() {
   requestAnimationFrame(tick);
-  if (!app.envSet || stats.state === 'error') return;
+  if (!app.envSet || stats.state === 'error' || app.spinning) return;
   try {
     const rotate = app.angle !== app.appliedAngle;
     if (rotate || app.framesLeft > 0 || app.dragging) {
@@ -367,6 +384,22 @@ function readControls() {
 
 // ---- Test and measurement hooks (web/test/page_test.mjs, docs/web.md) -------------------------
 
+// A lat-long map at half the width and height, each pixel the mean of 2 × 2 (for timing only).
+function halveMap(m) {
+  const w = m.width >> 1, h = m.height >> 1;
+  const rgb = new Float32Array(3 * w * h);
+  for (let y = 0; y < h; ++y) {
+    for (let x = 0; x < w; ++x) {
+      for (let c = 0; c < 3; ++c) {
+        const at = (xx, yy) => m.rgb[3 * (yy * m.width + xx) + c];
+        rgb[3 * (y * w + x) + c] = 0.25 * (at(2 * x, 2 * y) + at(2 * x + 1, 2 * y) +
+                                           at(2 * x, 2 * y + 1) + at(2 * x + 1, 2 * y + 1));
+      }
+    }
+  }
+  return {width: w, height: h, rgb};
+}
+
 function base64(bytes) {
   let s = '';
   for (let i = 0; i < bytes.length; i += 8192) {
@@ -389,9 +422,11 @@ window.prtPage = {
    * Times the runtime in this page as bench/runtime_bench.cpp times the native C API: frames of
    * `terms` (0 exact, else PBI restarted from no light) under a rotating environment (rotate by
    * 0.01 rad, untimed, then time the relight; the first 2 frames warm up), and set_rotation_y
-   * alone with the full map and with preview. Medians in ms. Leaves the view as it found it.
+   * alone with the full map and with preview; and set_rotation_y from the map averaged down to
+   * each width of `mapWidths` (where the rotation's time goes: docs/web.md, "Figures"). Medians
+   * in ms. Leaves the view as it found it.
    */
-  benchmark({frames = 30, budgets = [0, 30, 100, 300]} = {}) {
+  benchmark({frames = 30, budgets = [0, 30, 100, 300], mapWidths = []} = {}) {
     const p = app.pack;
     const a0 = app.angle;
     const time = (fn) => {
@@ -417,11 +452,77 @@ window.prtPage = {
       const t = Array.from({length: frames}, (_, f) => time(() => p.setRotationY(a0 + 0.01 * f)));
       out[preview ? 'rotatePreviewMs' : 'rotateFullMs'] = median(t);
     }
+    p.setPreview(false);
+    out.rotateByMapWidthMs = {};
+    let map = app.env;
+    for (const w of [...mapWidths].sort((x, y) => y - x)) {
+      while (map.width > w && map.height >= 4) map = halveMap(map);
+      p.setEnvironment(map.rgb, map.width, map.height);
+      const t = Array.from({length: 10}, (_, f) => time(() => p.setRotationY(a0 + 0.01 * f)));
+      out.rotateByMapWidthMs[map.width] = median(t);
+    }
+    if (mapWidths.length) p.setEnvironment(app.env.rgb, app.env.width, app.env.height);
     p.setPreview(app.preview);
     p.setRotationY(a0);
     exactFrame();
     convergeSilently();
     return out;
+  },
+  /**
+   * The page's own loop rotating the environment, as a drag does but without input events: every
+   * animation frame for `ms` turns the map by `step` radians in preview (set_rotation_y), relights
+   * one PBI frame of the budget and draws it (`relight` false: only the background turns and the
+   * frame is drawn; `draw` false: nothing is drawn). Resolves to fps and per-frame medians in
+   * ms; then the page converges on the full map as after a drag.
+   */
+  spin({ms = 3000, step = 0.02, relight = true, draw = true} = {}) {
+    const p = app.pack;
+    app.spinning = true;
+    p.setPreview(true);
+    app.preview = true;
+    const split = {rotate: [], relight: [], draw: []};
+    let n = 0;
+    const t0 = performance.now();
+    return new Promise((resolve, reject) => {
+      const frame = () => {
+        try {
+          const t1 = performance.now();
+          app.angle += step;
+          if (relight) p.setRotationY(app.angle);
+          const t2 = performance.now();
+          if (relight) app.view.setRadiance(p.relight(stats.budget));
+          const t3 = performance.now();
+          app.view.setRotation(app.angle);
+          if (draw) app.view.render();
+          const t4 = performance.now();
+          split.rotate.push(t2 - t1);
+          split.relight.push(t3 - t2);
+          split.draw.push(t4 - t3);
+          ++n;
+          if (t4 - t0 < ms) {
+            requestAnimationFrame(frame);
+            return;
+          }
+          const seconds = (performance.now() - t0) / 1000;
+          p.setPreview(false);
+          app.preview = false;
+          if (relight) {
+            app.appliedAngle = app.angle;
+          } else {
+            app.appliedAngle = NaN;  // the lighting is behind the view: the loop catches up
+          }
+          app.framesLeft = framesToConverge();
+          stats.converged = false;
+          app.spinning = false;
+          resolve({fps: n / seconds, frames: n, rotateMs: median(split.rotate),
+                   relightMs: median(split.relight), drawMs: median(split.draw)});
+        } catch (e) {
+          app.spinning = false;
+          reject(e);
+        }
+      };
+      requestAnimationFrame(frame);
+    });
   },
 };
 

@@ -28,10 +28,11 @@ export class MeshView {
    */
   constructor(canvas, camera, positions, triangles) {
     this.canvas = canvas;
-    // preserveDrawingBuffer: screenshots and readPixels see the last frame; no antialiasing, so
-    // that mesh pixels are prt-view's (one sample at each pixel centre).
+    // No antialiasing, so that mesh pixels are prt-view's (one sample at each pixel centre). The
+    // drawing buffer is not preserved (a copy per frame, 20 % of a frame in software WebGL):
+    // screenshots see the composited frame, and meshMask() draws into its own target.
     this.renderer = new THREE.WebGLRenderer({canvas, antialias: false,
-                                             preserveDrawingBuffer: true});
+                                             preserveDrawingBuffer: false});
     this.renderer.setPixelRatio(1);
     this.renderer.autoClear = true;
     this.scene = new THREE.Scene();

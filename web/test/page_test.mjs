@@ -143,7 +143,20 @@ async function main() {
     await (await page.$(s0.isImage ? '#image' : '#gl')).screenshot({path: shot});
 
     if (a.measure) {
-      const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30}));
+      const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30,
+                                                                        mapWidths: [1024, 512, 256, 128]}));
+      // The page's loop rotating by itself: as a drag, and drawing alone (no relight).
+      const spin = await page.evaluate(() => window.prtPage.spin({ms: 3000}));
+      await page.waitForFunction(() => window.prtStats.converged, {timeout: 60000});
+      const spinDraw = await page.evaluate(() => window.prtPage.spin({ms: 3000, relight: false}));
+      await page.waitForFunction(() => window.prtStats.converged, {timeout: 60000});
+      const raf = await page.evaluate(() => new Promise((ok) => {
+        let n = 0;
+        const t0 = performance.now();
+        const f = () => (++n, performance.now() - t0 < 2000 ? requestAnimationFrame(f)
+                                                             : ok(n / ((performance.now() - t0) / 1000)));
+        requestAnimationFrame(f);
+      }));
       await drag(page, 120, 16);
       await page.waitForFunction(() => window.prtStats.dragFps !== null, {timeout: 30000});
       await page.waitForFunction(() => window.prtStats.converged, {timeout: 60000});
@@ -153,12 +166,13 @@ async function main() {
       const med = (xs) => [...xs].sort((p, q) => p - q)[Math.floor(xs.length / 2)];
       console.log(JSON.stringify({
         pack: a.pack, samples: s.samples, n: s.cubemapSize, budget: s.budget, ...bench,
-        loadToFirstFrameMs: s0.loadToFirstFrameMs, openMs: s0.openMs,
+        loadToFirstFrameMs: s0.loadToFirstFrameMs, openMs: s0.openMs, load: s0.load,
         bytesDownloaded: s0.bytesDownloaded, dragFps: s.dragFps, dragFrames: s.dragFrames,
         dragFrameMedianMs: med(dragFrames.map((f) => f.totalMs)),
         dragRotateMedianMs: med(dragFrames.map((f) => f.rotateMs)),
         dragRelightMedianMs: med(dragFrames.map((f) => f.relightMs)),
         dragDrawMedianMs: med(dragFrames.map((f) => f.drawMs)),
+        spin, spinDrawOnly: spinDraw, rafOnlyFps: raf,
         memoryBytes: s0.memoryBytes, wasmHeapBytes: s0.wasmHeapBytes,
       }, null, 1));
       return;
