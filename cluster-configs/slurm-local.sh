@@ -530,7 +530,10 @@ cmd_requeue_test() {
          submit "$scene" "$out" "$@")
     log "submitted batch job $id with --time=1 --signal=B:USR1@30"
   else
-    id=$(submit "$scene" "$out" "$@")
+    # A time limit well past the script's --signal=B:USR1@300: Slurm's own warning must not come
+    # before ours (with a 5-minute limit it came within a second or two, and under load it beat
+    # the 10 journaled jobs this waits for).
+    id=$(PRT_SLURM_TIME=60 submit "$scene" "$out" "$@")
     log "submitted batch job $id"
     local n=0
     for _ in $(seq 600); do
