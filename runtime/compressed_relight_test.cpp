@@ -185,19 +185,11 @@ TEST(CompressedRelighter, Equation8MatchesDenseProductForEveryWaveletPair) {
   }
 }
 
-// A transport at n = 2 (24 columns), 11 bits, on TwoSegmentDomain(mesh_count, 67, 61, 5): column
-// j has depth j mod (maximum + 1) and stores coefficient i where stored(j, i), with a random
-// non-zero quantised value (no column where it stores nothing).
-// With `channels` = 3, the rows of 3 colour channels over 3 copies of that domain.
+// Columns of t (its header set): column j at depth j mod (maximum + 1), storing coefficient i
+// where stored(j, i), each with a random non-zero quantised value; columns storing nothing are
+// left out.
 template <class Stored>
-CompressedTransport TiledTransport(uint32_t mesh_count, std::mt19937& rng, Stored stored,
-                                   uint32_t channels = 1) {
-  CompressedTransport t;
-  t.header.cubemap_n = 2;
-  t.header.bits = 11;
-  t.header.domain = PerChannelDomain(TwoSegmentDomain(mesh_count, 67, 61, 5), channels);
-  t.header.channels = channels;
-  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+void AddColumns(CompressedTransport& t, std::mt19937& rng, Stored stored) {
   const uint32_t S = t.header.sample_count;
   const auto M = static_cast<uint32_t>(t.header.column_count());
   const int maxd = MaxColumnDepth(t.header.domain);
@@ -214,6 +206,22 @@ CompressedTransport TiledTransport(uint32_t mesh_count, std::mt19937& rng, Store
     }
     if (!c.index.empty()) t.columns.push_back(c);
   }
+}
+
+// A transport at n = 2 (24 columns), 11 bits, on TwoSegmentDomain(mesh_count, 67, 61, 5): column
+// j has depth j mod (maximum + 1) and stores coefficient i where stored(j, i), with a random
+// non-zero quantised value (no column where it stores nothing).
+// With `channels` = 3, the rows of 3 colour channels over 3 copies of that domain.
+template <class Stored>
+CompressedTransport TiledTransport(uint32_t mesh_count, std::mt19937& rng, Stored stored,
+                                   uint32_t channels = 1) {
+  CompressedTransport t;
+  t.header.cubemap_n = 2;
+  t.header.bits = 11;
+  t.header.domain = PerChannelDomain(TwoSegmentDomain(mesh_count, 67, 61, 5), channels);
+  t.header.channels = channels;
+  t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
+  AddColumns(t, rng, stored);
   return t;
 }
 
@@ -481,24 +489,11 @@ CompressedTransport MeshTransport(ColumnWavelet wavelet, uint32_t channels, std:
   t.header.domain = PerChannelDomain(d, channels);
   t.header.channels = channels;
   t.header.sample_count = static_cast<uint32_t>(t.header.domain.sample_count());
-  const uint32_t S = t.header.sample_count;
-  const auto M = static_cast<uint32_t>(t.header.column_count());
-  const int maxd = MaxColumnDepth(t.header.domain);
-  for (uint32_t j = 0; j < M; ++j) {
-    if (j % 7 == 3) continue;  // absent
-    CompressedColumn c;
-    c.column = j;
-    c.depth = static_cast<uint8_t>(j % static_cast<uint32_t>(maxd + 1));
-    c.scale = 1.0f;
+  AddColumns(t, rng, [&](uint32_t j, uint32_t) {
+    if (j % 7 == 3) return false;  // absent columns
     const uint32_t keep = j % 3 == 0 ? 1 : (j % 3 == 1 ? 5 : 50);
-    for (uint32_t i = 0; i < S; ++i) {
-      if (rng() % keep != 0) continue;
-      c.index.push_back(i);
-      const int32_t q = static_cast<int32_t>(rng() % 2001) - 1000;
-      c.q.push_back(q == 0 ? 1 : q);
-    }
-    if (!c.index.empty()) t.columns.push_back(c);
-  }
+    return rng() % keep == 0;
+  });
   return t;
 }
 
