@@ -170,8 +170,8 @@ class CompressedRelighter {
   };
   std::vector<Term> terms_;
   std::vector<Term> late_terms_;
-  // X is scattered tile by tile: tile_ consecutive coefficients (4096, 64 KB of X with three
-  // channels, so that every term's read-modify-write stays within L1/L2 of the core that owns
+  // X is scattered tile by tile: tile_ consecutive coefficients (16,384, 256 KB of X with three
+  // channels, so that every term's read-modify-write stays within L2 of the core that owns
   // the tile), all of a depth's lights per tile.
   // tile_offsets_[(slot·P + c)·(tiles_ + 1) + t], P = T's colour channels, is the first term
   // of column `slot` whose index is at least c·V + t·tile_ (entry tiles_: at least (c + 1)·V;
