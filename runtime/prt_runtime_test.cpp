@@ -142,8 +142,8 @@ std::vector<float> ReadNpy(const std::string& path) {
 // prt-view's radiance for the pack under kEnv: --exact, or `terms` of `lighting`.
 std::vector<float> PrtViewRadiance(const std::string& pack, const std::string& mode_args,
                                    const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / "prt_runtime_test";
-  fs::create_directories(dir);
+  // This process's own folder: CTest runs each pack's case as its own process, in parallel.
+  const fs::path dir = WorkDir();
   const std::string npy = (dir / (name + ".npy")).string();
   fs::remove(npy);
   const std::string cmd = std::string("'") + PRT_VIEW_EXE + "' '" + pack + "' --env '" + kEnv +
