@@ -32,10 +32,10 @@
 
 #include "bench/bench_scenes.h"
 #include "formats/visibility_blocks.h"
-#include "viewer/block_lighting.h"
-#include "viewer/brdf.h"
+#include "runtime/block_lighting.h"
+#include "runtime/brdf.h"
 #include "viewer/rasterizer.h"
-#include "viewer/triple_product.h"
+#include "runtime/triple_product.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/tbb_parallel.h"

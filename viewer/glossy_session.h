@@ -1,8 +1,8 @@
 // A .prtpack that holds per-vertex visibility (VISB sections) opened for glossy relighting under
 // changing view, lighting and materials: the second asset kind of prtfarm (docs/viewer.md,
 // "Glossy assets"). Each frame evaluates Algorithm 1 of Inger, Farbman & Lischinski 2013
-// (viewer/triple_product.h) for every vertex towards the camera's eye, with the per-block
-// lighting of viewer/block_lighting.h and the materials of the pack's META "materials"
+// (runtime/triple_product.h) for every vertex towards the camera's eye, with the per-block
+// lighting of runtime/block_lighting.h and the materials of the pack's META "materials"
 // (docs/scene-format.md, "Glossy materials"), then rasterises the vertex colours.
 #pragma once
 
@@ -14,10 +14,10 @@
 #include <vector>
 
 #include "formats/visibility_blocks.h"
-#include "viewer/block_lighting.h"
-#include "viewer/brdf.h"
+#include "runtime/block_lighting.h"
+#include "runtime/brdf.h"
 #include "viewer/rasterizer.h"
-#include "viewer/triple_product.h"
+#include "runtime/triple_product.h"
 #include "vocabulary/envmap.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/scene.h"

@@ -29,7 +29,7 @@ struct FitBox {
 
 // A mesh's material for glossy (triple-product) relighting, docs/scene-format.md "Glossy
 // materials": the mesh's albedo is the diffuse part, `specular` weighs the lobe of `brdf`
-// (viewer/brdf.h). Transport runs ignore it (their BRDF is diffuse).
+// (runtime/brdf.h). Transport runs ignore it (their BRDF is diffuse).
 struct GlossyMaterialSettings {
   std::string brdf = "lambert";  // lambert | phong | ashikhmin-shirley
   Rgb specular{0.f, 0.f, 0.f};   // albedo + specular ≤ 1 per channel

@@ -26,8 +26,8 @@
 #include <span>
 
 #include "formats/visibility_blocks.h"
-#include "viewer/block_lighting.h"
-#include "viewer/brdf.h"
+#include "runtime/block_lighting.h"
+#include "runtime/brdf.h"
 
 namespace prt {
 

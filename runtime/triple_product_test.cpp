@@ -1,4 +1,4 @@
-#include "viewer/triple_product.h"
+#include "runtime/triple_product.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "viewer/brdf.h"
+#include "runtime/brdf.h"
 
 #include <algorithm>
 #include <cmath>

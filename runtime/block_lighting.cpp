@@ -1,10 +1,9 @@
-#include "viewer/block_lighting.h"
-
-#include <tbb/parallel_for.h>
+#include "runtime/block_lighting.h"
 
 #include <stdexcept>
 
-#include "viewer/brdf.h"
+#include "runtime/brdf.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
@@ -69,7 +68,8 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
   out.pixels.resize(entries * 256);
   out.suffix_vec.resize(entries * 257 * 3);
   out.suffix_rgbxyz.assign(static_cast<std::size_t>(blocks.block_count()) * 257, {});
-  tbb::parallel_for(0, blocks.block_count(), [&](int b) {
+  ParallelFor(static_cast<std::size_t>(blocks.block_count()), [&](std::size_t bi) {
+    const int b = static_cast<int>(bi);
     for (int c = 0; c < 3; ++c) {
       const std::vector<float>& ch = light.Channel(c);
       const std::size_t e = static_cast<std::size_t>(b) * 3 + c;

@@ -1,19 +1,22 @@
-#include "viewer/triple_product.h"
+#include "runtime/triple_product.h"
 
-#include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
-
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "vocabulary/errors.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
 namespace {
+
+// Vertices per parallel work item of RelightTripleProduct.
+constexpr std::size_t kVertexChunk = 256;
 
 // Σ_{k ∈ [a, b)} x[k]·y[k] with eight partial sums (vectorises without -ffast-math).
 inline float DotRange(const float* x, const float* y, int a, int b) {
@@ -366,17 +369,19 @@ TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapB
   CheckScene(scene, blocks, light);
   if (out_rgb.size() != scene.positions.size() * 3)
     throw std::invalid_argument("RelightTripleProduct: output size");
-  tbb::enumerable_thread_specific<TripleProductStats> local;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, scene.positions.size(), 256),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      TripleProductStats& st = local.local();
-                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                        const auto b =
-                            TripleProductVertex(scene, blocks, light, v, eye, &st, options);
-                        for (int c = 0; c < 3; ++c)
-                          out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
-                      }
-                    });
+  // Fixed chunks of vertices, each with its own statistics, summed in order: the result does not
+  // depend on the parallel backend.
+  const std::size_t nv = scene.positions.size();
+  const std::size_t chunks = (nv + kVertexChunk - 1) / kVertexChunk;
+  std::vector<TripleProductStats> local(chunks);
+  ParallelFor(chunks, [&](std::size_t chunk) {
+    TripleProductStats& st = local[chunk];
+    const std::size_t end = std::min(nv, (chunk + 1) * kVertexChunk);
+    for (std::size_t v = chunk * kVertexChunk; v < end; ++v) {
+      const auto b = TripleProductVertex(scene, blocks, light, v, eye, &st, options);
+      for (int c = 0; c < 3; ++c) out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
+    }
+  });
   TripleProductStats total;
   for (const auto& s : local) total += s;
   return total;
@@ -411,15 +416,12 @@ void RelightPixelBasisReference(const GlossyScene& scene, const CubemapBlocks& b
   CheckScene(scene, blocks, light);
   if (out_rgb.size() != scene.positions.size() * 3)
     throw std::invalid_argument("RelightPixelBasisReference: output size");
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, scene.positions.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                        const auto b =
-                            PixelBasisReferenceVertex(scene, blocks, light, v, eye, skip_occluded);
-                        for (int c = 0; c < 3; ++c)
-                          out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
-                      }
-                    });
+  ParallelForRange(0, scene.positions.size(), 64, [&](std::size_t lo, std::size_t hi) {
+    for (std::size_t v = lo; v < hi; ++v) {
+      const auto b = PixelBasisReferenceVertex(scene, blocks, light, v, eye, skip_occluded);
+      for (int c = 0; c < 3; ++c) out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
+    }
+  });
 }
 
 }  // namespace prt

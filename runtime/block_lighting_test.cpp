@@ -1,4 +1,4 @@
-#include "viewer/block_lighting.h"
+#include "runtime/block_lighting.h"
 
 #include <gtest/gtest.h>
 
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "formats/visibility_blocks.h"
-#include "viewer/brdf.h"
+#include "runtime/brdf.h"
 
 namespace prt {
 namespace {
