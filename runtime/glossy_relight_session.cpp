@@ -154,6 +154,17 @@ TripleProductStats GlossyRelightSession::Relight(const BlockLighting& light, con
   }
 }
 
+TripleProductStats GlossyRelightSession::RelightRange(const BlockLighting& light, const Vec3& eye,
+                                                      std::size_t first, std::size_t count,
+                                                      std::span<float> rgb,
+                                                      const TripleProductOptions& options) const {
+  try {
+    return RelightTripleProductRange(Scene(), *blocks_, light, eye, first, count, rgb, options);
+  } catch (const NumericalError& e) {
+    throw NumericalError(path_ + ": " + e.what());
+  }
+}
+
 void GlossyRelightSession::RelightReference(const BlockLighting& light, const Vec3& eye,
                                             std::span<float> rgb) const {
   try {

@@ -76,6 +76,10 @@ class GlossyRelightSession {
   // NumericalError naming the pack and the vertex when the radiance overflows float.
   TripleProductStats Relight(const BlockLighting& light, const Vec3& eye, std::span<float> rgb,
                              const TripleProductOptions& options = {}) const;
+  // Vertices [first, first + count) only (3·count floats), as Relight gives them.
+  TripleProductStats RelightRange(const BlockLighting& light, const Vec3& eye, std::size_t first,
+                                  std::size_t count, std::span<float> rgb,
+                                  const TripleProductOptions& options = {}) const;
   void RelightReference(const BlockLighting& light, const Vec3& eye, std::span<float> rgb) const;
 
  protected:

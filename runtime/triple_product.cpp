@@ -366,20 +366,30 @@ TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapB
                                         const BlockLighting& light, const Vec3& eye,
                                         std::span<float> out_rgb,
                                         const TripleProductOptions& options) {
+  return RelightTripleProductRange(scene, blocks, light, eye, 0, scene.positions.size(), out_rgb,
+                                   options);
+}
+
+TripleProductStats RelightTripleProductRange(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                             const BlockLighting& light, const Vec3& eye,
+                                             std::size_t first, std::size_t count,
+                                             std::span<float> out_rgb,
+                                             const TripleProductOptions& options) {
   CheckScene(scene, blocks, light);
-  if (out_rgb.size() != scene.positions.size() * 3)
-    throw std::invalid_argument("RelightTripleProduct: output size");
+  const std::size_t nv = scene.positions.size();
+  if (first > nv || count > nv - first || out_rgb.size() != count * 3)
+    throw std::invalid_argument("RelightTripleProduct: vertex range or output size");
   // Fixed chunks of vertices, each with its own statistics, summed in order: the result does not
   // depend on the parallel backend.
-  const std::size_t nv = scene.positions.size();
-  const std::size_t chunks = (nv + kVertexChunk - 1) / kVertexChunk;
+  const std::size_t chunks = (count + kVertexChunk - 1) / kVertexChunk;
   std::vector<TripleProductStats> local(chunks);
   ParallelFor(chunks, [&](std::size_t chunk) {
     TripleProductStats& st = local[chunk];
-    const std::size_t end = std::min(nv, (chunk + 1) * kVertexChunk);
-    for (std::size_t v = chunk * kVertexChunk; v < end; ++v) {
+    const std::size_t end = std::min(count, (chunk + 1) * kVertexChunk);
+    for (std::size_t i = chunk * kVertexChunk; i < end; ++i) {
+      const std::size_t v = first + i;
       const auto b = TripleProductVertex(scene, blocks, light, v, eye, &st, options);
-      for (int c = 0; c < 3; ++c) out_rgb[v * 3 + c] = ToFloatRadiance(b[c], v, c);
+      for (int c = 0; c < 3; ++c) out_rgb[i * 3 + c] = ToFloatRadiance(b[c], v, c);
     }
   });
   TripleProductStats total;

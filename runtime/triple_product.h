@@ -90,6 +90,14 @@ TripleProductStats RelightTripleProduct(const GlossyScene& scene, const CubemapB
                                         std::span<float> out_rgb,
                                         const TripleProductOptions& options = {});
 
+// Vertices [first, first + count) only, into out_rgb (3·count floats): the same values as
+// RelightTripleProduct gives those vertices (a host splitting a frame between its threads).
+TripleProductStats RelightTripleProductRange(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                             const BlockLighting& light, const Vec3& eye,
+                                             std::size_t first, std::size_t count,
+                                             std::span<float> out_rgb,
+                                             const TripleProductOptions& options = {});
+
 // The reference: the same sum in the pixel basis over all 6·n·n texels (the BRDF evaluated at
 // every texel centre, the visibility decoded to pixels). skip_occluded evaluates the BRDF only
 // where V > 0 (a cheaper reference; the paper's baseline is the full sum).
