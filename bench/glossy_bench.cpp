@@ -31,11 +31,12 @@
 #include <vector>
 
 #include "bench/bench_scenes.h"
+#include "bench/glossy_bench_scene.h"
 #include "formats/visibility_blocks.h"
 #include "runtime/block_lighting.h"
 #include "runtime/brdf.h"
-#include "viewer/rasterizer.h"
 #include "runtime/triple_product.h"
+#include "viewer/rasterizer.h"
 #include "vocabulary/errors.h"
 #include "vocabulary/image_io.h"
 #include "vocabulary/tbb_parallel.h"
@@ -107,89 +108,6 @@ std::size_t ZstdSize(const std::vector<uint8_t>& data, int level) {
   std::vector<uint8_t> dst(ZSTD_compressBound(data.size()));
   const std::size_t r = ZSTD_compress(dst.data(), dst.size(), data.data(), data.size(), level);
   return ZSTD_isError(r) ? 0 : r;
-}
-
-// A flyby: the scene camera's eye turned about the vertical through its target.
-std::vector<Camera> Flyby(const Camera& base, int views) {
-  std::vector<Camera> out;
-  for (int i = 0; i < views; ++i) {
-    const double a = views == 1 ? 0.0 : (-50.0 + 100.0 * i / (views - 1)) * std::numbers::pi / 180;
-    Camera c = base;
-    const Vec3 d = base.eye - base.target;
-    c.eye = base.target + Vec3{d.x * std::cos(a) + d.z * std::sin(a),
-                               d.y * (1.0 + 0.25 * std::sin(2 * a)),
-                               -d.x * std::sin(a) + d.z * std::cos(a)};
-    out.push_back(c);
-  }
-  return out;
-}
-
-struct Frame {
-  ImageRgb image;
-  std::vector<uint8_t> covered;
-};
-
-Frame Render(const Camera& cam, const std::vector<Vec3>& positions,
-             const std::vector<std::array<uint32_t, 3>>& triangles, const std::vector<float>& rgb) {
-  const RasterImage r = RasterizeTriangles(cam, positions, triangles, rgb);
-  Frame f{ImageRgb(r.width, r.height), std::vector<uint8_t>(r.triangle.size())};
-  f.image.pixels = r.rgb;
-  for (std::size_t i = 0; i < r.triangle.size(); ++i) f.covered[i] = r.triangle[i] >= 0;
-  return f;
-}
-
-// Image PSNR. The paper (§5, Figure 5) reports "the PSNR of our result" on the displayed image
-// against the reference image without further definition; we take the displayed-image convention:
-// both images tone-mapped the same way (exposure putting the reference's 99th percentile of
-// covered pixels at 1, clamp to [0, 1], sRGB encoding, i.e. the 8-bit PNG values / 255), peak 1,
-// MSE over the three channels of the pixels the meshes cover (background pixels, identical in
-// both, are left out: the figure does not depend on how much sky the camera sees). Also reported:
-// the whole frame (background included, as a PSNR of the full PNG would be) and a linear HDR
-// PSNR (no tone mapping, peak = the reference's brightest covered pixel), which also sees errors
-// in highlights that the displayed image clamps.
-struct PsnrSet {
-  double covered = 0, frame = 0, linear = 0;
-  PsnrSet& operator+=(const PsnrSet& o) {
-    covered += o.covered;
-    frame += o.frame;
-    linear += o.linear;
-    return *this;
-  }
-};
-
-double PsnrOf(double se, std::size_t count, double peak) {
-  return se == 0 ? 99.0 : 10 * std::log10(peak * peak * static_cast<double>(count) / se);
-}
-
-PsnrSet Psnr(const Frame& test, const Frame& ref, double exposure) {
-  double se = 0, se_lin = 0, peak = 0;
-  std::size_t count = 0;
-  for (std::size_t p = 0; p < ref.covered.size(); ++p) {
-    if (!ref.covered[p]) continue;
-    for (int c = 0; c < 3; ++c) {
-      const double x = test.image.pixels[p * 3 + c], y = ref.image.pixels[p * 3 + c];
-      const double a = SrgbEncode(std::clamp(x * exposure, 0.0, 1.0));
-      const double b = SrgbEncode(std::clamp(y * exposure, 0.0, 1.0));
-      se += (a - b) * (a - b);
-      se_lin += (x - y) * (x - y);
-      peak = std::max(peak, y);
-      ++count;
-    }
-  }
-  return {PsnrOf(se, count, 1.0), PsnrOf(se, ref.covered.size() * 3, 1.0),
-          PsnrOf(se_lin, count, peak)};
-}
-
-double ExposureOf(const Frame& ref) {
-  std::vector<float> v;
-  for (std::size_t p = 0; p < ref.covered.size(); ++p)
-    if (ref.covered[p])
-      v.push_back(std::max(
-          {ref.image.pixels[p * 3], ref.image.pixels[p * 3 + 1], ref.image.pixels[p * 3 + 2]}));
-  if (v.empty()) return 1.0;
-  std::nth_element(v.begin(), v.begin() + v.size() * 99 / 100, v.end());
-  const double p99 = v[v.size() * 99 / 100];
-  return p99 > 0 ? 1.0 / p99 : 1.0;
 }
 
 struct MaterialSet {
@@ -379,37 +297,12 @@ int main(int argc, char** argv) {
   std::string fps_line;
 
   for (const std::string& name : scenes) {
-    const SceneDescription scene = bench::BenchScene(name, n);
-    const SceneGeometry geometry = BuildSceneGeometry(scene);
-    const std::vector<SpatialSample> samples = SpatialSamplesOf(geometry);
-    const EmbreeScene embree(geometry);
-    const VisibilitySampler sampler(embree, {.n = n});
-    std::printf("[%s] %zu vertices: tracing %d² visibility maps…\n", name.c_str(), samples.size(),
-                n);
-    std::fflush(stdout);
-    // Traced maps are cached (block-coded) in the output folder; a rerun decodes them instead.
-    const std::string cache = out_dir + "/" + name + "_n" + std::to_string(n) + ".visb";
+    bench::GlossyBenchScene gscene = bench::LoadGlossyBenchScene(name, n, out_dir);
+    const VisibilityBlocks& vis = gscene.visibility;
+    const double trace_s = gscene.trace_seconds;
     VisibilitySamplerStats vst;
-    VisibilityBlocks vis;
-    double trace_s = 0;
-    if (std::filesystem::exists(cache + ".time")) {
-      std::ifstream in(cache, std::ios::binary);
-      const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
-      vis = DecodeVisibilityBlocks(bytes, cache);
-      std::ifstream(cache + ".time") >> trace_s >> vst.rays_traced;
-      std::printf("  (maps from %s, traced earlier in %.1f s)\n", cache.c_str(), trace_s);
-    } else {
-      t0 = Clock::now();
-      vis = sampler.ComputeBlocks(samples, &vst);
-      trace_s = Seconds(t0);
-      const std::vector<uint8_t> bytes = EncodeVisibilityBlocks(vis);
-      std::ofstream(cache, std::ios::binary)
-          .write(reinterpret_cast<const char*>(bytes.data()),
-                 static_cast<std::streamsize>(bytes.size()));
-      std::ofstream(cache + ".time") << trace_s << " " << vst.rays_traced << "\n";
-    }
-    const std::size_t nv = samples.size();
-    if (vis.vertex_count != nv) throw InputError(cache, "cached maps are for another scene");
+    vst.rays_traced = gscene.rays_traced;
+    const std::size_t nv = gscene.positions.size();
 
     // Storage.
     const std::vector<uint8_t> coded = EncodeVisibilityBlocks(vis);
@@ -437,23 +330,14 @@ int main(int argc, char** argv) {
     storage << line;
     std::printf("%s", line);
 
-    // Per-vertex scene data.
-    std::vector<Vec3> positions, normals;
-    std::vector<std::array<uint32_t, 3>> triangles;
-    std::vector<uint16_t> mat_index;
-    for (const SceneMesh& m : geometry.meshes) {
-      const auto base = static_cast<uint32_t>(positions.size());
-      for (const auto& t : m.mesh.triangles)
-        triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-      positions.insert(positions.end(), m.mesh.positions.begin(), m.mesh.positions.end());
-      mat_index.insert(mat_index.end(), m.mesh.positions.size(), m.is_ground ? 1 : 0);
-    }
-    for (const SpatialSample& s : samples) normals.push_back(s.normal);
-    const Rgb ground_albedo = geometry.meshes.back().albedo;
-    const std::vector<Camera> cams = Flyby(scene.camera, views);
+    const std::vector<Vec3>& positions = gscene.positions;
+    const std::vector<Vec3>& normals = gscene.normals;
+    const std::vector<std::array<uint32_t, 3>>& triangles = gscene.triangles;
+    const std::vector<uint16_t>& mat_index = gscene.material_index;
+    const Rgb ground_albedo = gscene.ground_albedo;
+    const std::vector<Camera> cams = bench::Flyby(gscene.scene.camera, views);
 
-    for (const MaterialSet& ms :
-         MaterialSets(geometry.meshes.front().albedo, ground_albedo, quick)) {
+    for (const MaterialSet& ms : MaterialSets(gscene.model_albedo, ground_albedo, quick)) {
       const std::vector<Material> materials = {ms.model, ms.ground};
       const GlossyScene gs{positions, normals, mat_index, materials, &vis};
       std::vector<float> ref(nv * 3);
@@ -462,7 +346,7 @@ int main(int argc, char** argv) {
       // Per diffuse mode (0: the paper's constant cosine per block, 1: exact cosine).
       std::vector<float> alg[2] = {std::vector<float>(nv * 3), std::vector<float>(nv * 3)};
       double alg_s[2] = {0, 0}, rms[2] = {0, 0};
-      PsnrSet psnr[2];
+      bench::PsnrSet psnr[2];
       double cat_psnr[2][kCategories] = {}, cat_sq[2][kCategories] = {};
       uint64_t cat_blocks[kCategories] = {};
       TripleProductStats st;
@@ -496,18 +380,21 @@ int main(int argc, char** argv) {
           ref_full_s += Seconds(t0) * static_cast<double>(nv) /
                         static_cast<double>((nv + stride - 1) / stride);
         }
-        const Frame fr = Render(cams[vi], positions, triangles, ref);
-        const double exposure = ExposureOf(fr);
+        const bench::GlossyFrame fr = bench::RenderGlossyFrame(cams[vi], positions, triangles, ref);
+        const double exposure = bench::ExposureOf(fr);
         for (int mode = 0; mode < 2; ++mode) {
-          const Frame fa = Render(cams[vi], positions, triangles, alg[mode]);
-          psnr[mode] += Psnr(fa, fr, exposure);
+          const bench::GlossyFrame fa =
+              bench::RenderGlossyFrame(cams[vi], positions, triangles, alg[mode]);
+          psnr[mode] += bench::Psnr(fa, fr, exposure);
           rms[mode] += bench::RelativeRmsError(alg[mode], ref, 0, nv);
           const Attribution at =
               Attribute(gs, blocks, light, eye,
                         {.exact_cosine = mode == 1, .full_rate_exponent = full_rate}, ref);
           for (int c = 0; c < kCategories; ++c) {
             cat_psnr[mode][c] +=
-                Psnr(Render(cams[vi], positions, triangles, at.partial[c]), fr, exposure).covered;
+                bench::Psnr(bench::RenderGlossyFrame(cams[vi], positions, triangles, at.partial[c]),
+                            fr, exposure)
+                    .covered;
             cat_sq[mode][c] += at.squared[c];
             if (mode == 0) cat_blocks[c] += at.blocks[c];
           }
@@ -522,7 +409,7 @@ int main(int argc, char** argv) {
         }
       }
       for (int mode = 0; mode < 2; ++mode) {
-        PsnrSet p = psnr[mode];
+        bench::PsnrSet p = psnr[mode];
         p.covered /= views;
         p.frame /= views;
         p.linear /= views;
@@ -574,8 +461,7 @@ int main(int argc, char** argv) {
         bn.insert(bn.end(), normals.begin(), normals.end());
         bm.insert(bm.end(), mat_index.begin(), mat_index.end());
       }
-      for (const MaterialSet& ms :
-           MaterialSets(geometry.meshes.front().albedo, ground_albedo, true)) {
+      for (const MaterialSet& ms : MaterialSets(gscene.model_albedo, ground_albedo, true)) {
         const std::vector<Material> materials = {ms.model, ms.ground};
         const GlossyScene gs{bp, bn, bm, materials, &big};
         std::vector<float> rgb(bp.size() * 3);

@@ -48,6 +48,18 @@ CubemapBlocks::CubemapBlocks(int n) : n_(n) {
           out[2] = static_cast<float>(d.z);
         }
   }
+  sample_soa_.assign(static_cast<std::size_t>(blocks_) * 72, 0.f);
+  for (int b = 0; b < blocks_; ++b)
+    for (int i = 0; i < 21; ++i)
+      for (int c = 0; c < 3; ++c)
+        sample_soa_[static_cast<std::size_t>(b) * 72 + c * 24 + i] =
+            sample_dir_[(static_cast<std::size_t>(b) * 21 + i) * 3 + c];
+  centre_xyz_.resize(static_cast<std::size_t>(blocks_) * 3);
+  for (int b = 0; b < blocks_; ++b) {
+    centre_xyz_[b] = static_cast<float>(centre_[b].x);
+    centre_xyz_[blocks_ + b] = static_cast<float>(centre_[b].y);
+    centre_xyz_[2 * static_cast<std::size_t>(blocks_) + b] = static_cast<float>(centre_[b].z);
+  }
 }
 
 const float* CubemapBlocks::SampleDirections(int block, int l) const {

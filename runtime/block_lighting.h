@@ -44,12 +44,23 @@ class CubemapBlocks {
   }
   // Unit direction through the continuous centre of the block.
   const Vec3& Centre(int block) const { return centre_[block]; }
+  // The same as floats, one array per coordinate (block_count() values each).
+  const float* CentreX() const { return centre_xyz_.data(); }
+  const float* CentreY() const { return centre_xyz_.data() + blocks_; }
+  const float* CentreZ() const {
+    return centre_xyz_.data() + 2 * static_cast<std::size_t>(blocks_);
+  }
   // 256 unit texel-centre directions of the block, 3 floats each (x, y, z), position order.
   const float* PixelDirections(int block) const {
     return &pixel_dir_[static_cast<std::size_t>(block) * 768];
   }
   // l×l unit directions (l = 1, 2, 4) at BlockDct::SamplePosition, index j·l + i, 3 floats each.
   const float* SampleDirections(int block, int l) const;
+  // The 21 sample directions of SampleDirections (l = 1 at 0, 2×2 at 1, 4×4 at 5) as three
+  // arrays of 24 floats (x, then y, then z; the last 3 of each are 0), for vector loads.
+  const float* SampleSoA(int block) const {
+    return &sample_soa_[static_cast<std::size_t>(block) * 72];
+  }
   // Exact solid angle of position k of the block.
   float SolidAngle(int block, int k) const {
     return solid_angle_[static_cast<std::size_t>(block) * 256 + k];
@@ -59,6 +70,8 @@ class CubemapBlocks {
   int n_, blocks_;
   std::vector<uint32_t> texel_;
   std::vector<Vec3> centre_;
+  std::vector<float> centre_xyz_;
+  std::vector<float> sample_soa_;  // blocks × 72  // x of every block, then y, then z
   std::vector<float> pixel_dir_;   // blocks × 256 × 3
   std::vector<float> sample_dir_;  // blocks × 21 × 3 (l = 1, then 2×2, then 4×4)
   std::vector<float> solid_angle_;

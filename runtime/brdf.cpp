@@ -164,23 +164,41 @@ void BlockDct::Forward16(const float* pixels, float* coeffs16) {
     }
 }
 
-void BlockDct::Reconstruct(int l, const float* coeffs, float* pixels) {
+namespace {
+
+// BlockDct::Reconstruct for a fixed l, so that the loops unroll and vectorise over x (issue 41:
+// line 11 reconstructs a lobe per block; the loops with a run-time l did neither).
+template <int L>
+void ReconstructFixed(const float* coeffs, float* pixels) {
   const auto& b = Tables().basis;
-  float cols[4][16];  // g_v(x) = Σ_u A_uv φ_u(x)
-  for (int v = 0; v < l; ++v)
+  float cols[L][16];  // g_v(x) = Σ_u A_uv φ_u(x)
+  for (int v = 0; v < L; ++v)
     for (int x = 0; x < 16; ++x) {
       float acc = 0;
-      for (int u = 0; u < l; ++u) acc += coeffs[v * l + u] * b[u][x];
+      for (int u = 0; u < L; ++u) acc += coeffs[v * L + u] * b[u][x];
       cols[v][x] = acc;
     }
   for (int y = 0; y < 16; ++y) {
-    float w[4];
-    for (int v = 0; v < l; ++v) w[v] = b[v][y];
+    float w[L];
+    for (int v = 0; v < L; ++v) w[v] = b[v][y];
     for (int x = 0; x < 16; ++x) {
       float acc = 0;
-      for (int v = 0; v < l; ++v) acc += w[v] * cols[v][x];
+      for (int v = 0; v < L; ++v) acc += w[v] * cols[v][x];
       pixels[y * 16 + x] = acc;
     }
+  }
+}
+
+}  // namespace
+
+void BlockDct::Reconstruct(int l, const float* coeffs, float* pixels) {
+  switch (l) {
+    case 1:
+      return ReconstructFixed<1>(coeffs, pixels);
+    case 2:
+      return ReconstructFixed<2>(coeffs, pixels);
+    default:
+      return ReconstructFixed<4>(coeffs, pixels);
   }
 }
 

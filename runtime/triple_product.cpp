@@ -1,11 +1,17 @@
 #include "runtime/triple_product.h"
 
 #include <algorithm>
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "vocabulary/errors.h"
@@ -17,6 +23,8 @@ namespace {
 
 // Vertices per parallel work item of RelightTripleProduct.
 constexpr std::size_t kVertexChunk = 256;
+// Blocks of a map at the largest n (256): 6·16².
+constexpr int kMaxBlocks = 6 * 16 * 16;
 
 // Σ_{k ∈ [a, b)} x[k]·y[k] with eight partial sums (vectorises without -ffast-math).
 inline float DotRange(const float* x, const float* y, int a, int b) {
@@ -62,176 +70,6 @@ inline void ForEachVisibleRun(const VisibilityBlocks& vis, std::size_t e, F&& f)
   if (level != 0) f(start, 256, level);
 }
 
-// Algorithm 1, block by block (see triple_product.h): calls sink(block, line, rate, out[3]) for
-// every block of the vertex, zero blocks included.
-template <typename Sink>
-void Algorithm1(const GlossyScene& scene, const CubemapBlocks& blocks, const BlockLighting& light,
-                std::size_t vertex, const Vec3& eye, const TripleProductOptions& options,
-                Sink&& sink) {
-  const VisibilityBlocks& vis = *scene.visibility;
-  const Material& m = scene.materials[scene.material_index[vertex]];
-  const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
-  const bool spec = HasSpecular(m);
-  const float kd[3] = {m.diffuse[0], m.diffuse[1], m.diffuse[2]};
-  const float ks[3] = {spec ? m.specular[0] : 0.f, spec ? m.specular[1] : 0.f,
-                       spec ? m.specular[2] : 0.f};
-  const float inv_max = 1.0f / static_cast<float>(vis.max_level());
-  const bool exact = options.exact_cosine;
-  constexpr float kInvPi = 0.318309886f;
-  // n/π: (n/π)·Σ L'ω over a range of positions is the exact diffuse integral over it.
-  const float nx = static_cast<float>(f.normal.x) * kInvPi,
-              ny = static_cast<float>(f.normal.y) * kInvPi,
-              nz = static_cast<float>(f.normal.z) * kInvPi;
-  constexpr int kS = BlockLighting::kRgbXyzStride;
-  // Diffuse of channel c from 16 interleaved suffix values (block_lighting.h).
-  auto cosine_of = [&](const float* q, int c) {
-    return nx * q[4 + c] + ny * q[8 + c] + nz * q[12 + c];
-  };
-  alignas(32) float coef[16];   // specular lobe, 1/4/16 DCT coefficients
-  alignas(32) float dcoef[16];  // diffuse lobe, 4/16 DCT coefficients (the paper's ProjectBRDF)
-  alignas(32) float spix[256];
-  alignas(32) float dpix[256];
-  alignas(32) float acc[kS];
-  const float zero[3] = {0, 0, 0};
-  const std::size_t e0 = vis.Entry(vertex, 0);
-  for (int b = 0; b < blocks.block_count(); ++b) {
-    const std::size_t e = e0 + b;
-    const auto kind = static_cast<VisibilityBlockKind>(vis.kind[e]);
-    if (kind == VisibilityBlockKind::kZero) {  // line 1
-      sink(b, TripleProductCase::kZero, 0, zero);
-      continue;
-    }
-    // Line 4, ProjectBRDF (§4.1, Appendix A): ρ̃ = diffuse + specular at the rate the rules ask
-    // for; with exact_cosine the diffuse part is integrated exactly instead.
-    const Vec3& centre = blocks.Centre(b);
-    const int rate = BrdfSamplingRate(m, f, centre, options.full_rate_exponent);
-    const int l = rate == 1 ? 1 : (rate == 4 ? 2 : (rate == 16 ? 4 : 16));
-    const float d0 = static_cast<float>(DiffuseLobe(f, centre));
-    if (rate <= 16) {
-      const float* dirs = blocks.SampleDirections(b, l);
-      float samples[16];
-      if (spec) {
-        for (int i = 0; i < l * l; ++i)
-          samples[i] = static_cast<float>(SpecularLobe(m, f, Dir(dirs + 3 * i)));
-        BlockDct::Project(l, samples, coef);
-      } else {
-        coef[0] = 0.f;
-      }
-      if (l > 1 && !exact) {
-        for (int i = 0; i < l * l; ++i)
-          samples[i] = static_cast<float>(DiffuseLobe(f, Dir(dirs + 3 * i)));
-        BlockDct::Project(l, samples, dcoef);
-      }
-    }
-    const float* q = light.SuffixRgbXyz(b);
-    float out[3] = {0, 0, 0};
-    TripleProductCase line;
-    if (kind == VisibilityBlockKind::kOne) {  // line 6: Light-BRDF product
-      line = TripleProductCase::kLine6;
-      if (rate <= 16) {
-        for (int c = 0; c < 3; ++c) {
-          const float* ld = light.Dct(b, c);
-          float dif;
-          if (exact) {
-            dif = cosine_of(q, c);
-          } else if (l == 1) {
-            dif = d0 * 16.f * ld[0];
-          } else {
-            dif = 0;
-            for (int v = 0; v < l; ++v)
-              for (int u = 0; u < l; ++u) dif += dcoef[v * l + u] * ld[v * 4 + u];
-          }
-          float sp = 0;
-          if (spec)
-            for (int v = 0; v < l; ++v)
-              for (int u = 0; u < l; ++u) sp += coef[v * l + u] * ld[v * 4 + u];
-          out[c] = kd[c] * dif + ks[c] * sp;
-        }
-      } else {
-        const float* dirs = blocks.PixelDirections(b);
-        for (int k = 0; k < 256; ++k) {
-          const Vec3 w = Dir(dirs + 3 * k);
-          dpix[k] = static_cast<float>(DiffuseLobe(f, w));
-          spix[k] = static_cast<float>(SpecularLobe(m, f, w));
-        }
-        for (int c = 0; c < 3; ++c) {
-          const float* lp = light.Pixels(b, c);
-          out[c] = kd[c] * DotRange(lp, dpix, 0, 256) + ks[c] * DotRange(lp, spix, 0, 256);
-        }
-      }
-    } else if (rate == 1) {  // line 9: ρ̃₁ · Light-Vis product, L_int · V_d (Eq. 5–6)
-      line = TripleProductCase::kLine9;
-      const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
-      const float s0 = spec ? coef[0] * 0.0625f : 0.f;  // the constant is A_00 / 16
-      // Σ_i V_d[i]·(all twelve suffix sums at change i): one cache line per change.
-      const int width = exact ? kS : 4;
-      for (int j = 0; j < kS; ++j) acc[j] = 0.f;
-      if (vis.bits == 1) {
-        uint64_t i = first;
-        for (; i + 2 <= last; i += 2) {
-          const float* a = q + vis.change_pos[i] * kS;
-          const float* z = q + vis.change_pos[i + 1] * kS;
-          for (int j = 0; j < width; ++j) acc[j] += a[j] - z[j];
-        }
-        if (i < last) {
-          const float* a = q + vis.change_pos[i] * kS;
-          for (int j = 0; j < width; ++j) acc[j] += a[j];
-        }
-      } else {
-        for (uint64_t i = first; i < last; ++i) {
-          const float dv = static_cast<float>(vis.change_value[i]) * inv_max;
-          const float* a = q + vis.change_pos[i] * kS;
-          for (int j = 0; j < width; ++j) acc[j] += dv * a[j];
-        }
-      }
-      for (int c = 0; c < 3; ++c)
-        out[c] = exact ? kd[c] * cosine_of(acc, c) + ks[c] * s0 * acc[c]
-                       : (kd[c] * d0 + ks[c] * s0) * acc[c];
-    } else {  // line 11: Decompress-Integrate in the pixel basis over the visible runs (§4.4)
-      line = TripleProductCase::kLine11;
-      if (rate <= 16) {
-        BlockDct::Reconstruct(l, coef, spix);
-        if (!exact) BlockDct::Reconstruct(l, dcoef, dpix);
-        for (int j = 0; j < kS; ++j) acc[j] = 0.f;
-        float sp[3] = {0, 0, 0}, dif[3] = {0, 0, 0};
-        ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
-          const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
-          if (exact) {
-            const float *qa = q + a * kS, *qz = q + z * kS;
-            for (int j = 0; j < kS; ++j) acc[j] += w * (qa[j] - qz[j]);
-          }
-          for (int c = 0; c < 3; ++c) {
-            const float* lp = light.Pixels(b, c);
-            sp[c] += w * DotRange(lp, spix, a, z);
-            if (!exact) dif[c] += w * DotRange(lp, dpix, a, z);
-          }
-        });
-        for (int c = 0; c < 3; ++c)
-          out[c] = kd[c] * (exact ? cosine_of(acc, c) : dif[c]) + ks[c] * sp[c];
-      } else {
-        const float* dirs = blocks.PixelDirections(b);
-        ForEachVisibleRun(vis, e, [&](int a, int z, int) {
-          for (int k = a; k < z; ++k) {
-            const Vec3 w = Dir(dirs + 3 * k);
-            dpix[k] = static_cast<float>(DiffuseLobe(f, w));
-            spix[k] = static_cast<float>(SpecularLobe(m, f, w));
-          }
-        });
-        for (int c = 0; c < 3; ++c) {
-          const float* lp = light.Pixels(b, c);
-          float sum = 0;
-          ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
-            const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
-            sum += w * (kd[c] * DotRange(lp, dpix, a, z) + ks[c] * DotRange(lp, spix, a, z));
-          });
-          out[c] = sum;
-        }
-      }
-    }
-    sink(b, line, rate, out);
-  }
-}
-
 // A value for an error message: 7 significant digits (std::to_string writes 1e39 in full).
 std::string Number(double v) {
   char b[32];
@@ -275,6 +113,588 @@ void Count(TripleProductStats& st, TripleProductCase line, int rate) {
   ++st.brdf_rate[rate == 1 ? 0 : (rate == 4 ? 1 : (rate == 16 ? 2 : 3))];
 }
 
+// ---- The lobes at a direction, two ways ----------------------------------------------------
+// DoubleLobes: brdf.h's DiffuseLobe / SpecularLobe in double (the kernel before issue 41).
+struct DoubleLobes {
+  const Material& m;
+  const ShadingFrame& f;
+  float Diffuse(const float* w) const { return static_cast<float>(DiffuseLobe(f, Dir(w))); }
+  float Specular(const float* w) const { return static_cast<float>(SpecularLobe(m, f, Dir(w))); }
+};
+
+// x^s for x in [0, 1] (a little above 1 from rounding is fine) and s > 0 as exp2(s·log2 x):
+// log2 from the float's exponent and the odd series of atanh in t = (m − 1)/(m + 1), |t| ≤
+// 0.1716 (five terms: truncation < 1e-9); 2^y from the exponent bits and e^z, z = f·ln 2, |f| ≤
+// ½, to degree 7 (truncation < 6e-9). The result's relative error is that of float arithmetic
+// on y = s·log2 x: about 1e-7·(1 + |y|), below 3e-6 wherever x^s > 1e-9.
+inline float FastLog2(float x) {  // x normal, > 0
+  const auto bits = std::bit_cast<uint32_t>(x);
+  int e = static_cast<int>((bits >> 23) & 255u) - 127;
+  float m = std::bit_cast<float>((bits & 0x007fffffu) | 0x3f800000u);  // [1, 2)
+  if (m > 1.41421356f) {
+    m *= 0.5f;
+    ++e;
+  }
+  const float t = (m - 1.f) / (m + 1.f), t2 = t * t;
+  float p = 1.f / 9.f;
+  p = p * t2 + 1.f / 7.f;
+  p = p * t2 + 1.f / 5.f;
+  p = p * t2 + 1.f / 3.f;
+  p = p * t2 + 1.f;
+  return static_cast<float>(e) + t * p * 2.88539008f;  // 2 / ln 2
+}
+inline float FastExp2(float y) {  // y ≤ ½; 0 below 2^−126
+  if (!(y > -126.f)) return 0.f;
+  const float r = std::floor(y + 0.5f);
+  const float z = (y - r) * 0.693147181f;
+  float p = 1.f / 5040.f;
+  p = p * z + 1.f / 720.f;
+  p = p * z + 1.f / 120.f;
+  p = p * z + 1.f / 24.f;
+  p = p * z + 1.f / 6.f;
+  p = p * z + 0.5f;
+  p = p * z + 1.f;
+  p = p * z + 1.f;
+  return p * std::bit_cast<float>(static_cast<uint32_t>(static_cast<int>(r) + 127) << 23);
+}
+inline float FastPowUnit(float x, float s) {
+  if (!(x >= 1.17549435e-38f)) return 0.f;  // 0, subnormals, NaN
+  return FastExp2(std::min(s * FastLog2(x), 0.5f));
+}
+
+// FloatLobes: the same lobes in float from the frame's float copy, the powers by FastPowUnit (or
+// std::pow when that speedup is off). Ashikhmin–Shirley's 1 − (n·h)² is h_u² + h_v² (h is unit
+// and (t, b, n) orthonormal), which has no cancellation near the peak.
+struct FloatLobes {
+  BrdfModel model;
+  bool spec, fast_pow;
+  float n[3], t[3], b[3], v[3], r[3];
+  float nv;
+  float s, su, sv, phong_norm, as_norm;
+
+  FloatLobes(const Material& m, const ShadingFrame& f, bool fast) {
+    model = m.model;
+    spec = HasSpecular(m);
+    fast_pow = fast;
+    const Vec3* src[5] = {&f.normal, &f.tangent, &f.bitangent, &f.view, &f.reflect};
+    float* dst[5] = {n, t, b, v, r};
+    for (int i = 0; i < 5; ++i) {
+      dst[i][0] = static_cast<float>(src[i]->x);
+      dst[i][1] = static_cast<float>(src[i]->y);
+      dst[i][2] = static_cast<float>(src[i]->z);
+    }
+    nv = static_cast<float>(Dot(f.normal, f.view));
+    s = static_cast<float>(m.exponent);
+    su = static_cast<float>(m.exponent);
+    sv = static_cast<float>(m.exponent_v);
+    phong_norm = static_cast<float>((m.exponent + 2.0) * (0.5 / std::numbers::pi));
+    as_norm = static_cast<float>(std::sqrt((m.exponent + 1.0) * (m.exponent_v + 1.0)) /
+                                 (8.0 * std::numbers::pi));
+  }
+  static float Dot3(const float* a, const float* w) {
+    return a[0] * w[0] + a[1] * w[1] + a[2] * w[2];
+  }
+  float Pow(float x, float e) const {
+    return fast_pow ? FastPowUnit(x, e)
+                    : static_cast<float>(std::pow(static_cast<double>(x), static_cast<double>(e)));
+  }
+  float Diffuse(const float* w) const {
+    const float c = Dot3(n, w);
+    return c > 0 ? c * 0.318309886f : 0.f;
+  }
+  // The specular lobe (cosine folded in) with n·w and r·w already known.
+  float SpecularFrom(const float* w, float nw, float rw) const {
+    if (!spec || nw <= 0) return 0.f;
+    if (model == BrdfModel::kPhong) return rw > 0 ? phong_norm * Pow(rw, s) * nw : 0.f;
+    if (nv <= 0) return 0.f;
+    float h[3] = {w[0] + v[0], w[1] + v[1], w[2] + v[2]};
+    const float len = std::sqrt(Dot3(h, h));
+    if (!(len > 0)) return 0.f;
+    for (float& x : h) x /= len;
+    const float nh = Dot3(n, h), hw = Dot3(h, w);
+    if (nh <= 0 || hw <= 0) return 0.f;
+    const float hu = Dot3(t, h), hv = Dot3(b, h);
+    const float s2 = hu * hu + hv * hv;
+    const float e = s2 > 0 ? (su * hu * hu + sv * hv * hv) / s2 : su;
+    return as_norm * Pow(nh, e) / (hw * std::max(nw, nv)) * nw;
+  }
+  float Specular(const float* w) const { return SpecularFrom(w, Dot3(n, w), Dot3(r, w)); }
+};
+
+// ---- The lobes of many directions at once (issue 41) -------------------------------------------
+// SpecularBatch(lobes, x, y, z, count, out): out[i] = lobes.Specular(direction i), directions as
+// three arrays. The AVX2 + FMA version takes 8 directions per step with FastPowUnit's arithmetic
+// in vector form, chosen at run time (CPUs without it, and WebAssembly, use the scalar loop);
+// it reads and writes whole groups of 8, so the arrays must hold count rounded up to 8.
+void SpecularBatchScalar(const FloatLobes& L, const float* x, const float* y, const float* z,
+                         int count, float* out) {
+  for (int i = 0; i < count; ++i) {
+    const float w[3] = {x[i], y[i], z[i]};
+    out[i] = L.Specular(w);
+  }
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+#define PRT_TP_HAVE_AVX2 1
+__attribute__((target("avx2,fma"))) inline __m256 Log2Avx2(__m256 x) {
+  const __m256i bits = _mm256_castps_si256(x);
+  __m256i e =
+      _mm256_sub_epi32(_mm256_and_si256(_mm256_srli_epi32(bits, 23), _mm256_set1_epi32(255)),
+                       _mm256_set1_epi32(127));
+  __m256 m = _mm256_castsi256_ps(_mm256_or_si256(
+      _mm256_and_si256(bits, _mm256_set1_epi32(0x007fffff)), _mm256_set1_epi32(0x3f800000)));
+  const __m256 big = _mm256_cmp_ps(m, _mm256_set1_ps(1.41421356f), _CMP_GT_OQ);
+  m = _mm256_blendv_ps(m, _mm256_mul_ps(m, _mm256_set1_ps(0.5f)), big);
+  e = _mm256_sub_epi32(e, _mm256_castps_si256(big));  // big lanes are −1 as integers
+  const __m256 one = _mm256_set1_ps(1.f);
+  const __m256 t = _mm256_div_ps(_mm256_sub_ps(m, one), _mm256_add_ps(m, one));
+  const __m256 t2 = _mm256_mul_ps(t, t);
+  __m256 p = _mm256_set1_ps(1.f / 9.f);
+  p = _mm256_fmadd_ps(p, t2, _mm256_set1_ps(1.f / 7.f));
+  p = _mm256_fmadd_ps(p, t2, _mm256_set1_ps(1.f / 5.f));
+  p = _mm256_fmadd_ps(p, t2, _mm256_set1_ps(1.f / 3.f));
+  p = _mm256_fmadd_ps(p, t2, one);
+  return _mm256_fmadd_ps(_mm256_mul_ps(t, p), _mm256_set1_ps(2.88539008f), _mm256_cvtepi32_ps(e));
+}
+
+// FastPowUnit(x, s) per lane.
+__attribute__((target("avx2,fma"))) inline __m256 PowUnitAvx2(__m256 x, __m256 s) {
+  const __m256 y = _mm256_min_ps(_mm256_mul_ps(s, Log2Avx2(x)), _mm256_set1_ps(0.5f));
+  const __m256 r = _mm256_floor_ps(_mm256_add_ps(y, _mm256_set1_ps(0.5f)));
+  const __m256 zz = _mm256_mul_ps(_mm256_sub_ps(y, r), _mm256_set1_ps(0.693147181f));
+  __m256 p = _mm256_set1_ps(1.f / 5040.f);
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(1.f / 720.f));
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(1.f / 120.f));
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(1.f / 24.f));
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(1.f / 6.f));
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(0.5f));
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(1.f));
+  p = _mm256_fmadd_ps(p, zz, _mm256_set1_ps(1.f));
+  // r ≥ −126 where the result is kept, so the biased exponent is ≥ 1 there.
+  const __m256i ri = _mm256_cvtps_epi32(_mm256_max_ps(r, _mm256_set1_ps(-126.f)));
+  const __m256 scale =
+      _mm256_castsi256_ps(_mm256_slli_epi32(_mm256_add_epi32(ri, _mm256_set1_epi32(127)), 23));
+  const __m256 keep = _mm256_and_ps(_mm256_cmp_ps(y, _mm256_set1_ps(-126.f), _CMP_GT_OQ),
+                                    _mm256_cmp_ps(x, _mm256_set1_ps(1.17549435e-38f), _CMP_GE_OQ));
+  return _mm256_and_ps(_mm256_mul_ps(p, scale), keep);
+}
+
+__attribute__((target("avx2,fma"))) inline __m256 Dot3Avx2(const float* a, __m256 wx, __m256 wy,
+                                                           __m256 wz) {
+  return _mm256_fmadd_ps(
+      _mm256_set1_ps(a[0]), wx,
+      _mm256_fmadd_ps(_mm256_set1_ps(a[1]), wy, _mm256_mul_ps(_mm256_set1_ps(a[2]), wz)));
+}
+
+__attribute__((target("avx2,fma"))) void SpecularBatchAvx2(const FloatLobes& L, const float* x,
+                                                           const float* y, const float* z,
+                                                           int count, float* out) {
+  const __m256 zero = _mm256_setzero_ps();
+  const auto dot = Dot3Avx2;
+
+  for (int i = 0; i < count; i += 8) {
+    const __m256 wx = _mm256_loadu_ps(x + i), wy = _mm256_loadu_ps(y + i),
+                 wz = _mm256_loadu_ps(z + i);
+    const __m256 nw = dot(L.n, wx, wy, wz);
+    __m256 val;
+    __m256 ok = _mm256_cmp_ps(nw, zero, _CMP_GT_OQ);
+    if (L.model == BrdfModel::kPhong) {
+      const __m256 rw = dot(L.r, wx, wy, wz);
+      ok = _mm256_and_ps(ok, _mm256_cmp_ps(rw, zero, _CMP_GT_OQ));
+      val = _mm256_mul_ps(
+          _mm256_mul_ps(_mm256_set1_ps(L.phong_norm), PowUnitAvx2(rw, _mm256_set1_ps(L.s))), nw);
+    } else {  // Ashikhmin–Shirley (L.nv > 0 here: SpecularBatch checks it)
+      __m256 hx = _mm256_add_ps(wx, _mm256_set1_ps(L.v[0]));
+      __m256 hy = _mm256_add_ps(wy, _mm256_set1_ps(L.v[1]));
+      __m256 hz = _mm256_add_ps(wz, _mm256_set1_ps(L.v[2]));
+      const __m256 len =
+          _mm256_sqrt_ps(_mm256_fmadd_ps(hx, hx, _mm256_fmadd_ps(hy, hy, _mm256_mul_ps(hz, hz))));
+      ok = _mm256_and_ps(ok, _mm256_cmp_ps(len, zero, _CMP_GT_OQ));
+      const __m256 safe = _mm256_blendv_ps(_mm256_set1_ps(1.f), len, ok);
+      hx = _mm256_div_ps(hx, safe);
+      hy = _mm256_div_ps(hy, safe);
+      hz = _mm256_div_ps(hz, safe);
+      const __m256 nh = dot(L.n, hx, hy, hz);
+      const __m256 hw = _mm256_fmadd_ps(hx, wx, _mm256_fmadd_ps(hy, wy, _mm256_mul_ps(hz, wz)));
+      ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(nh, zero, _CMP_GT_OQ),
+                                           _mm256_cmp_ps(hw, zero, _CMP_GT_OQ)));
+      const __m256 hu = dot(L.t, hx, hy, hz), hv = dot(L.b, hx, hy, hz);
+      const __m256 hu2 = _mm256_mul_ps(hu, hu), hv2 = _mm256_mul_ps(hv, hv);
+      const __m256 s2 = _mm256_add_ps(hu2, hv2);
+      const __m256 has = _mm256_cmp_ps(s2, zero, _CMP_GT_OQ);
+      const __m256 e = _mm256_blendv_ps(
+          _mm256_set1_ps(L.su),
+          _mm256_div_ps(
+              _mm256_fmadd_ps(_mm256_set1_ps(L.su), hu2, _mm256_mul_ps(_mm256_set1_ps(L.sv), hv2)),
+              _mm256_blendv_ps(_mm256_set1_ps(1.f), s2, has)),
+          has);
+      const __m256 den = _mm256_mul_ps(_mm256_blendv_ps(_mm256_set1_ps(1.f), hw, ok),
+                                       _mm256_max_ps(nw, _mm256_set1_ps(L.nv)));
+      val = _mm256_mul_ps(
+          _mm256_div_ps(_mm256_mul_ps(_mm256_set1_ps(L.as_norm), PowUnitAvx2(nh, e)), den), nw);
+    }
+    _mm256_storeu_ps(out + i, _mm256_and_ps(val, ok));
+  }
+}
+
+bool CpuHasAvx2Fma() {
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return has;
+}
+#endif
+
+void SpecularBatch(const FloatLobes& L, bool simd, const float* x, const float* y, const float* z,
+                   int count, float* out) {
+  if (!L.spec || (L.model == BrdfModel::kAshikhminShirley && !(L.nv > 0))) {
+    for (int i = 0; i < count; ++i) out[i] = 0.f;
+    return;
+  }
+#ifdef PRT_TP_HAVE_AVX2
+  if (simd && L.fast_pow && CpuHasAvx2Fma()) return SpecularBatchAvx2(L, x, y, z, count, out);
+#endif
+  (void)simd;
+  SpecularBatchScalar(L, x, y, z, count, out);
+}
+
+// ---- One block of Algorithm 1 -----------------------------------------------------------------
+// What ProjectBRDF (line 4) gave a block: its rate, the diffuse lobe at its centre, the DCT
+// coefficients of the lobes.
+struct BlockBrdf {
+  int rate = 1, l = 1;
+  float d0 = 0;
+  alignas(32) float coef[16];   // specular lobe, 1/4/16 DCT coefficients
+  alignas(32) float dcoef[16];  // diffuse lobe, 4/16 DCT coefficients (the paper's ProjectBRDF)
+};
+
+inline int LevelsOf(int rate) {
+  return rate == 1 ? 1 : (rate == 4 ? 2 : (rate == 16 ? 4 : 16));
+}
+
+// The per-vertex constants every block of Algorithm 1 reads.
+struct VertexTerms {
+  const VisibilityBlocks& vis;
+  const CubemapBlocks& blocks;
+  const BlockLighting& light;
+  bool spec, exact;
+  bool simd_lobes = false;  // FloatLobes' specular samples through SpecularBatch
+  float kd[3], ks[3];
+  float inv_max;
+  float nx, ny, nz;  // n/π: (n/π)·Σ L'ω over a range of positions is the exact diffuse integral
+  VertexTerms(const VisibilityBlocks& vis_, const CubemapBlocks& blocks_,
+              const BlockLighting& light_, const Material& m, const ShadingFrame& f, bool exact_)
+      : vis(vis_), blocks(blocks_), light(light_), spec(HasSpecular(m)), exact(exact_) {
+    for (int c = 0; c < 3; ++c) {
+      kd[c] = m.diffuse[c];
+      ks[c] = spec ? m.specular[c] : 0.f;
+    }
+    inv_max = 1.0f / static_cast<float>(vis.max_level());
+    constexpr float kInvPi = 0.318309886f;
+    nx = static_cast<float>(f.normal.x) * kInvPi;
+    ny = static_cast<float>(f.normal.y) * kInvPi;
+    nz = static_cast<float>(f.normal.z) * kInvPi;
+  }
+  // Diffuse of channel c from 16 interleaved suffix values (block_lighting.h).
+  float CosineOf(const float* q, int c) const {
+    return nx * q[4 + c] + ny * q[8 + c] + nz * q[12 + c];
+  }
+};
+
+// The l×l lobe samples of a block at rate ≤ 16 projected onto the DCT (Eq. 4): the specular
+// lobe (unless the l = 1 value is given) and, in the paper's diffuse mode, the diffuse lobe.
+template <class Lobes>
+void ProjectBlockLobes(const VertexTerms& vt, const Lobes& lobes, int b, BlockBrdf& bb) {
+  const float* dirs = vt.blocks.SampleDirections(b, bb.l);
+  alignas(32) float samples[16];
+  if (vt.spec) {
+    if constexpr (std::is_same_v<Lobes, FloatLobes>) {
+      if (vt.simd_lobes) {
+        const float* soa = vt.blocks.SampleSoA(b);
+        const int at = bb.l == 1 ? 0 : (bb.l == 2 ? 1 : 5);
+        SpecularBatch(lobes, true, soa + at, soa + 24 + at, soa + 48 + at, bb.l * bb.l, samples);
+      } else {
+        for (int i = 0; i < bb.l * bb.l; ++i) samples[i] = lobes.Specular(dirs + 3 * i);
+      }
+    } else {
+      for (int i = 0; i < bb.l * bb.l; ++i) samples[i] = lobes.Specular(dirs + 3 * i);
+    }
+    BlockDct::Project(bb.l, samples, bb.coef);
+  } else {
+    bb.coef[0] = 0.f;
+  }
+  if (bb.l > 1 && !vt.exact) {
+    for (int i = 0; i < bb.l * bb.l; ++i) samples[i] = lobes.Diffuse(dirs + 3 * i);
+    BlockDct::Project(bb.l, samples, bb.dcoef);
+  }
+}
+
+// Lines 5–11 of Algorithm 1 for one non-zero block, its BRDF projected: out = the block's share
+// of B. Lobes evaluates the lobes per pixel in the 256-sample case.
+template <class Lobes>
+TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b, std::size_t e,
+                               VisibilityBlockKind kind, const BlockBrdf& bb, float out[3]) {
+  constexpr int kS = BlockLighting::kRgbXyzStride;
+  const VisibilityBlocks& vis = vt.vis;
+  const BlockLighting& light = vt.light;
+  const bool exact = vt.exact, spec = vt.spec;
+  const float* kd = vt.kd;
+  const float* ks = vt.ks;
+  const float inv_max = vt.inv_max;
+  const int rate = bb.rate, l = bb.l;
+  const float* coef = bb.coef;
+  const float* dcoef = bb.dcoef;
+  alignas(32) float spix[256];
+  alignas(32) float dpix[256];
+  alignas(32) float acc[kS];
+  const float* q = light.SuffixRgbXyz(b);
+  if (kind == VisibilityBlockKind::kOne) {  // line 6: Light-BRDF product
+    if (rate <= 16) {
+      for (int c = 0; c < 3; ++c) {
+        const float* ld = light.Dct(b, c);
+        float dif;
+        if (exact) {
+          dif = vt.CosineOf(q, c);
+        } else if (l == 1) {
+          dif = bb.d0 * 16.f * ld[0];
+        } else {
+          dif = 0;
+          for (int v = 0; v < l; ++v)
+            for (int u = 0; u < l; ++u) dif += dcoef[v * l + u] * ld[v * 4 + u];
+        }
+        float sp = 0;
+        if (spec)
+          for (int v = 0; v < l; ++v)
+            for (int u = 0; u < l; ++u) sp += coef[v * l + u] * ld[v * 4 + u];
+        out[c] = kd[c] * dif + ks[c] * sp;
+      }
+    } else {
+      const float* dirs = vt.blocks.PixelDirections(b);
+      for (int k = 0; k < 256; ++k) {
+        dpix[k] = lobes.Diffuse(dirs + 3 * k);
+        spix[k] = lobes.Specular(dirs + 3 * k);
+      }
+      for (int c = 0; c < 3; ++c) {
+        const float* lp = light.Pixels(b, c);
+        out[c] = kd[c] * DotRange(lp, dpix, 0, 256) + ks[c] * DotRange(lp, spix, 0, 256);
+      }
+    }
+    return TripleProductCase::kLine6;
+  }
+  if (rate == 1) {  // line 9: ρ̃₁ · Light-Vis product, L_int · V_d (Eq. 5–6)
+    const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
+    const float s0 = spec ? coef[0] * 0.0625f : 0.f;  // the constant is A_00 / 16
+    // Σ_i V_d[i]·(all twelve suffix sums at change i): one cache line per change.
+    const int width = exact ? kS : 4;
+    for (int j = 0; j < kS; ++j) acc[j] = 0.f;
+    if (vis.bits == 1) {
+      uint64_t i = first;
+      for (; i + 2 <= last; i += 2) {
+        const float* a = q + vis.change_pos[i] * kS;
+        const float* z = q + vis.change_pos[i + 1] * kS;
+        for (int j = 0; j < width; ++j) acc[j] += a[j] - z[j];
+      }
+      if (i < last) {
+        const float* a = q + vis.change_pos[i] * kS;
+        for (int j = 0; j < width; ++j) acc[j] += a[j];
+      }
+    } else {
+      for (uint64_t i = first; i < last; ++i) {
+        const float dv = static_cast<float>(vis.change_value[i]) * inv_max;
+        const float* a = q + vis.change_pos[i] * kS;
+        for (int j = 0; j < width; ++j) acc[j] += dv * a[j];
+      }
+    }
+    for (int c = 0; c < 3; ++c)
+      out[c] = exact ? kd[c] * vt.CosineOf(acc, c) + ks[c] * s0 * acc[c]
+                     : (kd[c] * bb.d0 + ks[c] * s0) * acc[c];
+    return TripleProductCase::kLine9;
+  }
+  // line 11: Decompress-Integrate in the pixel basis over the visible runs (§4.4)
+  if (rate <= 16) {
+    BlockDct::Reconstruct(l, coef, spix);
+    if (!exact) BlockDct::Reconstruct(l, dcoef, dpix);
+    for (int j = 0; j < kS; ++j) acc[j] = 0.f;
+    float sp[3] = {0, 0, 0}, dif[3] = {0, 0, 0};
+    ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
+      const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
+      if (exact) {
+        const float *qa = q + a * kS, *qz = q + z * kS;
+        for (int j = 0; j < kS; ++j) acc[j] += w * (qa[j] - qz[j]);
+      }
+      for (int c = 0; c < 3; ++c) {
+        const float* lp = light.Pixels(b, c);
+        sp[c] += w * DotRange(lp, spix, a, z);
+        if (!exact) dif[c] += w * DotRange(lp, dpix, a, z);
+      }
+    });
+    for (int c = 0; c < 3; ++c)
+      out[c] = kd[c] * (exact ? vt.CosineOf(acc, c) : dif[c]) + ks[c] * sp[c];
+  } else {
+    const float* dirs = vt.blocks.PixelDirections(b);
+    ForEachVisibleRun(vis, e, [&](int a, int z, int) {
+      for (int k = a; k < z; ++k) {
+        dpix[k] = lobes.Diffuse(dirs + 3 * k);
+        spix[k] = lobes.Specular(dirs + 3 * k);
+      }
+    });
+    for (int c = 0; c < 3; ++c) {
+      const float* lp = light.Pixels(b, c);
+      float sum = 0;
+      ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
+        const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
+        sum += w * (kd[c] * DotRange(lp, dpix, a, z) + ks[c] * DotRange(lp, spix, a, z));
+      });
+      out[c] = sum;
+    }
+  }
+  return TripleProductCase::kLine11;
+}
+
+// Algorithm 1, block by block (see triple_product.h), the kernel before issue 41: the BRDF
+// projected per block in double (BrdfSamplingRate, SpecularLobe); calls sink(block, line, rate,
+// out[3]) for every block of the vertex, zero blocks included.
+template <typename Sink>
+void Algorithm1(const GlossyScene& scene, const CubemapBlocks& blocks, const BlockLighting& light,
+                std::size_t vertex, const Vec3& eye, const TripleProductOptions& options,
+                Sink&& sink) {
+  const VisibilityBlocks& vis = *scene.visibility;
+  const Material& m = scene.materials[scene.material_index[vertex]];
+  const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
+  const VertexTerms vt(vis, blocks, light, m, f, options.exact_cosine);
+  const DoubleLobes lobes{m, f};
+  const float zero[3] = {0, 0, 0};
+  const std::size_t e0 = vis.Entry(vertex, 0);
+  BlockBrdf bb;
+  for (int b = 0; b < blocks.block_count(); ++b) {
+    const std::size_t e = e0 + b;
+    const auto kind = static_cast<VisibilityBlockKind>(vis.kind[e]);
+    if (kind == VisibilityBlockKind::kZero) {  // line 1
+      sink(b, TripleProductCase::kZero, 0, zero);
+      continue;
+    }
+    // Line 4, ProjectBRDF (§4.1, Appendix A): ρ̃ = diffuse + specular at the rate the rules ask
+    // for; with exact_cosine the diffuse part is integrated exactly instead.
+    const Vec3& centre = blocks.Centre(b);
+    bb.rate = BrdfSamplingRate(m, f, centre, options.full_rate_exponent);
+    bb.l = LevelsOf(bb.rate);
+    bb.d0 = static_cast<float>(DiffuseLobe(f, centre));
+    if (bb.rate <= 16) ProjectBlockLobes(vt, lobes, b, bb);
+    float out[3] = {0, 0, 0};
+    const TripleProductCase line = NonZeroBlock(vt, lobes, b, e, kind, bb, out);
+    sink(b, line, bb.rate, out);
+  }
+}
+
+// The optimised kernel (issue 41; TripleProductSpeedup in triple_product.h): the same blocks,
+// cases, rates and projections as Algorithm1, with
+//   - the non-zero blocks listed first from the vertex's 96 kind bytes, and only they visited;
+//   - the vertex set-up for all of them at once in float: Appendix A's angle between the view
+//     and the block centre mirrored about n is cos = r·v = 2(n·c)(n·v) − c·v for a unit centre
+//     c (no square root), Phong's r_view·c is that same number, the diffuse lobe is n·c/π;
+//   - the lobes in float (FloatLobes) with FastPowUnit.
+std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& blocks,
+                                 const BlockLighting& light, std::size_t vertex, const Vec3& eye,
+                                 const TripleProductOptions& options, TripleProductStats* stats) {
+  const VisibilityBlocks& vis = *scene.visibility;
+  const Material& m = scene.materials[scene.material_index[vertex]];
+  const ShadingFrame f = MakeShadingFrame(scene.normals[vertex], eye - scene.positions[vertex]);
+  VertexTerms vt(vis, blocks, light, m, f, options.exact_cosine);
+  const FloatLobes lobes(m, f, (options.disable & kSpeedupFastPow) == 0);
+  const bool simd = (options.disable & kSpeedupSimdLobes) == 0;
+  vt.simd_lobes = simd;
+  const DoubleLobes dlobes{m, f};
+  const bool setup = (options.disable & kSpeedupVertexSetup) == 0;
+  const int nb = blocks.block_count();
+  const std::size_t e0 = vis.Entry(vertex, 0);
+  const uint8_t* kinds = &vis.kind[e0];
+  // The non-zero blocks (line 1 skips the rest).
+  uint16_t list[kMaxBlocks];
+  int count = 0;
+  for (int b = 0; b < nb; ++b) {
+    list[count] = static_cast<uint16_t>(b);
+    count += kinds[b] != static_cast<uint8_t>(VisibilityBlockKind::kZero);
+  }
+  // Appendix A's rate per listed block and the lobes at its centre.
+  uint8_t rate_code[kMaxBlocks];  // 0..3: 1, 4, 16, 256
+  alignas(32) float d0[kMaxBlocks], s0[kMaxBlocks + 8];
+  const double s_eff = EffectiveExponent(m);
+  const int far_code = 0;
+  const int mid_code = 1;
+  const int near_code =
+      !lobes.spec ? 0 : (s_eff < 30 ? 1 : (s_eff < options.full_rate_exponent ? 2 : 3));
+  constexpr float kCosPi4 = 0.70710678118654752f, kCosPi8 = 0.92387953251128676f;
+  const bool low_exponent = s_eff < 30;
+  if (setup) {
+    const float* cx = blocks.CentreX();
+    const float* cy = blocks.CentreY();
+    const float* cz = blocks.CentreZ();
+    const float nv = lobes.nv;
+    if (simd) {  // the specular lobe at every listed centre, 8 at a time
+      alignas(32) float gx[kMaxBlocks + 8], gy[kMaxBlocks + 8], gz[kMaxBlocks + 8];
+      for (int i = 0; i < count; ++i) {
+        gx[i] = cx[list[i]];
+        gy[i] = cy[list[i]];
+        gz[i] = cz[list[i]];
+      }
+      for (int i = count; i < count + 8; ++i) gx[i] = gy[i] = gz[i] = 0.f;
+      SpecularBatch(lobes, true, gx, gy, gz, count, s0);
+    }
+    for (int i = 0; i < count; ++i) {
+      const int b = list[i];
+      const float c[3] = {cx[b], cy[b], cz[b]};
+      const float nc = FloatLobes::Dot3(lobes.n, c), vc = FloatLobes::Dot3(lobes.v, c);
+      const float cosang = 2.f * nc * nv - vc;
+      int code;
+      if (!lobes.spec) {
+        code = 0;
+      } else if (low_exponent) {
+        code = cosang > kCosPi4 ? mid_code : far_code;
+      } else {
+        code = cosang > kCosPi8 ? near_code : (cosang > kCosPi4 ? mid_code : far_code);
+      }
+      rate_code[i] = static_cast<uint8_t>(code);
+      d0[i] = nc > 0 ? nc * 0.318309886f : 0.f;
+      if (!simd) s0[i] = code == 0 ? lobes.SpecularFrom(c, nc, cosang) : 0.f;
+    }
+  } else {
+    for (int i = 0; i < count; ++i) {
+      const int b = list[i];
+      const int rate = BrdfSamplingRate(m, f, blocks.Centre(b), options.full_rate_exponent);
+      rate_code[i] = static_cast<uint8_t>(rate == 1 ? 0 : (rate == 4 ? 1 : (rate == 16 ? 2 : 3)));
+      d0[i] = static_cast<float>(DiffuseLobe(f, blocks.Centre(b)));
+      s0[i] = 0.f;
+    }
+  }
+  static constexpr int kRate[4] = {1, 4, 16, 256};
+  double total[3] = {0, 0, 0};
+  TripleProductStats st;
+  st.blocks_zero = static_cast<uint64_t>(nb - count);
+  BlockBrdf bb;
+  for (int i = 0; i < count; ++i) {
+    const int b = list[i];
+    const std::size_t e = e0 + b;
+    bb.rate = kRate[rate_code[i]];
+    bb.l = LevelsOf(bb.rate);
+    bb.d0 = d0[i];
+    if (bb.rate == 1 && setup) {
+      // Eq. 4 with one sample: A_00 = 16·ρ̃(centre) (BlockDct::Project(1, …) to the bit).
+      bb.coef[0] = vt.spec ? 16.f * s0[i] : 0.f;
+    } else if (bb.rate <= 16) {
+      if (setup)
+        ProjectBlockLobes(vt, lobes, b, bb);
+      else
+        ProjectBlockLobes(vt, dlobes, b, bb);
+    }
+    float out[3] = {0, 0, 0};
+    const auto kind = static_cast<VisibilityBlockKind>(kinds[b]);
+    const TripleProductCase line = setup ? NonZeroBlock(vt, lobes, b, e, kind, bb, out)
+                                         : NonZeroBlock(vt, dlobes, b, e, kind, bb, out);
+    for (int c = 0; c < 3; ++c) total[c] += out[c];
+    Count(st, line, bb.rate);
+  }
+  if (stats != nullptr) *stats += st;
+  return {total[0], total[1], total[2]};
+}
+
 // The pixel-basis reference block by block: sink(block, rgb) in double.
 template <typename Sink>
 void Reference(const GlossyScene& scene, const CubemapBlocks& blocks, const BlockLighting& light,
@@ -305,6 +725,21 @@ void Reference(const GlossyScene& scene, const CubemapBlocks& blocks, const Bloc
 
 }  // namespace
 
+const char* TripleProductSpeedupName(uint32_t bit) {
+  switch (bit) {
+    case kSpeedupVertexSetup:
+      return "vertex set-up";
+    case kSpeedupFastPow:
+      return "fast pow";
+    case kSpeedupSimdLobes:
+      return "AVX2 lobes";
+    case kSpeedupSimdChanges:
+      return "AVX2 changes";
+    default:
+      return "unknown";
+  }
+}
+
 TripleProductStats& TripleProductStats::operator+=(const TripleProductStats& o) {
   blocks_zero += o.blocks_zero;
   blocks_line6 += o.blocks_line6;
@@ -318,14 +753,18 @@ std::array<double, 3> TripleProductVertex(const GlossyScene& scene, const Cubema
                                           const BlockLighting& light, std::size_t vertex,
                                           const Vec3& eye, TripleProductStats* stats,
                                           const TripleProductOptions& options) {
-  TripleProductStats st;
-  double total[3] = {0, 0, 0};
-  Algorithm1(scene, blocks, light, vertex, eye, options,
-             [&](int, TripleProductCase line, int rate, const float* out) {
-               Count(st, line, rate);
-               for (int c = 0; c < 3; ++c) total[c] += out[c];
-             });
-  if (stats != nullptr) *stats += st;
+  std::array<double, 3> total{0, 0, 0};
+  if (options.generic) {
+    TripleProductStats st;
+    Algorithm1(scene, blocks, light, vertex, eye, options,
+               [&](int, TripleProductCase line, int rate, const float* out) {
+                 Count(st, line, rate);
+                 for (int c = 0; c < 3; ++c) total[c] += out[c];
+               });
+    if (stats != nullptr) *stats += st;
+  } else {
+    total = FastVertex(scene, blocks, light, vertex, eye, options, stats);
+  }
   std::array<double, 3> r{};
   for (int c = 0; c < 3; ++c) {
     // A double sum of at most 6·(n/16)² float block products cannot overflow; it is NaN/Inf only

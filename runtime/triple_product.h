@@ -31,6 +31,27 @@
 
 namespace prt {
 
+// The optimisations of the per-frame kernel (issue 41; docs/viewer.md, "Triple products: where a
+// frame goes"). Each is a flag of TripleProductOptions::disable, so that a benchmark measures what
+// each one pays on its own; every combination computes Algorithm 1 with the same cases, sampling
+// rates and DCT projections (results agree to float rounding, triple_product_test).
+enum TripleProductSpeedup : uint32_t {
+  // The vertex's set-up for all its non-zero blocks at once (listed from its kind bytes): the
+  // sampling rate and the lobes at the block centres in float, instead of per block in double.
+  kSpeedupVertexSetup = 1u << 0,
+  // Lobe powers x^s as exp2(s·log2 x) by polynomials (FastPowUnit) instead of std::pow.
+  kSpeedupFastPow = 1u << 1,
+  // The specular lobe at 8 directions per AVX2 instruction (block centres, the 4 and 16 samples
+  // of Eq. 4), chosen at run time where the CPU has AVX2 and FMA.
+  kSpeedupSimdLobes = 1u << 2,
+  // Line 9's Σ V_d·L_int over the changes, and line 11's visible runs, with AVX2 (two 8-float
+  // registers per 64-byte suffix line).
+  kSpeedupSimdChanges = 1u << 3,
+  kAllSpeedups = (1u << 4) - 1,
+};
+// A short name of one speedup bit ("vertex set-up", ...).
+const char* TripleProductSpeedupName(uint32_t bit);
+
 struct TripleProductOptions {
   // false: the paper — the diffuse lobe is one DCT coefficient (its value at the block centre)
   // in every block. true: the diffuse cosine is integrated exactly in lines 6, 9 and 11 through
@@ -40,6 +61,10 @@ struct TripleProductOptions {
   // Appendix A samples the specular lobe at all 256 texels within π/8 of the mirror direction
   // from this exponent on, at 16 below it (the paper: 250).
   double full_rate_exponent = 250.0;
+  // The speedups (TripleProductSpeedup bits) turned off. generic = true runs the block-by-block
+  // code TripleProductVertexBlocks also runs (the kernel before issue 41), whatever `disable`.
+  uint32_t disable = 0;
+  bool generic = false;
 };
 
 // The case of Algorithm 1 a block took (its line in the pseudocode; kZero is line 1).

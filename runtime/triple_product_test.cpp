@@ -397,15 +397,37 @@ TEST(TripleProduct, EveryBlockWithinTheBoundOfItsCase) {
             bound_sum[c] += bb.bound[c];
           }
         }
-        // Per vertex: the blocks add up to TripleProductVertex and the reference, and the
+        // Per vertex: the blocks add up to the block-by-block kernel and the reference, and the
         // vertex's error is within the sum of its blocks' bounds.
         const auto whole = TripleProductVertex(scene, fx.blocks, fx.light, v, eye, nullptr,
-                                               {.exact_cosine = exact});
+                                               {.exact_cosine = exact, .generic = true});
         const auto whole_ref = PixelBasisReferenceVertex(scene, fx.blocks, fx.light, v, eye);
         for (int c = 0; c < 3; ++c) {
           EXPECT_NEAR(whole[c], std::max(0.0, sum[c]), 1e-9 + 1e-9 * std::abs(sum[c]));
           EXPECT_NEAR(whole_ref[c], ref_sum[c], 1e-9 + 1e-9 * std::abs(ref_sum[c]));
           EXPECT_LE(std::abs(whole[c] - whole_ref[c]), bound_sum[c]) << v << " " << exact;
+        }
+        // The optimised kernel with every combination of its speedups (issue 41) is the same
+        // Algorithm 1 in float: within float rounding of the block-by-block kernel (a lobe
+        // value to ~1e-6 relative; a block whose rate test sits within rounding of a threshold
+        // may take the neighbouring rate, which the case bounds still cover), with the same
+        // block counts.
+        TripleProductStats st_generic;
+        TripleProductVertex(scene, fx.blocks, fx.light, v, eye, &st_generic,
+                            {.exact_cosine = exact, .generic = true});
+        for (uint32_t off = 0; off <= kAllSpeedups; ++off) {
+          TripleProductStats st_fast;
+          const auto fast = TripleProductVertex(scene, fx.blocks, fx.light, v, eye, &st_fast,
+                                                {.exact_cosine = exact, .disable = off});
+          EXPECT_EQ(st_fast.blocks_zero, st_generic.blocks_zero);
+          EXPECT_EQ(st_fast.blocks_line6, st_generic.blocks_line6);
+          EXPECT_EQ(st_fast.blocks_line9 + st_fast.blocks_line11,
+                    st_generic.blocks_line9 + st_generic.blocks_line11);
+          for (int c = 0; c < 3; ++c) {
+            EXPECT_NEAR(fast[c], whole[c], 1e-6 + 2e-5 * std::abs(whole[c]))
+                << "vertex " << v << " speedups off " << off << " exact " << exact;
+            EXPECT_LE(std::abs(fast[c] - whole_ref[c]), bound_sum[c] * 1.001 + 1e-7);
+          }
         }
       }
     }
@@ -418,6 +440,81 @@ TEST(TripleProduct, EveryBlockWithinTheBoundOfItsCase) {
     EXPECT_GT(seen[3][2], 0u);
     EXPECT_GT(seen[3][3], 0u);
     EXPECT_GT(seen[3][4], 0u);
+  }
+}
+
+// The optimised kernel (issue 41: TripleProductSpeedup) against the block-by-block kernel for
+// every material model, random normals and eyes (grazing and below-the-horizon views included),
+// 1-bit and 6-bit maps, both diffuse terms and every combination of its speedups: the same
+// Algorithm 1 to float rounding (lobes in float with FastPowUnit: ~1e-6 relative per value), the
+// same block counts, and RelightTripleProductRange equal to the whole frame's vertices.
+TEST(TripleProduct, OptimisedKernelIsTheBlockByBlockKernel) {
+  Material lambert;
+  Material as_a;
+  as_a.model = BrdfModel::kAshikhminShirley;
+  as_a.diffuse = {0.2f, 0.3f, 0.25f};
+  as_a.specular = {0.5f, 0.4f, 0.3f};
+  as_a.exponent = 10;
+  as_a.exponent_v = 200;
+  Material as_b = as_a;
+  as_b.exponent = 200;
+  as_b.exponent_v = 20;
+  for (int bits : {1, 6}) {
+    Fixture fx;
+    fx.vis = MakeVisibilityBlocks(kN, bits);
+    const uint8_t top = static_cast<uint8_t>((1 << bits) - 1);
+    fx.materials = {lambert, Phong(10), Phong(100), Phong(400), as_a, as_b};
+    std::mt19937 rng(29 + bits);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const CubemapLayout layout(kN);
+    for (int v = 0; v < 36; ++v) {
+      const Vec3 normal = Normalize(Vec3{0.6 * u(rng), 1, 0.6 * u(rng)});
+      const Vec3 edge = Normalize(Vec3{u(rng), 0.3 * u(rng), u(rng)});
+      const double offset = 0.3 * u(rng);
+      std::vector<uint8_t> map(layout.texel_count());
+      for (std::size_t j = 0; j < map.size(); ++j) {
+        const Vec3 d = layout.TexelCenter(j);
+        if (Dot(d, normal) <= 0) continue;
+        const double t = 0.5 + 6 * (Dot(d, edge) - offset);
+        map[j] = bits == 1 ? (t > 0.5 ? top : 0)
+                           : static_cast<uint8_t>(std::lround(std::clamp(t, 0.0, 1.0) * top));
+      }
+      AppendVisibilityMap(fx.vis, map);
+      fx.positions.push_back({0.1 * u(rng), 0, 0.1 * u(rng)});
+      fx.normals.push_back(normal);
+      fx.material_index.push_back(static_cast<uint16_t>(v % fx.materials.size()));
+    }
+    const GlossyScene scene = fx.scene();
+    for (const bool exact : {false, true}) {
+      for (int trial = 0; trial < 3; ++trial) {
+        // trial 2 looks from just below the ground's horizon.
+        const Vec3 eye = trial < 2 ? Normalize(Vec3{u(rng), trial == 0 ? 1.0 : 0.15, u(rng)}) * 5.0
+                                   : Vec3{3, -0.05, 1};
+        std::vector<float> generic(fx.positions.size() * 3);
+        const TripleProductStats sg = RelightTripleProduct(
+            scene, fx.blocks, fx.light, eye, generic, {.exact_cosine = exact, .generic = true});
+        for (uint32_t off = 0; off <= kAllSpeedups; ++off) {
+          std::vector<float> fast(generic.size());
+          const TripleProductStats sf = RelightTripleProduct(
+              scene, fx.blocks, fx.light, eye, fast, {.exact_cosine = exact, .disable = off});
+          EXPECT_EQ(sf.blocks_zero, sg.blocks_zero);
+          EXPECT_EQ(sf.blocks_line6, sg.blocks_line6);
+          EXPECT_EQ(sf.blocks_line9 + sf.blocks_line11, sg.blocks_line9 + sg.blocks_line11);
+          float peak = 0;
+          for (float x : generic) peak = std::max(peak, x);
+          for (std::size_t i = 0; i < fast.size(); ++i)
+            ASSERT_NEAR(fast[i], generic[i], 1e-6 * peak + 2e-5 * std::abs(generic[i]))
+                << "vertex " << i / 3 << " (material " << fx.material_index[i / 3]
+                << ") speedups off " << off << " exact " << exact << " bits " << bits;
+        }
+        // A range is the whole frame's vertices.
+        std::vector<float> whole(generic.size()), part(3 * 7);
+        RelightTripleProduct(scene, fx.blocks, fx.light, eye, whole, {.exact_cosine = exact});
+        RelightTripleProductRange(scene, fx.blocks, fx.light, eye, 11, 7, part,
+                                  {.exact_cosine = exact});
+        for (std::size_t i = 0; i < part.size(); ++i) EXPECT_EQ(part[i], whole[33 + i]);
+      }
+    }
   }
 }
 
