@@ -337,6 +337,69 @@ __attribute__((target("avx2,fma"))) void SpecularBatchAvx2(const FloatLobes& L, 
   }
 }
 
+// Line 9 with the exact cosine on 1-bit maps: acc[0..16) += Σ over change pairs (a, z) of
+// q[a] − q[z] (and + q[a] for an unpaired last change), one 64-byte suffix line per change in two
+// 8-float registers.
+__attribute__((target("avx2,fma"))) void AccumulateChangePairsAvx2(const float* q,
+                                                                   const uint8_t* pos,
+                                                                   uint64_t count, float* acc) {
+  constexpr int kS = BlockLighting::kRgbXyzStride;
+  __m256 lo = _mm256_setzero_ps(), hi = _mm256_setzero_ps();
+  uint64_t i = 0;
+  for (; i + 2 <= count; i += 2) {
+    const float* a = q + pos[i] * kS;
+    const float* z = q + pos[i + 1] * kS;
+    lo = _mm256_add_ps(lo, _mm256_sub_ps(_mm256_load_ps(a), _mm256_load_ps(z)));
+    hi = _mm256_add_ps(hi, _mm256_sub_ps(_mm256_load_ps(a + 8), _mm256_load_ps(z + 8)));
+  }
+  if (i < count) {
+    const float* a = q + pos[i] * kS;
+    lo = _mm256_add_ps(lo, _mm256_load_ps(a));
+    hi = _mm256_add_ps(hi, _mm256_load_ps(a + 8));
+  }
+  _mm256_storeu_ps(acc, lo);
+  _mm256_storeu_ps(acc + 8, hi);
+}
+
+__attribute__((target("avx2,fma"))) inline float HorizontalSumAvx2(__m256 v) {
+  alignas(32) float t[8];
+  _mm256_store_ps(t, v);
+  return ((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7]));
+}
+
+// Line 11 on a 1-bit map: the lobes' pixels times the visibility (the runs filled into a 0/1
+// mask), dotted with the three channels' pixels, 8 positions per step; dpix null with the exact
+// cosine.
+__attribute__((target("avx2,fma"))) void Line11PixelsAvx2(const float* visible,
+                                                          const float* const lp[3],
+                                                          const float* spix, const float* dpix,
+                                                          float sp[3], float dif[3]) {
+  __m256 s0 = _mm256_setzero_ps(), s1 = s0, s2 = s0, d0 = s0, d1 = s0, d2 = s0;
+  for (int k = 0; k < 256; k += 8) {
+    const __m256 m = _mm256_load_ps(visible + k);
+    const __m256 l0 = _mm256_load_ps(lp[0] + k), l1 = _mm256_load_ps(lp[1] + k),
+                 l2 = _mm256_load_ps(lp[2] + k);
+    const __m256 sv = _mm256_mul_ps(_mm256_load_ps(spix + k), m);
+    s0 = _mm256_fmadd_ps(l0, sv, s0);
+    s1 = _mm256_fmadd_ps(l1, sv, s1);
+    s2 = _mm256_fmadd_ps(l2, sv, s2);
+    if (dpix != nullptr) {
+      const __m256 dv = _mm256_mul_ps(_mm256_load_ps(dpix + k), m);
+      d0 = _mm256_fmadd_ps(l0, dv, d0);
+      d1 = _mm256_fmadd_ps(l1, dv, d1);
+      d2 = _mm256_fmadd_ps(l2, dv, d2);
+    }
+  }
+  const auto hsum = HorizontalSumAvx2;
+
+  sp[0] = hsum(s0);
+  sp[1] = hsum(s1);
+  sp[2] = hsum(s2);
+  dif[0] = hsum(d0);
+  dif[1] = hsum(d1);
+  dif[2] = hsum(d2);
+}
+
 bool CpuHasAvx2Fma() {
   static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
   return has;
@@ -376,7 +439,8 @@ struct VertexTerms {
   const CubemapBlocks& blocks;
   const BlockLighting& light;
   bool spec, exact;
-  bool simd_lobes = false;  // FloatLobes' specular samples through SpecularBatch
+  bool simd_lobes = false;    // FloatLobes' specular samples through SpecularBatch
+  bool simd_changes = false;  // line 9's changes through AccumulateChangePairsAvx2
   float kd[3], ks[3];
   float inv_max;
   float nx, ny, nz;  // n/π: (n/π)·Σ L'ω over a range of positions is the exact diffuse integral
@@ -485,7 +549,12 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
     // Σ_i V_d[i]·(all twelve suffix sums at change i): one cache line per change.
     const int width = exact ? kS : 4;
     for (int j = 0; j < kS; ++j) acc[j] = 0.f;
-    if (vis.bits == 1) {
+#ifdef PRT_TP_HAVE_AVX2
+    if (vt.simd_changes && exact && vis.bits == 1) {
+      AccumulateChangePairsAvx2(q, vis.change_pos.data() + first, last - first, acc);
+    } else
+#endif
+        if (vis.bits == 1) {
       uint64_t i = first;
       for (; i + 2 <= last; i += 2) {
         const float* a = q + vis.change_pos[i] * kS;
@@ -514,18 +583,33 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
     if (!exact) BlockDct::Reconstruct(l, dcoef, dpix);
     for (int j = 0; j < kS; ++j) acc[j] = 0.f;
     float sp[3] = {0, 0, 0}, dif[3] = {0, 0, 0};
-    ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
-      const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
+#ifdef PRT_TP_HAVE_AVX2
+    if (vt.simd_changes && vis.bits == 1) {
+      alignas(32) float visible[256];
+      for (float& x : visible) x = 0.f;
+      ForEachVisibleRun(vis, e, [&](int a, int z, int) {
+        for (int k = a; k < z; ++k) visible[k] = 1.f;
+      });
+      const float* lp[3] = {light.Pixels(b, 0), light.Pixels(b, 1), light.Pixels(b, 2)};
+      Line11PixelsAvx2(visible, lp, spix, exact ? nullptr : dpix, sp, dif);
       if (exact) {
-        const float *qa = q + a * kS, *qz = q + z * kS;
-        for (int j = 0; j < kS; ++j) acc[j] += w * (qa[j] - qz[j]);
+        const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
+        AccumulateChangePairsAvx2(q, vis.change_pos.data() + first, last - first, acc);
       }
-      for (int c = 0; c < 3; ++c) {
-        const float* lp = light.Pixels(b, c);
-        sp[c] += w * DotRange(lp, spix, a, z);
-        if (!exact) dif[c] += w * DotRange(lp, dpix, a, z);
-      }
-    });
+    } else
+#endif
+      ForEachVisibleRun(vis, e, [&](int a, int z, int level) {
+        const float w = vis.bits == 1 ? 1.f : static_cast<float>(level) * inv_max;
+        if (exact) {
+          const float *qa = q + a * kS, *qz = q + z * kS;
+          for (int j = 0; j < kS; ++j) acc[j] += w * (qa[j] - qz[j]);
+        }
+        for (int c = 0; c < 3; ++c) {
+          const float* lp = light.Pixels(b, c);
+          sp[c] += w * DotRange(lp, spix, a, z);
+          if (!exact) dif[c] += w * DotRange(lp, dpix, a, z);
+        }
+      });
     for (int c = 0; c < 3; ++c)
       out[c] = kd[c] * (exact ? vt.CosineOf(acc, c) : dif[c]) + ks[c] * sp[c];
   } else {
@@ -601,11 +685,28 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
   const FloatLobes lobes(m, f, (options.disable & kSpeedupFastPow) == 0);
   const bool simd = (options.disable & kSpeedupSimdLobes) == 0;
   vt.simd_lobes = simd;
+#ifdef PRT_TP_HAVE_AVX2
+  vt.simd_changes = (options.disable & kSpeedupSimdChanges) == 0 && CpuHasAvx2Fma();
+#endif
   const DoubleLobes dlobes{m, f};
   const bool setup = (options.disable & kSpeedupVertexSetup) == 0;
   const int nb = blocks.block_count();
   const std::size_t e0 = vis.Entry(vertex, 0);
   const uint8_t* kinds = &vis.kind[e0];
+  if ((options.disable & kSpeedupPrefetch) == 0) {
+    // The change positions of the next vertex (its offsets were prefetched a vertex ago) and
+    // the offsets and kinds of the ones after: a vertex reads them in block order, but only for
+    // its mixed blocks, which the hardware prefetcher does not follow.
+    const std::size_t entries = vis.kind.size();
+    if (e0 + 2 * nb <= entries) {
+      const uint64_t a = vis.change_begin[e0 + nb], z = vis.change_begin[e0 + 2 * nb];
+      for (uint64_t i = a; i < z; i += 64) __builtin_prefetch(vis.change_pos.data() + i);
+      __builtin_prefetch(kinds + nb);
+      __builtin_prefetch(kinds + nb + 64);
+    }
+    if (e0 + 3 * nb <= entries)
+      for (int i = 0; i < nb; i += 8) __builtin_prefetch(vis.change_begin.data() + e0 + 2 * nb + i);
+  }
   // The non-zero blocks (line 1 skips the rest).
   uint16_t list[kMaxBlocks];
   int count = 0;
@@ -735,6 +836,8 @@ const char* TripleProductSpeedupName(uint32_t bit) {
       return "AVX2 lobes";
     case kSpeedupSimdChanges:
       return "AVX2 changes";
+    case kSpeedupPrefetch:
+      return "prefetch";
     default:
       return "unknown";
   }

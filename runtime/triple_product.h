@@ -47,7 +47,10 @@ enum TripleProductSpeedup : uint32_t {
   // Line 9's Σ V_d·L_int over the changes, and line 11's visible runs, with AVX2 (two 8-float
   // registers per 64-byte suffix line).
   kSpeedupSimdChanges = 1u << 3,
-  kAllSpeedups = (1u << 4) - 1,
+  // The next vertices' visibility (kind bytes, change offsets, change positions) prefetched
+  // while this vertex runs.
+  kSpeedupPrefetch = 1u << 4,
+  kAllSpeedups = (1u << 5) - 1,
 };
 // A short name of one speedup bit ("vertex set-up", ...).
 const char* TripleProductSpeedupName(uint32_t bit);
