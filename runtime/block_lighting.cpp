@@ -1,8 +1,11 @@
 #include "runtime/block_lighting.h"
 
+#include <algorithm>
+#include <cstdint>
 #include <stdexcept>
 
 #include "runtime/brdf.h"
+#include "vocabulary/huge_pages.h"
 #include "vocabulary/parallel.h"
 
 namespace prt {
@@ -79,7 +82,17 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
   out.suffix.resize(entries * 257);
   out.pixels.resize(entries * 256);
   out.suffix_vec.resize(entries * 257 * 3);
-  out.suffix_rgbxyz.assign(static_cast<std::size_t>(blocks.block_count()) * 257, {});
+  const std::size_t lines = static_cast<std::size_t>(blocks.block_count()) * 257;
+  constexpr std::size_t kHuge = std::size_t{2} << 20;
+  constexpr std::size_t kHugeLines = kHuge / sizeof(BlockLighting::SuffixLine);
+  if (out.suffix_rgbxyz.size() != lines + kHugeLines) {
+    ReserveFreshHuge(out.suffix_rgbxyz, lines + kHugeLines);
+    out.suffix_rgbxyz.resize(lines + kHugeLines);
+    const auto addr = reinterpret_cast<std::uintptr_t>(out.suffix_rgbxyz.data());
+    out.suffix_offset = ((kHuge - addr % kHuge) % kHuge) / sizeof(BlockLighting::SuffixLine);
+  }
+  std::fill_n(out.suffix_rgbxyz.begin() + static_cast<std::ptrdiff_t>(out.suffix_offset), lines,
+              BlockLighting::SuffixLine{});
   ParallelFor(static_cast<std::size_t>(blocks.block_count()), [&](std::size_t bi) {
     const int b = static_cast<int>(bi);
     for (int c = 0; c < 3; ++c) {
@@ -110,8 +123,8 @@ void UpdateBlockLighting(const CubemapRgb& light, const CubemapBlocks& blocks, B
         sv[3 * k + 2] = static_cast<float>(vz);
       }
     }
-    float* q =
-        reinterpret_cast<float*>(out.suffix_rgbxyz.data() + static_cast<std::size_t>(b) * 257);
+    float* q = reinterpret_cast<float*>(out.suffix_rgbxyz.data() + out.suffix_offset +
+                                        static_cast<std::size_t>(b) * 257);
     for (int c = 0; c < 3; ++c) {
       const std::size_t e = static_cast<std::size_t>(b) * 3 + c;
       const float* suffix = &out.suffix[e * 257];

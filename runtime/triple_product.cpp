@@ -57,6 +57,29 @@ void CheckScene(const GlossyScene& s, const CubemapBlocks& blocks, const BlockLi
 }
 
 // The runs of a mixed block: calls f(begin, end, level) for each maximal run of non-zero level.
+// A 1-bit block's visibility as 256 bits (bit k of word k/64: position k visible): the changes
+// toggle, so the visibility is the prefix XOR of a bit per change.
+inline void VisibleBits(const VisibilityBlocks& vis, std::size_t e, uint64_t out[4]) {
+  uint64_t t[4] = {0, 0, 0, 0};
+  for (uint64_t i = vis.change_begin[e]; i < vis.change_begin[e + 1]; ++i) {
+    const unsigned pos = vis.change_pos[i];
+    t[pos >> 6] ^= uint64_t{1} << (pos & 63u);
+  }
+  uint64_t carry = 0;
+  for (int w = 0; w < 4; ++w) {
+    uint64_t x = t[w];
+    x ^= x << 1;
+    x ^= x << 2;
+    x ^= x << 4;
+    x ^= x << 8;
+    x ^= x << 16;
+    x ^= x << 32;
+    x ^= carry;
+    out[w] = x;
+    carry = (x >> 63) != 0 ? ~uint64_t{0} : 0;
+  }
+}
+
 template <typename F>
 inline void ForEachVisibleRun(const VisibilityBlocks& vis, std::size_t e, F&& f) {
   const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
@@ -340,11 +363,12 @@ __attribute__((target("avx2,fma"))) void SpecularBatchAvx2(const FloatLobes& L, 
 // Line 9 with the exact cosine on 1-bit maps: acc[0..16) += Σ over change pairs (a, z) of
 // q[a] − q[z] (and + q[a] for an unpaired last change), one 64-byte suffix line per change in two
 // 8-float registers.
-__attribute__((target("avx2,fma"))) void AccumulateChangePairsAvx2(const float* q,
-                                                                   const uint8_t* pos,
-                                                                   uint64_t count, float* acc) {
+__attribute__((target("avx2,fma"))) inline void ChangePairsAvx2(const float* q, const uint8_t* pos,
+                                                                uint64_t count, __m256& lo,
+                                                                __m256& hi) {
   constexpr int kS = BlockLighting::kRgbXyzStride;
-  __m256 lo = _mm256_setzero_ps(), hi = _mm256_setzero_ps();
+  lo = _mm256_setzero_ps();
+  hi = _mm256_setzero_ps();
   uint64_t i = 0;
   for (; i + 2 <= count; i += 2) {
     const float* a = q + pos[i] * kS;
@@ -357,8 +381,39 @@ __attribute__((target("avx2,fma"))) void AccumulateChangePairsAvx2(const float* 
     lo = _mm256_add_ps(lo, _mm256_load_ps(a));
     hi = _mm256_add_ps(hi, _mm256_load_ps(a + 8));
   }
+}
+
+__attribute__((target("avx2,fma"))) void AccumulateChangePairsAvx2(const float* q,
+                                                                   const uint8_t* pos,
+                                                                   uint64_t count, float* acc) {
+  __m256 lo, hi;
+  ChangePairsAvx2(q, pos, count, lo, hi);
   _mm256_storeu_ps(acc, lo);
   _mm256_storeu_ps(acc + 8, hi);
+}
+
+// The whole of line 9 with the exact cosine on a 1-bit map, in registers: with the interleaved
+// sums lo = [L, Lx], hi = [Ly, Lz] (block_lighting.h), out_c = kd_c·(n/π)·(Lx, Ly, Lz)_c +
+// ks_c·s0·L_c.
+__attribute__((target("avx2,fma"))) void Line9ExactAvx2(const float* q, const uint8_t* pos,
+                                                        uint64_t count, const float n_pi[3],
+                                                        const float kd[3], const float ks[3],
+                                                        float s0, float out[3]) {
+  __m256 lo, hi;
+  ChangePairsAvx2(q, pos, count, lo, hi);
+  const __m128 l = _mm256_castps256_ps128(lo), lx = _mm256_extractf128_ps(lo, 1);
+  const __m128 ly = _mm256_castps256_ps128(hi), lz = _mm256_extractf128_ps(hi, 1);
+  const __m128 cosine =
+      _mm_fmadd_ps(_mm_set1_ps(n_pi[0]), lx,
+                   _mm_fmadd_ps(_mm_set1_ps(n_pi[1]), ly, _mm_mul_ps(_mm_set1_ps(n_pi[2]), lz)));
+  const __m128 r =
+      _mm_fmadd_ps(_mm_setr_ps(kd[0], kd[1], kd[2], 0.f), cosine,
+                   _mm_mul_ps(_mm_setr_ps(ks[0] * s0, ks[1] * s0, ks[2] * s0, 0.f), l));
+  alignas(16) float t[4];
+  _mm_store_ps(t, r);
+  out[0] = t[0];
+  out[1] = t[1];
+  out[2] = t[2];
 }
 
 __attribute__((target("avx2,fma"))) inline float HorizontalSumAvx2(__m256 v) {
@@ -367,31 +422,34 @@ __attribute__((target("avx2,fma"))) inline float HorizontalSumAvx2(__m256 v) {
   return ((t[0] + t[1]) + (t[2] + t[3])) + ((t[4] + t[5]) + (t[6] + t[7]));
 }
 
-// Line 11 on a 1-bit map: the lobes' pixels times the visibility (the runs filled into a 0/1
-// mask), dotted with the three channels' pixels, 8 positions per step; dpix null with the exact
-// cosine.
-__attribute__((target("avx2,fma"))) void Line11PixelsAvx2(const float* visible,
+// Line 11 on a 1-bit map: the lobes' pixels times the visibility, dotted with the three
+// channels' pixels, 8 positions per step; dpix null with the exact cosine. `visible` holds the
+// 256 positions' visibility as bits (VisibleBits); each step widens 8 of them to a lane mask.
+__attribute__((target("avx2,fma"))) void Line11PixelsAvx2(const uint64_t visible[4],
                                                           const float* const lp[3],
                                                           const float* spix, const float* dpix,
                                                           float sp[3], float dif[3]) {
   __m256 s0 = _mm256_setzero_ps(), s1 = s0, s2 = s0, d0 = s0, d1 = s0, d2 = s0;
+  const __m256i lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
   for (int k = 0; k < 256; k += 8) {
-    const __m256 m = _mm256_load_ps(visible + k);
-    const __m256 l0 = _mm256_load_ps(lp[0] + k), l1 = _mm256_load_ps(lp[1] + k),
-                 l2 = _mm256_load_ps(lp[2] + k);
-    const __m256 sv = _mm256_mul_ps(_mm256_load_ps(spix + k), m);
+    const auto byte = static_cast<int>((visible[k >> 6] >> (k & 63)) & 255u);
+    if (byte == 0) continue;
+    const __m256 m = _mm256_castsi256_ps(
+        _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(byte), lane_bit), lane_bit));
+    const __m256 l0 = _mm256_loadu_ps(lp[0] + k), l1 = _mm256_loadu_ps(lp[1] + k),
+                 l2 = _mm256_loadu_ps(lp[2] + k);
+    const __m256 sv = _mm256_and_ps(_mm256_load_ps(spix + k), m);
     s0 = _mm256_fmadd_ps(l0, sv, s0);
     s1 = _mm256_fmadd_ps(l1, sv, s1);
     s2 = _mm256_fmadd_ps(l2, sv, s2);
     if (dpix != nullptr) {
-      const __m256 dv = _mm256_mul_ps(_mm256_load_ps(dpix + k), m);
+      const __m256 dv = _mm256_and_ps(_mm256_load_ps(dpix + k), m);
       d0 = _mm256_fmadd_ps(l0, dv, d0);
       d1 = _mm256_fmadd_ps(l1, dv, d1);
       d2 = _mm256_fmadd_ps(l2, dv, d2);
     }
   }
   const auto hsum = HorizontalSumAvx2;
-
   sp[0] = hsum(s0);
   sp[1] = hsum(s1);
   sp[2] = hsum(s2);
@@ -400,11 +458,69 @@ __attribute__((target("avx2,fma"))) void Line11PixelsAvx2(const float* visible,
   dif[2] = hsum(d2);
 }
 
+// The vertex set-up over its listed blocks (FastVertex), 8 block centres per step: Appendix A's
+// rate code (0..3 for 1, 4, 16, 256 samples) from cos = 2(n·c)(n·v) − c·v and the diffuse lobe
+// at the centre.
+__attribute__((target("avx2,fma"))) void SetupAvx2(const FloatLobes& L, const float* gx,
+                                                   const float* gy, const float* gz, int count,
+                                                   bool low_exponent, int mid_code, int near_code,
+                                                   int32_t* code, float* d0) {
+  const __m256 c4 = _mm256_set1_ps(0.70710678118654752f), c8 = _mm256_set1_ps(0.92387953251128676f);
+  const __m256i mid = _mm256_set1_epi32(mid_code), near = _mm256_set1_epi32(near_code);
+  for (int i = 0; i < count; i += 8) {
+    const __m256 x = _mm256_load_ps(gx + i), y = _mm256_load_ps(gy + i), z = _mm256_load_ps(gz + i);
+    const __m256 nc = Dot3Avx2(L.n, x, y, z), vc = Dot3Avx2(L.v, x, y, z);
+    const __m256 cosang = _mm256_sub_ps(
+        _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(2.f), nc), _mm256_set1_ps(L.nv)), vc);
+    const __m256i above4 = _mm256_castps_si256(_mm256_cmp_ps(cosang, c4, _CMP_GT_OQ));
+    const __m256i above8 = _mm256_castps_si256(_mm256_cmp_ps(cosang, c8, _CMP_GT_OQ));
+    __m256i c = _mm256_and_si256(above4, mid);
+    if (!L.spec) {
+      c = _mm256_setzero_si256();
+    } else if (!low_exponent) {
+      c = _mm256_blendv_epi8(c, near, above8);
+    }
+    _mm256_store_si256(reinterpret_cast<__m256i*>(code + i), c);
+    _mm256_store_ps(d0 + i, _mm256_mul_ps(_mm256_max_ps(nc, _mm256_setzero_ps()),
+                                          _mm256_set1_ps(0.318309886f)));
+  }
+}
+
+// The non-zero blocks of a vertex from its kind bytes, 32 per step; returns their count.
+__attribute__((target("avx2,bmi"))) int ListNonZeroAvx2(const uint8_t* kinds, int nb,
+                                                        uint16_t* list) {
+  int count = 0, b = 0;
+  for (; b + 32 <= nb; b += 32) {
+    const __m256i k = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kinds + b));
+    auto mask =
+        ~static_cast<uint32_t>(_mm256_movemask_epi8(_mm256_cmpeq_epi8(k, _mm256_setzero_si256())));
+    while (mask != 0) {
+      list[count++] = static_cast<uint16_t>(b + static_cast<int>(_tzcnt_u32(mask)));
+      mask &= mask - 1;
+    }
+  }
+  for (; b < nb; ++b) {
+    list[count] = static_cast<uint16_t>(b);
+    count += kinds[b] != 0;
+  }
+  return count;
+}
+
 bool CpuHasAvx2Fma() {
-  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+                          __builtin_cpu_supports("bmi");
   return has;
 }
 #endif
+
+// True where the AVX2 paths run (an x86 CPU with AVX2, FMA and BMI).
+bool SimdAvailable() {
+#ifdef PRT_TP_HAVE_AVX2
+  return CpuHasAvx2Fma();
+#else
+  return false;
+#endif
+}
 
 void SpecularBatch(const FloatLobes& L, bool simd, const float* x, const float* y, const float* z,
                    int count, float* out) {
@@ -551,10 +667,12 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
     for (int j = 0; j < kS; ++j) acc[j] = 0.f;
 #ifdef PRT_TP_HAVE_AVX2
     if (vt.simd_changes && exact && vis.bits == 1) {
-      AccumulateChangePairsAvx2(q, vis.change_pos.data() + first, last - first, acc);
-    } else
+      const float n_pi[3] = {vt.nx, vt.ny, vt.nz};
+      Line9ExactAvx2(q, vis.change_pos.data() + first, last - first, n_pi, kd, ks, s0, out);
+      return TripleProductCase::kLine9;
+    }
 #endif
-        if (vis.bits == 1) {
+    if (vis.bits == 1) {
       uint64_t i = first;
       for (; i + 2 <= last; i += 2) {
         const float* a = q + vis.change_pos[i] * kS;
@@ -585,11 +703,8 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
     float sp[3] = {0, 0, 0}, dif[3] = {0, 0, 0};
 #ifdef PRT_TP_HAVE_AVX2
     if (vt.simd_changes && vis.bits == 1) {
-      alignas(32) float visible[256];
-      for (float& x : visible) x = 0.f;
-      ForEachVisibleRun(vis, e, [&](int a, int z, int) {
-        for (int k = a; k < z; ++k) visible[k] = 1.f;
-      });
+      uint64_t visible[4];
+      VisibleBits(vis, e, visible);
       const float* lp[3] = {light.Pixels(b, 0), light.Pixels(b, 1), light.Pixels(b, 2)};
       Line11PixelsAvx2(visible, lp, spix, exact ? nullptr : dpix, sp, dif);
       if (exact) {
@@ -668,6 +783,67 @@ void Algorithm1(const GlossyScene& scene, const CubemapBlocks& blocks, const Blo
   }
 }
 
+#ifdef PRT_TP_HAVE_AVX2
+// FastVertex's block loop with the exact cosine on a 1-bit map: the rate-1 blocks of lines 6 and
+// 9, most of a vertex's non-zero blocks, add their suffix lines (line 6: the block's total, line
+// 0; line 9: Σ over change pairs) into running sums for the whole vertex, [Lx] and [Ly, Lz] as
+// they are and L weighted by the block's ρ̃₁, and the vertex's share is taken from the sums once
+// at the end: out_c = kd_c·(n/π)·Σ(Lx, Ly, Lz)_c + ks_c·Σ ρ̃₁·L_c. (Line 6 at one BRDF sample is
+// ρ̃₁·16·F_00 = ρ̃₁·Σ L', the block's total; the sums reorder float additions only.) Other
+// blocks go through NonZeroBlock as in FastVertex.
+__attribute__((target("avx2,fma"))) void BlocksWithVertexSumsAvx2(
+    const VertexTerms& vt, const FloatLobes& lobes, const uint16_t* list, int count,
+    const int32_t* rate_code, const float* d0, const float* s0, std::size_t e0,
+    const uint8_t* kinds, double total[3], TripleProductStats& st) {
+  const VisibilityBlocks& vis = vt.vis;
+  __m256 lo_sum = _mm256_setzero_ps(), hi_sum = _mm256_setzero_ps(), spec = _mm256_setzero_ps();
+  static constexpr int kRate[4] = {1, 4, 16, 256};
+  BlockBrdf bb;
+  for (int i = 0; i < count; ++i) {
+    const int b = list[i];
+    const std::size_t e = e0 + b;
+    const auto kind = static_cast<VisibilityBlockKind>(kinds[b]);
+    if (rate_code[i] == 0) {
+      const float* q = vt.light.SuffixRgbXyz(b);
+      __m256 lo, hi;
+      if (kind == VisibilityBlockKind::kOne) {
+        lo = _mm256_load_ps(q);
+        hi = _mm256_load_ps(q + 8);
+        ++st.blocks_line6;
+      } else {
+        const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
+        ChangePairsAvx2(q, vis.change_pos.data() + first, last - first, lo, hi);
+        ++st.blocks_line9;
+      }
+      ++st.brdf_rate[0];
+      lo_sum = _mm256_add_ps(lo_sum, lo);
+      hi_sum = _mm256_add_ps(hi_sum, hi);
+      spec = _mm256_fmadd_ps(_mm256_set1_ps(s0[i]), lo, spec);
+      continue;
+    }
+    bb.rate = kRate[rate_code[i]];
+    bb.l = LevelsOf(bb.rate);
+    bb.d0 = d0[i];
+    if (bb.rate <= 16) ProjectBlockLobes(vt, lobes, b, bb);
+    float out[3] = {0, 0, 0};
+    const TripleProductCase line = NonZeroBlock(vt, lobes, b, e, kind, bb, out);
+    for (int c = 0; c < 3; ++c) total[c] += out[c];
+    Count(st, line, bb.rate);
+  }
+  const __m128 lx = _mm256_extractf128_ps(lo_sum, 1);
+  const __m128 ly = _mm256_castps256_ps128(hi_sum), lz = _mm256_extractf128_ps(hi_sum, 1);
+  const __m128 cosine =
+      _mm_fmadd_ps(_mm_set1_ps(vt.nx), lx,
+                   _mm_fmadd_ps(_mm_set1_ps(vt.ny), ly, _mm_mul_ps(_mm_set1_ps(vt.nz), lz)));
+  const __m128 r = _mm_fmadd_ps(
+      _mm_setr_ps(vt.kd[0], vt.kd[1], vt.kd[2], 0.f), cosine,
+      _mm_mul_ps(_mm_setr_ps(vt.ks[0], vt.ks[1], vt.ks[2], 0.f), _mm256_castps256_ps128(spec)));
+  alignas(16) float t[4];
+  _mm_store_ps(t, r);
+  for (int c = 0; c < 3; ++c) total[c] += t[c];
+}
+#endif
+
 // The optimised kernel (issue 41; TripleProductSpeedup in triple_product.h): the same blocks,
 // cases, rates and projections as Algorithm1, with
 //   - the non-zero blocks listed first from the vertex's 96 kind bytes, and only they visited;
@@ -708,15 +884,21 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
       for (int i = 0; i < nb; i += 8) __builtin_prefetch(vis.change_begin.data() + e0 + 2 * nb + i);
   }
   // The non-zero blocks (line 1 skips the rest).
+  static_assert(static_cast<uint8_t>(VisibilityBlockKind::kZero) == 0);
   uint16_t list[kMaxBlocks];
   int count = 0;
-  for (int b = 0; b < nb; ++b) {
-    list[count] = static_cast<uint16_t>(b);
-    count += kinds[b] != static_cast<uint8_t>(VisibilityBlockKind::kZero);
+  const bool avx2 = simd && SimdAvailable();
+  if (avx2 && setup) {
+    count = ListNonZeroAvx2(kinds, nb, list);
+  } else {
+    for (int b = 0; b < nb; ++b) {
+      list[count] = static_cast<uint16_t>(b);
+      count += kinds[b] != static_cast<uint8_t>(VisibilityBlockKind::kZero);
+    }
   }
   // Appendix A's rate per listed block and the lobes at its centre.
-  uint8_t rate_code[kMaxBlocks];  // 0..3: 1, 4, 16, 256
-  alignas(32) float d0[kMaxBlocks], s0[kMaxBlocks + 8];
+  alignas(32) int32_t rate_code[kMaxBlocks + 8];  // 0..3: 1, 4, 16, 256
+  alignas(32) float d0[kMaxBlocks + 8], s0[kMaxBlocks + 8];
   const double s_eff = EffectiveExponent(m);
   const int far_code = 0;
   const int mid_code = 1;
@@ -738,8 +920,10 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
       }
       for (int i = count; i < count + 8; ++i) gx[i] = gy[i] = gz[i] = 0.f;
       SpecularBatch(lobes, true, gx, gy, gz, count, s0);
+      if (avx2)
+        SetupAvx2(lobes, gx, gy, gz, count, low_exponent, mid_code, near_code, rate_code, d0);
     }
-    for (int i = 0; i < count; ++i) {
+    for (int i = 0; i < count && !avx2; ++i) {
       const int b = list[i];
       const float c[3] = {cx[b], cy[b], cz[b]};
       const float nc = FloatLobes::Dot3(lobes.n, c), vc = FloatLobes::Dot3(lobes.v, c);
@@ -752,7 +936,7 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
       } else {
         code = cosang > kCosPi8 ? near_code : (cosang > kCosPi4 ? mid_code : far_code);
       }
-      rate_code[i] = static_cast<uint8_t>(code);
+      rate_code[i] = code;
       d0[i] = nc > 0 ? nc * 0.318309886f : 0.f;
       if (!simd) s0[i] = code == 0 ? lobes.SpecularFrom(c, nc, cosang) : 0.f;
     }
@@ -760,7 +944,7 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
     for (int i = 0; i < count; ++i) {
       const int b = list[i];
       const int rate = BrdfSamplingRate(m, f, blocks.Centre(b), options.full_rate_exponent);
-      rate_code[i] = static_cast<uint8_t>(rate == 1 ? 0 : (rate == 4 ? 1 : (rate == 16 ? 2 : 3)));
+      rate_code[i] = rate == 1 ? 0 : (rate == 4 ? 1 : (rate == 16 ? 2 : 3));
       d0[i] = static_cast<float>(DiffuseLobe(f, blocks.Centre(b)));
       s0[i] = 0.f;
     }
@@ -769,6 +953,14 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
   double total[3] = {0, 0, 0};
   TripleProductStats st;
   st.blocks_zero = static_cast<uint64_t>(nb - count);
+#ifdef PRT_TP_HAVE_AVX2
+  if (avx2 && setup && vt.simd_changes && vt.exact && vis.bits == 1 &&
+      (options.disable & kSpeedupVertexSums) == 0) {
+    BlocksWithVertexSumsAvx2(vt, lobes, list, count, rate_code, d0, s0, e0, kinds, total, st);
+    if (stats != nullptr) *stats += st;
+    return {total[0], total[1], total[2]};
+  }
+#endif
   BlockBrdf bb;
   for (int i = 0; i < count; ++i) {
     const int b = list[i];
@@ -838,6 +1030,8 @@ const char* TripleProductSpeedupName(uint32_t bit) {
       return "AVX2 changes";
     case kSpeedupPrefetch:
       return "prefetch";
+    case kSpeedupVertexSums:
+      return "vertex sums";
     default:
       return "unknown";
   }
