@@ -4,9 +4,9 @@
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
 #endif
-#include <bit>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
@@ -150,10 +150,19 @@ struct DoubleLobes {
 // 0.1716 (five terms: truncation < 1e-9); 2^y from the exponent bits and e^z, z = f·ln 2, |f| ≤
 // ½, to degree 7 (truncation < 6e-9). The result's relative error is that of float arithmetic
 // on y = s·log2 x: about 1e-7·(1 + |y|), below 3e-6 wherever x^s > 1e-9.
+// std::bit_cast, which Emscripten 3.1.6's library (the web build) lacks.
+template <class To, class From>
+inline To BitCast(const From& from) {
+  static_assert(sizeof(To) == sizeof(From));
+  To to;
+  std::memcpy(&to, &from, sizeof to);
+  return to;
+}
+
 inline float FastLog2(float x) {  // x normal, > 0
-  const auto bits = std::bit_cast<uint32_t>(x);
+  const auto bits = BitCast<uint32_t>(x);
   int e = static_cast<int>((bits >> 23) & 255u) - 127;
-  float m = std::bit_cast<float>((bits & 0x007fffffu) | 0x3f800000u);  // [1, 2)
+  float m = BitCast<float>((bits & 0x007fffffu) | 0x3f800000u);  // [1, 2)
   if (m > 1.41421356f) {
     m *= 0.5f;
     ++e;
@@ -178,7 +187,7 @@ inline float FastExp2(float y) {  // y ≤ ½; 0 below 2^−126
   p = p * z + 0.5f;
   p = p * z + 1.f;
   p = p * z + 1.f;
-  return p * std::bit_cast<float>(static_cast<uint32_t>(static_cast<int>(r) + 127) << 23);
+  return p * BitCast<float>(static_cast<uint32_t>(static_cast<int>(r) + 127) << 23);
 }
 inline float FastPowUnit(float x, float s) {
   if (!(x >= 1.17549435e-38f)) return 0.f;  // 0, subnormals, NaN
@@ -367,20 +376,33 @@ __attribute__((target("avx2,fma"))) inline void ChangePairsAvx2(const float* q, 
                                                                 uint64_t count, __m256& lo,
                                                                 __m256& hi) {
   constexpr int kS = BlockLighting::kRgbXyzStride;
-  lo = _mm256_setzero_ps();
-  hi = _mm256_setzero_ps();
+  // Two pairs a step into two sets of sums: the adds of one pair do not wait for the last's.
+  __m256 lo0 = _mm256_setzero_ps(), hi0 = lo0, lo1 = lo0, hi1 = lo0;
   uint64_t i = 0;
-  for (; i + 2 <= count; i += 2) {
+  for (; i + 4 <= count; i += 4) {
+    const float* a0 = q + pos[i] * kS;
+    const float* z0 = q + pos[i + 1] * kS;
+    const float* a1 = q + pos[i + 2] * kS;
+    const float* z1 = q + pos[i + 3] * kS;
+    lo0 = _mm256_add_ps(lo0, _mm256_sub_ps(_mm256_load_ps(a0), _mm256_load_ps(z0)));
+    hi0 = _mm256_add_ps(hi0, _mm256_sub_ps(_mm256_load_ps(a0 + 8), _mm256_load_ps(z0 + 8)));
+    lo1 = _mm256_add_ps(lo1, _mm256_sub_ps(_mm256_load_ps(a1), _mm256_load_ps(z1)));
+    hi1 = _mm256_add_ps(hi1, _mm256_sub_ps(_mm256_load_ps(a1 + 8), _mm256_load_ps(z1 + 8)));
+  }
+  if (i + 2 <= count) {
     const float* a = q + pos[i] * kS;
     const float* z = q + pos[i + 1] * kS;
-    lo = _mm256_add_ps(lo, _mm256_sub_ps(_mm256_load_ps(a), _mm256_load_ps(z)));
-    hi = _mm256_add_ps(hi, _mm256_sub_ps(_mm256_load_ps(a + 8), _mm256_load_ps(z + 8)));
+    lo0 = _mm256_add_ps(lo0, _mm256_sub_ps(_mm256_load_ps(a), _mm256_load_ps(z)));
+    hi0 = _mm256_add_ps(hi0, _mm256_sub_ps(_mm256_load_ps(a + 8), _mm256_load_ps(z + 8)));
+    i += 2;
   }
   if (i < count) {
     const float* a = q + pos[i] * kS;
-    lo = _mm256_add_ps(lo, _mm256_load_ps(a));
-    hi = _mm256_add_ps(hi, _mm256_load_ps(a + 8));
+    lo1 = _mm256_add_ps(lo1, _mm256_load_ps(a));
+    hi1 = _mm256_add_ps(hi1, _mm256_load_ps(a + 8));
   }
+  lo = _mm256_add_ps(lo0, lo1);
+  hi = _mm256_add_ps(hi0, hi1);
 }
 
 __attribute__((target("avx2,fma"))) void AccumulateChangePairsAvx2(const float* q,
@@ -504,6 +526,59 @@ __attribute__((target("avx2,bmi"))) int ListNonZeroAvx2(const uint8_t* kinds, in
     count += kinds[b] != 0;
   }
   return count;
+}
+
+// Line 11 with the exact cosine on a 1-bit map, the specular lobe never stored: each row y of
+// its reconstruction Σ_uv A_uv φ_u(x) φ_v(y) (BlockDct::Reconstruct) is made in two 8-float
+// registers, masked by the row's visibility bits and dotted with the three channels' pixels.
+template <int L>
+__attribute__((target("avx2,fma"))) void Line11FromDctAvx2(const float* coef,
+                                                           const uint64_t visible[4],
+                                                           const float* const lp[3], float sp[3]) {
+  alignas(32) static const std::array<float, 64> kBasis = [] {
+    std::array<float, 64> t{};
+    for (int u = 0; u < 4; ++u)
+      for (int x = 0; x < 16; ++x) t[u * 16 + x] = BlockDct::Basis(u, x);
+    return t;
+  }();
+  __m256 g_lo[L], g_hi[L];  // g_v(x) = Σ_u A_uv φ_u(x), x < 8 and x ≥ 8
+  for (int v = 0; v < L; ++v) {
+    g_lo[v] = _mm256_setzero_ps();
+    g_hi[v] = _mm256_setzero_ps();
+    for (int u = 0; u < L; ++u) {
+      const __m256 a = _mm256_set1_ps(coef[v * L + u]);
+      g_lo[v] = _mm256_fmadd_ps(a, _mm256_load_ps(&kBasis[u * 16]), g_lo[v]);
+      g_hi[v] = _mm256_fmadd_ps(a, _mm256_load_ps(&kBasis[u * 16 + 8]), g_hi[v]);
+    }
+  }
+  const __m256i lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  __m256 s0 = _mm256_setzero_ps(), s1 = s0, s2 = s0;
+  for (int y = 0; y < 16; ++y) {
+    const auto row = static_cast<unsigned>((visible[y >> 2] >> ((y & 3) * 16)) & 0xffffu);
+    if (row == 0) continue;
+    __m256 p_lo = _mm256_setzero_ps(), p_hi = p_lo;
+    for (int v = 0; v < L; ++v) {
+      const __m256 w = _mm256_set1_ps(kBasis[v * 16 + y]);
+      p_lo = _mm256_fmadd_ps(w, g_lo[v], p_lo);
+      p_hi = _mm256_fmadd_ps(w, g_hi[v], p_hi);
+    }
+    const __m256 m_lo = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+        _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(row & 255u)), lane_bit), lane_bit));
+    const __m256 m_hi = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+        _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(row >> 8)), lane_bit), lane_bit));
+    p_lo = _mm256_and_ps(p_lo, m_lo);
+    p_hi = _mm256_and_ps(p_hi, m_hi);
+    const int k = y * 16;
+    s0 = _mm256_fmadd_ps(_mm256_loadu_ps(lp[0] + k), p_lo, s0);
+    s1 = _mm256_fmadd_ps(_mm256_loadu_ps(lp[1] + k), p_lo, s1);
+    s2 = _mm256_fmadd_ps(_mm256_loadu_ps(lp[2] + k), p_lo, s2);
+    s0 = _mm256_fmadd_ps(_mm256_loadu_ps(lp[0] + k + 8), p_hi, s0);
+    s1 = _mm256_fmadd_ps(_mm256_loadu_ps(lp[1] + k + 8), p_hi, s1);
+    s2 = _mm256_fmadd_ps(_mm256_loadu_ps(lp[2] + k + 8), p_hi, s2);
+  }
+  sp[0] = HorizontalSumAvx2(s0);
+  sp[1] = HorizontalSumAvx2(s1);
+  sp[2] = HorizontalSumAvx2(s2);
 }
 
 bool CpuHasAvx2Fma() {
@@ -697,10 +772,29 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
   }
   // line 11: Decompress-Integrate in the pixel basis over the visible runs (§4.4)
   if (rate <= 16) {
-    BlockDct::Reconstruct(l, coef, spix);
-    if (!exact) BlockDct::Reconstruct(l, dcoef, dpix);
     for (int j = 0; j < kS; ++j) acc[j] = 0.f;
     float sp[3] = {0, 0, 0}, dif[3] = {0, 0, 0};
+#ifdef PRT_TP_HAVE_AVX2
+    if (vt.simd_changes && vis.bits == 1 && exact) {
+      uint64_t visible[4];
+      VisibleBits(vis, e, visible);
+      const float* lp[3] = {light.Pixels(b, 0), light.Pixels(b, 1), light.Pixels(b, 2)};
+      if (spec) {
+        if (l == 1)
+          Line11FromDctAvx2<1>(coef, visible, lp, sp);
+        else if (l == 2)
+          Line11FromDctAvx2<2>(coef, visible, lp, sp);
+        else
+          Line11FromDctAvx2<4>(coef, visible, lp, sp);
+      }
+      const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
+      AccumulateChangePairsAvx2(q, vis.change_pos.data() + first, last - first, acc);
+      for (int c = 0; c < 3; ++c) out[c] = kd[c] * vt.CosineOf(acc, c) + ks[c] * sp[c];
+      return TripleProductCase::kLine11;
+    }
+#endif
+    BlockDct::Reconstruct(l, coef, spix);
+    if (!exact) BlockDct::Reconstruct(l, dcoef, dpix);
 #ifdef PRT_TP_HAVE_AVX2
     if (vt.simd_changes && vis.bits == 1) {
       uint64_t visible[4];
