@@ -178,6 +178,19 @@ void RequireHandle(const prt_runtime* rt) {
   if (rt == nullptr || (!rt->session && !rt->glossy)) throw ArgumentError("the handle is NULL");
 }
 
+static_assert(static_cast<int>(prt::BrdfModel::kLambert) == PRT_RUNTIME_BRDF_LAMBERT &&
+              static_cast<int>(prt::BrdfModel::kPhong) == PRT_RUNTIME_BRDF_PHONG &&
+              static_cast<int>(prt::BrdfModel::kAshikhminShirley) ==
+                  PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY);
+
+void RequireMaterialIndex(const prt_runtime& rt, unsigned mesh) {
+  if (!rt.glossy)
+    throw ArgumentError(rt.name +
+                        " is not a glossy pack: its materials are baked into its transport");
+  Require(mesh < rt.glossy->materials().size(),
+          "mesh " + std::to_string(mesh) + " of " + std::to_string(rt.glossy->materials().size()));
+}
+
 // A glossy pack's frames: as prt-view's RunGlossy, whose default is the exact diffuse cosine.
 constexpr prt::TripleProductOptions kGlossyOptions{.exact_cosine = true};
 
@@ -676,6 +689,53 @@ int prt_runtime_get_eye(const prt_runtime* rt, float eye[3]) {
     eye[0] = static_cast<float>(rt->eye.x);
     eye[1] = static_cast<float>(rt->eye.y);
     eye[2] = static_cast<float>(rt->eye.z);
+  });
+}
+
+unsigned prt_runtime_material_count(const prt_runtime* rt) {
+  return rt != nullptr && rt->glossy ? static_cast<unsigned>(rt->glossy->materials().size()) : 0;
+}
+
+int prt_runtime_get_material(const prt_runtime* rt, unsigned mesh, prt_runtime_material* out) {
+  return Guard("prt_runtime_get_material", [&] {
+    RequireHandle(rt);
+    Require(out != nullptr, "out is NULL");
+    RequireMaterialIndex(*rt, mesh);
+    const prt::Material& m = rt->glossy->materials()[mesh];
+    out->brdf = static_cast<int>(m.model);
+    for (int c = 0; c < 3; ++c) {
+      out->diffuse[c] = m.diffuse[c];
+      out->specular[c] = m.specular[c];
+    }
+    out->exponent = m.exponent;
+    out->exponent_v = m.exponent_v;
+  });
+}
+
+int prt_runtime_set_material(prt_runtime* rt, unsigned mesh, const prt_runtime_material* material) {
+  return Guard("prt_runtime_set_material", [&] {
+    RequireHandle(rt);
+    Require(material != nullptr, "material is NULL");
+    RequireMaterialIndex(*rt, mesh);
+    const prt_runtime_material& in = *material;
+    Require(in.brdf == PRT_RUNTIME_BRDF_LAMBERT || in.brdf == PRT_RUNTIME_BRDF_PHONG ||
+                in.brdf == PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY,
+            "unknown brdf " + std::to_string(in.brdf));
+    prt::Material m;
+    m.model = static_cast<prt::BrdfModel>(in.brdf);
+    for (int c = 0; c < 3; ++c) {
+      Require(in.diffuse[c] >= 0 && in.diffuse[c] <= 1,
+              "diffuse[" + std::to_string(c) + "] is outside [0, 1]");
+      Require(in.specular[c] >= 0 && in.specular[c] <= 1,
+              "specular[" + std::to_string(c) + "] is outside [0, 1]");
+      m.diffuse[c] = in.diffuse[c];
+      m.specular[c] = in.specular[c];
+    }
+    Require(in.exponent > 0 && in.exponent <= 1e6, "exponent is outside (0, 1e6]");
+    Require(in.exponent_v > 0 && in.exponent_v <= 1e6, "exponent_v is outside (0, 1e6]");
+    m.exponent = in.exponent;
+    m.exponent_v = in.exponent_v;
+    rt->glossy->materials()[mesh] = m;
   });
 }
 

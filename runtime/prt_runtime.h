@@ -53,7 +53,21 @@ extern "C" {
 #define PRT_RUNTIME_ORDER_PACK 0    /* the pack's order (the default) */
 #define PRT_RUNTIME_ORDER_RUNTIME 1 /* the relighter's own order: no gather per frame */
 
+/* A glossy pack's BRDF models (prt_runtime_material.brdf). */
+#define PRT_RUNTIME_BRDF_LAMBERT 0
+#define PRT_RUNTIME_BRDF_PHONG 1
+#define PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY 2
+
 typedef struct prt_runtime prt_runtime; /* opaque */
+
+/* One mesh's material of a glossy pack (docs/scene-format.md, "Glossy materials"). */
+typedef struct prt_runtime_material {
+  int brdf;          /* PRT_RUNTIME_BRDF_* */
+  float diffuse[3];  /* albedo of the Lambert part, each in [0, 1] */
+  float specular[3]; /* weight of the specular lobe, each in [0, 1] (ignored for Lambert) */
+  double exponent;   /* Phong s, Ashikhmin-Shirley n_u: in (0, 1e6] */
+  double exponent_v; /* Ashikhmin-Shirley n_v: in (0, 1e6] */
+} prt_runtime_material;
 
 /* ---- Opening ------------------------------------------------------------------------------ */
 
@@ -125,6 +139,15 @@ int prt_runtime_get_camera(const prt_runtime* rt, float eye[3], float target[3],
  * viewer orbits any pack the same way; a vertex or image pack's radiance does not depend on it. */
 int prt_runtime_set_eye(prt_runtime* rt, const float eye[3]);
 int prt_runtime_get_eye(const prt_runtime* rt, float eye[3]);
+
+/* A glossy pack's materials, one per mesh in pack order, from its metadata at opening (a mesh
+ * without an entry is Lambert with its albedo); editable between frames: the next relight uses
+ * them. prt_runtime_material_count is the mesh count of a glossy pack, 0 for any other (a vertex
+ * pack's materials are baked into its transport). get/set: `mesh` < the count, every field in
+ * its range (PRT_RUNTIME_ERROR_ARGUMENT otherwise; a refused material leaves the old one). */
+unsigned prt_runtime_material_count(const prt_runtime* rt);
+int prt_runtime_get_material(const prt_runtime* rt, unsigned mesh, prt_runtime_material* out);
+int prt_runtime_set_material(prt_runtime* rt, unsigned mesh, const prt_runtime_material* material);
 
 /* ---- Lighting ----------------------------------------------------------------------------- */
 

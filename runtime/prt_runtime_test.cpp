@@ -653,6 +653,76 @@ TEST(RuntimeGlossy, EqualsPrtViewAndFollowsTheEye) {
     ASSERT_NEAR(again[i], rgb[i], 1e-6f * std::abs(rgb[i])) << "Lambert sample " << i / 3;
 }
 
+// A glossy pack's materials: read from its metadata, editable between frames (a box made Lambert
+// no longer follows the eye; a sharper lobe changes the frame), every bad field refused.
+TEST(RuntimeGlossy, MaterialsAreEditable) {
+  const auto message = [] { return std::string(prt_runtime_last_error()); };
+  Handle h(GlossyPack(32));
+  ASSERT_NE(h.rt, nullptr) << message();
+  ASSERT_EQ(prt_runtime_material_count(h.rt), 2u);
+  prt_runtime_material box{}, ground{};
+  ASSERT_EQ(prt_runtime_get_material(h.rt, 0, &box), PRT_RUNTIME_OK) << message();
+  ASSERT_EQ(prt_runtime_get_material(h.rt, 1, &ground), PRT_RUNTIME_OK);
+  EXPECT_EQ(box.brdf, PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY);
+  EXPECT_DOUBLE_EQ(box.exponent, 30.0);
+  EXPECT_DOUBLE_EQ(box.exponent_v, 150.0);
+  EXPECT_FLOAT_EQ(box.specular[1], 0.5f);
+  EXPECT_EQ(ground.brdf, PRT_RUNTIME_BRDF_LAMBERT);
+
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<float> map(3 * 32 * 16, 1.0f), a(3 * n), b(3 * n), c(3 * n);
+  for (std::size_t i = 0; i < 32 * 8; ++i) map[3 * i] = map[3 * i + 1] = 4.0f;  // bright sky
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  const float e1[3] = {3, 1, 0}, e2[3] = {0, 2, 3};
+  const auto box_change = [&](const std::vector<float>& x, const std::vector<float>& y) {
+    double d = 0;
+    for (std::size_t i = 0; i < 3 * kGlossyBoxVertices; ++i)
+      d = std::max(d, std::abs(double(x[i]) - y[i]) / std::max(1e-12, std::abs(double(y[i]))));
+    return d;
+  };
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, e1), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, a.data(), n), PRT_RUNTIME_OK);
+  prt_runtime_material sharp = box;
+  sharp.exponent = sharp.exponent_v = 400;
+  ASSERT_EQ(prt_runtime_set_material(h.rt, 0, &sharp), PRT_RUNTIME_OK) << message();
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, b.data(), n), PRT_RUNTIME_OK);
+  EXPECT_GT(box_change(b, a), 1e-3) << "a sharper lobe should change the box";
+  prt_runtime_material lambert = box;
+  lambert.brdf = PRT_RUNTIME_BRDF_LAMBERT;
+  ASSERT_EQ(prt_runtime_set_material(h.rt, 0, &lambert), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, b.data(), n), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, e2), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, c.data(), n), PRT_RUNTIME_OK);
+  EXPECT_LE(box_change(c, b), 1e-6) << "a Lambert box should not follow the eye";
+
+  // Refused: a bad index, model, colour or exponent, NULL; the old material stays.
+  prt_runtime_material bad = box;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 2, &box), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("mesh 2 of 2"), std::string::npos) << message();
+  bad.brdf = 9;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  bad = box;
+  bad.specular[2] = 1.5f;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("specular[2]"), std::string::npos) << message();
+  bad = box;
+  bad.diffuse[0] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  bad = box;
+  bad.exponent_v = 0;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, nullptr), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_get_material(h.rt, 0, nullptr), PRT_RUNTIME_ERROR_ARGUMENT);
+  prt_runtime_material now{};
+  ASSERT_EQ(prt_runtime_get_material(h.rt, 0, &now), PRT_RUNTIME_OK);
+  EXPECT_EQ(now.brdf, PRT_RUNTIME_BRDF_LAMBERT);
+  // A vertex pack has no editable materials.
+  Handle v(Pack("adaptive4d"));
+  EXPECT_EQ(prt_runtime_material_count(v.rt), 0u);
+  EXPECT_EQ(prt_runtime_get_material(v.rt, 0, &now), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("not a glossy pack"), std::string::npos) << message();
+}
+
 // A glossy frame split into ranges (3 threads at once) writes what the whole frame writes, under
 // a rotated map, in preview and at an orbited eye; the runtime's order is the pack's.
 TEST(RuntimeGlossy, RangesEqualTheWholeFrame) {

@@ -16,7 +16,7 @@ const kKeptFrames = 600;
 const stats = {
   state: 'empty', error: null, pack: null, env: null, samples: 0, triangles: 0, isImage: false,
   isGlossy: false, cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
-  orbitDeg: 0, lastOrbitMs: null,
+  orbitDeg: 0, lastOrbitMs: null, orbitFps: null, eye: null, target: null,
   converged: false, preview: false, lastFrameAt: null, convergeMs: null, previewSetupMs: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
   lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
   bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,

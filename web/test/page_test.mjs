@@ -188,6 +188,24 @@ async function main() {
     const shot = join(a.outDir, 'page.png');
     await (await page.$(s0.isImage ? '#image' : '#gl')).screenshot({path: shot});
 
+    if (a.measure && s0.isGlossy) {  // a glossy pack: its orbit and rotation steps
+      const bench = await page.evaluate(() => window.prtPage.glossyBenchmark({frames: 10}));
+      await drag(page, 20, 16, 'right', 0.1);
+      await settle(page);
+      const s = await page.evaluate(() => window.prtStats);
+      const orbit = s.frames.filter((f) => f.orbit && f.glossy);
+      const med = (xs) => [...xs].sort((p, q) => p - q)[Math.floor(xs.length / 2)];
+      console.log(JSON.stringify({
+        pack: a.pack, samples: s.samples, n: s.cubemapSize, ...bench,
+        orbitDragFrames: orbit.length, orbitDragFps: s.orbitFps,
+        orbitDragFrameMedianMs: med(orbit.map((f) => f.totalMs)),
+        orbitDragRelightMedianMs: med(orbit.map((f) => f.relightMs)),
+        exactRelightMs: s0.exactRelightMs, openMs: s0.openMs,
+        loadToFirstFrameMs: s0.loadToFirstFrameMs, memoryBytes: s0.memoryBytes,
+        wasmHeapBytes: s0.wasmHeapBytes,
+      }, null, 1));
+      return;
+    }
     if (a.measure) {
       const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30,
                                                                         mapWidths: [1024, 512, 256, 128]}));
