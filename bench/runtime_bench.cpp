@@ -12,12 +12,20 @@
 // frame (set_rotation: resample + projection), open time, prt_runtime_memory_bytes and the
 // process's peak RSS.
 //
+// A glossy pack (prt_runtime_is_glossy: visibility, Algorithm 1 per frame towards the eye;
+// docs/runtime.md, "Glossy packs") is measured instead as the frames a viewer makes: an orbit
+// step (prt_runtime_set_eye 0.02 rad further about the camera's target, then relight) and a
+// lighting rotation step (set_rotation_y 0.01 rad further, with and without the preview, then
+// relight), each through the C API on 1 thread, with the 2-thread task runner and as 2 ranges on
+// 2 host threads, against prt-view's GlossySession on TBB.
+//
 // Usage: prt-runtime-bench PACK ENV.exr [frames]
 #include <sys/resource.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
@@ -31,6 +39,7 @@
 
 #include "runtime/lighting.h"
 #include "runtime/prt_runtime.h"
+#include "viewer/glossy_session.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/environment_io.h"
@@ -128,6 +137,139 @@ void Check(int status) {
   }
 }
 
+double PeakRssMiB() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return static_cast<double>(ru.ru_maxrss) / 1024.0;
+}
+
+// A glossy pack's frames (see the header comment). `rt` has the environment set.
+int RunGlossy(prt_runtime* rt, const std::string& pack, const prt::EnvironmentImage& env,
+              int frames, double open_ms, double env_ms) {
+  const std::size_t n = prt_runtime_sample_count(rt);
+  std::vector<float> rgb(3 * n);
+  float eye0[3], target[3];
+  Check(prt_runtime_get_camera(rt, eye0, target, nullptr, nullptr, nullptr, nullptr));
+  // The eye turned by `a` about the vertical through the target (prt-view's window orbit).
+  const auto orbit = [&](double a, float out[3]) {
+    const double x = eye0[0] - target[0], z = eye0[2] - target[2];
+    out[0] = static_cast<float>(target[0] + x * std::cos(a) + z * std::sin(a));
+    out[1] = eye0[1];
+    out[2] = static_cast<float>(target[2] - x * std::sin(a) + z * std::cos(a));
+  };
+  std::vector<double> rotation_ms, preview_ms;
+  for (int f = 0; f < frames; ++f) {
+    auto t0 = Clock::now();
+    Check(prt_runtime_set_rotation_y(rt, 0.01 * f));
+    rotation_ms.push_back(Ms(t0));
+  }
+  Check(prt_runtime_set_preview(rt, 1));
+  for (int f = 0; f < frames; ++f) {
+    auto t0 = Clock::now();
+    Check(prt_runtime_set_rotation_y(rt, 0.01 * f));
+    preview_ms.push_back(Ms(t0));
+  }
+  Check(prt_runtime_set_preview(rt, 0));
+  std::printf(
+      "%s: glossy, %zu vertices, n = %u; open %.0f ms, environment %dx%d %.1f ms, lighting per "
+      "rotation (set_rotation_y: resample + block lighting) %.2f ms, with prt_runtime_set_preview "
+      "%.2f ms\n",
+      pack.c_str(), n, prt_runtime_cubemap_size(rt), open_ms, env.width, env.height, env_ms,
+      Median(rotation_ms), Median(preview_ms));
+
+  // Three kinds of step, each: change the view or the lighting, then relight (timed together).
+  const auto steps = [&](const std::function<void()>& relight) {
+    std::vector<double> med;
+    for (int kind = 0; kind < 3; ++kind) {  // orbit, rotation with preview, rotation exact
+      Check(prt_runtime_set_preview(rt, kind == 1 ? 1 : 0));
+      Check(prt_runtime_set_rotation_y(rt, 0.0));
+      float e[3];
+      orbit(0.0, e);
+      Check(prt_runtime_set_eye(rt, e));
+      std::vector<double> t;
+      for (int f = 0; f < frames + 2; ++f) {
+        const auto s = Clock::now();
+        if (kind == 0) {
+          orbit(0.02 * f, e);
+          Check(prt_runtime_set_eye(rt, e));
+        } else {
+          Check(prt_runtime_set_rotation_y(rt, 0.01 * f));
+        }
+        relight();
+        if (f >= 2) t.push_back(Ms(s));
+      }
+      med.push_back(Median(t));
+    }
+    Check(prt_runtime_set_preview(rt, 0));
+    return med;
+  };
+  const auto whole = [&] { Check(prt_runtime_relight(rt, 0, rgb.data(), n)); };
+  const std::vector<double> c1 = steps(whole);
+  const std::size_t mem = prt_runtime_memory_bytes(rt);
+  Pool pool(2);
+  prt_runtime_set_task_runner(&Pool::Run, &pool, 2);
+  const std::vector<double> runner = steps(whole);
+  prt_runtime_set_task_runner(nullptr, nullptr, 1);
+  const std::vector<double> ranges = steps([&] {
+    Check(prt_runtime_prepare(rt, 0));
+    int s1 = PRT_RUNTIME_OK;
+    std::thread other([&] { s1 = prt_runtime_relight_range(rt, n / 2, n - n / 2, rgb.data(), n); });
+    Check(prt_runtime_relight_range(rt, 0, n / 2, rgb.data(), n));
+    other.join();
+    Check(s1);
+  });
+  prt_runtime_close(rt);
+
+  // prt-view's GlossySession on TBB (every core): the same steps as prt-view's window makes them
+  // (without its rasteriser).
+  prt::UseTbbParallelism();
+  const auto session = prt::GlossySession::Open(pack);
+  const int cn = session->cubemap_n();
+  std::vector<double> view;
+  for (int kind = 0; kind < 3; ++kind) {
+    prt::BlockLighting light = session->Lighting(prt::ResampleToCubemap(env, cn, 0.0));
+    std::vector<double> t;
+    for (int f = 0; f < frames + 2; ++f) {
+      float e[3];
+      orbit(kind == 0 ? 0.02 * f : 0.0, e);
+      const auto s = Clock::now();
+      if (kind == 2) light = session->Lighting(prt::ResampleToCubemap(env, cn, 0.01 * f));
+      session->Relight(light, prt::Vec3{e[0], e[1], e[2]}, rgb, {.exact_cosine = true});
+      if (f >= 2) t.push_back(Ms(s));
+    }
+    view.push_back(kind == 1 ? std::nan("") : Median(t));
+  }
+
+  std::printf("\n%-22s %12s %12s %12s\n", "median ms per frame", "orbit step", "rot. preview",
+              "rot. exact");
+  const auto row = [&](const char* name, const std::vector<double>& v) {
+    std::printf("%-22s", name);
+    for (double x : v) std::isnan(x) ? std::printf(" %12s", "-") : std::printf(" %12.2f", x);
+    std::printf("\n");
+  };
+  row("prt-view (TBB)", view);
+  row("C API, 1 thread", c1);
+  row("C API, runner x2", runner);
+  row("C API, 2 ranges x2", ranges);
+  std::printf("\n%-22s %12s %12s %12s\n", "speed-up vs 1 thread", "orbit step", "rot. preview",
+              "rot. exact");
+  const auto ratio = [&](const char* name, const std::vector<double>& v) {
+    std::printf("%-22s", name);
+    for (std::size_t i = 0; i < v.size(); ++i)
+      std::isnan(v[i]) ? std::printf(" %12s", "-") : std::printf(" %11.2fx", c1[i] / v[i]);
+    std::printf("\n");
+  };
+  ratio("prt-view (TBB)", view);
+  ratio("C API, runner x2", runner);
+  ratio("C API, 2 ranges x2", ranges);
+  std::printf(
+      "\nprt_runtime_memory_bytes %.1f MiB (pack file %.1f MiB); peak RSS of this process "
+      "%.1f MiB\n",
+      static_cast<double>(mem) / (1 << 20),
+      static_cast<double>(std::filesystem::file_size(pack)) / (1 << 20), PeakRssMiB());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -154,6 +296,7 @@ int main(int argc, char** argv) {
   t0 = Clock::now();
   Check(prt_runtime_set_environment_latlong(rt, map.data(), env.width, env.height));
   const double env_ms = Ms(t0);
+  if (prt_runtime_is_glossy(rt) == 1) return RunGlossy(rt, pack, env, frames, open_ms, env_ms);
   std::vector<double> rotation_ms;
   for (int f = 0; f < frames; ++f) {
     t0 = Clock::now();

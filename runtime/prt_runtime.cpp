@@ -1,7 +1,10 @@
 // The C API of runtime/prt_runtime.h over RelightSession (runtime/relight_session.h): the same
 // calls prt-view makes (ResampleToCubemap, ProjectLighting, RelightExact / NWA / BI / PBI, Shade,
-// ToPackOrder), behind opaque handles, status codes and a per-thread message. No exception
-// leaves this file.
+// ToPackOrder), behind opaque handles, status codes and a per-thread message. A glossy pack
+// (visibility, no transport) is opened as a GlossyRelightSession instead
+// (runtime/glossy_relight_session.h) and relit as prt-view's RunGlossy does: ResampleToCubemap,
+// the block lighting (UpdateBlockLighting) and Algorithm 1 towards the eye. No exception leaves
+// this file.
 #include "runtime/prt_runtime.h"
 
 #include <algorithm>
@@ -21,6 +24,8 @@
 
 #include "formats/image_file.h"
 #include "packager/prtpack_reader.h"
+#include "runtime/block_lighting.h"
+#include "runtime/glossy_relight_session.h"
 #include "runtime/lighting.h"
 #include "runtime/per_band_incremental.h"
 #include "runtime/relight.h"
@@ -99,8 +104,15 @@ prt::pack::ReaderOptions Options() {
 }  // namespace
 
 struct prt_runtime {
+  // Exactly one of the two: a pack with a transport, or a glossy pack (visibility only).
   std::unique_ptr<prt::RelightSession> session;
+  std::unique_ptr<prt::GlossyRelightSession> glossy;
   std::string name;  // the pack, in messages
+
+  // A glossy pack's view (prt_runtime_set_eye; the pack's camera eye at opening) and its
+  // lighting in the block representations (updated in place when the lighting changes).
+  prt::Vec3 eye{};
+  prt::BlockLighting block_light;
 
   // Lighting: the environment, its rotation, and the lighting they make.
   prt::EnvironmentImage env;
@@ -128,31 +140,63 @@ struct prt_runtime {
   bool incremental_frame = false;
   // The prepared frame (prt_runtime_prepare), applied range by range: its lighting terms
   // (exact, NWA) into frame_radiance, or an incremental step of BI / PBI.
-  enum class Prepared { kNone, kTerms, kBi, kPbi };
+  enum class Prepared { kNone, kTerms, kBi, kPbi, kGlossy };
   Prepared prepared = Prepared::kNone;
   std::vector<prt::LightingTerm> frame_terms;
   prt::SampleRadiance frame_radiance;
   prt::IncrementalStep step;
   std::atomic<std::size_t> relit{0};  // samples written by relight_range since prepare
 
-  std::size_t samples() const { return session->sample_count(); }
+  std::size_t samples() const { return glossy ? glossy->sample_count() : session->sample_count(); }
+  int cubemap_n() const {
+    return glossy ? glossy->cubemap_n() : static_cast<int>(session->cubemap_n());
+  }
 };
 
 namespace {
 
+// What prt-view relights: a pack with visibility and no transport is glossy (view_main.cpp).
 prt_runtime* Open(const char* function, const std::function<prt::pack::PackReader()>& read,
                   const std::string& name) {
   std::unique_ptr<prt_runtime> rt;
   const int status = Guard(function, [&] {
     rt = std::make_unique<prt_runtime>();
     rt->name = name;
-    rt->session = prt::RelightSession::FromReader(read(), name);
+    const prt::pack::PackReader reader = read();
+    if (!reader.has_transport() && !reader.has_cpca() && reader.has_visibility()) {
+      rt->glossy = prt::GlossyRelightSession::FromReader(reader, name);
+      rt->eye = rt->glossy->camera().eye;
+    } else {
+      rt->session = prt::RelightSession::FromReader(reader, name);
+      rt->eye = rt->session->camera().eye;
+    }
   });
   return status == PRT_RUNTIME_OK ? rt.release() : nullptr;
 }
 
 void RequireHandle(const prt_runtime* rt) {
-  if (rt == nullptr || !rt->session) throw ArgumentError("the handle is NULL");
+  if (rt == nullptr || (!rt->session && !rt->glossy)) throw ArgumentError("the handle is NULL");
+}
+
+static_assert(static_cast<int>(prt::BrdfModel::kLambert) == PRT_RUNTIME_BRDF_LAMBERT &&
+              static_cast<int>(prt::BrdfModel::kPhong) == PRT_RUNTIME_BRDF_PHONG &&
+              static_cast<int>(prt::BrdfModel::kAshikhminShirley) ==
+                  PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY);
+
+void RequireMaterialIndex(const prt_runtime& rt, unsigned mesh) {
+  if (!rt.glossy)
+    throw ArgumentError(rt.name +
+                        " is not a glossy pack: its materials are baked into its transport");
+  Require(mesh < rt.glossy->materials().size(),
+          "mesh " + std::to_string(mesh) + " of " + std::to_string(rt.glossy->materials().size()));
+}
+
+// A glossy pack's frames: as prt-view's RunGlossy, whose default is the exact diffuse cosine.
+constexpr prt::TripleProductOptions kGlossyOptions{.exact_cosine = true};
+
+void RequireEnvironment(const prt_runtime& rt) {
+  if (!rt.has_env)
+    throw StateError(rt.name + ": no environment yet (call prt_runtime_set_environment_latlong)");
 }
 
 void UpdateLighting(prt_runtime& rt);
@@ -245,7 +289,7 @@ void SetRotation(prt_runtime& rt, bool general, double angle_y, const std::array
 prt::CubemapRgb Lighting(const prt_runtime& rt, const prt::EnvironmentImage& env,
                          std::unique_ptr<prt::PeriodicLatLongResampler>& periodic,
                          std::unique_ptr<prt::EnvironmentImage>& reduced) {
-  const int n = static_cast<int>(rt.session->cubemap_n());
+  const int n = rt.cubemap_n();
   if (!rt.preview) return Resample(rt, env, n);
   if (!rt.general_rotation) {
     if (!periodic)
@@ -256,7 +300,13 @@ prt::CubemapRgb Lighting(const prt_runtime& rt, const prt::EnvironmentImage& env
   return Resample(rt, *reduced, n);
 }
 
+// A glossy pack's block lighting is updated in place (its storage kept from frame to frame).
 void UpdateLighting(prt_runtime& rt) {
+  if (rt.glossy) {
+    prt::UpdateBlockLighting(Lighting(rt, rt.env, rt.periodic, rt.reduced), rt.glossy->blocks(),
+                             rt.block_light);
+    return;
+  }
   rt.lighting = prt::ProjectLighting(Lighting(rt, rt.env, rt.periodic, rt.reduced));
 }
 
@@ -317,8 +367,11 @@ void EnsureIncremental(prt_runtime& rt, unsigned terms) {
 
 // prt_runtime_prepare's work: the frame's decisions, none of its per-sample work.
 void PrepareFrame(prt_runtime& rt, unsigned terms) {
-  if (!rt.has_env)
-    throw StateError(rt.name + ": no environment yet (call prt_runtime_set_environment_latlong)");
+  RequireEnvironment(rt);
+  if (rt.glossy) {  // terms and the lighting mode do not apply: every frame is Algorithm 1
+    rt.prepared = prt_runtime::Prepared::kGlossy;
+    return;
+  }
   const prt::RelightSession& s = *rt.session;
   if (terms == 0 || rt.mode == PRT_RUNTIME_LIGHTING_NWA) {
     if (terms == 0) {
@@ -349,6 +402,10 @@ void PrepareFrame(prt_runtime& rt, unsigned terms) {
 void RelightRange(prt_runtime& rt, std::size_t first, std::size_t count, float* out) {
   const prt::SampleRadiance* radiance = nullptr;
   switch (rt.prepared) {
+    case prt_runtime::Prepared::kGlossy:  // the pack's order is the runtime's
+      rt.glossy->RelightRange(rt.block_light, rt.eye, first, count,
+                              std::span<float>(out + 3 * first, 3 * count), kGlossyOptions);
+      return;
     case prt_runtime::Prepared::kTerms:
       rt.session->transport().AccumulateRange(rt.frame_terms, rt.frame_radiance, first, count,
                                               true);
@@ -428,11 +485,15 @@ const char* prt_runtime_last_error(void) {
 }
 
 size_t prt_runtime_sample_count(const prt_runtime* rt) {
-  return rt != nullptr && rt->session ? rt->samples() : 0;
+  return rt != nullptr && (rt->session || rt->glossy) ? rt->samples() : 0;
 }
 
 int prt_runtime_is_image(const prt_runtime* rt) {
   return rt != nullptr && rt->session && rt->session->image() != nullptr ? 1 : 0;
+}
+
+int prt_runtime_is_glossy(const prt_runtime* rt) {
+  return rt != nullptr && rt->glossy ? 1 : 0;
 }
 
 unsigned prt_runtime_transport_channels(const prt_runtime* rt) {
@@ -440,7 +501,7 @@ unsigned prt_runtime_transport_channels(const prt_runtime* rt) {
 }
 
 unsigned prt_runtime_cubemap_size(const prt_runtime* rt) {
-  return rt != nullptr && rt->session ? static_cast<unsigned>(rt->session->cubemap_n()) : 0;
+  return rt != nullptr && (rt->session || rt->glossy) ? static_cast<unsigned>(rt->cubemap_n()) : 0;
 }
 
 unsigned prt_runtime_coefficient_count(const prt_runtime* rt) {
@@ -449,6 +510,7 @@ unsigned prt_runtime_coefficient_count(const prt_runtime* rt) {
 }
 
 size_t prt_runtime_triangle_count(const prt_runtime* rt) {
+  if (rt != nullptr && rt->glossy) return rt->glossy->triangles().size();
   return rt != nullptr && rt->session ? rt->session->triangles().size() : 0;
 }
 
@@ -457,9 +519,19 @@ int prt_runtime_get_positions(const prt_runtime* rt, float* xyz, size_t samples)
     RequireHandle(rt);
     Require(xyz != nullptr, "xyz is NULL");
     const std::size_t ns = rt->samples();
-    Require(rt->session->image() == nullptr, rt->name + " is an image pack: it has no positions");
+    Require(rt->glossy || rt->session->image() == nullptr,
+            rt->name + " is an image pack: it has no positions");
     Require(samples == ns,
             "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
+    if (rt->glossy) {  // the pack's order
+      const std::span<const prt::Vec3> p = rt->glossy->positions();
+      for (std::size_t i = 0; i < ns; ++i) {
+        xyz[3 * i] = static_cast<float>(p[i].x);
+        xyz[3 * i + 1] = static_cast<float>(p[i].y);
+        xyz[3 * i + 2] = static_cast<float>(p[i].z);
+      }
+      return;
+    }
     const std::span<const prt::Vec3> p = rt->session->positions();
     const std::span<const uint32_t> pack_sample = rt->session->pack_sample();
     for (std::size_t i = 0; i < ns; ++i) {
@@ -475,9 +547,15 @@ int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t t
   return Guard("prt_runtime_get_triangles", [&] {
     RequireHandle(rt);
     Require(indices != nullptr, "indices is NULL");
-    const std::span<const std::array<uint32_t, 3>> t = rt->session->triangles();
+    const std::span<const std::array<uint32_t, 3>> t =
+        rt->glossy ? rt->glossy->triangles() : rt->session->triangles();
     Require(triangles == t.size(), "room for " + std::to_string(triangles) +
                                        " triangles, the pack has " + std::to_string(t.size()));
+    if (rt->glossy) {  // the pack's order
+      for (std::size_t i = 0; i < t.size(); ++i)
+        for (int k = 0; k < 3; ++k) indices[3 * i + k] = t[i][k];
+      return;
+    }
     const std::span<const uint32_t> pack_sample = rt->session->pack_sample();
     for (std::size_t i = 0; i < t.size(); ++i)
       for (int k = 0; k < 3; ++k) indices[3 * i + k] = pack_sample[t[i][k]];
@@ -488,7 +566,7 @@ int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background,
   return Guard("prt_runtime_get_image_background", [&] {
     RequireHandle(rt);
     Require(background != nullptr, "background is NULL");
-    const prt::ImageSamplesInfo* image = rt->session->image();
+    const prt::ImageSamplesInfo* image = rt->glossy ? nullptr : rt->session->image();
     Require(image != nullptr, rt->name + " is a vertex pack: it has no background pixels");
     const std::size_t ns = rt->samples();
     Require(samples == ns,
@@ -503,7 +581,7 @@ int prt_runtime_get_camera(const prt_runtime* rt, float eye[3], float target[3],
                            float* fov_deg, int* width, int* height) {
   return Guard("prt_runtime_get_camera", [&] {
     RequireHandle(rt);
-    const prt::Camera& c = rt->session->camera();
+    const prt::Camera& c = rt->glossy ? rt->glossy->camera() : rt->session->camera();
     const auto put = [](float* o, const prt::Vec3& v) {
       if (o == nullptr) return;
       o[0] = static_cast<float>(v.x);
@@ -541,11 +619,17 @@ int prt_runtime_set_environment_latlong(prt_runtime* rt, const float* rgb, int w
     // Resample before replacing anything: on error the previous environment stays.
     std::unique_ptr<prt::PeriodicLatLongResampler> periodic;
     std::unique_ptr<prt::EnvironmentImage> reduced;
-    prt::WaveletLighting lighting = prt::ProjectLighting(Lighting(*rt, env, periodic, reduced));
+    const prt::CubemapRgb cube = Lighting(*rt, env, periodic, reduced);
+    if (rt->glossy) {
+      prt::BlockLighting light;
+      prt::UpdateBlockLighting(cube, rt->glossy->blocks(), light);
+      rt->block_light = std::move(light);
+    } else {
+      rt->lighting = prt::ProjectLighting(cube);
+    }
     rt->env = std::move(env);
     rt->periodic = std::move(periodic);
     rt->reduced = std::move(reduced);
-    rt->lighting = std::move(lighting);
     rt->has_env = true;
   });
 }
@@ -585,6 +669,73 @@ int prt_runtime_set_rotation_y(prt_runtime* rt, double radians) {
     // RotateAboutY (vocabulary/envmap.h) as a matrix: x' = x cos + z sin, z' = −x sin + z cos.
     const double c = std::cos(radians), s = std::sin(radians);
     SetRotation(*rt, false, radians, {c, 0, s, 0, 1, 0, -s, 0, c});
+  });
+}
+
+int prt_runtime_set_eye(prt_runtime* rt, const float eye[3]) {
+  return Guard("prt_runtime_set_eye", [&] {
+    RequireHandle(rt);
+    Require(eye != nullptr, "eye is NULL");
+    for (int i = 0; i < 3; ++i)
+      Require(std::isfinite(eye[i]), "eye[" + std::to_string(i) + "] is not finite");
+    rt->eye = {eye[0], eye[1], eye[2]};  // a vertex pack's radiance does not depend on it
+  });
+}
+
+int prt_runtime_get_eye(const prt_runtime* rt, float eye[3]) {
+  return Guard("prt_runtime_get_eye", [&] {
+    RequireHandle(rt);
+    Require(eye != nullptr, "eye is NULL");
+    eye[0] = static_cast<float>(rt->eye.x);
+    eye[1] = static_cast<float>(rt->eye.y);
+    eye[2] = static_cast<float>(rt->eye.z);
+  });
+}
+
+unsigned prt_runtime_material_count(const prt_runtime* rt) {
+  return rt != nullptr && rt->glossy ? static_cast<unsigned>(rt->glossy->materials().size()) : 0;
+}
+
+int prt_runtime_get_material(const prt_runtime* rt, unsigned mesh, prt_runtime_material* out) {
+  return Guard("prt_runtime_get_material", [&] {
+    RequireHandle(rt);
+    Require(out != nullptr, "out is NULL");
+    RequireMaterialIndex(*rt, mesh);
+    const prt::Material& m = rt->glossy->materials()[mesh];
+    out->brdf = static_cast<int>(m.model);
+    for (int c = 0; c < 3; ++c) {
+      out->diffuse[c] = m.diffuse[c];
+      out->specular[c] = m.specular[c];
+    }
+    out->exponent = m.exponent;
+    out->exponent_v = m.exponent_v;
+  });
+}
+
+int prt_runtime_set_material(prt_runtime* rt, unsigned mesh, const prt_runtime_material* material) {
+  return Guard("prt_runtime_set_material", [&] {
+    RequireHandle(rt);
+    Require(material != nullptr, "material is NULL");
+    RequireMaterialIndex(*rt, mesh);
+    const prt_runtime_material& in = *material;
+    Require(in.brdf == PRT_RUNTIME_BRDF_LAMBERT || in.brdf == PRT_RUNTIME_BRDF_PHONG ||
+                in.brdf == PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY,
+            "unknown brdf " + std::to_string(in.brdf));
+    prt::Material m;
+    m.model = static_cast<prt::BrdfModel>(in.brdf);
+    for (int c = 0; c < 3; ++c) {
+      Require(in.diffuse[c] >= 0 && in.diffuse[c] <= 1,
+              "diffuse[" + std::to_string(c) + "] is outside [0, 1]");
+      Require(in.specular[c] >= 0 && in.specular[c] <= 1,
+              "specular[" + std::to_string(c) + "] is outside [0, 1]");
+      m.diffuse[c] = in.diffuse[c];
+      m.specular[c] = in.specular[c];
+    }
+    Require(in.exponent > 0 && in.exponent <= 1e6, "exponent is outside (0, 1e6]");
+    Require(in.exponent_v > 0 && in.exponent_v <= 1e6, "exponent_v is outside (0, 1e6]");
+    m.exponent = in.exponent;
+    m.exponent_v = in.exponent_v;
+    rt->glossy->materials()[mesh] = m;
   });
 }
 
@@ -635,6 +786,10 @@ int prt_runtime_get_sample_order(const prt_runtime* rt, uint32_t* pack_index, si
     Require(samples == rt->samples(), "room for " + std::to_string(samples) +
                                           " samples, the pack has " +
                                           std::to_string(rt->samples()));
+    if (rt->glossy) {  // a glossy pack's runtime order is the pack's
+      for (std::size_t i = 0; i < rt->samples(); ++i) pack_index[i] = static_cast<uint32_t>(i);
+      return;
+    }
     const std::span<const uint32_t> p = rt->session->pack_sample();
     std::copy(p.begin(), p.end(), pack_index);
   });
@@ -685,6 +840,12 @@ int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t 
                        std::to_string(rt->samples()) +
                        " samples; its incremental state would be torn");
     rt->prepared = prt_runtime::Prepared::kNone;
+    if (rt->glossy) {  // terms and the lighting mode do not apply; the pack's order
+      RequireEnvironment(*rt);
+      rt->glossy->Relight(rt->block_light, rt->eye, std::span<float>(out_rgb, 3 * rt->samples()),
+                          kGlossyOptions);
+      return;
+    }
     ComputeFrame(*rt, terms);
     CopyOut(*rt, 0, rt->samples(), out_rgb);
   });
@@ -706,7 +867,27 @@ void prt_runtime_set_max_section_bytes(uint64_t bytes) {
   g_max_section_bytes.store(bytes);
 }
 
+// A glossy pack: its visibility, vertices (position, normal, material), triangles, the blocks'
+// geometry (texel, directions, solid angles), the block lighting, and the map.
+std::size_t GlossyMemoryBytes(const prt_runtime& rt) {
+  const prt::GlossyRelightSession& g = *rt.glossy;
+  std::size_t bytes = g.visibility().MemoryBytes();
+  bytes += g.sample_count() * (2 * sizeof(prt::Vec3) + sizeof(uint16_t));
+  bytes += g.triangles().size() * sizeof(std::array<uint32_t, 3>);
+  bytes += static_cast<std::size_t>(g.blocks().block_count()) *
+           (256 * sizeof(uint32_t) + sizeof(prt::Vec3) + (768 + 63 + 256) * sizeof(float));
+  const prt::BlockLighting& l = rt.block_light;
+  bytes +=
+      sizeof(float) * (l.dct.size() + l.suffix.size() + l.pixels.size() + l.suffix_vec.size()) +
+      sizeof(prt::BlockLighting::SuffixLine) * l.suffix_rgbxyz.size();
+  bytes += sizeof(float) * rt.env.r.size() * 3;
+  if (rt.periodic) bytes += rt.periodic->memory_bytes();
+  if (rt.reduced) bytes += sizeof(float) * 3 * rt.reduced->PixelCount();
+  return bytes;
+}
+
 size_t prt_runtime_memory_bytes(const prt_runtime* rt) {
+  if (rt != nullptr && rt->glossy) return GlossyMemoryBytes(*rt);
   if (rt == nullptr || !rt->session) return 0;
   std::size_t bytes = rt->session->memory_bytes();
   bytes += sizeof(float) * (rt->env.r.size() * 3 + rt->frame_rgb.size());

@@ -5,7 +5,9 @@
  * or a budget of wavelet terms (NWA, BI, PBI: Ng et al. 2003; Overbeck et al. 2006), and the
  * pack's transport: 2D, 4D and adaptive 4D compressed columns (Cheslack-Postava et al. 2008 §4.5,
  * Eq. 8), clustered PCA (Overbeck et al. 2006 §6.3), vertex or image packs, one or three colour
- * channels. The library links the C++ standard library, Draco, zstd and xxHash only.
+ * channels. Glossy packs (per-vertex visibility, no transport) are relit towards the eye by the
+ * per-block triple products of Inger et al. 2013, Algorithm 1 (prt_runtime_is_glossy). The library
+ * links the C++ standard library, Draco, zstd and xxHash only.
  *
  * Conventions
  * - Every function that can fail returns a status (PRT_RUNTIME_OK = 0, else a PRT_RUNTIME_ERROR_*
@@ -14,9 +16,9 @@
  * - The caller owns every output buffer and says how large it is; a wrong size is an error,
  *   never a write past it.
  * - Radiance is linear RGB, 3 floats per sample: albedo × (T·L), what prt-view --radiance-out
- *   writes. Samples are the pack's, in the pack's order (meshes in pack order, each mesh's
- *   vertices in order; an image pack's pixels row-major from the top), unless
- *   prt_runtime_set_sample_order() chose the runtime's order.
+ *   writes (a glossy pack: the outgoing radiance towards the eye, ∫ L V ρ̃ dω). Samples are the
+ * pack's, in the pack's order (meshes in pack order, each mesh's vertices in order; an image pack's
+ * pixels row-major from the top), unless prt_runtime_set_sample_order() chose the runtime's order.
  * - Threads: a handle is used by one thread at a time, except prt_runtime_relight_range(), which
  *   any number of threads may call at once on one handle between prt_runtime_prepare() and the
  *   next call of anything else. Different handles are independent. prt_runtime_set_task_runner()
@@ -51,14 +53,31 @@ extern "C" {
 #define PRT_RUNTIME_ORDER_PACK 0    /* the pack's order (the default) */
 #define PRT_RUNTIME_ORDER_RUNTIME 1 /* the relighter's own order: no gather per frame */
 
+/* A glossy pack's BRDF models (prt_runtime_material.brdf). */
+#define PRT_RUNTIME_BRDF_LAMBERT 0
+#define PRT_RUNTIME_BRDF_PHONG 1
+#define PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY 2
+
 typedef struct prt_runtime prt_runtime; /* opaque */
+
+/* One mesh's material of a glossy pack (docs/scene-format.md, "Glossy materials"). */
+typedef struct prt_runtime_material {
+  int brdf;          /* PRT_RUNTIME_BRDF_* */
+  float diffuse[3];  /* albedo of the Lambert part, each in [0, 1] */
+  float specular[3]; /* weight of the specular lobe, each in [0, 1] (ignored for Lambert) */
+  double exponent;   /* Phong s, Ashikhmin-Shirley n_u: in (0, 1e6] */
+  double exponent_v; /* Ashikhmin-Shirley n_v: in (0, 1e6] */
+} prt_runtime_material;
 
 /* ---- Opening ------------------------------------------------------------------------------ */
 
 /* Reads the pack (meshes, materials, metadata, the whole compressed transport) and readies it
- * for relighting. Needs: a readable .prtpack with a transport (TRNS or CPCA section).
+ * for relighting. Needs: a readable .prtpack with a transport (TRNS or CPCA section), or a glossy
+ * pack: visibility (VISB sections) and no transport, opened as prt-view opens it (its meshes,
+ * per-vertex visibility and the materials of its metadata).
  * Returns NULL on error: an unreadable file, a corrupt or truncated pack (every checksum and
- * size is checked), a pack with no transport, memory. Safe on hostile input. */
+ * size is checked), a pack with neither transport nor visibility, memory. Safe on hostile
+ * input. */
 prt_runtime* prt_runtime_open_file(const char* path);
 /* The same from bytes in memory (copied as needed: `data` may be freed after the call). */
 prt_runtime* prt_runtime_open_memory(const void* data, size_t size);
@@ -75,10 +94,20 @@ const char* prt_runtime_last_error(void);
 size_t prt_runtime_sample_count(const prt_runtime* rt);
 /* 1 for an image pack (samples are the pixels of a fixed camera), else 0. */
 int prt_runtime_is_image(const prt_runtime* rt);
-/* Colour channels of the transport (1, or 3 with coloured interreflection). */
+/* 1 for a glossy pack, else 0. A glossy pack's samples are its vertices in the pack's order
+ * (meshes in pack order, each mesh's vertices in order; the runtime's order is the same), each
+ * with the material of its mesh from the pack's metadata (Lambert, Phong or Ashikhmin-Shirley;
+ * docs/scene-format.md, "Glossy materials"). Its radiance depends on the view: every frame is
+ * Algorithm 1 of Inger et al. 2013 for every vertex towards the eye (prt_runtime_set_eye), with
+ * the exact diffuse cosine (prt-view's default). Terms, the lighting mode and PBI do not apply:
+ * every relight is the full frame, whatever `terms`. Everything else (maps, rotation, preview,
+ * ranges, the task runner) works as for a vertex pack. */
+int prt_runtime_is_glossy(const prt_runtime* rt);
+/* Colour channels of the transport (1, or 3 with coloured interreflection); 0 for a glossy
+ * pack. */
 unsigned prt_runtime_transport_channels(const prt_runtime* rt);
-/* Lighting cubemap face size n, and its 6·n² wavelet coefficients (the largest useful term
- * budget). */
+/* Lighting cubemap face size n (a glossy pack: its visibility's), and its 6·n² wavelet
+ * coefficients (the largest useful term budget). */
 unsigned prt_runtime_cubemap_size(const prt_runtime* rt);
 unsigned prt_runtime_coefficient_count(const prt_runtime* rt);
 
@@ -99,9 +128,26 @@ int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background,
 
 /* The camera the pack was baked with (an image pack's fixed view; a vertex pack's scene camera,
  * or prt-view's default when its scene had none): eye, target, up, vertical field of view in
- * degrees, width and height in pixels. Any pointer may be NULL. */
+ * degrees, width and height in pixels. Any pointer may be NULL. Unaffected by
+ * prt_runtime_set_eye. */
 int prt_runtime_get_camera(const prt_runtime* rt, float eye[3], float target[3], float up[3],
                            float* fov_deg, int* width, int* height);
+
+/* The eye a glossy pack is relit towards (world coordinates, the pack's), set as often as every
+ * frame; the pack's camera eye after opening. Cheap: the next relight uses it. Every component
+ * must be finite (PRT_RUNTIME_ERROR_ARGUMENT otherwise). Accepted for every pack, so that a
+ * viewer orbits any pack the same way; a vertex or image pack's radiance does not depend on it. */
+int prt_runtime_set_eye(prt_runtime* rt, const float eye[3]);
+int prt_runtime_get_eye(const prt_runtime* rt, float eye[3]);
+
+/* A glossy pack's materials, one per mesh in pack order, from its metadata at opening (a mesh
+ * without an entry is Lambert with its albedo); editable between frames: the next relight uses
+ * them. prt_runtime_material_count is the mesh count of a glossy pack, 0 for any other (a vertex
+ * pack's materials are baked into its transport). get/set: `mesh` < the count, every field in
+ * its range (PRT_RUNTIME_ERROR_ARGUMENT otherwise; a refused material leaves the old one). */
+unsigned prt_runtime_material_count(const prt_runtime* rt);
+int prt_runtime_get_material(const prt_runtime* rt, unsigned mesh, prt_runtime_material* out);
+int prt_runtime_set_material(prt_runtime* rt, unsigned mesh, const prt_runtime_material* material);
 
 /* ---- Lighting ----------------------------------------------------------------------------- */
 
@@ -135,7 +181,8 @@ int prt_runtime_set_rotation_y(prt_runtime* rt, double radians);
 int prt_runtime_set_preview(prt_runtime* rt, int preview);
 
 /* PRT_RUNTIME_LIGHTING_NWA, _BI or _PBI (the default) for relights with terms > 0. Switching
- * restarts the incremental state (its next frame starts from no light). */
+ * restarts the incremental state (its next frame starts from no light). Accepted and ignored for
+ * a glossy pack. */
 int prt_runtime_set_lighting_mode(prt_runtime* rt, int mode);
 
 /* PRT_RUNTIME_ORDER_PACK (the default) or PRT_RUNTIME_ORDER_RUNTIME: the order of the samples in
@@ -153,7 +200,9 @@ int prt_runtime_get_sample_order(const prt_runtime* rt, uint32_t* pack_index, si
  * Needs an environment (PRT_RUNTIME_ERROR_STATE otherwise) and out_samples equal to
  * prt_runtime_sample_count (PRT_RUNTIME_ERROR_ARGUMENT). With BI or PBI each call is one frame:
  * it spends `terms` terms on the change since the last frame, so calls under still lighting
- * converge to the exact radiance. PRT_RUNTIME_ERROR_NUMERIC when a radiance overflows float. */
+ * converge to the exact radiance. PRT_RUNTIME_ERROR_NUMERIC when a radiance overflows float.
+ * A glossy pack: the full frame towards the current eye whatever `terms` (Algorithm 1; equals
+ * prt-view --radiance-out of the same view). */
 int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t out_samples);
 
 /* A frame split across the host's threads, in two calls:
@@ -169,7 +218,10 @@ int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t 
  *    same samples land at their pack positions, so a partition of [0, n) still writes every
  *    sample once. The values equal prt_runtime_relight's to float rounding (1e-6 relative).
  * prepare returns PRT_RUNTIME_ERROR_STATE when the previous prepared frame of an incremental
- * mode was not relit in full (its state would be torn); so does prt_runtime_relight. */
+ * mode was not relit in full (its state would be torn); so does prt_runtime_relight.
+ * A glossy pack: prepare only checks that there is an environment; each range relights its
+ * vertices towards the eye current when it runs (do not call prt_runtime_set_eye while ranges
+ * run), with the same values as prt_runtime_relight. */
 int prt_runtime_prepare(prt_runtime* rt, unsigned terms);
 int prt_runtime_relight_range(prt_runtime* rt, size_t first, size_t count, float* out_rgb,
                               size_t out_samples);

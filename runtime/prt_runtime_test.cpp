@@ -1,6 +1,7 @@
 // The C API (runtime/prt_runtime.h) against prt-view on the same pack and map: exact lighting
 // and the first frame of NWA / PBI equal prt-view --radiance-out to 1e-5 relative, for the test
-// corpus' 2D, adaptive-4D, CPCA, image and 3-channel packs; a frame split into ranges equals the
+// corpus' 2D, adaptive-4D, CPCA, image and 3-channel packs, and a glossy pack's frames (towards
+// its camera's eye and an orbited one) equal prt-view's; a frame split into ranges equals the
 // whole frame; rotations; every misuse and hostile input an error code and a message.
 #include "runtime/prt_runtime.h"
 
@@ -17,6 +18,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 #include <vector>
@@ -31,6 +33,7 @@
 #include "worker/column_order.h"
 #include "worker/cpca.h"
 #include "worker/transport_compressor.h"
+#include "worker/visibility_sampler.h"
 
 namespace {
 
@@ -115,6 +118,52 @@ std::string Pack(const std::string& kind) {
   return path.string();
 }
 const std::string kEnv = std::string(PRT_DATA_DIR) + "/envmaps/sunrise.exr";
+
+// A glossy pack of tests/data/tiny.toml (the box, then the ground grid: 8 + 64 vertices):
+// visibility traced at cubemap size n (1 bit, one ray per texel) as the farm's visibility job
+// does, the box Ashikhmin-Shirley (anisotropic), the ground Lambert, the other packs' camera.
+// runtime/fuzz_corpus/glossy.prtpack is GlossyPack(16).
+constexpr std::size_t kGlossyBoxVertices = 8;
+std::string GlossyPack(int n) {
+  using namespace prt;
+  const fs::path path = WorkDir() / ("glossy" + std::to_string(n) + ".prtpack");
+  if (fs::exists(path)) return path.string();
+  const SceneGeometry geometry =
+      BuildSceneGeometry(LoadSceneFile(std::string(PRT_SOURCE_DIR) + "/tests/data/tiny.toml"));
+  const std::vector<SpatialSample> samples = SpatialSamplesOf(geometry);
+  const EmbreeScene embree(geometry);
+  const VisibilitySampler sampler(embree, VisibilitySamplerOptions{n, 1, 1});
+  pack::PackInput in;
+  in.meshes = pack::PackMeshesOf(geometry);
+  pack::VisibilityInput vis;
+  std::size_t first = 0;
+  for (const SceneMesh& m : geometry.meshes) {
+    const std::size_t nv = m.mesh.positions.size();
+    vis.per_mesh.push_back(EncodeVisibilityBlocks(
+        sampler.ComputeBlocks(std::span<const SpatialSample>(samples).subspan(first, nv))));
+    first += nv;
+  }
+  in.visibility = std::move(vis);
+  const nlohmann::json meta = {{"scene",
+                                {{"camera",
+                                  {{"eye", {2.0, 2.0, 3.0}},
+                                   {"target", {0.0, 0.3, 0.0}},
+                                   {"up", {0.0, 1.0, 0.0}},
+                                   {"fov", 45.0},
+                                   {"width", 64},
+                                   {"height", 48}}}}},
+                               {"materials",
+                                {{{"name", "box"},
+                                  {"brdf", "ashikhmin-shirley"},
+                                  {"diffuse", {0.3, 0.3, 0.3}},
+                                  {"specular", {0.5, 0.5, 0.5}},
+                                  {"exponent", 30.0},
+                                  {"exponent_v", 150.0}},
+                                 {{"name", "ground"}, {"brdf", "lambert"}}}}};
+  in.metadata_json = meta.dump();
+  pack::WritePackFile(path.string(), in);
+  return path.string();
+}
 
 // The map as the C API takes it: interleaved RGB, rows from the top.
 std::vector<float> Interleaved(const prt::EnvironmentImage& e) {
@@ -538,6 +587,280 @@ TEST(RuntimeGeometry, ImageBackground) {
   std::vector<uint8_t> vb(nv);
   EXPECT_EQ(prt_runtime_get_image_background(v.rt, vb.data(), nv), PRT_RUNTIME_ERROR_ARGUMENT);
   EXPECT_NE(std::string(prt_runtime_last_error()).find("vertex pack"), std::string::npos);
+}
+
+// A glossy pack through the C API: what it holds, prt-view's radiance towards the pack's camera
+// and towards an orbited eye (terms and the lighting mode ignored), the glossy box's radiance
+// following the eye while the Lambert ground's does not.
+TEST(RuntimeGlossy, EqualsPrtViewAndFollowsTheEye) {
+  if (!fs::exists(kEnv)) GTEST_SKIP() << kEnv << " missing (scripts/install-deps.sh)";
+  const std::string pack = GlossyPack(32);
+  Handle h(pack);
+  ASSERT_NE(h.rt, nullptr) << prt_runtime_last_error();
+  EXPECT_EQ(prt_runtime_is_glossy(h.rt), 1);
+  EXPECT_EQ(prt_runtime_is_image(h.rt), 0);
+  EXPECT_EQ(prt_runtime_transport_channels(h.rt), 0u);
+  EXPECT_EQ(prt_runtime_cubemap_size(h.rt), 32u);
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  ASSERT_EQ(n, kGlossyBoxVertices + 64);
+  float eye[3], target[3];
+  ASSERT_EQ(prt_runtime_get_camera(h.rt, eye, target, nullptr, nullptr, nullptr, nullptr),
+            PRT_RUNTIME_OK);
+  EXPECT_FLOAT_EQ(eye[2], 3.0f);
+  float current[3];
+  ASSERT_EQ(prt_runtime_get_eye(h.rt, current), PRT_RUNTIME_OK);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(current[k], eye[k]);
+
+  const prt::EnvironmentImage env = prt::ReadEnvironment(kEnv);
+  const std::vector<float> map = Interleaved(env);
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), env.width, env.height),
+            PRT_RUNTIME_OK)
+      << prt_runtime_last_error();
+  std::vector<float> rgb(3 * n), again(3 * n);
+  const std::vector<float> view = PrtViewRadiance(pack, "", "glossy");
+  ASSERT_EQ(view.size(), 3 * n) << "prt-view failed on " << pack;
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, rgb.data(), n), PRT_RUNTIME_OK)
+      << prt_runtime_last_error();
+  EXPECT_LE(RelativeMaxError(rgb, view), 1e-5);
+  double sum = 0;
+  for (float v : rgb) sum += v;
+  EXPECT_GT(sum, 0.0) << "a lit pack relit to black";
+  // Terms and the lighting mode do not apply: the same frame.
+  ASSERT_EQ(prt_runtime_set_lighting_mode(h.rt, PRT_RUNTIME_LIGHTING_NWA), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 40, again.data(), n), PRT_RUNTIME_OK);
+  EXPECT_EQ(again, rgb);
+
+  // An orbited eye: prt-view --camera with the same eye and target.
+  const double a = 0.8;
+  const float orbit[3] = {static_cast<float>(eye[0] * std::cos(a) + eye[2] * std::sin(a)), eye[1],
+                          static_cast<float>(-eye[0] * std::sin(a) + eye[2] * std::cos(a))};
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, orbit), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, again.data(), n), PRT_RUNTIME_OK);
+  char spec[256];
+  std::snprintf(spec, sizeof spec, "--camera %.9g,%.9g,%.9g,%.9g,%.9g,%.9g", orbit[0], orbit[1],
+                orbit[2], target[0], target[1], target[2]);
+  const std::vector<float> view_orbit = PrtViewRadiance(pack, spec, "glossy_orbit");
+  ASSERT_EQ(view_orbit.size(), 3 * n);
+  EXPECT_LE(RelativeMaxError(again, view_orbit), 1e-5);
+  // The glossy box's vertices change with the eye, the Lambert ground's do not.
+  double box_change = 0, box_scale = 0;
+  for (std::size_t i = 0; i < 3 * kGlossyBoxVertices; ++i) {
+    box_change = std::max(box_change, std::abs(double(again[i]) - rgb[i]));
+    box_scale = std::max(box_scale, std::abs(double(rgb[i])));
+  }
+  EXPECT_GT(box_change, 1e-2 * box_scale) << "an orbit step should move the box's highlights";
+  for (std::size_t i = 3 * kGlossyBoxVertices; i < 3 * n; ++i)
+    ASSERT_NEAR(again[i], rgb[i], 1e-6f * std::abs(rgb[i])) << "Lambert sample " << i / 3;
+}
+
+// A glossy pack's materials: read from its metadata, editable between frames (a box made Lambert
+// no longer follows the eye; a sharper lobe changes the frame), every bad field refused.
+TEST(RuntimeGlossy, MaterialsAreEditable) {
+  const auto message = [] { return std::string(prt_runtime_last_error()); };
+  Handle h(GlossyPack(32));
+  ASSERT_NE(h.rt, nullptr) << message();
+  ASSERT_EQ(prt_runtime_material_count(h.rt), 2u);
+  prt_runtime_material box{}, ground{};
+  ASSERT_EQ(prt_runtime_get_material(h.rt, 0, &box), PRT_RUNTIME_OK) << message();
+  ASSERT_EQ(prt_runtime_get_material(h.rt, 1, &ground), PRT_RUNTIME_OK);
+  EXPECT_EQ(box.brdf, PRT_RUNTIME_BRDF_ASHIKHMIN_SHIRLEY);
+  EXPECT_DOUBLE_EQ(box.exponent, 30.0);
+  EXPECT_DOUBLE_EQ(box.exponent_v, 150.0);
+  EXPECT_FLOAT_EQ(box.specular[1], 0.5f);
+  EXPECT_EQ(ground.brdf, PRT_RUNTIME_BRDF_LAMBERT);
+
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<float> map(3 * 32 * 16, 1.0f), a(3 * n), b(3 * n), c(3 * n);
+  for (std::size_t i = 0; i < 32 * 8; ++i) map[3 * i] = map[3 * i + 1] = 4.0f;  // bright sky
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  const float e1[3] = {3, 1, 0}, e2[3] = {0, 2, 3};
+  const auto box_change = [&](const std::vector<float>& x, const std::vector<float>& y) {
+    double d = 0;
+    for (std::size_t i = 0; i < 3 * kGlossyBoxVertices; ++i)
+      d = std::max(d, std::abs(double(x[i]) - y[i]) / std::max(1e-12, std::abs(double(y[i]))));
+    return d;
+  };
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, e1), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, a.data(), n), PRT_RUNTIME_OK);
+  prt_runtime_material sharp = box;
+  sharp.exponent = sharp.exponent_v = 400;
+  ASSERT_EQ(prt_runtime_set_material(h.rt, 0, &sharp), PRT_RUNTIME_OK) << message();
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, b.data(), n), PRT_RUNTIME_OK);
+  EXPECT_GT(box_change(b, a), 1e-3) << "a sharper lobe should change the box";
+  prt_runtime_material lambert = box;
+  lambert.brdf = PRT_RUNTIME_BRDF_LAMBERT;
+  ASSERT_EQ(prt_runtime_set_material(h.rt, 0, &lambert), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, b.data(), n), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, e2), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, c.data(), n), PRT_RUNTIME_OK);
+  EXPECT_LE(box_change(c, b), 1e-6) << "a Lambert box should not follow the eye";
+
+  // Refused: a bad index, model, colour or exponent, NULL; the old material stays.
+  prt_runtime_material bad = box;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 2, &box), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("mesh 2 of 2"), std::string::npos) << message();
+  bad.brdf = 9;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  bad = box;
+  bad.specular[2] = 1.5f;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("specular[2]"), std::string::npos) << message();
+  bad = box;
+  bad.diffuse[0] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  bad = box;
+  bad.exponent_v = 0;
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, &bad), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_set_material(h.rt, 0, nullptr), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_get_material(h.rt, 0, nullptr), PRT_RUNTIME_ERROR_ARGUMENT);
+  prt_runtime_material now{};
+  ASSERT_EQ(prt_runtime_get_material(h.rt, 0, &now), PRT_RUNTIME_OK);
+  EXPECT_EQ(now.brdf, PRT_RUNTIME_BRDF_LAMBERT);
+  // A vertex pack has no editable materials.
+  Handle v(Pack("adaptive4d"));
+  EXPECT_EQ(prt_runtime_material_count(v.rt), 0u);
+  EXPECT_EQ(prt_runtime_get_material(v.rt, 0, &now), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("not a glossy pack"), std::string::npos) << message();
+}
+
+// A glossy frame split into ranges (3 threads at once) writes what the whole frame writes, under
+// a rotated map, in preview and at an orbited eye; the runtime's order is the pack's.
+TEST(RuntimeGlossy, RangesEqualTheWholeFrame) {
+  const prt::EnvironmentImage env = prt::ReadEnvironment(kEnv);
+  const std::vector<float> map = Interleaved(env);
+  Handle h(GlossyPack(32));
+  ASSERT_NE(h.rt, nullptr) << prt_runtime_last_error();
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<uint32_t> order(n);
+  ASSERT_EQ(prt_runtime_get_sample_order(h.rt, order.data(), n), PRT_RUNTIME_OK);
+  for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(order[i], i);
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), env.width, env.height),
+            PRT_RUNTIME_OK);
+  std::vector<float> whole(3 * n), split(3 * n), first(3 * n);
+  for (int frame = 0; frame < 3; ++frame) {
+    ASSERT_EQ(prt_runtime_set_preview(h.rt, frame == 1 ? 1 : 0), PRT_RUNTIME_OK);
+    ASSERT_EQ(prt_runtime_set_rotation_y(h.rt, 0.7 * frame), PRT_RUNTIME_OK);
+    const float e[3] = {3.0f * static_cast<float>(std::sin(0.5 * frame)), 1.5f,
+                        3.0f * static_cast<float>(std::cos(0.5 * frame))};
+    ASSERT_EQ(prt_runtime_set_eye(h.rt, e), PRT_RUNTIME_OK);
+    ASSERT_EQ(prt_runtime_set_sample_order(
+                  h.rt, frame == 2 ? PRT_RUNTIME_ORDER_RUNTIME : PRT_RUNTIME_ORDER_PACK),
+              PRT_RUNTIME_OK);
+    ASSERT_EQ(prt_runtime_relight(h.rt, 0, whole.data(), n), PRT_RUNTIME_OK);
+    if (frame == 0) first = whole;
+    std::fill(split.begin(), split.end(), -1.0f);
+    ASSERT_EQ(prt_runtime_prepare(h.rt, 30), PRT_RUNTIME_OK) << prt_runtime_last_error();
+    std::vector<std::thread> threads;
+    std::array<int, 3> status{};
+    for (std::size_t r = 0; r < 3; ++r)
+      threads.emplace_back([&, r] {
+        const std::size_t lo = n * r / 3, hi = n * (r + 1) / 3;
+        status[r] = prt_runtime_relight_range(h.rt, lo, hi - lo, split.data(), n);
+      });
+    for (std::thread& t : threads) t.join();
+    for (int s : status) ASSERT_EQ(s, PRT_RUNTIME_OK) << prt_runtime_last_error();
+    EXPECT_LE(RelativeMaxError(split, whole), 1e-6) << "frame " << frame;
+  }
+  EXPECT_GT(RelativeMaxError(whole, first), 1e-3) << "rotation and eye should change the frame";
+}
+
+// A vertex pack takes an eye too (a viewer orbits every pack the same way) and its radiance does
+// not depend on it.
+TEST(RuntimeGlossy, AnEyeDoesNotChangeADiffusePack) {
+  Handle h(Pack("adaptive4d"));
+  ASSERT_NE(h.rt, nullptr);
+  EXPECT_EQ(prt_runtime_is_glossy(h.rt), 0);
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<float> map(3 * 32 * 16, 1.0f), a(3 * n), b(3 * n);
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, a.data(), n), PRT_RUNTIME_OK);
+  const float e[3] = {-3, 1, 0.5f};
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, e), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, b.data(), n), PRT_RUNTIME_OK);
+  EXPECT_EQ(a, b);
+}
+
+// A glossy pack's misuse: a status and a message, the handle usable afterwards; its geometry in
+// the pack's order; the fuzz seed (GlossyPack(16)) opens and relights.
+TEST(RuntimeGlossy, MisuseGeometryAndTheFuzzSeed) {
+  const auto message = [] { return std::string(prt_runtime_last_error()); };
+  Handle h(GlossyPack(32));
+  ASSERT_NE(h.rt, nullptr) << message();
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  std::vector<float> rgb(3 * n);
+  EXPECT_EQ(prt_runtime_relight(h.rt, 0, rgb.data(), n), PRT_RUNTIME_ERROR_STATE);
+  EXPECT_NE(message().find("environment"), std::string::npos) << message();
+  EXPECT_EQ(prt_runtime_prepare(h.rt, 0), PRT_RUNTIME_ERROR_STATE);
+  EXPECT_EQ(prt_runtime_relight_range(h.rt, 0, n, rgb.data(), n), PRT_RUNTIME_ERROR_STATE);
+  const float nan3[3] = {0, std::numeric_limits<float>::quiet_NaN(), 0};
+  EXPECT_EQ(prt_runtime_set_eye(h.rt, nan3), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_NE(message().find("eye[1]"), std::string::npos) << message();
+  EXPECT_EQ(prt_runtime_set_eye(h.rt, nullptr), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_set_eye(nullptr, nan3), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_get_eye(h.rt, nullptr), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_is_glossy(nullptr), 0);
+  std::vector<uint8_t> bg(n);
+  EXPECT_EQ(prt_runtime_get_image_background(h.rt, bg.data(), n), PRT_RUNTIME_ERROR_ARGUMENT);
+  std::vector<float> map(3 * 32 * 16, 0.5f);
+  map[3 * (2 * 32 + 3)] = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_ERROR_INPUT);
+  EXPECT_EQ(prt_runtime_relight(h.rt, 0, rgb.data(), n), PRT_RUNTIME_ERROR_STATE)
+      << "a refused map must not count as an environment";
+  map[3 * (2 * 32 + 3)] = 0.5f;
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  EXPECT_EQ(prt_runtime_relight(h.rt, 0, rgb.data(), n - 1), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_relight_range(h.rt, 0, n, rgb.data(), n), PRT_RUNTIME_ERROR_STATE)
+      << "a range before prepare";
+  ASSERT_EQ(prt_runtime_prepare(h.rt, 0), PRT_RUNTIME_OK);
+  EXPECT_EQ(prt_runtime_relight_range(h.rt, n - 2, 5, rgb.data(), n), PRT_RUNTIME_ERROR_ARGUMENT);
+  const float mirror[9] = {-1, 0, 0, 0, 1, 0, 0, 0, 1};
+  EXPECT_EQ(prt_runtime_set_rotation(h.rt, mirror), PRT_RUNTIME_ERROR_ARGUMENT);
+  // A map whose block sums overflow float: a numeric error, never Inf in an OK frame.
+  std::vector<float> hot(3 * 32 * 16, 3e38f);
+  if (prt_runtime_set_environment_latlong(h.rt, hot.data(), 32, 16) == PRT_RUNTIME_OK) {
+    const int s = prt_runtime_relight(h.rt, 0, rgb.data(), n);
+    if (s == PRT_RUNTIME_OK) {
+      for (float v : rgb) ASSERT_TRUE(std::isfinite(v));
+    } else {
+      EXPECT_EQ(s, PRT_RUNTIME_ERROR_NUMERIC) << message();
+    }
+  }
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, rgb.data(), n), PRT_RUNTIME_OK) << message();
+  for (float v : rgb) ASSERT_TRUE(std::isfinite(v) && v >= 0);
+  EXPECT_GT(prt_runtime_memory_bytes(h.rt), 0u);
+
+  // Geometry: the pack's meshes in order (the box's 8 vertices first), triangles into them.
+  const std::size_t nt = prt_runtime_triangle_count(h.rt);
+  ASSERT_GT(nt, 0u);
+  std::vector<float> xyz(3 * n);
+  std::vector<uint32_t> tri(3 * nt);
+  ASSERT_EQ(prt_runtime_get_positions(h.rt, xyz.data(), n), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_get_triangles(h.rt, tri.data(), nt), PRT_RUNTIME_OK);
+  for (uint32_t v : tri) ASSERT_LT(v, n);
+  for (std::size_t v = kGlossyBoxVertices; v < n; ++v) EXPECT_EQ(xyz[3 * v + 1], 0.0f) << v;
+  EXPECT_EQ(prt_runtime_get_positions(h.rt, xyz.data(), n + 1), PRT_RUNTIME_ERROR_ARGUMENT);
+  // The eye on a vertex (no view direction there): finite radiance or an error, never NaN.
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, &xyz[3 * 5]), PRT_RUNTIME_OK);
+  if (prt_runtime_relight(h.rt, 0, rgb.data(), n) == PRT_RUNTIME_OK) {
+    for (float v : rgb) ASSERT_TRUE(std::isfinite(v));
+  } else {
+    std::printf("eye on a vertex: %s\n", message().c_str());
+  }
+
+  // The committed fuzz seed is GlossyPack(16); PRT_WRITE_RUNTIME_FUZZ_SEED=DIR writes it again.
+  const std::string seed = GlossyPack(16);
+  if (const char* dir = std::getenv("PRT_WRITE_RUNTIME_FUZZ_SEED"))
+    fs::copy_file(seed, fs::path(dir) / "glossy.prtpack", fs::copy_options::overwrite_existing);
+  const std::string committed = std::string(PRT_SOURCE_DIR) + "/runtime/fuzz_corpus/glossy.prtpack";
+  Handle f(committed);
+  ASSERT_NE(f.rt, nullptr) << message();
+  EXPECT_EQ(prt_runtime_is_glossy(f.rt), 1);
+  EXPECT_EQ(prt_runtime_cubemap_size(f.rt), 16u);
+  const std::size_t nf = prt_runtime_sample_count(f.rt);
+  std::vector<float> out(3 * nf);
+  ASSERT_EQ(prt_runtime_set_environment_latlong(f.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  EXPECT_EQ(prt_runtime_relight(f.rt, 0, out.data(), nf), PRT_RUNTIME_OK) << message();
 }
 
 }  // namespace

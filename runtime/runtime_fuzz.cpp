@@ -3,7 +3,8 @@
 // (ResealChecksums, so that mutations get past the section checksums into the transport, the
 // meshes and the relighter's set-up), and each pack that opens is relit: exact, NWA, a PBI frame,
 // a frame split into ranges, positions, triangles and the sample order, under a small map whose
-// sun moves with the input. An error status is the expected outcome of a bad input; a crash, a
+// sun moves with the input; a glossy pack (visibility, no transport) the same way, towards an eye
+// that moves with the input. An error status is the expected outcome of a bad input; a crash, a
 // sanitizer report, a hang, or a NaN/Inf in an output that came back PRT_RUNTIME_OK is a bug.
 // Built only with clang (runtime/CMakeLists.txt); CTest runs it a fixed number of runs on the
 // reader's corpus (packager/fuzz_corpus) and the runtime's seeds (runtime/fuzz_corpus).
@@ -40,6 +41,14 @@ void Exercise(const std::vector<uint8_t>& bytes) {
   const std::size_t sun = 3 * (bytes.empty() ? 0 : bytes[bytes.size() / 2] % (16 * 8));
   map[sun] = map[sun + 1] = map[sun + 2] = 50.0f;
   std::vector<float> rgb(3 * n);
+  // An eye from the input (a glossy pack's frames depend on it; others accept and ignore it).
+  const float b0 = bytes.empty() ? 0.0f : static_cast<float>(bytes[bytes.size() / 3]);
+  const float eye[3] = {0.05f * b0 - 6.0f, 2.0f, 3.0f - 0.02f * b0};
+  if (prt_runtime_set_eye(rt, eye) != PRT_RUNTIME_OK) {
+    std::fprintf(stderr, "runtime_fuzz: set_eye refused a finite eye: %s\n",
+                 prt_runtime_last_error());
+    std::abort();
+  }
   if (prt_runtime_set_environment_latlong(rt, map.data(), 16, 8) == PRT_RUNTIME_OK) {
     if (prt_runtime_relight(rt, 0, rgb.data(), n) == PRT_RUNTIME_OK) RequireFinite(rgb, "exact");
     prt_runtime_set_lighting_mode(rt, PRT_RUNTIME_LIGHTING_NWA);

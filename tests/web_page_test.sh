@@ -3,9 +3,9 @@
 # a no-op when it is up to date), then web/test/page_test.mjs drives /usr/bin/chromium over it
 # with the fixture's pack (tests/web_page_pack.sh). Fails, never skips, when Chromium, node, the
 # npm packages or Emscripten are missing: scripts/install-deps.sh installs them.
-#   web_page_test.sh SOURCE_DIR FIXTURE_WORK OUT_DIR IMAGE_PACK
+#   web_page_test.sh SOURCE_DIR FIXTURE_WORK OUT_DIR IMAGE_PACK PRT_VIEW
 set -eu
-src=$1 work=$2 out=$3 image_pack=$4
+src=$1 work=$2 out=$3 image_pack=$4 view=$5
 missing=""
 [ -x /usr/bin/chromium ] || missing="$missing chromium"
 command -v node >/dev/null 2>&1 || missing="$missing node"
@@ -24,4 +24,5 @@ site="${PRT_WASM_BUILD_DIR:-$src/build-wasm}/site"
 exec node "$src/web/test/page_test.mjs" --site "$site" --pack "$work/web_bunny.prtpack" \
   --env "$work/sunrise.hdr" --reference "$work/prt-view.png" --exposure 0.45 \
   --corrupt "$work/corrupt.prtpack" --bad-env "$work/truncated.hdr" --image-pack "$image_pack" \
-  --image-reference "$work/prt-view-image.png" --out-dir "$out"
+  --image-reference "$work/prt-view-image.png" --glossy-pack "$work/web_glossy.prtpack" \
+  --glossy-reference "$work/prt-view-glossy.png" --prt-view "$view" --out-dir "$out"

@@ -2,6 +2,8 @@
 // ?pack=URL&env=URL), relights the pack with the WebAssembly runtime and draws it (viewer.js).
 // Dragging rotates the environment: preview lighting and PBI frames of `budget` terms while it
 // moves, frames until PBI has converged when it stops, then nothing until the next change.
+// Dragging with the right button orbits the camera about its target: a diffuse pack is only
+// drawn again, a glossy pack (prt_runtime_is_glossy) is relit towards the new eye.
 // Figures are kept in window.prtStats and shown in #stats; window.prtPage has the test hooks.
 import {loadRuntimeModule, Pack} from './runtime.js';
 import {parseRadianceHdr} from './hdr.js';
@@ -13,7 +15,8 @@ const kKeptFrames = 600;
 
 const stats = {
   state: 'empty', error: null, pack: null, env: null, samples: 0, triangles: 0, isImage: false,
-  cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
+  isGlossy: false, cubemapSize: 0, coefficients: 0, budget: 100, exposure: 1, rotationDeg: 0,
+  orbitDeg: 0, lastOrbitMs: null, orbitFps: null, eye: null, target: null,
   converged: false, preview: false, lastFrameAt: null, convergeMs: null, previewSetupMs: null, loadToFirstFrameMs: null, openMs: null, exactRelightMs: null, lastFrameMs: null,
   lastRelightMs: null, lastRotateMs: null, frames: [], dragFps: null, dragFrames: 0,
   bytesDownloaded: 0, memoryBytes: 0, wasmHeapBytes: 0,
@@ -28,6 +31,9 @@ const app = {
   M: null, pack: null, packName: null, env: null, envName: null, view: null, angle: 0,
   appliedAngle: 0, dragging: false, preview: false, framesLeft: 0, needsRender: false,
   drag: null, envSet: false, firstFrameDone: false,
+  // The orbit: the pack camera's eye turned by `orbit` radians about the vertical through its
+  // target (prt-view's window, view_window_main.cpp Orbit).
+  camera: null, orbit: 0, appliedOrbit: 0, orbiting: null,
 };
 
 function setState(s) {
@@ -70,17 +76,21 @@ function measureDownloads() {
 function updateStatsText() {
   const pbi = stats.frames.filter((f) => f.terms > 0).map((f) => f.relightMs);
   const rot = stats.frames.filter((f) => f.rotateMs > 0).map((f) => f.rotateMs);
+  const glossy = stats.frames.filter((f) => f.glossy).map((f) => f.totalMs);
+  const kind = stats.isImage ? ' (image pack)' : stats.isGlossy ? ' (glossy pack)' : '';
   const lines = [
     `pack         ${stats.pack ?? '–'}`,
     `environment  ${stats.env ?? '–'}`,
-    `samples      ${stats.samples}${stats.isImage ? ' (image pack)' : ''}, ` +
+    `samples      ${stats.samples}${kind}, ` +
         `${stats.triangles} triangles, n = ${stats.cubemapSize}`,
-    `term budget  ${stats.budget} of ${stats.coefficients} (PBI)`,
+    stats.isGlossy ? 'term budget  – (glossy: triple products towards the eye every frame)'
+                   : `term budget  ${stats.budget} of ${stats.coefficients} (PBI)`,
     `exposure     ${stats.exposure}`,
-    `rotation     ${fmt(stats.rotationDeg, 1)}°`,
+    `rotation     ${fmt(stats.rotationDeg, 1)}°, orbit ${fmt(stats.orbitDeg, 1)}°`,
     `frame time   ${fmt(stats.lastFrameMs)} ms (relight ${fmt(stats.lastRelightMs)} ms, ` +
         `rotate ${fmt(stats.lastRotateMs)} ms)`,
-    `PBI frame    ${fmt(median(pbi))} ms median of ${pbi.length}`,
+    stats.isGlossy ? `glossy frame ${fmt(median(glossy))} ms median of ${glossy.length}`
+                   : `PBI frame    ${fmt(median(pbi))} ms median of ${pbi.length}`,
     `rotate       ${fmt(median(rot))} ms median of ${rot.length} (env → cubemap)`,
     `exact        ${fmt(stats.exactRelightMs)} ms`,
     `drag fps     ${fmt(stats.dragFps, 1)}`,
@@ -130,6 +140,7 @@ async function openPack(bytes, name) {
   stats.samples = app.pack.samples;
   stats.triangles = app.pack.triangles;
   stats.isImage = app.pack.isImage;
+  stats.isGlossy = app.pack.isGlossy;
   stats.cubemapSize = app.pack.cubemapSize;
   stats.coefficients = app.pack.coefficients;
   $('budget').max = String(app.pack.coefficients);
@@ -140,6 +151,8 @@ async function openPack(bytes, name) {
 function makeView() {
   const pack = app.pack;
   const cam = pack.camera();
+  app.camera = cam;
+  app.appliedOrbit = 0;  // the runtime's eye is the pack camera's after opening
   const width = Number(params.get('width')) || cam.width;
   const height = Number(params.get('height')) || cam.height;
   const gl = $('gl');
@@ -166,6 +179,27 @@ function makeView() {
   }
   app.view.setExposure(stats.exposure);
   if (app.env) app.view.setEnvironment(app.env);
+  applyOrbit();
+}
+
+// The pack camera's eye turned by `radians` about the vertical through its target.
+function orbitEye(radians) {
+  const {eye, target} = app.camera;
+  const dx = eye[0] - target[0], dz = eye[2] - target[2];
+  const c = Math.cos(radians), s = Math.sin(radians);
+  return [target[0] + c * dx + s * dz, eye[1], target[2] - s * dx + c * dz];
+}
+
+// The orbit into the view and the runtime (an image pack's view is fixed).
+function applyOrbit() {
+  if (app.pack.isImage) return;
+  const eye = orbitEye(app.orbit);
+  app.view.setEye(eye);
+  app.pack.setEye(eye);
+  app.appliedOrbit = app.orbit;
+  stats.orbitDeg = ((app.orbit * 180) / Math.PI) % 360;
+  stats.eye = eye;
+  stats.target = app.camera.target;
 }
 
 function setEnvironment(env, name) {
@@ -229,6 +263,7 @@ function exactFrame() {
 // lighting (⌈6n²/N⌉ frames, each cheap when the lighting is still), so that a drag's frames only
 // spend their terms on the rotation's change. The view keeps showing the exact frame.
 function convergeSilently() {
+  if (app.pack.isGlossy) return;  // every glossy frame is whole: nothing to converge
   const t0 = performance.now();
   for (let i = 0; i < framesToConverge(); ++i) app.pack.relight(stats.budget);
   stats.convergeMs = performance.now() - t0;
@@ -279,9 +314,16 @@ async function loadFiles(files) {
 // ---- Interaction and the frame loop ----------------------------------------------------------
 
 function attachDrag(canvas) {
+  canvas.addEventListener('contextmenu', (ev) => ev.preventDefault());
   canvas.addEventListener('pointerdown', (ev) => {
     if (!app.envSet) return;
     canvas.setPointerCapture(ev.pointerId);
+    if (ev.button === 2) {  // the right button orbits the camera
+      if (!app.pack.isImage) {
+        app.orbiting = {x0: ev.clientX, orbit0: app.orbit, t0: performance.now(), frames: 0};
+      }
+      return;
+    }
     app.dragging = true;
     app.drag = {x0: ev.clientX, angle0: app.angle, t0: performance.now(), frames: 0};
     if (!app.preview) {
@@ -290,11 +332,22 @@ function attachDrag(canvas) {
     }
   });
   canvas.addEventListener('pointermove', (ev) => {
+    if (app.orbiting) {
+      const w = canvas.clientWidth || canvas.width;
+      app.orbit = app.orbiting.orbit0 + (2 * Math.PI * (ev.clientX - app.orbiting.x0)) / w;
+      return;
+    }
     if (!app.dragging) return;
     const w = canvas.clientWidth || canvas.width;
     app.angle = app.drag.angle0 + (2 * Math.PI * (ev.clientX - app.drag.x0)) / w;
   });
   const end = () => {
+    if (app.orbiting) {
+      const dt = (performance.now() - app.orbiting.t0) / 1000;
+      if (dt > 0 && app.orbiting.frames > 0) stats.orbitFps = app.orbiting.frames / dt;
+      app.orbiting = null;
+      return;
+    }
     if (!app.dragging) return;
     app.dragging = false;
     const dt = (performance.now() - app.drag.t0) / 1000;
@@ -314,6 +367,8 @@ function attachDrag(canvas) {
 }
 
 function framesToConverge() {
+  // A glossy frame is whole: one frame after the preview ends, on the full map.
+  if (app.pack && app.pack.isGlossy) return 1;
   // Under still lighting PBI reaches the exact radiance within ⌈6n²/N⌉ frames (runtime.md).
   return Math.ceil(stats.coefficients / stats.budget) + 1;
 }
@@ -322,8 +377,23 @@ function tick() {
   requestAnimationFrame(tick);
   if (!app.envSet || stats.state === 'error' || app.spinning) return;
   try {
+    const glossy = app.pack.isGlossy;
     const rotate = app.angle !== app.appliedAngle;
-    if (rotate || app.framesLeft > 0 || app.dragging) {
+    const orbit = app.orbit !== app.appliedOrbit;
+    let orbitMs = 0;
+    if (orbit) {
+      const t = performance.now();
+      applyOrbit();
+      orbitMs = performance.now() - t;
+      stats.lastOrbitMs = orbitMs;
+      if (app.orbiting) ++app.orbiting.frames;
+      if (!glossy) app.needsRender = true;  // a diffuse pack's radiance does not change
+    }
+    // A glossy pack relights when the view or the lighting changed (each frame is whole); a
+    // diffuse one while PBI frames remain or the lighting is dragged.
+    const relight = glossy ? rotate || orbit || app.framesLeft > 0
+                           : rotate || app.framesLeft > 0 || app.dragging;
+    if (relight) {
       const t0 = performance.now();
       if (rotate) {
         app.pack.setRotationY(app.angle);
@@ -333,13 +403,14 @@ function tick() {
         app.framesLeft = framesToConverge();
       }
       const t1 = performance.now();
-      const rgb = app.pack.relight(stats.budget);
+      const terms = glossy ? 0 : stats.budget;
+      const rgb = app.pack.relight(terms);
       const t2 = performance.now();
       app.view.setRadiance(rgb);
       app.view.render();
       const t3 = performance.now();
-      recordFrame({terms: stats.budget, rotateMs: rotate ? t1 - t0 : 0, relightMs: t2 - t1,
-                   drawMs: t3 - t2, totalMs: t3 - t0, preview: app.preview});
+      recordFrame({terms, rotateMs: rotate ? t1 - t0 : 0, relightMs: t2 - t1, drawMs: t3 - t2,
+                   totalMs: t3 - t0 + orbitMs, preview: app.preview, orbit, glossy});
       if (app.dragging) ++app.drag.frames;
       if (!app.dragging && app.framesLeft > 0) --app.framesLeft;
       stats.lastFrameAt = t3;
@@ -348,7 +419,13 @@ function tick() {
       app.needsRender = false;
       updateStatsText();
     } else if (app.needsRender) {
+      const t0 = performance.now();
       app.view.render();
+      const t1 = performance.now();
+      if (orbit) {  // a diffuse pack's orbit step: drawn again, nothing relit
+        recordFrame({terms: 0, rotateMs: 0, relightMs: 0, drawMs: t1 - t0,
+                     totalMs: t1 - t0 + orbitMs, preview: false, orbit, glossy});
+      }
       app.needsRender = false;
       updateStatsText();
     }
@@ -412,6 +489,50 @@ window.prtPage = {
   /** Which pixels the mesh covers (base64 of one byte per pixel, rows from the top). */
   meshMask() {
     return base64(app.view.meshMask());
+  },
+  /** The radiance drawn now, 3 floats per sample (a copy, as a plain array). */
+  radiance() {
+    return Array.from(app.view.radiance ? app.view.radiance.array : app.view.rgb);
+  },
+  /**
+   * A glossy pack's steps timed as prt-runtime-bench times them (docs/runtime.md, "Glossy
+   * packs"): an orbit step (set_eye 0.02 rad further about the target, relight) and a rotation
+   * step in preview (set_rotation_y 0.01 rad further, relight), `frames` each after 2 untimed;
+   * also the same with upload and drawing. Medians in ms. Leaves the view as it found it.
+   */
+  glossyBenchmark({frames = 20} = {}) {
+    const p = app.pack;
+    const o0 = app.orbit, a0 = app.angle;
+    const run = (step, draw) => {
+      const t = [];
+      for (let f = 0; f < frames + 2; ++f) {
+        const t0 = performance.now();
+        step(f);
+        const rgb = p.relight(0);
+        if (draw) {
+          app.view.setRadiance(rgb);
+          app.view.render();
+        }
+        if (f >= 2) t.push(performance.now() - t0);
+      }
+      return median(t);
+    };
+    const orbit = (f) => p.setEye(orbitEye(o0 + 0.02 * f));
+    const rotate = (f) => p.setRotationY(a0 + 0.01 * f);
+    const out = {samples: stats.samples, n: stats.cubemapSize, frames};
+    out.orbitStepMs = run(orbit, false);
+    out.orbitStepDrawnMs = run(orbit, true);
+    p.setEye(orbitEye(o0));
+    p.setPreview(true);
+    out.rotationStepPreviewMs = run(rotate, false);
+    out.rotationStepPreviewDrawnMs = run(rotate, true);
+    p.setPreview(false);
+    out.rotationStepExactMs = run(rotate, false);
+    p.setPreview(app.preview);
+    p.setRotationY(a0);
+    applyOrbit();
+    exactFrame();
+    return out;
   },
   /** An image pack's drawn pixels: {width, height, rgb: base64 of RGB bytes, rows from the top}. */
   imagePixels() {

@@ -40,6 +40,9 @@ export class Pack {
     if (!this.rt) throw new Error(this.lastError());
     this.samples = M._prt_runtime_sample_count(this.rt);
     this.isImage = M._prt_runtime_is_image(this.rt) !== 0;
+    // A glossy pack: visibility, relit towards the eye by triple products (docs/runtime.md,
+    // "Glossy packs"); its frames depend on the view, not on a term budget.
+    this.isGlossy = M._prt_runtime_is_glossy(this.rt) !== 0;
     this.triangles = M._prt_runtime_triangle_count(this.rt);
     this.cubemapSize = M._prt_runtime_cubemap_size(this.rt);
     this.coefficients = M._prt_runtime_coefficient_count(this.rt);
@@ -129,6 +132,18 @@ export class Pack {
     this.check(this.M._prt_runtime_set_rotation_y(this.rt, radians), 'rotation');
   }
 
+  /** The eye a glossy pack is relit towards (any pack accepts it; only glossy ones use it). */
+  setEye(eye) {
+    const M = this.M;
+    const ptr = M._malloc(12);
+    try {
+      M.HEAPF32.set(eye, ptr >> 2);
+      this.check(M._prt_runtime_set_eye(this.rt, ptr), 'eye');
+    } finally {
+      M._free(ptr);
+    }
+  }
+
   setPreview(on) {
     this.check(this.M._prt_runtime_set_preview(this.rt, on ? 1 : 0), 'preview');
   }
@@ -138,8 +153,9 @@ export class Pack {
   }
 
   /**
-   * One frame: terms = 0 exact, else that many wavelet terms (a PBI frame by default). Returns
-   * a view of the radiance (3 floats per sample, the pack's order) valid until the next call.
+   * One frame: terms = 0 exact, else that many wavelet terms (a PBI frame by default; a glossy
+   * pack's frame is the same whatever the terms). Returns a view of the radiance (3 floats per
+   * sample, the pack's order) valid until the next call.
    */
   relight(terms) {
     const M = this.M;

@@ -42,6 +42,7 @@ export class MeshView {
     const dist = eye.distanceTo(target);
     this.camera = new THREE.PerspectiveCamera(camera.fov, camera.width / camera.height,
                                               dist * 1e-3, dist * 1e3);
+    this.target = target;
     this.camera.position.copy(eye);
     this.camera.up.set(...camera.up);
     this.camera.lookAt(target);
@@ -174,6 +175,13 @@ export class MeshView {
     if (this.background) this.background.material.uniforms.rotation.value = radians;
   }
 
+  /** Moves the camera's eye (an orbit), still looking at the pack camera's target. */
+  setEye(eye) {
+    this.camera.position.set(eye[0], eye[1], eye[2]);
+    this.camera.lookAt(this.target);
+    this.camera.updateMatrixWorld();
+  }
+
   /** Uploads a frame's radiance (3 floats per vertex). */
   setRadiance(rgb) {
     this.radiance.array.set(rgb);
@@ -295,6 +303,9 @@ export class ImageView {
     if (radians !== this.rotation) this.backgroundRgb = null;
     this.rotation = radians;
   }
+
+  /** An image pack's view is fixed: its pixels are the samples. */
+  setEye() {}
 
   setEnvironment(env) {
     this.env = env;

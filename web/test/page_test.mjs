@@ -9,7 +9,13 @@
 //  (c) frame times come back from the page (window.prtStats and the #stats text) after a drag
 //      that rotates the environment (preview and PBI frames), and the page converges after it;
 //  (d) an image pack and the map chosen through the page's file inputs: the pack is drawn as an
-//      image (2D canvas), its pixels within the tolerance of (a) of prt-view's image of it.
+//      image (2D canvas), its pixels within the tolerance of (a) of prt-view's image of it;
+//  (e) an orbit step (right-button drag) on the diffuse pack draws it again from the new eye
+//      without relighting it (its radiance unchanged);
+//  (f) a glossy pack (visibility, relit by triple products towards the eye): its image from the
+//      pack's camera against prt-view's within the tolerance of (a); an orbit step relights it
+//      (its radiance changes) and the page's image from the new eye matches prt-view's image
+//      towards the same eye (--prt-view runs it), and the glossy frame times are reported.
 // With --measure it prints the figures of docs/web.md instead (prtPage.benchmark(), load to first
 // frame, bytes downloaded, fps while dragging) and checks nothing; --screenshot PATH then saves
 // the whole page after the drag (docs/images/web-runtime.png).
@@ -17,7 +23,9 @@
 // node web/test/page_test.mjs --site build-wasm/site --pack P.prtpack --env E.hdr
 //     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR]
 //     [--image-pack I.prtpack --image-reference prt-view-image.png] [--bad-env TRUNCATED.hdr]
+//     [--glossy-pack G.prtpack --glossy-reference prt-view-glossy.png --prt-view PRT_VIEW]
 //     [--measure [--screenshot PATH]]
+import {execFileSync} from 'node:child_process';
 import {createServer} from 'node:http';
 import {readFileSync, writeFileSync, mkdirSync, existsSync, statSync} from 'node:fs';
 import {extname, join, resolve, normalize} from 'node:path';
@@ -99,23 +107,61 @@ function compareMesh(page, ref, mask, w, h, erode = true) {
   return {pixels: n, mean: n ? sum / (3 * n * 255) : NaN, within: n ? within / n : 0, max};
 }
 
-async function drag(page, steps, stepMs) {
+// A drag across the view: the left button rotates the lighting, the right one orbits the camera
+// (by 2π × `span` of the canvas width).
+async function drag(page, steps, stepMs, button = 'left', span = 0.4) {
   const box = await (await page.$('#gl')).boundingBox();
   const y = box.y + box.height / 2;
   const x0 = box.x + box.width * 0.3;
   await page.mouse.move(x0, y);
-  await page.mouse.down();
+  await page.mouse.down({button});
   for (let i = 1; i <= steps; ++i) {
-    await page.mouse.move(x0 + (box.width * 0.4 * i) / steps, y);
+    await page.mouse.move(x0 + (box.width * span * i) / steps, y);
     await new Promise((r) => setTimeout(r, stepMs));
   }
-  await page.mouse.up();
+  await page.mouse.up({button});
+}
+
+// Idle: no frame for half a second (and converged).
+async function settle(page) {
+  await page.waitForFunction(() => {
+    const s = window.prtStats;
+    return s.frames.length && s.converged && performance.now() - s.lastFrameAt > 500;
+  }, {timeout: 60000, polling: 100});
+}
+
+// max |a − b| / max |b| over two radiance arrays.
+function relativeChange(a, b) {
+  let d = 0, m = 0;
+  for (let i = 0; i < a.length; ++i) {
+    d = Math.max(d, Math.abs(a[i] - b[i]));
+    m = Math.max(m, Math.abs(b[i]));
+  }
+  return m > 0 ? d / m : d;
+}
+
+// The page's canvas against a prt-view PNG on the mesh's pixels (a): logs and checks.
+async function compareWithPrtView(page, shot, reference, what, check) {
+  const got = decodePng(readFileSync(shot));
+  const ref = decodePng(readFileSync(reference));
+  check(got.width === ref.width && got.height === ref.height,
+        `${what}: page ${got.width}×${got.height} = prt-view ${ref.width}×${ref.height}`);
+  const mask = Buffer.from(await page.evaluate(() => window.prtPage.meshMask()), 'base64');
+  const r = compareMesh(got.rgb, ref.rgb, mask, got.width, got.height);
+  console.log(`${what}: mesh pixels ${r.pixels}: mean |page − prt-view| ` +
+              `${(100 * r.mean).toFixed(3)} % of full scale, ${(100 * r.within).toFixed(2)} % ` +
+              `within ${kPixelTolerance}/255, max ${r.max}/255`);
+  check(r.pixels > 0.05 * got.width * got.height, `${what}: the mesh covers > 5 % of the image`);
+  check(r.mean <= kMeanTolerance, `${what}: mean difference ≤ ${100 * kMeanTolerance} %`);
+  check(r.within >= kPixelFraction,
+        `${what}: ≥ ${100 * kPixelFraction} % of mesh pixels within ${kPixelTolerance}/255`);
 }
 
 async function main() {
   const a = parseArgs(process.argv);
   mkdirSync(a.outDir, {recursive: true});
   const files = {'/data/pack.prtpack': resolve(a.pack), '/data/env.hdr': resolve(a.env)};
+  if (a.glossyPack) files['/data/glossy.prtpack'] = resolve(a.glossyPack);
   if (a.corrupt) files['/data/corrupt.prtpack'] = resolve(a.corrupt);
   if (a.badEnv) files['/data/truncated.hdr'] = resolve(a.badEnv);
   const server = await serve(resolve(a.site), files);
@@ -142,6 +188,24 @@ async function main() {
     const shot = join(a.outDir, 'page.png');
     await (await page.$(s0.isImage ? '#image' : '#gl')).screenshot({path: shot});
 
+    if (a.measure && s0.isGlossy) {  // a glossy pack: its orbit and rotation steps
+      const bench = await page.evaluate(() => window.prtPage.glossyBenchmark({frames: 10}));
+      await drag(page, 20, 16, 'right', 0.1);
+      await settle(page);
+      const s = await page.evaluate(() => window.prtStats);
+      const orbit = s.frames.filter((f) => f.orbit && f.glossy);
+      const med = (xs) => [...xs].sort((p, q) => p - q)[Math.floor(xs.length / 2)];
+      console.log(JSON.stringify({
+        pack: a.pack, samples: s.samples, n: s.cubemapSize, ...bench,
+        orbitDragFrames: orbit.length, orbitDragFps: s.orbitFps,
+        orbitDragFrameMedianMs: med(orbit.map((f) => f.totalMs)),
+        orbitDragRelightMedianMs: med(orbit.map((f) => f.relightMs)),
+        exactRelightMs: s0.exactRelightMs, openMs: s0.openMs,
+        loadToFirstFrameMs: s0.loadToFirstFrameMs, memoryBytes: s0.memoryBytes,
+        wasmHeapBytes: s0.wasmHeapBytes,
+      }, null, 1));
+      return;
+    }
     if (a.measure) {
       const bench = await page.evaluate(() => window.prtPage.benchmark({frames: 30,
                                                                         mapWidths: [1024, 512, 256, 128]}));
@@ -220,6 +284,21 @@ async function main() {
     check(/frame time\s+[\d.]+ ms/.test(text) && /term budget\s+\d+/.test(text),
           'frame time and term budget in the #stats text');
     check(s.converged && !s.preview, 'converged to the full map after the drag');
+
+    // (e) an orbit step on the diffuse pack: drawn again from the new eye, nothing relit.
+    const before = await page.evaluate(() => window.prtPage.radiance());
+    const framesBefore = s.frames.length;
+    await drag(page, 10, 20, 'right', 0.1);
+    await settle(page);
+    const so = await page.evaluate(() => window.prtStats);
+    const orbited = so.frames.slice(framesBefore - so.frames.length).filter((f) => f.orbit);
+    const after = await page.evaluate(() => window.prtPage.radiance());
+    console.log(`diffuse orbit: ${orbited.length} frames to ${so.orbitDeg.toFixed(1)}°, ` +
+                `median ${orbited.length ? orbited.map((f) => f.totalMs).sort((p, q) => p - q)[orbited.length >> 1].toFixed(2) : '–'} ms`);
+    check(orbited.length > 0 && Math.abs(so.orbitDeg) > 1, 'a right-button drag orbits the camera');
+    check(orbited.every((f) => f.relightMs === 0 && f.terms === 0),
+          'a diffuse pack\'s orbit frames only draw');
+    check(relativeChange(after, before) === 0, 'a diffuse pack\'s radiance does not follow the eye');
     await page.close();
 
     // (d) an image pack, opened through the file inputs (the map first, then the pack).
@@ -250,6 +329,53 @@ async function main() {
               'the image pack matches prt-view within the tolerance');
       }
       await p.close();
+    }
+
+    // (f) a glossy pack: prt-view's image from its camera, then an orbit step relights it.
+    if (a.glossyPack) {
+      const g = await openPage(browser, `${base}/index.html?pack=/data/glossy.prtpack` +
+                                            `&env=/data/env.hdr&exposure=${a.exposure}`, log);
+      const gs = await g.evaluate(() => window.prtStats);
+      check(gs.state === 'ready' && gs.isGlossy,
+            `the page opens the glossy pack (${gs.state}${gs.error ? `: ${gs.error}` : ''})`);
+      if (gs.state === 'ready') {
+        const gshot = join(a.outDir, 'glossy.png');
+        await (await g.$('#gl')).screenshot({path: gshot});
+        if (a.glossyReference) {
+          await compareWithPrtView(g, gshot, a.glossyReference, 'glossy, the pack\'s camera',
+                                   check);
+        }
+        const r0 = await g.evaluate(() => window.prtPage.radiance());
+        const n0 = gs.frames.length;
+        await drag(g, 8, 30, 'right', 0.08);
+        await settle(g);
+        const go = await g.evaluate(() => window.prtStats);
+        const steps = go.frames.slice(n0 - go.frames.length).filter((f) => f.orbit && f.glossy);
+        const r1 = await g.evaluate(() => window.prtPage.radiance());
+        const change = relativeChange(r1, r0);
+        const med = (xs) => [...xs].sort((p, q) => p - q)[xs.length >> 1];
+        console.log(`glossy orbit: ${steps.length} frames to ${go.orbitDeg.toFixed(1)}°, frame ` +
+                    `median ${steps.length ? med(steps.map((f) => f.totalMs)).toFixed(2) : '–'} ms ` +
+                    `(relight ${steps.length ? med(steps.map((f) => f.relightMs)).toFixed(2) : '–'} ms), ` +
+                    `radiance changed by ${(100 * change).toFixed(2)} % of its max`);
+        check(steps.length > 0 && steps.every((f) => f.relightMs > 0 && Number.isFinite(f.totalMs)),
+              'an orbit step relights the glossy pack');
+        check(change > 1e-3, 'the glossy radiance follows the eye');
+        const text = await g.$eval('#stats', (e) => e.textContent);
+        check(/glossy frame\s+[\d.]+ ms/.test(text), 'the glossy frame time in the #stats text');
+        if (a.prtView && a.glossyReference) {
+          const oshot = join(a.outDir, 'glossy-orbit.png');
+          await (await g.$('#gl')).screenshot({path: oshot});
+          const ref = join(a.outDir, 'prt-view-glossy-orbit.png');
+          const spec = [...go.eye, ...go.target].map((x) => x.toPrecision(9)).join(',');
+          execFileSync(a.prtView, [resolve(a.glossyPack), '--env', resolve(a.env), '--exposure',
+                                   a.exposure, '--camera', spec, '--out', ref, '--quiet']);
+          await compareWithPrtView(g, oshot, ref, 'glossy, orbited', check);
+        }
+        const bench = await g.evaluate(() => window.prtPage.glossyBenchmark({frames: 10}));
+        console.log(`glossy steps in the page: ${JSON.stringify(bench)}`);
+      }
+      await g.close();
     }
 
     // (b) a corrupt pack: the runtime's message on the page.
