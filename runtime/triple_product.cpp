@@ -1051,8 +1051,15 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
   if (avx2 && setup && vt.simd_changes && vt.exact && vis.bits == 1 &&
       (options.disable & kSpeedupVertexSums) == 0) {
     BlocksWithVertexSumsAvx2(vt, lobes, list, count, rate_code, d0, s0, e0, kinds, total, st);
-    if (stats != nullptr) *stats += st;
-    return {total[0], total[1], total[2]};
+    if (std::isfinite(total[0]) && std::isfinite(total[1]) && std::isfinite(total[2])) {
+      if (stats != nullptr) *stats += st;
+      return {total[0], total[1], total[2]};
+    }
+    // The float sums over many blocks overflowed where the blocks' own products (summed in
+    // double) may not: the vertex again block by block, which decides.
+    total[0] = total[1] = total[2] = 0.0;
+    st = TripleProductStats{};
+    st.blocks_zero = static_cast<uint64_t>(nb - count);
   }
 #endif
   BlockBrdf bb;
