@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -81,6 +82,17 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+double Min(const std::vector<double>& v) {
+  return *std::min_element(v.begin(), v.end());
+}
+
+// CPU time of the whole process (every thread), ms.
+double CpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+
 // Coverage identical, colours within 1e-5 relative (of max(1, |old|)); prints what differs.
 bool SamePicture(const RasterImage& a, const RasterImage& b) {
   std::size_t cover = 0, colour = 0, drawn = 0;
@@ -129,17 +141,18 @@ int Run(int argc, char** argv) {
   RasterOptions opt;
   opt.background = EnvironmentBackground(lookup, 0.3);
   bool ok = true;
-  std::printf("# prt-raster-bench: %dx%d over %s, median of %d frames, camera orbiting 3°/frame\n",
-              width, height, env_path.c_str(), reps);
   std::printf(
-      "| pack | triangles | threads | old ms | new ms | old/new | new, no background ms |\n");
-  std::printf("|---|---|---|---|---|---|---|\n");
-  std::vector<std::string> checks;
+      "# prt-raster-bench: %dx%d over %s, %d frames per setting, camera orbiting 3°/frame.\n"
+      "# wall ms: median (min) of the frames; CPU ms: the process's CPU time per frame (all its\n"
+      "# threads), median; old/new: ratio of the median wall times, old and new alternating\n"
+      "# frame by frame so that the machine's drift hits both\n",
+      width, height, env_path.c_str(), reps);
+  std::vector<std::string> rows;
   for (Mesh& m : meshes) {
     m.camera.width = width;
     m.camera.height = height;
     {
-      std::printf("%s:\n", m.name.c_str());
+      std::printf("%s: %zu triangles\n", m.name.c_str(), m.triangles.size());
       const RasterImage a =
           RasterizeTrianglesReference(m.camera, m.positions, m.triangles, m.rgb, opt);
       const RasterImage b = RasterizeTriangles(m.camera, m.positions, m.triangles, m.rgb, opt);
@@ -147,27 +160,43 @@ int Run(int argc, char** argv) {
     }
     for (int t : thread_counts) {
       tbb::global_control gc(tbb::global_control::max_allowed_parallelism, t);
-      std::vector<double> old_ms, new_ms, bare_ms;
+      std::vector<double> old_ms, new_ms, bare_ms, old_cpu, new_cpu;
+      const auto ms = [](Clock::time_point a, Clock::time_point b) {
+        return std::chrono::duration<double, std::milli>(b - a).count();
+      };
       for (int r = -1; r < reps; ++r) {  // r = −1: warm-up
         const Camera cam = Orbit(m.camera, 3.0 * r);
-        auto t0 = Clock::now();
+        const double c0 = CpuMs();
+        const auto t0 = Clock::now();
         const RasterImage a =
             RasterizeTrianglesReference(cam, m.positions, m.triangles, m.rgb, opt);
-        auto t1 = Clock::now();
+        const auto t1 = Clock::now();
+        const double c1 = CpuMs();
         const RasterImage b = RasterizeTriangles(cam, m.positions, m.triangles, m.rgb, opt);
-        auto t2 = Clock::now();
+        const auto t2 = Clock::now();
+        const double c2 = CpuMs();
         const RasterImage c = RasterizeTriangles(cam, m.positions, m.triangles, m.rgb);
-        auto t3 = Clock::now();
+        const auto t3 = Clock::now();
         if (r < 0) continue;
-        old_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
-        new_ms.push_back(std::chrono::duration<double, std::milli>(t2 - t1).count());
-        bare_ms.push_back(std::chrono::duration<double, std::milli>(t3 - t2).count());
+        old_ms.push_back(ms(t0, t1));
+        new_ms.push_back(ms(t1, t2));
+        bare_ms.push_back(ms(t2, t3));
+        old_cpu.push_back(c1 - c0);
+        new_cpu.push_back(c2 - c1);
       }
-      const double o = Median(old_ms), n = Median(new_ms);
-      std::printf("| %s | %zu | %d | %.2f | %.2f | %.2f | %.2f |\n", m.name.c_str(),
-                  m.triangles.size(), t, o, n, o / n, Median(bare_ms));
+      char row[512];
+      std::snprintf(row, sizeof row,
+                    "| %s | %d | %.2f (%.2f) | %.2f (%.2f) | %.2f | %.2f | %.2f | %.2f (%.2f) |",
+                    m.name.c_str(), t, Median(old_ms), Min(old_ms), Median(new_ms), Min(new_ms),
+                    Median(old_ms) / Median(new_ms), Median(old_cpu), Median(new_cpu),
+                    Median(bare_ms), Min(bare_ms));
+      rows.push_back(row);
     }
   }
+  std::printf(
+      "\n| pack | threads | old wall ms | new wall ms | old/new | old CPU ms | new CPU ms | new "
+      "without background, wall ms |\n|---|---|---|---|---|---|---|---|\n");
+  for (const std::string& r : rows) std::printf("%s\n", r.c_str());
   if (!ok) std::printf("PICTURES DIFFER\n");
   return ok ? 0 : 1;
 }

@@ -26,6 +26,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -45,7 +46,7 @@ struct ClipVertex {
   std::array<double, 3> rgb;
 };
 
-ClipVertex Lerp(const ClipVertex& a, const ClipVertex& b, double t) {
+[[gnu::always_inline]] inline ClipVertex Lerp(const ClipVertex& a, const ClipVertex& b, double t) {
   ClipVertex r;
   r.view = a.view + (b.view - a.view) * t;
   for (int c = 0; c < 3; ++c) r.rgb[c] = a.rgb[c] + (b.rgb[c] - a.rgb[c]) * t;
@@ -53,7 +54,7 @@ ClipVertex Lerp(const ClipVertex& a, const ClipVertex& b, double t) {
 }
 
 // Keeps the part of a triangle with view z ≥ near: 0, 3 or 4 vertices.
-int ClipNear(const ClipVertex in[3], double near, ClipVertex out[4]) {
+[[gnu::always_inline]] inline int ClipNear(const ClipVertex in[3], double near, ClipVertex out[4]) {
   int n = 0;
   for (int i = 0; i < 3; ++i) {
     const ClipVertex& a = in[i];
@@ -72,7 +73,8 @@ struct ScreenVertex {
   double rgb_over_z[3];
 };
 
-ScreenVertex Project(const CameraProjection& cam, const Vec3& view, const double rgb[3]) {
+[[gnu::always_inline]] inline ScreenVertex Project(const CameraProjection& cam, const Vec3& view,
+                                                   const double rgb[3]) {
   ScreenVertex s;
   cam.ViewToPixel(view, s.px, s.py);
   s.inv_z = 1.0 / view.z;
@@ -91,7 +93,8 @@ struct ScreenTriangle {
 // Edge function of the edge a→b at p: positive on one side, zero on the line. Evaluated with the
 // endpoints in a canonical order and negated when swapped, so that the two triangles sharing an
 // edge get bitwise opposite values and no pixel is lost or drawn twice along it.
-inline double Edge(double ax, double ay, double bx, double by, double px, double py) {
+[[gnu::always_inline]] inline double Edge(double ax, double ay, double bx, double by, double px,
+                                          double py) {
   if (ax > bx || (ax == bx && ay > by)) {
     return -((ax - bx) * (py - by) - (ay - by) * (px - bx));
   }
@@ -101,8 +104,9 @@ inline double Edge(double ax, double ay, double bx, double by, double px, double
 // The pixel centres x + ½, y + ½ inside the box of three screen vertices, clamped to the image;
 // false when there is none, or the box is not finite, or the triangle's area is zero or not
 // finite (nothing would be drawn).
-bool Box(const ScreenVertex& a, const ScreenVertex& b, const ScreenVertex& c, double w, double h,
-         ScreenTriangle& t) {
+[[gnu::always_inline]] inline bool Box(const ScreenVertex& a, const ScreenVertex& b,
+                                       const ScreenVertex& c, double w, double h,
+                                       ScreenTriangle& t) {
   const ScreenVertex* v[3] = {&a, &b, &c};
   double xmin = std::numeric_limits<double>::infinity(), xmax = -xmin, ymin = xmin, ymax = -xmin;
   for (int i = 0; i < 3; ++i) {
@@ -124,7 +128,7 @@ bool Box(const ScreenVertex& a, const ScreenVertex& b, const ScreenVertex& c, do
 
 // Top-left rule: a pixel centre exactly on an edge belongs to the triangle whose interior lies to
 // its right (+x) or, for a horizontal edge, below it (+y). `nx, ny` is the inward edge normal.
-inline bool OwnsEdge(double nx, double ny) {
+[[gnu::always_inline]] inline bool OwnsEdge(double nx, double ny) {
   return nx > 0.0 || (nx == 0.0 && ny > 0.0);
 }
 
@@ -132,14 +136,6 @@ inline bool OwnsEdge(double nx, double ny) {
 // the per-pixel value esign·(row − edy·(x + ½ − ex0)), row = edx·(y + ½ − ey0), is the same
 // floating-point expression Edge() evaluates (bitwise), with the per-edge and per-row parts
 // hoisted out of the pixel loop. Edge i is opposite vertex i: (1→2), (2→0), (0→1).
-// A screen triangle in a tile's list: its vertices copied in, so that a tile reads its list as
-// one stream instead of gathering vertices from the whole frame's array.
-struct BinnedTriangle {
-  ScreenVertex v[3];
-  int32_t id;
-  int32_t xmin, xmax, ymin, ymax;
-};
-
 struct TriangleSetup {
   double s, inv_area;
   double ex0[3], ey0[3], edx[3], edy[3], esign[3];
@@ -149,8 +145,9 @@ struct TriangleSetup {
   int32_t id;
 };
 
-void Setup(const BinnedTriangle& t, TriangleSetup& e) {
-  for (int i = 0; i < 3; ++i) e.v[i] = &t.v[i];
+[[gnu::always_inline]] inline void Setup(const ScreenTriangle& t, const ScreenVertex* verts,
+                                         TriangleSetup& e) {
+  for (int i = 0; i < 3; ++i) e.v[i] = &verts[t.v[i]];
   const double px[3] = {e.v[0]->px, e.v[1]->px, e.v[2]->px};
   const double py[3] = {e.v[0]->py, e.v[1]->py, e.v[2]->py};
   const double area = Edge(px[0], py[0], px[1], py[1], px[2], py[2]);
@@ -179,7 +176,8 @@ void Setup(const BinnedTriangle& t, TriangleSetup& e) {
 }
 
 // Pixel p of a covered centre with edge values w: z-test, then depth, triangle and colour.
-inline void Shade(const TriangleSetup& e, const double w[3], std::size_t p, RasterImage& img) {
+[[gnu::always_inline]] inline void Shade(const TriangleSetup& e, const double w[3], std::size_t p,
+                                         RasterImage& img) {
   // Screen-space barycentrics; 1/z and rgb/z are affine in screen space.
   double b[3];
   for (int i = 0; i < 3; ++i) b[i] = e.s * w[i] * e.inv_area;
@@ -202,7 +200,8 @@ inline void Shade(const TriangleSetup& e, const double w[3], std::size_t p, Rast
 }
 
 // Columns [x0, x1] of rows [y0, y1], one pixel at a time.
-void DrawRows(const TriangleSetup& e, int x0, int x1, int y0, int y1, int width, RasterImage& img) {
+[[gnu::always_inline]] inline void DrawRows(const TriangleSetup& e, int x0, int x1, int y0, int y1,
+                                            int width, RasterImage& img) {
   for (int y = y0; y <= y1; ++y) {
     const double pyc = y + 0.5;
     double row[3];
@@ -302,16 +301,82 @@ const bool g_raster_avx2 = [] {
 }();
 #endif
 
+// Pass 2's output for one chunk of triangles.
+struct Chunk {
+  std::vector<ScreenTriangle> tris;
+  std::vector<ScreenVertex> extra;   // vertices made by near clipping
+  std::vector<uint32_t> tile_count;  // then: where the chunk's entries of each tile start
+};
+
+// A frame's working arrays, kept from one frame to the next by the calling thread (a frame
+// allocates ~15 MB for 83k triangles; fresh pages cost a page fault each, ~10 % of a frame). A
+// call made while the thread's arrays are in use (a nested call from a TBB task) gets its own.
+struct Scratch {
+  bool busy = false;
+  std::vector<Vec3> view;
+  std::vector<ScreenVertex> verts;
+  std::vector<Chunk> chunk;
+  std::vector<ScreenTriangle> binned;
+};
+
+class ScratchLease {
+ public:
+  ScratchLease() {
+    static thread_local Scratch kept;
+    if (!kept.busy) {
+      scratch_ = &kept;
+    } else {
+      own_ = std::make_unique<Scratch>();
+      scratch_ = own_.get();
+    }
+    scratch_->busy = true;
+  }
+  ~ScratchLease() { scratch_->busy = false; }
+  ScratchLease(const ScratchLease&) = delete;
+  ScratchLease& operator=(const ScratchLease&) = delete;
+  Scratch& get() { return *scratch_; }
+
+ private:
+  std::unique_ptr<Scratch> own_;
+  Scratch* scratch_ = nullptr;
+};
+
+// Runs body(i) built for AVX2 (no FMA: the arithmetic rounds as in the default build, bitwise)
+// or for the default target: the passes' bodies and what they call are always inlined, so the
+// AVX2 build gets SSE4.1 rounding for floor/ceil and wider moves throughout.
+template <typename F>
+void RunDefault(const F& body, std::size_t i) {
+  body(i);
+}
+#if defined(__x86_64__)
+template <typename F>
+__attribute__((target("avx2"))) void RunAvx2(const F& body, std::size_t i) {
+  body(i);
+}
+#endif
+template <typename F>
+void Run(bool avx2, const F& body, std::size_t i) {
+#if defined(__x86_64__)
+  if (avx2) {
+    RunAvx2(body, i);
+    return;
+  }
+#endif
+  (void)avx2;
+  RunDefault(body, i);
+}
+
 // Draws the pixels of `t` in columns [x0, x1] and rows [y0, y1] (its tile).
-void DrawTriangle(const BinnedTriangle& t, int x0, int x1, int y0, int y1, int width, bool simd,
-                  RasterImage& img) {
+[[gnu::always_inline]] inline void DrawTriangle(const ScreenTriangle& t, const ScreenVertex* verts,
+                                                int x0, int x1, int y0, int y1, int width,
+                                                bool simd, RasterImage& img) {
   x0 = std::max(x0, t.xmin);
   x1 = std::min(x1, t.xmax);
   y0 = std::max(y0, t.ymin);
   y1 = std::min(y1, t.ymax);
   if (x0 > x1 || y0 > y1) return;
   TriangleSetup e;
-  Setup(t, e);
+  Setup(t, verts, e);
 #if defined(__x86_64__)
   if (simd) {
     DrawRowsAvx2(e, x0, x1, y0, y1, width, img);
@@ -351,13 +416,22 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
       triangles.size() > static_cast<std::size_t>(std::numeric_limits<int32_t>::max()))
     throw std::invalid_argument("RasterizeTriangles: too many vertices or triangles");
   const double near = options.near > 0.0 ? options.near : 1e-3;
+#if defined(__x86_64__)
+  const bool simd = g_raster_avx2 && !options.scalar;
+#else
+  const bool simd = false;
+#endif
   const int width = camera.width, height = camera.height;
   const double wd = width, hd = height;
 
   // Pass 1: every vertex in view space, and on the screen when in front of the near plane.
   const std::size_t nv = positions.size();
-  std::vector<Vec3> view(nv);
-  std::vector<ScreenVertex> verts(nv);
+  ScratchLease lease;
+  Scratch& scratch = lease.get();
+  std::vector<Vec3>& view = scratch.view;
+  std::vector<ScreenVertex>& verts = scratch.verts;
+  view.resize(nv);
+  verts.resize(nv);
   tbb::parallel_for(std::size_t{0}, (nv + kChunk - 1) / kChunk, [&](std::size_t ch) {
     const std::size_t end = std::min(nv, (ch + 1) * kChunk);
     for (std::size_t v = ch * kChunk; v < end; ++v) {
@@ -375,15 +449,14 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
   const std::size_t chunks = (triangles.size() + kChunk - 1) / kChunk;
   const int tiles_x = (width + kTileW - 1) / kTileW, tiles_y = (height + kTileH - 1) / kTileH;
   const std::size_t tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
-  struct Chunk {
-    std::vector<ScreenTriangle> tris;
-    std::vector<ScreenVertex> extra;
-    std::vector<uint32_t> tile_count;  // then: where the chunk's entries of each tile start
-  };
-  std::vector<Chunk> chunk(chunks);
-  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t ch) {
+  std::vector<Chunk>& chunk = scratch.chunk;
+  if (chunk.size() < chunks) chunk.resize(chunks);
+  const auto clip_and_count = [&](std::size_t ch) __attribute__((always_inline)) {
     Chunk& out = chunk[ch];
     out.tile_count.assign(tiles, 0);
+    out.tris.clear();
+    out.tris.reserve(kChunk);
+    out.extra.clear();
     const std::size_t end = std::min(triangles.size(), (ch + 1) * kChunk);
     const auto keep = [&](ScreenTriangle& t) {
       for (int ty = t.ymin / kTileH; ty <= t.ymax / kTileH; ++ty)
@@ -425,7 +498,8 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
         keep(t);
       }
     }
-  });
+  };
+  tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t ch) { Run(simd, clip_and_count, ch); });
 
   // Join the chunks' clipped vertices to the vertex array; lay the tiles' lists out tile by
   // tile, chunk by chunk inside a tile (so triangle order), then fill them in parallel.
@@ -438,12 +512,14 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
     }
     if (extra > 0) {
       verts.reserve(nv + extra);
-      for (const Chunk& c : chunk) verts.insert(verts.end(), c.extra.begin(), c.extra.end());
+      for (std::size_t ch = 0; ch < chunks; ++ch)
+        verts.insert(verts.end(), chunk[ch].extra.begin(), chunk[ch].extra.end());
     }
     uint32_t at = 0;
     for (std::size_t t = 0; t < tiles; ++t) {
       tile_start[t] = at;
-      for (Chunk& c : chunk) {
+      for (std::size_t ch = 0; ch < chunks; ++ch) {
+        Chunk& c = chunk[ch];
         const uint32_t count = c.tile_count[t];
         c.tile_count[t] = at;
         at += count;
@@ -451,23 +527,18 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
     }
     tile_start[tiles] = at;
   }
-  std::vector<BinnedTriangle> binned(tile_start[tiles]);
+  std::vector<ScreenTriangle>& binned = scratch.binned;
+  binned.resize(tile_start[tiles]);
   tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t ch) {
     Chunk& c = chunk[ch];
-    for (const ScreenTriangle& t : c.tris) {
-      BinnedTriangle b;
-      for (int k = 0; k < 3; ++k)
-        b.v[k] = verts[t.v[k] < nv ? t.v[k] : t.v[k] - nv + extra_base[ch]];
-      b.id = t.id;
-      b.xmin = t.xmin;
-      b.xmax = t.xmax;
-      b.ymin = t.ymin;
-      b.ymax = t.ymax;
+    for (ScreenTriangle b : c.tris) {
+      for (uint32_t& v : b.v)
+        if (v >= nv) v = static_cast<uint32_t>(v - nv + extra_base[ch]);
+      const ScreenTriangle& t = b;
       for (int ty = t.ymin / kTileH; ty <= t.ymax / kTileH; ++ty)
         for (int tx = t.xmin / kTileW; tx <= t.xmax / kTileW; ++tx)
           binned[c.tile_count[static_cast<std::size_t>(ty) * tiles_x + tx]++] = b;
     }
-    std::vector<ScreenTriangle>().swap(c.tris);
   });
 
   RasterImage img;
@@ -482,17 +553,12 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
   // image's first one reported after all tiles, whatever the thread count.
   constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
   std::vector<std::size_t> bad_background(tiles, kNone);
-#if defined(__x86_64__)
-  const bool simd = g_raster_avx2 && !options.scalar;
-#else
-  const bool simd = false;
-#endif
-  tbb::parallel_for(std::size_t{0}, tiles, [&](std::size_t tile) {
+  const auto draw_tile = [&](std::size_t tile) __attribute__((always_inline)) {
     const int x0 = static_cast<int>(tile % tiles_x) * kTileW;
     const int y0 = static_cast<int>(tile / tiles_x) * kTileH;
     const int x1 = std::min(width, x0 + kTileW) - 1, y1 = std::min(height, y0 + kTileH) - 1;
     for (uint32_t k = tile_start[tile]; k < tile_start[tile + 1]; ++k)
-      DrawTriangle(binned[k], x0, x1, y0, y1, width, simd, img);
+      DrawTriangle(binned[k], verts.data(), x0, x1, y0, y1, width, simd, img);
     if (!options.background) return;
     Vec3 dirs[kTileW];
     Rgb out[kTileW];
@@ -519,7 +585,8 @@ RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> posit
         for (int ch = 0; ch < 3; ++ch) img.rgb[3 * p + ch] = c[ch];
       }
     }
-  });
+  };
+  tbb::parallel_for(std::size_t{0}, tiles, [&](std::size_t tile) { Run(simd, draw_tile, tile); });
   const std::size_t bad = *std::min_element(bad_background.begin(), bad_background.end());
   if (bad != kNone)
     throw NumericalError(
