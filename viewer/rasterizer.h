@@ -80,10 +80,13 @@ struct RasterOptions {
 
 // Rasterises triangles with per-vertex colours (3 floats per position, interleaved). Triangles
 // are two-sided and clipped against the near plane; coverage follows the top-left rule, so a
-// pixel centre on an edge shared by two triangles is drawn once. Parallel over row bands (TBB).
-// Throws std::invalid_argument on a colour array of the wrong size or an out-of-range index,
-// NumericalError on a NaN/Inf vertex colour or background value (naming the vertex or pixel):
-// no pixel is blacked out silently.
+// pixel centre on an edge shared by two triangles is drawn once. Parallel over 64×32-pixel tiles
+// (TBB); the result does not depend on the thread count or on AVX2 (bitwise: docs/viewer.md,
+// "Rasteriser"). The calling thread keeps the working arrays (~8 MB for 83k triangles) for its
+// next call. Throws std::invalid_argument on a colour array of the wrong size, an out-of-range
+// index or 2³¹ or more vertices or triangles, NumericalError on a NaN/Inf vertex colour or
+// background value (naming the vertex, or the first such pixel in row-major order): no pixel is
+// blacked out silently.
 RasterImage RasterizeTriangles(const Camera& camera, std::span<const Vec3> positions,
                                std::span<const std::array<uint32_t, 3>> triangles,
                                std::span<const float> vertex_rgb,
