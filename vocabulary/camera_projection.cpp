@@ -26,12 +26,6 @@ CameraProjection::CameraProjection(const Camera& camera)
   aspect_ = static_cast<double>(width_) / height_;
 }
 
-Vec3 CameraProjection::PixelDirection(double px, double py) const {
-  const double sx = (2.0 * px / width_ - 1.0) * aspect_ * tan_half_;
-  const double sy = (1.0 - 2.0 * py / height_) * tan_half_;
-  return Normalize(forward_ + sx * right_ + sy * up_);
-}
-
 Vec3 CameraProjection::ToView(const Vec3& p) const {
   const Vec3 d = p - eye_;
   return {Dot(d, right_), Dot(d, up_), Dot(d, forward_)};

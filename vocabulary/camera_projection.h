@@ -29,8 +29,13 @@ class CameraProjection {
   const Vec3& up() const { return up_; }
   int width() const { return width_; }
   int height() const { return height_; }
-  // Unit direction through continuous pixel coordinates (px, py) (pixel centres at +½).
-  Vec3 PixelDirection(double px, double py) const;
+  // Unit direction through continuous pixel coordinates (px, py) (pixel centres at +½). Inline:
+  // the rasteriser calls it for every background pixel.
+  Vec3 PixelDirection(double px, double py) const {
+    const double sx = (2.0 * px / width_ - 1.0) * aspect_ * tan_half_;
+    const double sy = (1.0 - 2.0 * py / height_) * tan_half_;
+    return Normalize(forward_ + sx * right_ + sy * up_);
+  }
   // View-space coordinates (x right, y up, z forward) of a world point.
   Vec3 ToView(const Vec3& p) const;
   // Continuous pixel coordinates of a view-space point with z > 0.
