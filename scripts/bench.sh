@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -316,13 +316,18 @@ run_runtime() {
   "$BUILD_DIR/bench/prt-runtime-bench" "$pack" "$BUILD_DIR/data/envmaps/sunrise.exr" 40
 }
 run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/glossy_bench" --out "$OUT/glossy" || echo "glossy_bench not built"; }
+# Triple products per frame (issue 41, docs/viewer.md "Triple products: where a frame goes"):
+# before/after and each speedup alone, 1 and 2 threads, the whole frame, on the default scene,
+# the armadillo and the dragon (visibility traced once into bench-out/glossy, shared with
+# glossy_bench).
+run_tp() { "$BUILD_DIR/bench/prt-tp-bench" --cache "$OUT/glossy" --out "$OUT/tp"; }
 
 case "$WHAT" in
-  all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy ;;
-  transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|sweep|stress|rebake) "run_$WHAT" ;;
+  all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy; run_tp ;;
+  transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake) "run_$WHAT" ;;
   mc-error) run_mc_error ;;
   gi) run_gi ;;
   sparse-gi) run_sparse_gi ;;
   image) run_image ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
 esac
