@@ -130,21 +130,39 @@ double BlockDct::SamplePosition(int l, int i) {
   return (i + 0.5) * 16.0 / l - 0.5;
 }
 
+namespace {
+
+// BlockDct::Project for a fixed l: the loops unroll (issue 41: a rate-4 or rate-16 block projects
+// its lobe samples every frame).
+template <int L>
+void ProjectFixed(const float* samples, float* coeffs) {
+  const auto& inv = Tables().inverse[L];
+  float tmp[L * L];  // rows: tmp[j][u] = Σ_i inv[u][i] f(i, j)
+  for (int j = 0; j < L; ++j)
+    for (int u = 0; u < L; ++u) {
+      float acc = 0;
+      for (int i = 0; i < L; ++i) acc += inv[u][i] * samples[j * L + i];
+      tmp[j * L + u] = acc;
+    }
+  for (int v = 0; v < L; ++v)
+    for (int u = 0; u < L; ++u) {
+      float acc = 0;
+      for (int j = 0; j < L; ++j) acc += inv[v][j] * tmp[j * L + u];
+      coeffs[v * L + u] = acc;
+    }
+}
+
+}  // namespace
+
 void BlockDct::Project(int l, const float* samples, float* coeffs) {
-  const auto& inv = Tables().inverse[l];
-  float tmp[16];  // rows: tmp[j][u] = Σ_i inv[u][i] f(i, j)
-  for (int j = 0; j < l; ++j)
-    for (int u = 0; u < l; ++u) {
-      float acc = 0;
-      for (int i = 0; i < l; ++i) acc += inv[u][i] * samples[j * l + i];
-      tmp[j * l + u] = acc;
-    }
-  for (int v = 0; v < l; ++v)
-    for (int u = 0; u < l; ++u) {
-      float acc = 0;
-      for (int j = 0; j < l; ++j) acc += inv[v][j] * tmp[j * l + u];
-      coeffs[v * l + u] = acc;
-    }
+  switch (l) {
+    case 1:
+      return ProjectFixed<1>(samples, coeffs);
+    case 2:
+      return ProjectFixed<2>(samples, coeffs);
+    default:
+      return ProjectFixed<4>(samples, coeffs);
+  }
 }
 
 void BlockDct::Forward16(const float* pixels, float* coeffs16) {

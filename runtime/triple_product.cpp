@@ -481,12 +481,13 @@ __attribute__((target("avx2,fma"))) void Line11PixelsAvx2(const uint64_t visible
 }
 
 // The vertex set-up over its listed blocks (FastVertex), 8 block centres per step: Appendix A's
-// rate code (0..3 for 1, 4, 16, 256 samples) from cos = 2(n·c)(n·v) − c·v and the diffuse lobe
-// at the centre.
+// rate code (0..3 for 1, 4, 16, 256 samples) from cos = 2(n·c)(n·v) − c·v, the diffuse lobe at
+// the centre and, for Phong (phong_s0 not null), the specular lobe there: r_view·c is that same
+// cos.
 __attribute__((target("avx2,fma"))) void SetupAvx2(const FloatLobes& L, const float* gx,
                                                    const float* gy, const float* gz, int count,
                                                    bool low_exponent, int mid_code, int near_code,
-                                                   int32_t* code, float* d0) {
+                                                   int32_t* code, float* d0, float* phong_s0) {
   const __m256 c4 = _mm256_set1_ps(0.70710678118654752f), c8 = _mm256_set1_ps(0.92387953251128676f);
   const __m256i mid = _mm256_set1_epi32(mid_code), near = _mm256_set1_epi32(near_code);
   for (int i = 0; i < count; i += 8) {
@@ -505,6 +506,14 @@ __attribute__((target("avx2,fma"))) void SetupAvx2(const FloatLobes& L, const fl
     _mm256_store_si256(reinterpret_cast<__m256i*>(code + i), c);
     _mm256_store_ps(d0 + i, _mm256_mul_ps(_mm256_max_ps(nc, _mm256_setzero_ps()),
                                           _mm256_set1_ps(0.318309886f)));
+    if (phong_s0 != nullptr) {  // FloatLobes::SpecularFrom(c, n·c, r·c) for Phong
+      const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(nc, _mm256_setzero_ps(), _CMP_GT_OQ),
+                                      _mm256_cmp_ps(cosang, _mm256_setzero_ps(), _CMP_GT_OQ));
+      const __m256 v = _mm256_mul_ps(
+          _mm256_mul_ps(_mm256_set1_ps(L.phong_norm), PowUnitAvx2(cosang, _mm256_set1_ps(L.s))),
+          nc);
+      _mm256_store_ps(phong_s0 + i, _mm256_and_ps(v, ok));
+    }
   }
 }
 
@@ -1013,9 +1022,16 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
         gz[i] = cz[list[i]];
       }
       for (int i = count; i < count + 8; ++i) gx[i] = gy[i] = gz[i] = 0.f;
-      SpecularBatch(lobes, true, gx, gy, gz, count, s0);
-      if (avx2)
-        SetupAvx2(lobes, gx, gy, gz, count, low_exponent, mid_code, near_code, rate_code, d0);
+      if (avx2) {
+        // Phong's centre lobe comes out of the set-up's own cos (r·c for the centre c);
+        // Ashikhmin–Shirley needs the half vector: SpecularBatch.
+        const bool phong_centres = lobes.spec && lobes.model == BrdfModel::kPhong;
+        SetupAvx2(lobes, gx, gy, gz, count, low_exponent, mid_code, near_code, rate_code, d0,
+                  phong_centres ? s0 : nullptr);
+        if (!phong_centres) SpecularBatch(lobes, true, gx, gy, gz, count, s0);
+      } else {
+        SpecularBatch(lobes, true, gx, gy, gz, count, s0);
+      }
     }
     for (int i = 0; i < count && !avx2; ++i) {
       const int b = list[i];
