@@ -991,9 +991,12 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
   uint16_t list[kMaxBlocks];
   int count = 0;
   const bool avx2 = simd && SimdAvailable();
+#ifdef PRT_TP_HAVE_AVX2
   if (avx2 && setup) {
     count = ListNonZeroAvx2(kinds, nb, list);
-  } else {
+  } else
+#endif
+  {
     for (int b = 0; b < nb; ++b) {
       list[count] = static_cast<uint16_t>(b);
       count += kinds[b] != static_cast<uint8_t>(VisibilityBlockKind::kZero);
@@ -1022,6 +1025,7 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
         gz[i] = cz[list[i]];
       }
       for (int i = count; i < count + 8; ++i) gx[i] = gy[i] = gz[i] = 0.f;
+#ifdef PRT_TP_HAVE_AVX2
       if (avx2) {
         // Phong's centre lobe comes out of the set-up's own cos (r·c for the centre c);
         // Ashikhmin–Shirley needs the half vector: SpecularBatch.
@@ -1029,7 +1033,9 @@ std::array<double, 3> FastVertex(const GlossyScene& scene, const CubemapBlocks& 
         SetupAvx2(lobes, gx, gy, gz, count, low_exponent, mid_code, near_code, rate_code, d0,
                   phong_centres ? s0 : nullptr);
         if (!phong_centres) SpecularBatch(lobes, true, gx, gy, gz, count, s0);
-      } else {
+      } else
+#endif
+      {
         SpecularBatch(lobes, true, gx, gy, gz, count, s0);
       }
     }

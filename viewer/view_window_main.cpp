@@ -17,10 +17,10 @@
 #include <string>
 #include <vector>
 
+#include "runtime/per_band_incremental.h"
 #include "viewer/environment_background.h"
 #include "viewer/glossy_session.h"
 #include "viewer/npy_writer.h"
-#include "runtime/per_band_incremental.h"
 #include "viewer/viewer_session.h"
 #include "vocabulary/cubemap_resample.h"
 #include "vocabulary/image_io.h"
@@ -248,7 +248,10 @@ int RunGlossyWindow(prt::GlossySession& session,
   const int n = session.cubemap_n();
   const prt::ToneMapOptions tone{exposure, prt::ToneMap::kClamp};
   double env_deg = 0, orbit_deg = 0, lit_deg = std::nan("");
-  bool reference = false;
+  bool reference = false, lit_exact = false;
+  // While the lighting is dragged it is resampled through the periodic grid (the runtime's
+  // preview, vocabulary/cubemap_resample.h: ~1 ms instead of ~100 ms); on release exactly.
+  const prt::PeriodicLatLongResampler preview(env->image(), n, 16 * n);
   prt::CubemapRgb cube;
   prt::BlockLighting light;
   prt::BackgroundFunction background;  // the environment image, rotated with the lighting
@@ -279,11 +282,14 @@ int RunGlossyWindow(prt::GlossySession& session,
         }
       }
     }
-    if (!(env_deg == lit_deg)) {
-      cube = prt::ResampleToCubemap(env->image(), n, Radians(env_deg));
-      light = session.Lighting(cube);
+    const bool dragging = (SDL_GetMouseState(nullptr, nullptr) & SDL_BUTTON_LMASK) != 0;
+    if (!(env_deg == lit_deg) || (!dragging && !lit_exact)) {
+      cube = dragging ? preview.Resample(Radians(env_deg))
+                      : prt::ResampleToCubemap(env->image(), n, Radians(env_deg));
+      prt::UpdateBlockLighting(cube, session.blocks(), light);
       background = prt::EnvironmentBackground(env, Radians(env_deg));
       lit_deg = env_deg;
+      lit_exact = !dragging;
     }
     const prt::Camera cam = Orbit(camera, orbit_deg);
     if (reference) {
