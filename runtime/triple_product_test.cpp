@@ -331,34 +331,44 @@ BlockBound BoundOf(const GlossyScene& s, const CubemapBlocks& blocks, const Bloc
   return out;
 }
 
+// `count` vertices with random normals (tilted up to `tilt` from +Y), each map a random straight
+// shadow edge through the upper hemisphere (anti-aliased when bits > 1) under the horizon mask of
+// traced maps; materials cycle through fx.materials; positions at the origin or, with
+// `jitter`, scattered by up to 0.1 on the ground plane.
+void AddShadowEdgeVertices(Fixture& fx, int bits, int count, double tilt, bool jitter,
+                           std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  const uint8_t top = static_cast<uint8_t>((1 << bits) - 1);
+  const CubemapLayout layout(kN);
+  for (int v = 0; v < count; ++v) {
+    const Vec3 normal = Normalize(Vec3{tilt * u(rng), 1, tilt * u(rng)});
+    const Vec3 edge = Normalize(Vec3{u(rng), 0.3 * u(rng), u(rng)});
+    const double offset = 0.3 * u(rng);
+    std::vector<uint8_t> map(layout.texel_count());
+    for (std::size_t j = 0; j < map.size(); ++j) {
+      const Vec3 d = layout.TexelCenter(j);
+      if (Dot(d, normal) <= 0) continue;  // the horizon mask of traced maps
+      const double t = 0.5 + 6 * (Dot(d, edge) - offset);
+      map[j] = bits == 1 ? (t > 0.5 ? top : 0)
+                         : static_cast<uint8_t>(std::lround(std::clamp(t, 0.0, 1.0) * top));
+    }
+    AppendVisibilityMap(fx.vis, map);
+    fx.positions.push_back(jitter ? Vec3{0.1 * u(rng), 0, 0.1 * u(rng)} : Vec3{0, 0, 0});
+    fx.normals.push_back(normal);
+    fx.material_index.push_back(static_cast<uint16_t>(v % fx.materials.size()));
+  }
+}
+
 TEST(TripleProduct, EveryBlockWithinTheBoundOfItsCase) {
   for (int bits : {1, 6}) {
     Fixture fx;
     fx.vis = MakeVisibilityBlocks(kN, bits);
-    const uint8_t top = static_cast<uint8_t>((1 << bits) - 1);
     Material lambert;
     lambert.diffuse = {0.9f, 0.6f, 0.3f};
     fx.materials = {lambert, Phong(10), Phong(60), Phong(200), Phong(400)};
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> u(-1, 1);
-    const CubemapLayout layout(kN);
-    for (int v = 0; v < 20; ++v) {
-      const Vec3 normal = Normalize(Vec3{0.4 * u(rng), 1, 0.4 * u(rng)});
-      const Vec3 edge = Normalize(Vec3{u(rng), 0.3 * u(rng), u(rng)});
-      const double offset = 0.3 * u(rng);
-      std::vector<uint8_t> map(layout.texel_count());
-      for (std::size_t j = 0; j < map.size(); ++j) {
-        const Vec3 d = layout.TexelCenter(j);
-        if (Dot(d, normal) <= 0) continue;  // the horizon mask of traced maps
-        const double t = 0.5 + 6 * (Dot(d, edge) - offset);
-        map[j] = bits == 1 ? (t > 0.5 ? top : 0)
-                           : static_cast<uint8_t>(std::lround(std::clamp(t, 0.0, 1.0) * top));
-      }
-      AppendVisibilityMap(fx.vis, map);
-      fx.positions.push_back({0, 0, 0});
-      fx.normals.push_back(normal);
-      fx.material_index.push_back(static_cast<uint16_t>(v % fx.materials.size()));
-    }
+    AddShadowEdgeVertices(fx, bits, 20, 0.4, false, rng);
     const GlossyScene scene = fx.scene();
     std::vector<TripleProductBlockTerm> terms(fx.blocks.block_count());
     std::vector<std::array<double, 3>> ref(fx.blocks.block_count());
@@ -462,28 +472,10 @@ TEST(TripleProduct, OptimisedKernelIsTheBlockByBlockKernel) {
   for (int bits : {1, 6}) {
     Fixture fx;
     fx.vis = MakeVisibilityBlocks(kN, bits);
-    const uint8_t top = static_cast<uint8_t>((1 << bits) - 1);
     fx.materials = {lambert, Phong(10), Phong(100), Phong(400), as_a, as_b};
     std::mt19937 rng(29 + bits);
     std::uniform_real_distribution<double> u(-1, 1);
-    const CubemapLayout layout(kN);
-    for (int v = 0; v < 36; ++v) {
-      const Vec3 normal = Normalize(Vec3{0.6 * u(rng), 1, 0.6 * u(rng)});
-      const Vec3 edge = Normalize(Vec3{u(rng), 0.3 * u(rng), u(rng)});
-      const double offset = 0.3 * u(rng);
-      std::vector<uint8_t> map(layout.texel_count());
-      for (std::size_t j = 0; j < map.size(); ++j) {
-        const Vec3 d = layout.TexelCenter(j);
-        if (Dot(d, normal) <= 0) continue;
-        const double t = 0.5 + 6 * (Dot(d, edge) - offset);
-        map[j] = bits == 1 ? (t > 0.5 ? top : 0)
-                           : static_cast<uint8_t>(std::lround(std::clamp(t, 0.0, 1.0) * top));
-      }
-      AppendVisibilityMap(fx.vis, map);
-      fx.positions.push_back({0.1 * u(rng), 0, 0.1 * u(rng)});
-      fx.normals.push_back(normal);
-      fx.material_index.push_back(static_cast<uint16_t>(v % fx.materials.size()));
-    }
+    AddShadowEdgeVertices(fx, bits, 36, 0.6, true, rng);
     const GlossyScene scene = fx.scene();
     for (const bool exact : {false, true}) {
       for (int trial = 0; trial < 3; ++trial) {
