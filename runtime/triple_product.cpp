@@ -747,8 +747,6 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
     const uint64_t first = vis.change_begin[e], last = vis.change_begin[e + 1];
     const float s0 = spec ? coef[0] * 0.0625f : 0.f;  // the constant is A_00 / 16
     // Σ_i V_d[i]·(all twelve suffix sums at change i): one cache line per change.
-    const int width = exact ? kS : 4;
-    for (int j = 0; j < kS; ++j) acc[j] = 0.f;
 #ifdef PRT_TP_HAVE_AVX2
     if (vt.simd_changes && exact && vis.bits == 1) {
       const float n_pi[3] = {vt.nx, vt.ny, vt.nz};
@@ -756,6 +754,8 @@ TripleProductCase NonZeroBlock(const VertexTerms& vt, const Lobes& lobes, int b,
       return TripleProductCase::kLine9;
     }
 #endif
+    const int width = exact ? kS : 4;
+    for (int j = 0; j < kS; ++j) acc[j] = 0.f;
     if (vis.bits == 1) {
       uint64_t i = first;
       for (; i + 2 <= last; i += 2) {
