@@ -205,7 +205,8 @@ double SquaredNorm(const float* v, std::size_t n) {
 std::unique_ptr<ComposedTransport> OpenComposedRows(const FarmContext& ctx) {
   return std::make_unique<ComposedTransport>(
       ctx.folder.transport,
-      IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0),
+      IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0,
+                    ctx.params.image != 0),
       ctx.params.channels);
 }
 

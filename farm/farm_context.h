@@ -181,6 +181,8 @@ struct FarmContext {
   std::vector<SpatialSample> samples;
   // Image runs: per pixel, the mesh it sees or kImageBackground (worker/camera_samples.h).
   std::vector<uint32_t> pixel_mesh;
+  // Image runs: per pixel, the longest edge of the triangle it sees (CameraSamples::pixel_edge).
+  std::vector<float> pixel_edge;
   // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
@@ -288,10 +290,14 @@ using PhaseFactory = void (*)(const FarmContext& ctx, PhaseList& phases);
 // which decides what the run is; the others are asked once it has.
 const std::vector<PhaseFactory>& FarmPhaseList();
 
-// The indirect stage's files: indirect/bounce-1 … K.prtt, or indirect/path-traced.prtt.
-inline std::vector<std::string> IndirectFiles(const RunFolder& f, int bounces, bool path) {
+// The indirect stage's files that hold the samples' bounce rows: indirect/bounce-1 … K.prtt,
+// indirect/path-traced.prtt, or for an image run that gathers (`image`),
+// indirect/pixel-gather.prtt (the vertex support files beside it are not the samples' rows).
+inline std::vector<std::string> IndirectFiles(const RunFolder& f, int bounces, bool path,
+                                              bool image) {
   std::vector<std::string> files;
   if (path && bounces > 0) return {f.PathTracedFile()};
+  if (image && bounces > 0) return {f.PixelGatherFile()};
   for (int k = 1; k <= bounces; ++k) files.push_back(f.BounceFile(k));
   return files;
 }

@@ -223,12 +223,16 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
     throw InputError(scene.file, "indirect_n " + std::to_string(indirect_n) +
                                      " is larger than the cubemap's n " + std::to_string(n));
   ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
-  if (image && bounces > 0 && !ctx.params.path_estimator)
+  // Image runs gather their pixels' bounce light from mesh-vertex support rows
+  // (docs/image-relighting.md, "Interreflection"): the pixels are combined with "combination"
+  // or gather themselves; "features" (a sparse pixel evaluating feature texels) is not built.
+  if (image && bounces > 0 && !ctx.params.path_estimator && ctx.params.sparse &&
+      scene.sparse.indirect == "features")
     throw InputError(scene.file,
-                     "samples = \"camera\" with bounces = " + std::to_string(bounces) +
-                         " needs [sampling] estimator = \"path\": bounce gathering reads the "
-                         "previous bounce's rows at mesh vertices, which an image run does not "
-                         "compute (docs/image-relighting.md)");
+                     "samples = \"camera\" with bounces gathered does not take [sparse] indirect "
+                     "= \"features\": set it to \"combination\" (the default: only the dense "
+                     "pixels gather, about dense_budget of the gather's cost) or \"full\" "
+                     "(every surface pixel gathers)");
   // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
   // 2 features.
   ctx.params.sparse_indirect = 0;
@@ -323,9 +327,12 @@ RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest)
     }
   }
   if (const nlohmann::ordered_json* ind = manifest.Stage(kStageIndirect)) {
+    const nlohmann::ordered_json* rows_stage = manifest.Stage(kStageRows);
+    const bool image_rows = rows_stage && rows_stage->contains("camera");
     state.indirect_complete = true;
     for (const std::string& file :
-         IndirectFiles(f, ind->at("bounces").get<int>(), ind->at("estimator") == "path"))
+         IndirectFiles(f, ind->at("bounces").get<int>(), ind->at("estimator") == "path",
+                       image_rows))
       state.indirect_complete = state.indirect_complete && TransportComplete(file);
     state.indirect_unfinished = !state.indirect_complete && fs::exists(f.indirect, ec);
   }
@@ -643,6 +650,7 @@ class SetupPhase final : public FarmPhase {
             ComputeCameraSamples(*ctx.embree, surfaces, ctx.params.camera, "the scene's camera");
         ctx.samples = std::move(pixels.samples);
         ctx.pixel_mesh = std::move(pixels.pixel_mesh);
+        ctx.pixel_edge = std::move(pixels.pixel_edge);
         if (ctx.rank == 0) {
           WriteImageSamplesFile(ctx.folder.image,
                                 ImageSamplesInfo{ctx.params.camera, ctx.pixel_mesh});

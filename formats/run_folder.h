@@ -78,6 +78,21 @@ struct RunFolder {
   std::string BounceFile(int k) const {
     return (std::filesystem::path(indirect) / ("bounce-" + std::to_string(k) + ".prtt")).string();
   }
+  // Bounce gathering for an image run's pixels (docs/image-relighting.md, "Interreflection"):
+  // the mesh vertices' support rows that are never shipped, on the indirect grid:
+  // indirect/vertex-direct.prtt (T⁰ at the vertices, one channel) and
+  // indirect/vertex-bounce-<k>.prtt (bounce k at the vertices, channels × vertices rows, k < K),
+  // and the pixels' gathered Σ_k Tᵏ, indirect/pixel-gather.prtt (channels × pixels rows).
+  std::string VertexDirectFile() const {
+    return (std::filesystem::path(indirect) / "vertex-direct.prtt").string();
+  }
+  std::string VertexBounceFile(int k) const {
+    return (std::filesystem::path(indirect) / ("vertex-bounce-" + std::to_string(k) + ".prtt"))
+        .string();
+  }
+  std::string PixelGatherFile() const {
+    return (std::filesystem::path(indirect) / "pixel-gather.prtt").string();
+  }
   std::string dir;
   std::string image;              // image.prti (image-relighting runs only)
   std::string transport;          // transport.prtt (final, complete)

@@ -2,13 +2,14 @@
 // scene seen by a 32×16 camera. Rows are the kernels' rows of the camera samples, byte-identical
 // for any rank count, by brute force, by the sparse method and with path-traced bounces; a run
 // killed mid-way resumes to the same bytes; the pack carries the image and prt-view writes it;
-// gathering is refused with a clear error.
+// gathered bounces (the vertices' support rows, then the pixels') are byte-identical too.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -248,7 +249,7 @@ TEST(ImageRelightingMpiTest, SparseRunsAreByteIdenticalAndKilledRunsResumeToTheS
     EXPECT_TRUE(ReadWholeFile(dir + "/np1" + f) == ReadWholeFile(dir + "/kill" + f)) << f;
 }
 
-TEST(ImageRelightingMpiTest, PathTracedBouncesAreByteIdenticalAndGatheringIsRefused) {
+TEST(ImageRelightingMpiTest, PathTracedBouncesAreByteIdentical) {
   const std::string dir = WorkDir("bounces");
   const std::string scene_file =
       ImageScene(dir, "tiny.toml", "bounces = 1\nestimator = \"path\"\ngather_paths = 4\n");
@@ -262,10 +263,63 @@ TEST(ImageRelightingMpiTest, PathTracedBouncesAreByteIdenticalAndGatheringIsRefu
   double bounce = 0;
   for (float x : a) bounce += x;
   EXPECT_GT(bounce, 0.0);  // the box and the ground light each other
-  const std::string gather = ImageScene(dir, "tiny.toml", "bounces = 1\n");
-  const auto refused = testing::RunPrtFarm(1, gather + " --out " + dir + "/gather");
+}
+
+// Gathering, the default estimator (docs/image-relighting.md, "Interreflection"): the vertices'
+// support rows (vertex-direct, vertex-bounce-1), then the pixels' Σ_k Tᵏ (pixel-gather), the
+// same bytes for 1 and 2 ranks and after a kill; zero rows for background pixels; [sparse]
+// indirect = "features" is refused naming the key to change.
+TEST(ImageRelightingMpiTest, GatheredBouncesAreByteIdenticalAndResume) {
+  const std::string dir = WorkDir("gather");
+  const std::string scene_file = ImageScene(dir, "tiny.toml", "bounces = 2\ngather_paths = 16\n");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, scene_file + " --out " + dir + "/np" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const char* files[] = {"/indirect/vertex-direct.prtt", "/indirect/vertex-bounce-1.prtt",
+                         "/indirect/pixel-gather.prtt", "/transport.prtc"};
+  for (const char* f : files)
+    EXPECT_TRUE(ReadWholeFile(dir + "/np1" + f) == ReadWholeFile(dir + "/np2" + f)) << f;
+  const TransportFileReader pixels(dir + "/np1/indirect/pixel-gather.prtt");
+  EXPECT_EQ(pixels.info().rows, uint64_t{kWidth} * kHeight);  // one channel: grey albedos
+  EXPECT_EQ(pixels.info().cubemap_n, 2u);                     // the indirect grid, n / 4
+  const std::vector<float> gathered = Rows(dir + "/np1/indirect/pixel-gather.prtt");
+  const ImageSamplesInfo image = ReadImageSamplesFile(dir + "/np1/image.prti", 2);
+  const std::size_t cols = pixels.info().cols();
+  double surface = 0;
+  for (std::size_t p = 0; p < image.pixel_mesh.size(); ++p) {
+    double s = 0;
+    for (std::size_t j = 0; j < cols; ++j) s += gathered[p * cols + j];
+    if (image.pixel_mesh[p] == kImageBackground)
+      EXPECT_EQ(s, 0.0) << p;
+    else
+      surface += s;
+  }
+  EXPECT_GT(surface, 0.0);
+  const nlohmann::json rep = nlohmann::json::parse(ReadWholeFile(dir + "/np2/report.json"));
+  const auto& passes = rep["interreflection"]["image_passes"];
+  ASSERT_EQ(passes.size(), 3u);
+  EXPECT_EQ(passes[0]["phase"], "vertex-direct");
+  EXPECT_EQ(passes[2]["phase"], "pixel-gather");
+
+  const auto killed = testing::RunPrtFarm(
+      2, scene_file + " --out " + dir + "/kill" + kSmallJobs + " --fail-after-jobs 17");
+  EXPECT_NE(killed.exit_code, 0);
+  const auto resumed =
+      testing::RunPrtFarm(2, scene_file + " --out " + dir + "/kill" + kSmallJobs + " --resume");
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+  for (const char* f : files)
+    EXPECT_TRUE(ReadWholeFile(dir + "/np1" + f) == ReadWholeFile(dir + "/kill" + f)) << f;
+
+  std::string features = ReadWholeFile(ImageScene(dir, "sparse_tiny.toml", "bounces = 1\n"));
+  testing::ReplaceOnce(features, "[sparse]\n", "[sparse]\nindirect = \"features\"\n");
+  const std::string features_file = dir + "/features.toml";
+  std::ofstream(features_file) << features;
+  const auto refused = testing::RunPrtFarm(1, features_file + " --out " + dir + "/features");
   EXPECT_EQ(refused.exit_code, 2) << refused.output;
-  EXPECT_NE(refused.output.find("estimator = \"path\""), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find("indirect = \"combination\""), std::string::npos)
+      << refused.output;
 }
 
 }  // namespace

@@ -28,6 +28,20 @@ bool Finite(const Vec3& v) {
   return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+// Sorts `raw` by vertex and sums the terms of each vertex into `out` (cleared first).
+void MergeTerms(std::vector<GatherTerm>& raw, std::vector<GatherTerm>& out) {
+  out.clear();
+  std::sort(raw.begin(), raw.end(),
+            [](const GatherTerm& l, const GatherTerm& r) { return l.vertex < r.vertex; });
+  for (const GatherTerm& g : raw) {
+    if (!out.empty() && out.back().vertex == g.vertex) {
+      for (int c = 0; c < 3; ++c) out.back().weight[c] += g.weight[c];
+    } else {
+      out.push_back(g);
+    }
+  }
+}
+
 // The near field's second condition: the hit triangle is this much coarser than the gathering
 // vertex's own triangles.
 constexpr double kNearCoarser = 2.0;
@@ -95,8 +109,10 @@ GatherStats BounceGatherer::GatherRow(const SpatialSample& x, uint64_t index, in
 
 GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
                                   std::vector<GatherTerm>& out, float* near,
-                                  std::span<const uint32_t> near_texels) const {
+                                  std::span<const uint32_t> near_texels,
+                                  const GatherSite& site) const {
   out.clear();
+  const double own_edge = site.own_edge >= 0 ? site.own_edge : surfaces_.VertexEdge(index);
   GatherStats st;
   const bool near_field = near != nullptr && bounce == 1 && near_sampler_ != nullptr;
   const bool subset = !near_texels.empty();
@@ -131,7 +147,7 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   const uint64_t key = SplitMix64(SplitMix64(options_.seed ^ 0x5052544245434E31ull) ^ index) ^
                        SplitMix64(static_cast<uint64_t>(bounce));
   const double inv_p = 1.0 / options_.paths;
-  std::vector<GatherTerm> raw;
+  std::vector<GatherTerm> raw, raw_near;
   raw.reserve(3 * static_cast<std::size_t>(options_.paths));
   for (int p = 0; p < options_.paths; ++p) {
     const uint64_t bits = SplitMix64(key + 2 * static_cast<uint64_t>(p));
@@ -155,19 +171,21 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     const Rgb& rho = surfaces_.albedo(h.mesh);
     // Near: closer than the hit triangle's size, and a triangle coarser than x's own
     // tessellation (kNearCoarser ×), whose vertices cannot resolve what x sees of it.
-    if (near_field && hit.t < options_.near_field * h.max_edge &&
-        h.max_edge > kNearCoarser * surfaces_.VertexEdge(index)) {
+    const bool is_near = near_field && hit.t < options_.near_field * h.max_edge &&
+                         h.max_edge > kNearCoarser * own_edge;
+    if (is_near) {
       // Near field: traced below, once the vertex's near hits are known.
       ++st.near_hits;
       near_hits.push_back({h.sample, rho, SplitMix64(key ^ (0x6E656172ull + 2 * uint64_t(p)))});
-      continue;
+      if (!site.near_terms) continue;
     }
+    std::vector<GatherTerm>& into = is_near ? raw_near : raw;
     for (int i = 0; i < 3; ++i) {
       GatherTerm g;
       g.vertex = h.vertices[i];
       for (int c = 0; c < channels; ++c)
         g.weight[c] = static_cast<float>(rho[c] * h.weights[i] * inv_p);
-      raw.push_back(g);
+      into.push_back(g);
     }
   }
   // The near hits: each traced with probability q = min(1, near_rows / their count) and weighted
@@ -191,15 +209,37 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
       }
     }
   }
-  std::sort(raw.begin(), raw.end(),
-            [](const GatherTerm& l, const GatherTerm& r) { return l.vertex < r.vertex; });
-  for (const GatherTerm& g : raw) {
-    if (!out.empty() && out.back().vertex == g.vertex) {
-      for (int c = 0; c < 3; ++c) out.back().weight[c] += g.weight[c];
-    } else {
-      out.push_back(g);
+  MergeTerms(raw, out);
+  if (site.near_terms) MergeTerms(raw_near, *site.near_terms);
+  return st;
+}
+
+GatherStats BounceGatherer::GatherSumRow(const SpatialSample& x, uint64_t index,
+                                         double own_edge, int channels, const float* direct,
+                                         const float* higher, uint64_t vertex_count,
+                                         std::size_t cols, float* out, SumScratch& s) const {
+  const std::size_t per_row = static_cast<std::size_t>(channels) * cols;
+  const bool with_near = HasNearField(1, cols);
+  s.near.resize(per_row);
+  GatherSite site;
+  site.own_edge = own_edge;
+  site.near_terms = higher ? &s.near_terms : nullptr;
+  s.near_terms.clear();
+  const GatherStats st =
+      Terms(x, index, 1, channels, s.terms, with_near ? s.near.data() : nullptr, {}, site);
+  // T⁰ interpolated at the far hits; the bounces k ≥ 1 interpolated at every hit.
+  ApplyGather(s.terms, direct, vertex_count, 1, channels, cols, out);
+  if (higher) {
+    s.part.resize(per_row);
+    ApplyGather(s.terms, higher, vertex_count, channels, channels, cols, s.part.data());
+    for (std::size_t j = 0; j < per_row; ++j) out[j] += s.part[j];
+    if (!s.near_terms.empty()) {
+      ApplyGather(s.near_terms, higher, vertex_count, channels, channels, cols, s.part.data());
+      for (std::size_t j = 0; j < per_row; ++j) out[j] += s.part[j];
     }
   }
+  if (with_near && st.near_hits > 0)
+    for (std::size_t j = 0; j < per_row; ++j) out[j] += s.near[j];
   return st;
 }
 

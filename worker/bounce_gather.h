@@ -68,6 +68,18 @@ struct GatherStats {
   }
 };
 
+// Where a gather is taken when it is not at a mesh vertex (an image run's pixel,
+// docs/image-relighting.md "Interreflection").
+struct GatherSite {
+  // The near field's "own tessellation" of the gathering point: the longest edge of the
+  // triangle it lies on (< 0: SceneSurfaces::VertexEdge(index), the gathering vertex's).
+  double own_edge = -1;
+  // Receives the interpolation terms of the bounce-1 near hits (merged per vertex, sorted, the
+  // same weights ρ_c·b_i/P as `out`'s), which Terms otherwise drops: what a gather of
+  // Σ_k Tᵏ applies to the bounces k ≥ 1 at those hits, whose T⁰ the near field traces.
+  std::vector<GatherTerm>* near_terms = nullptr;
+};
+
 // Thread-safe after construction; the scene and surfaces must outlive it.
 class BounceGatherer {
  public:
@@ -87,9 +99,11 @@ class BounceGatherer {
   // sparse vertex's feature texels, worker/sparse_indirect.h): only these coarse texels are
   // traced at the near hits, near then holds channels × near_texels.size() floats (channel c at
   // c·size), each value bit-identical to the full near row's at that texel.
+  // site: a gather away from the vertices (GatherSite).
   GatherStats Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
                     std::vector<GatherTerm>& out, float* near = nullptr,
-                    std::span<const uint32_t> near_texels = {}) const;
+                    std::span<const uint32_t> near_texels = {},
+                    const GatherSite& site = {}) const;
 
   // Tᵏ(x) for bounce k into out (channels rows of `cols` floats): Terms, ApplyGather to the
   // previous bounce's rows (prev_channels × vertex_count rows) and, in bounce 1, the near field.
@@ -105,6 +119,21 @@ class BounceGatherer {
                            const float* previous, uint64_t vertex_count, int prev_channels,
                            std::size_t cols, std::span<const uint32_t> texels, float* out,
                            std::vector<GatherTerm>& terms, std::vector<float>& near) const;
+  // Σ_{k=1..K} Tᵏ(x) in one gather at a point that is not a mesh vertex (an image run's pixel,
+  // docs/image-relighting.md "Interreflection"), from the vertices' rows on the indirect grid:
+  // `direct` T⁰ (vertex_count rows of `cols`), `higher` Σ_{k=1..K−1} Tᵏ (channels ×
+  // vertex_count rows, channel-major; nullptr for K = 1):
+  //   Σ_k Tᵏ(x) = (1/P) Σ_q ρ(y_q) · (T⁰(y_q) + Σ_{k≥1} Tᵏ(y_q)),
+  // bounce 1's directions for every bounce, T⁰ traced at near-field hits (GatherSite, own_edge:
+  // the longest edge of x's triangle). out: channels rows of `cols`. A pure function of
+  // (seed, index). `terms`, `near_terms`, `near`, `part` are the caller's scratch.
+  struct SumScratch {
+    std::vector<GatherTerm> terms, near_terms;
+    std::vector<float> near, part;
+  };
+  GatherStats GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge, int channels,
+                           const float* direct, const float* higher, uint64_t vertex_count,
+                           std::size_t cols, float* out, SumScratch& scratch) const;
   // Whether bounce `bounce` on rows of `cols` texels traces a near field.
   bool HasNearField(int bounce, std::size_t cols) const;
 

@@ -30,6 +30,7 @@ CameraSamples ComputeCameraSamples(const EmbreeScene& scene, const SceneSurfaces
   const std::size_t pixels = static_cast<std::size_t>(camera.width) * camera.height;
   out.samples.resize(pixels);
   out.pixel_mesh.assign(pixels, kImageBackground);
+  out.pixel_edge.assign(pixels, 0.0f);
   const double far = 100.0 * std::max(surfaces.geometry().diagonal(), 1.0);
   tbb::parallel_for(0, camera.height, [&](int y) {
     for (int x = 0; x < camera.width; ++x) {
@@ -59,6 +60,7 @@ CameraSamples ComputeCameraSamples(const EmbreeScene& scene, const SceneSurfaces
         sample.geometric_normal = -sample.geometric_normal;
       }
       out.pixel_mesh[p] = s.mesh;
+      out.pixel_edge[p] = static_cast<float>(s.max_edge);
     }
   });
   return out;

@@ -32,6 +32,9 @@ struct CameraSamples {
   // Per pixel: the index of the mesh it sees (SceneGeometry::meshes, its albedo), or
   // kImageBackground.
   std::vector<uint32_t> pixel_mesh;
+  // Per pixel: the longest edge of the triangle it sees, 0 for background (the bounce gather's
+  // near field compares hits with it, as with a vertex's SceneSurfaces::VertexEdge).
+  std::vector<float> pixel_edge;
   std::size_t background_count() const { return BackgroundPixels(pixel_mesh); }
 };
 

@@ -140,16 +140,46 @@ uint64_t ChecksumFiniteRows(const float* rows, std::size_t floats, std::size_t p
   return Checksum64(rows, floats * sizeof(float));
 }
 
+namespace {
+
+std::string PhaseName(int k, bool features_step, BouncePass pass) {
+  switch (pass) {
+    case BouncePass::kVertexDirect:
+      return "vertex-direct";
+    case BouncePass::kVertexBounce:
+      return "vertex-bounce-" + std::to_string(k);
+    case BouncePass::kPixelGather:
+      return "pixel-gather";
+    case BouncePass::kSamples:
+      break;
+  }
+  return (k > 0 ? "bounce-" + std::to_string(k) : std::string("path-trace")) +
+         (features_step ? "-sparse" : "");
+}
+
+}  // namespace
+
 BounceDriver::BounceDriver(int k, bool features_step,
-                           std::shared_ptr<nlohmann::ordered_json> figures)
+                           std::shared_ptr<nlohmann::ordered_json> figures, BouncePass pass)
     : figures_(std::move(figures)),
       k_(k),
       step_(features_step),
-      name_((k > 0 ? "bounce-" + std::to_string(k) : std::string("path-trace")) +
-            (features_step ? "-sparse" : "")) {}
+      pass_(pass),
+      name_(PhaseName(k, features_step, pass)) {}
+
+uint64_t BounceDriver::Rows(const FarmContext& ctx) const {
+  return on_vertices_of_image() ? ctx.geometry.vertex_count() : ctx.params.rows;
+}
+
+int BounceDriver::Channels(const FarmContext& ctx) const {
+  return pass_ == BouncePass::kVertexDirect ? 1 : ctx.params.channels;
+}
 
 std::string BounceDriver::FinalPath(const FarmContext& ctx) const {
   const RunFolder& f = ctx.folder;
+  if (pass_ == BouncePass::kVertexDirect) return f.VertexDirectFile();
+  if (pass_ == BouncePass::kVertexBounce) return f.VertexBounceFile(k_);
+  if (pass_ == BouncePass::kPixelGather) return f.PixelGatherFile();
   // With features: the dense rows first (bounce-k, path-trace), then every row (-sparse).
   const bool features = ctx.params.sparse_indirect == 2;
   return features && !step_ ? (k_ > 0 ? f.BounceDenseFile(k_) : f.PathTracedDenseFile())
@@ -157,9 +187,9 @@ std::string BounceDriver::FinalPath(const FarmContext& ctx) const {
 }
 
 TransportFileInfo BounceDriver::FileInfo(const FarmContext& ctx) const {
-  const bool on_grid = k_ > 0 || ctx.params.sparse_indirect;
+  const bool on_grid = k_ > 0 || ctx.params.sparse_indirect || pass_ != BouncePass::kSamples;
   return TransportFileInfo{
-      static_cast<uint64_t>(ctx.params.channels) * ctx.params.rows,
+      static_cast<uint64_t>(Channels(ctx)) * Rows(ctx),
       static_cast<uint32_t>(on_grid ? ctx.params.indirect_n : ctx.params.cubemap_n),
       ctx.options.rows_per_block, static_cast<uint32_t>(ctx.params.gather_paths), ctx.params.seed};
 }
@@ -193,7 +223,7 @@ void BounceDriver::ReadSceneRows(FarmContext& ctx, uint64_t bytes, const std::st
 void BounceDriver::LoadCombination(FarmContext& ctx) {
   mask_.clear();
   pairs_.clear();
-  if (!ctx.params.sparse_indirect) return;
+  if (!ctx.params.sparse_indirect || on_vertices_of_image()) return;
   const uint64_t V = ctx.params.rows;
   if (ctx.rank == 0) {
     try {
@@ -237,12 +267,12 @@ void BounceDriver::WriteInPlace(const FarmContext& ctx, std::size_t cols, const 
   if (!ctx.rows_in_place) return;
   if (!rows_out_)
     rows_out_.emplace(TransportFileWriter::OpenRows(FinalPath(ctx) + ".partial", FileInfo(ctx)));
-  const int C = ctx.params.channels;
+  const int C = Channels(ctx);
   const std::size_t floats = static_cast<std::size_t>(range.count) * C * cols;
   if (out.size() < at + sizeof(BounceResultHeader) + floats * sizeof(float))
     throw std::logic_error(name_ + ": a job's result is shorter than its rows");
   const float* rows = reinterpret_cast<const float*>(out.data() + at + sizeof(BounceResultHeader));
-  WriteByChannel(*rows_out_, ctx.params.rows, C, cols, range, rows);
+  WriteByChannel(*rows_out_, Rows(ctx), C, cols, range, rows);
   rows_out_->Sync();
   BounceResultHeader h;
   std::memcpy(&h, out.data() + at, sizeof h);
@@ -253,8 +283,8 @@ void BounceDriver::WriteInPlace(const FarmContext& ctx, std::size_t cols, const 
 
 // Rank 0's side of the jobs: re-use what a killed run left, run the rest, commit, report.
 void BounceDriver::Coordinate(FarmContext& ctx, JobLoop& loop, const Jobs& jobs, double start) {
-  const uint64_t V = ctx.params.rows;
-  const int C = ctx.params.channels;
+  const uint64_t V = Rows(ctx);
+  const int C = Channels(ctx);
   const std::string final_path = FinalPath(ctx);
   const std::string partial = final_path + ".partial";
   std::error_code ec;
@@ -284,7 +314,8 @@ void BounceDriver::Coordinate(FarmContext& ctx, JobLoop& loop, const Jobs& jobs,
   batch.items = V;
   batch.unit = "samples";
   batch.max_items = std::max<uint64_t>(1, kMaxJobBytes / (C * jobs.cols * sizeof(float)));
-  batch.cost = SampleCost(ctx);  // image runs: background pixels next to free
+  // Image runs: background pixels next to free (the vertex passes' items cost alike).
+  if (!on_vertices_of_image()) batch.cost = SampleCost(ctx);
   batch.accept = [&](int rank, const RowRange& range, std::string_view payload) {
     return Accept(ctx, jobs, *writer, rank, range, payload);
   };
@@ -333,8 +364,8 @@ void BounceDriver::ReuseJobs(FarmContext& ctx, const Jobs& jobs,
                              const std::vector<JournalEntry>& kept,
                              const TransportFileWriter& writer, JobBatch& batch,
                              BounceTotals& totals) const {
-  const uint64_t V = ctx.params.rows;
-  const int C = ctx.params.channels;
+  const uint64_t V = Rows(ctx);
+  const int C = Channels(ctx);
   const std::size_t cols = jobs.cols;
   std::vector<float> rows;
   for (const JournalEntry& e : kept) {
@@ -372,7 +403,7 @@ JournalEntry BounceDriver::Accept(const FarmContext& ctx, const Jobs& jobs,
   BounceResultHeader h;
   if (payload.size() >= sizeof h) std::memcpy(&h, payload.data(), sizeof h);
   // Rows in place: the worker wrote them; only the header and the energies came.
-  const std::size_t per_vertex = static_cast<std::size_t>(ctx.params.channels) * jobs.cols;
+  const std::size_t per_vertex = static_cast<std::size_t>(Channels(ctx)) * jobs.cols;
   const std::size_t floats = h.in_place ? 0 : static_cast<std::size_t>(range.count) * per_vertex;
   if (payload.size() != sizeof h + floats * sizeof(float) + jobs.energies * sizeof(double))
     throw RankFailure("rank " + std::to_string(rank) + " returned " +
@@ -383,7 +414,7 @@ JournalEntry BounceDriver::Accept(const FarmContext& ctx, const Jobs& jobs,
     if (Checksum64(rows, floats * sizeof(float)) != h.rows_checksum)
       throw RankFailure("rows of " + name_ + " from rank " + std::to_string(rank) +
                         " arrived damaged (checksum mismatch)");
-    WriteByChannel(writer, ctx.params.rows, ctx.params.channels, jobs.cols, range, rows);
+    WriteByChannel(writer, Rows(ctx), Channels(ctx), jobs.cols, range, rows);
   }
   JournalEntry e;
   e.phase = name_;
@@ -448,7 +479,8 @@ void ReportIndirectShare(FarmContext& ctx, nlohmann::ordered_json& figures) {
   const uint64_t V = ctx.params.rows;
   const int C = ctx.params.channels;
   const std::vector<std::string> files =
-      IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0);
+      IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0,
+                    ctx.params.image != 0);
   const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
   const std::size_t cols = coarse.texel_count();
   // T⁰ coarsened, and Σ_k Tᵏ.
@@ -492,6 +524,13 @@ void AddBouncePhases(const FarmContext& ctx, PhaseList& phases) {
                              {"channels", p.channels},
                              {"per_bounce", nlohmann::ordered_json::array()}});
   const bool features = p.sparse_indirect == 2;
+  if (p.image && !p.path_estimator) {
+    // docs/image-relighting.md, "Interreflection": the vertices' support rows, then the pixels.
+    phases.push_back(MakeVertexDirectPhase(figures));
+    for (int k = 1; k < p.bounces; ++k) phases.push_back(MakeVertexBouncePhase(k, figures));
+    phases.push_back(MakePixelGatherPhase(figures));
+    return;
+  }
   if (p.path_estimator) {
     phases.push_back(MakePathTracingPhase(figures));
     if (features) phases.push_back(MakeFeaturesPhase(0, figures));
@@ -511,9 +550,11 @@ void AddBouncePhases(const FarmContext& ctx, PhaseList& phases) {
 // (docs/sparse-precomputation.md, "With interreflection").
 void BounceDriver::PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const {
   const SetupParams& p = ctx.params;
-  const double rows = static_cast<double>(p.rows);
+  double rows = static_cast<double>(p.rows);
   const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
-  const double dense_share = p.sparse_indirect ? std::min(1.0, ctx.plan.dense_budget + 0.05) : 1.0;
+  const double dense_share = p.sparse_indirect && !on_vertices_of_image()
+                                ? std::min(1.0, ctx.plan.dense_budget + 0.05)
+                                : 1.0;
   const double share = step_ ? 1 - dense_share : dense_share;
   if (k_ == 0) {
     const double cols = 6.0 * p.cubemap_n * p.cubemap_n;
@@ -526,8 +567,17 @@ void BounceDriver::PredictSteps(const FarmContext& ctx, std::vector<RunStep>& st
     return;
   }
   const double m = p.indirect_n;
-  const double per_vertex =
-      (p.gather_paths / 2e6 + 3.0 * p.gather_paths * 6 * m * m * p.channels / 1e9) / threads;
+  if (pass_ == BouncePass::kVertexDirect) {  // rays_per_texel shadow rays per coarse texel
+    steps.push_back({name_, "bounce", double(Rows(ctx)),
+                     6 * m * m * p.rays_per_texel * 0.5 / (1e7 * threads)});
+    return;
+  }
+  if (on_vertices_of_image()) rows = double(Rows(ctx));
+  // The pixels' gather applies its terms to T⁰ and, with K > 1, to Σ_{k≥1} Tᵏ.
+  const double applies = pass_ == BouncePass::kPixelGather && p.bounces > 1 ? 2.0 : 1.0;
+  const double per_vertex = (p.gather_paths / 2e6 +
+                             applies * 3.0 * p.gather_paths * 6 * m * m * p.channels / 1e9) /
+                            threads;
   // The features' directions are a fraction of P.
   const double scale =
       step_ ? double(std::max(1, p.sparse_feature_paths)) / std::max(1, p.gather_paths) : 1.0;

@@ -79,13 +79,29 @@ float* AppendJobResult(std::string& out, std::size_t floats, std::size_t energie
 uint64_t ChecksumFiniteRows(const float* rows, std::size_t floats, std::size_t per_vertex,
                             const RowRange& range, const std::string& phase);
 
+// Which rows a bounce phase computes. Vertex runs: the samples' own (kSamples). An image run
+// that gathers (docs/image-relighting.md, "Interreflection"): first support rows at the mesh
+// vertices, never shipped — T⁰ on the indirect grid (kVertexDirect, "vertex-direct") and bounces
+// 1 … K−1 (kVertexBounce, "vertex-bounce-<k>") —, then the pixels' Σ_k Tᵏ gathered from them
+// (kPixelGather, "pixel-gather").
+enum class BouncePass { kSamples, kVertexDirect, kVertexBounce, kPixelGather };
+
 class BounceDriver {
  public:
   // k ≥ 1: bounce k gathered; k = 0: every bounce by per-element path tracing; features_step:
   // the -sparse phase after it.
   // `figures`: report.json "interreflection", shared by the run's bounce phases (rank 0).
-  BounceDriver(int k, bool features_step, std::shared_ptr<nlohmann::ordered_json> figures);
+  BounceDriver(int k, bool features_step, std::shared_ptr<nlohmann::ordered_json> figures,
+               BouncePass pass = BouncePass::kSamples);
   const std::string& name() const { return name_; }
+  BouncePass pass() const { return pass_; }
+  bool on_vertices_of_image() const {
+    return pass_ == BouncePass::kVertexDirect || pass_ == BouncePass::kVertexBounce;
+  }
+  // The rows the phase computes per channel (the run's samples, or an image run's mesh
+  // vertices) and its channels (1 for vertex-direct).
+  uint64_t Rows(const FarmContext& ctx) const;
+  int Channels(const FarmContext& ctx) const;
   nlohmann::ordered_json& figures() const { return *figures_; }
 
   // What every bounce phase says of itself (farm_context.h, FarmPhase): its cost model, its
@@ -149,6 +165,7 @@ class BounceDriver {
   std::shared_ptr<nlohmann::ordered_json> figures_;
   int k_;
   bool step_;
+  BouncePass pass_;
   std::string name_;
   // This rank's handle on the phase's partial file (rows in place), opened at its first job.
   std::optional<TransportFileWriter> rows_out_;
@@ -161,8 +178,9 @@ class BounceDriver {
 // driver's name, the indirect stage, its cost model and report section.
 class BouncePhase : public FarmPhase {
  public:
-  BouncePhase(int k, bool features_step, std::shared_ptr<nlohmann::ordered_json> figures)
-      : driver_(k, features_step, std::move(figures)) {}
+  BouncePhase(int k, bool features_step, std::shared_ptr<nlohmann::ordered_json> figures,
+              BouncePass pass = BouncePass::kSamples)
+      : driver_(k, features_step, std::move(figures), pass) {}
   const char* name() const override { return driver_.name().c_str(); }
   const char* stage() const override { return kStageIndirect; }
   void PredictSteps(const FarmContext& ctx, std::vector<RunStep>& steps) const override {

@@ -27,6 +27,15 @@ std::unique_ptr<FarmPhase> MakePathTracingPhase(std::shared_ptr<nlohmann::ordere
 std::unique_ptr<FarmPhase> MakeFeaturesPhase(int k,
                                              std::shared_ptr<nlohmann::ordered_json> figures);
 
+// farm/bounce/pixel_gathering.cpp: an image run's bounce light by gathering
+// (docs/image-relighting.md, "Interreflection"): T⁰ at the mesh vertices on the indirect grid
+// ("vertex-direct"), bounces 1 … K−1 at the vertices ("vertex-bounce-<k>"), and the pixels'
+// Σ_k Tᵏ gathered from those ("pixel-gather").
+std::unique_ptr<FarmPhase> MakeVertexDirectPhase(std::shared_ptr<nlohmann::ordered_json> figures);
+std::unique_ptr<FarmPhase> MakeVertexBouncePhase(int k,
+                                                 std::shared_ptr<nlohmann::ordered_json> figures);
+std::unique_ptr<FarmPhase> MakePixelGatherPhase(std::shared_ptr<nlohmann::ordered_json> figures);
+
 // The gather estimator's settings of the run ([sampling] gather_paths, seed, indirect_n,
 // near_field).
 BounceGatherOptions GatherOptionsOf(const FarmContext& ctx);
