@@ -318,7 +318,7 @@ TEST(ImageRelightingMpiTest, GatheredBouncesAreByteIdenticalAndResume) {
   std::ofstream(features_file) << features;
   const auto refused = testing::RunPrtFarm(1, features_file + " --out " + dir + "/features");
   EXPECT_EQ(refused.exit_code, 2) << refused.output;
-  EXPECT_NE(refused.output.find("indirect = \"combination\""), std::string::npos)
+  EXPECT_NE(refused.output.find("set it to \"combination\""), std::string::npos)
       << refused.output;
 }
 
