@@ -5,7 +5,8 @@
 #
 #   bench/cycles/run.sh BUILD_DIR OUT_DIR
 #
-# Each case is "name|scene|cycles diffuse bounces|cycles glossy bounces|pixel filter width"
+# Each case is "name|scene|cycles diffuse bounces|cycles glossy bounces|pixel"
+# (pixel: centre = one ray through the pixel centre, box = the pixel's footprint)
 # (PRT_CAMERA_CASES, space-separated, replaces the list). Per case: prt-farm (2 ranks) farms the
 # image scene, prt-pack packs it, bench/cycles/export_scene.py writes the run's own world-space
 # geometry, camera and materials for Blender, and per environment of PRT_CAMERA_ENVS (names in
@@ -30,11 +31,11 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMPI_MCA_pml=ob1 OMPI_MCA_btl=self,vader OMPI_MCA_rmaps_base_oversubscribe=1
 export PRT_DATA_PATH="$BUILD_DIR/data${PRT_DATA_PATH:+:$PRT_DATA_PATH}"
 CAMERA_CASES_DEFAULT=(
-  "direct|scenes/bench/bunny-direct.toml|0|0|0.01"
-  "path-k2|scenes/bench/bunny-path-k2.toml|2|0|0.01"
-  "gather-k2|scenes/bench/bunny-gather-k2.toml|2|0|0.01"
-  "supersample-4|scenes/bench/bunny-ss4.toml|0|0|1.0"
-  "ggx-k0|scenes/bench/bunny-ggx-k0.toml|0|0|0.01"
+  "direct|scenes/bench/bunny-direct.toml|0|0|centre"
+  "path-k2|scenes/bench/bunny-path-k2.toml|2|0|centre"
+  "gather-k2|scenes/bench/bunny-gather-k2.toml|2|0|centre"
+  "supersample-4|scenes/bench/bunny-ss4.toml|0|0|box"
+  "ggx-k0|scenes/bench/bunny-ggx-k0.toml|0|0|centre"
 )
 dir="$OUT" shared="${PRT_SHARED_DATA:-$ROOT/../shared/data}"
 samples="${PRT_CAMERA_SAMPLES:-128}" envs="${PRT_CAMERA_ENVS:-sunrise city}"
@@ -49,11 +50,11 @@ fi
 mkdir -p "$dir"
 : > "$dir/results.list"
 for spec in "${cases[@]}"; do
-  name="" scene="" dbounce="" gbounce="" filter=""
-  IFS='|' read -r name scene dbounce gbounce filter <<< "$spec"
+  name="" scene="" dbounce="" gbounce="" pixel=""
+  IFS='|' read -r name scene dbounce gbounce pixel <<< "$spec"
   cdir="$dir/$name" run="$dir/$name/run"
   mkdir -p "$cdir"
-  echo "== camera case $name: $scene (Cycles: diffuse bounces $dbounce, glossy $gbounce, box filter $filter px, $samples samples) =="
+  echo "== camera case $name: $scene (Cycles: diffuse bounces $dbounce, glossy $gbounce, pixel $pixel, $samples samples) =="
   if [ ! -f "$run/report.json" ] || [ "$ROOT/$scene" -nt "$run/report.json" ]; then
     if ! PRT_DATA_PATH="$PRT_DATA_PATH:$shared" nice mpirun -np 2 --bind-to none \
         "$BUILD_DIR/farm/prt-farm" "$ROOT/$scene" --out "$run" --force -q > "$cdir/farm.log" 2>&1; then
@@ -69,16 +70,16 @@ for spec in "${cases[@]}"; do
     "$BUILD_DIR/viewer/prt-view" "$cdir/$name.prtpack" --env "$map" --exact \
       --exr "$cdir/$env-prt.exr" --quiet 2>/dev/null
     for seed in 1 2; do
-      render="$cdir/cycles/$env-s$seed-n$samples-f$filter.exr" index=()
+      render="$cdir/cycles/$env-s$seed-n$samples-$pixel.exr" index=()
       [ "$seed" = 1 ] && index=(--index-out "$cdir/cycles/index.exr")
       [ -f "$render" ] || nice blender -b --factory-startup --python \
         "$ROOT/bench/cycles/render_camera.py" -- --scene "$cdir/cycles/scene.json" --env "$map" \
         --out "$render" --samples "$samples" --seed "$seed" --bounces "$dbounce" \
-        --glossy-bounces "$gbounce" --filter-width "$filter" "${index[@]}" 2>&1 |
+        --glossy-bounces "$gbounce" --pixel "$pixel" "${index[@]}" 2>&1 |
         grep 'render_camera.py:' || true
     done
     "$py" "$ROOT/bench/cycles/compare.py" --prt "$cdir/$env-prt.exr" \
-      --cycles "$cdir/cycles/$env-s1-n$samples-f$filter.exr" "$cdir/cycles/$env-s2-n$samples-f$filter.exr" \
+      --cycles "$cdir/cycles/$env-s1-n$samples-$pixel.exr" "$cdir/cycles/$env-s2-n$samples-$pixel.exr" \
       --scene "$cdir/cycles/scene.json" --index "$cdir/cycles/index.exr" --label "$name/$env" \
       --json "$cdir/$env-compare.json" --png-prefix "$cdir/$env"
     echo "$name|$cdir/$env-compare.json" >> "$dir/results.list"
