@@ -18,9 +18,10 @@
 # prints the refusal as its row and the others go on. Finished farm runs and Cycles renders are
 # reused (delete OUT_DIR/<case> to redo one). Installs blender and python3-numpy if missing.
 #
-# Cost on the shared 2-core VM (160×120, 128 samples, sunrise and city): Cycles ~1.5–2 min a
-# render at max bounces 0 (four per case), the direct case ~10 min in all; the path-traced K = 2
-# case adds ~3 min of farm and slower renders (~20 min). The three pending cases refuse in
+# Cost on the shared 2-core VM (160×120, 512 samples, four environments; measured 5 Dec 2026):
+# prt-farm 26 s (direct) and 34 s (path-traced K = 2), a Cycles render 17–25 s at max bounces 0
+# (about the same at 2 diffuse bounces) plus a few seconds of Blender start, the whole command ~9 min
+# from nothing, 7 with the farm runs reused. The three pending cases refuse in
 # seconds. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/, <env>-prt.exr,
 # <env>-compare.json, <env>-side.png, <env>-error.png) and OUT_DIR/table.txt.
 set -euo pipefail
@@ -38,7 +39,7 @@ CAMERA_CASES_DEFAULT=(
   "ggx-k0|scenes/bench/bunny-ggx-k0.toml|0|0|centre"
 )
 dir="$OUT" shared="${PRT_SHARED_DATA:-$ROOT/../shared/data}"
-samples="${PRT_CAMERA_SAMPLES:-128}" envs="${PRT_CAMERA_ENVS:-sunrise city}"
+samples="${PRT_CAMERA_SAMPLES:-512}" envs="${PRT_CAMERA_ENVS:-sunrise city studio interior}"
 py=/usr/bin/python3 cases=("${CAMERA_CASES_DEFAULT[@]}")
 [ -n "${PRT_CAMERA_CASES:-}" ] && read -r -a cases <<< "$PRT_CAMERA_CASES"
 if ! command -v blender >/dev/null 2>&1 || ! "$py" -c 'import numpy' 2>/dev/null; then
