@@ -19,9 +19,9 @@
 # reused (delete OUT_DIR/<case> to redo one). Installs blender and python3-numpy if missing.
 #
 # Cost on the shared 2-core VM (160×120, 512 samples, four environments; measured 5 Dec 2026):
-# prt-farm 26 s (direct) and 34 s (path-traced K = 2), a Cycles render 17–25 s at max bounces 0
-# (about the same at 2 diffuse bounces) plus a few seconds of Blender start, the whole command ~9 min
-# from nothing, 7 with the farm runs reused. The three pending cases refuse in
+# prt-farm 26 s (direct) and 34 s (path-traced K = 2), a Cycles render 11–25 s at max bounces 0
+# or 2 diffuse bounces plus a few seconds of Blender start; the whole command 5 min from nothing
+# on a quiet machine, 7–9 min while others build. The three pending cases refuse in
 # seconds. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/, <env>-prt.exr,
 # <env>-compare.json, <env>-side.png, <env>-error.png) and OUT_DIR/table.txt.
 set -euo pipefail
@@ -57,6 +57,7 @@ for spec in "${cases[@]}"; do
   mkdir -p "$cdir"
   echo "== camera case $name: $scene (Cycles: diffuse bounces $dbounce, glossy $gbounce, pixel $pixel, $samples samples) =="
   if [ ! -f "$run/report.json" ] || [ "$ROOT/$scene" -nt "$run/report.json" ]; then
+    rm -rf "$cdir/cycles"  # renders of an older run of this case are stale
     if ! PRT_DATA_PATH="$PRT_DATA_PATH:$shared" nice mpirun -np 2 --bind-to none \
         "$BUILD_DIR/farm/prt-farm" "$ROOT/$scene" --out "$run" --force -q > "$cdir/farm.log" 2>&1; then
       echo "$name|not run: $(grep -m1 -i 'error' "$cdir/farm.log" | cut -c1-160)" >> "$dir/results.list"
@@ -73,11 +74,12 @@ for spec in "${cases[@]}"; do
     for seed in 1 2; do
       render="$cdir/cycles/$env-s$seed-n$samples-$pixel.exr" index=()
       [ "$seed" = 1 ] && index=(--index-out "$cdir/cycles/index.exr")
-      [ -f "$render" ] || nice blender -b --factory-startup --python \
+      [ -f "$render" ] || nice blender -b --factory-startup --python-exit-code 1 --python \
         "$ROOT/bench/cycles/render_camera.py" -- --scene "$cdir/cycles/scene.json" --env "$map" \
         --out "$render" --samples "$samples" --seed "$seed" --bounces "$dbounce" \
-        --glossy-bounces "$gbounce" --pixel "$pixel" "${index[@]}" 2>&1 |
-        grep 'render_camera.py:' || true
+        --glossy-bounces "$gbounce" --pixel "$pixel" "${index[@]}" > "$render.log" 2>&1 ||
+        { tail -20 "$render.log"; echo "render_camera.py failed: $render.log" >&2; exit 1; }
+      [ -f "$render.log" ] && grep 'render_camera.py:' "$render.log" || true
     done
     "$py" "$ROOT/bench/cycles/compare.py" --prt "$cdir/$env-prt.exr" \
       --cycles "$cdir/cycles/$env-s1-n$samples-$pixel.exr" "$cdir/cycles/$env-s2-n$samples-$pixel.exr" \
