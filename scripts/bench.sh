@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -322,6 +322,16 @@ run_glossy() { [ -x "$BUILD_DIR/bench/glossy_bench" ] && "$BUILD_DIR/bench/gloss
 # glossy_bench).
 run_tp() { "$BUILD_DIR/bench/prt-tp-bench" --cache "$OUT/glossy" --out "$OUT/tp"; }
 
+# Image runs against Blender Cycles (issue 40, docs/image-relighting.md "Checked against Cycles"):
+# bench/cycles/run.sh farms each case's image scene, relights it with prt-view, renders it twice
+# in Cycles (two seeds) and prints the noise-corrected per-pixel error on the model and the
+# ground; its header lists the cases, the settings (PRT_CAMERA_CASES, PRT_CAMERA_ENVS,
+# PRT_CAMERA_SAMPLES) and the run time. Output: bench-out/camera/.
+run_camera() {
+  PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" \
+    "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$OUT/camera"
+}
+
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy; run_tp ;;
   transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake) "run_$WHAT" ;;
@@ -329,5 +339,6 @@ case "$WHAT" in
   gi) run_gi ;;
   sparse-gi) run_sparse_gi ;;
   image) run_image ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image] [--quick]" >&2; exit 1 ;;
+  camera) run_camera ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera] [--quick]" >&2; exit 1 ;;
 esac
