@@ -37,6 +37,7 @@
 #include "vocabulary/envmap.h"
 #include "vocabulary/scene.h"
 #include "worker/embree_scene.h"
+#include "worker/glossy_pixels.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
 #include "worker/visibility_sampler.h"
@@ -87,6 +88,9 @@ struct SetupParams {
   // (rows = width·height in raster order), 0 for mesh vertices.
   int32_t image = 0;
   Camera camera;
+  // Image runs with glossy pixels (worker/glossy_pixels.h): the size of the per-mesh table rank 0
+  // broadcasts after the geometry; 0 when every pixel is diffuse.
+  uint64_t glossy_bytes = 0;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
@@ -181,6 +185,8 @@ struct FarmContext {
   std::vector<SpatialSample> samples;
   // Image runs: per pixel, the mesh it sees or kImageBackground (worker/camera_samples.h).
   std::vector<uint32_t> pixel_mesh;
+  // Image runs: the glossy pixels' materials per mesh (empty when every pixel is diffuse).
+  GlossyPixels glossy_pixels;
   // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;

@@ -170,6 +170,8 @@ nlohmann::json MaterialsJson(const SceneGeometry& geometry, const std::string& s
                    {"specular", {g.specular[0], g.specular[1], g.specular[2]}},
                    {"exponent", g.exponent},
                    {"exponent_v", g.exponent_v}});
+    // GGX only (older materials keep their bytes): roughness r, α = r².
+    if (g.brdf == "ggx") out.back()["roughness"] = g.roughness;
   }
   return out;
 }

@@ -36,6 +36,10 @@ int StrataV(int k) {
 // Everything a row needs about its sample, computed once per call.
 struct SampleFrame {
   Vec3 normal;         // unit shading normal
+  // A glossy pixel's material (TransportSamplerOptions::glossy_materials) and its frame with the
+  // view towards the eye; nullptr for a diffuse sample.
+  const Material* material = nullptr;
+  ShadingFrame shading;
   OcclusionRay ray{};  // origin, tnear, tfar filled; direction per ray
   uint64_t key = 0;    // RowKey(seed, sample index)
 };
@@ -109,6 +113,16 @@ struct TransportSampler::Impl {
     f.ray.tnear = 0.0f;
     f.ray.tfar = std::numeric_limits<float>::infinity();
     f.key = RowKey(options.seed, sample_index);
+    if (sample.glossy_material != kDiffuseSample) {
+      if (sample.glossy_material >= options.glossy_materials.size()) {
+        throw std::out_of_range("TransportSampler: sample " + std::to_string(sample_index) +
+                                " names glossy material " +
+                                std::to_string(sample.glossy_material) + " of " +
+                                std::to_string(options.glossy_materials.size()));
+      }
+      f.material = &options.glossy_materials[sample.glossy_material];
+      f.shading = MakeShadingFrame(f.normal, options.eye - sample.position);
+    }
     return f;
   }
 
@@ -280,6 +294,7 @@ struct TransportSampler::Impl {
     constexpr int kChunk = 16;
     float dir[kChunk][3];
     double cosine[kChunk];
+    Vec3 unit[kChunk];  // the directions in double (glossy pixels' BRDF)
     int su = 0, sv = 0;
     for (int s0 = 0; s0 < k; s0 += kChunk) {
       const int count = std::min(kChunk, k - s0);
@@ -293,6 +308,7 @@ struct TransportSampler::Impl {
         const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
         const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
         cosine[i] = Dot(f.normal, d);
+        unit[i] = d;
         dir[i][0] = static_cast<float>(d.x);
         dir[i][1] = static_cast<float>(d.y);
         dir[i][2] = static_cast<float>(d.z);
@@ -313,7 +329,14 @@ struct TransportSampler::Impl {
         ray.direction[0] = dir[i][0];
         ray.direction[1] = dir[i][1];
         ray.direction[2] = dir[i][2];
-        b.weight[b.count] = omega[s0 + i] * c;
+        // Diffuse: Ω_s·cos (the 1/π comes at Flush). Glossy pixel: Ω_s·(k_d·cos + π·k_s·f_s·cos).
+        b.weight[b.count] =
+            f.material == nullptr
+                ? omega[s0 + i] * c
+                : omega[s0 + i] *
+                      (f.material->diffuse[0] * c +
+                       std::numbers::pi * f.material->specular[0] *
+                           SpecularLobe(*f.material, f.shading, unit[i]));
         b.slot[b.count] = slot;
         b.stratum[b.count] = s0 + i;
         if (++b.count == Batch::kRays) {
