@@ -222,11 +222,14 @@ struct FarmContext {
   Rgb GroupAlbedo(std::size_t g) const {
     return params.image ? Rgb{1.f, 1.f, 1.f} : geometry.meshes[g].albedo;
   }
-  // The albedo of row `row`'s surface (0 for a background pixel).
+  // The albedo of row `row`'s surface (0 for a background pixel; a glossy pixel's weight,
+  // worker/glossy_pixels.h).
   Rgb RowAlbedo(uint64_t row) const {
     if (!params.image) return geometry.meshes[geometry.MeshOfVertex(row)].albedo;
     const uint32_t m = pixel_mesh[row];
-    return m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : geometry.meshes[m].albedo;
+    if (m == kImageBackground) return Rgb{0.f, 0.f, 0.f};
+    if (m < glossy_pixels.glossy.size() && glossy_pixels.glossy[m]) return glossy_pixels.weight[m];
+    return geometry.meshes[m].albedo;
   }
   // transport.prtt.partial's dimensions (as setup created it).
   TransportFileInfo RowsFileInfo() const {

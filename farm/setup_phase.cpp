@@ -723,9 +723,9 @@ class SetupPhase final : public FarmPhase {
         TransportSamplerOptions so;
         so.rays_per_texel = ctx.params.rays_per_texel;
         so.seed = ctx.params.seed;
-        so.glossy_materials = ctx.glossy_pixels.materials;
-        so.eye = ctx.params.camera.eye;
-        ctx.sampler = std::make_unique<TransportSampler>(*ctx.embree, ctx.params.cubemap_n, so);
+        ctx.sampler = std::make_unique<TransportSampler>(
+            *ctx.embree, ctx.params.cubemap_n, so,
+            GlossySampling{ctx.glossy_pixels.materials, ctx.params.camera.eye});
       }
     } catch (...) {
       std::string message;

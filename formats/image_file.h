@@ -35,8 +35,8 @@ struct ImageSamplesInfo {
   // both empty (PRTIMG01: every pixel diffuse). glossy_mesh[m] = 1: the rows of the pixels that
   // see mesh m hold its whole BRDF (diffuse and specular, the view from the camera), and their
   // relit radiance is glossy_weight[m] ⊙ (T·L) instead of albedo ⊙ (T·L).
-  std::vector<uint8_t> glossy_mesh;
-  std::vector<Rgb> glossy_weight;
+  std::vector<uint8_t> glossy_mesh{};
+  std::vector<Rgb> glossy_weight{};
   std::size_t pixels() const { return static_cast<std::size_t>(camera.width) * camera.height; }
   std::size_t background_pixels() const { return BackgroundPixels(pixel_mesh); }
   bool has_glossy_pixels() const {

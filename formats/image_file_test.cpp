@@ -68,8 +68,8 @@ TEST(ImageSamplesFile, GlossyTableRoundTripsAndWeighsPixels) {
   EXPECT_EQ(w[0], (Rgb{0.9f, 0.6f, 0.3f}));  // glossy mesh 0: its weight
   EXPECT_EQ(w[1], mesh_albedo[1]);           // diffuse mesh 1: its albedo
   EXPECT_EQ(w[3], (Rgb{0.f, 0.f, 0.f}));     // background
-  auto refused = [](const std::string& bytes, uint32_t meshes) {
-    EXPECT_THROW(ParseImageSamples(bytes, "run/image.prti", meshes), InputError);
+  auto refused = [](const std::string& b2, uint32_t meshes) {
+    EXPECT_THROW(ParseImageSamples(b2, "run/image.prti", meshes), InputError);
   };
   refused(bytes, 3);  // a table of 2 for 3 meshes
   std::string flag = bytes;

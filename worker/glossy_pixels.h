@@ -35,7 +35,7 @@ struct GlossyPixels {
 GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeometry& geometry);
 
 // Marks the samples of pixels that see a glossy mesh (SpatialSample::glossy_material = the mesh
-// index into GlossyPixels::materials, which TransportSamplerOptions::glossy_materials takes).
+// index into GlossyPixels::materials, which GlossySampling::materials takes).
 void MarkGlossyPixels(const GlossyPixels& glossy, std::span<const uint32_t> pixel_mesh,
                       std::vector<SpatialSample>& samples);
 

@@ -83,9 +83,8 @@ TEST(GlossyPixels, RowIsTheBrdfWeightedVisibilityIntegral) {
     TransportSamplerOptions o;
     o.rays_per_texel = 64;
     o.seed = 3;
-    o.glossy_materials = {Ggx(r, 0.4, 0.6)};
-    o.eye = eye;
-    const TransportSampler sampler(scene, 16, o);
+    const GlossySampling gs{{Ggx(r, 0.4, 0.6)}, eye};
+    const TransportSampler sampler(scene, 16, o, gs);
     SpatialSample s;
     s.position = p;
     s.normal = s.geometric_normal = {0, 1, 0};
@@ -95,7 +94,7 @@ TEST(GlossyPixels, RowIsTheBrdfWeightedVisibilityIntegral) {
     const ShadingFrame f = MakeShadingFrame({0, 1, 0}, eye - p);
     double diff = 0, norm = 0, sum = 0, ref_sum = 0;
     for (std::size_t j = 0; j < row.size(); ++j) {
-      const double ref = ReferenceTexel(sampler.layout(), j, p, o.glossy_materials[0], f, half,
+      const double ref = ReferenceTexel(sampler.layout(), j, p, gs.materials[0], f, half,
                                         h, 24);
       diff += std::abs(row[j] - ref);
       norm += std::abs(ref);
@@ -123,7 +122,7 @@ TEST(GlossyPixels, RowIsTheBrdfWeightedVisibilityIntegral) {
     TransportSamplerOptions plain;
     plain.rays_per_texel = 64;
     plain.seed = 3;
-    const TransportSampler plain_sampler(scene, 16, plain);
+    const TransportSampler plain_sampler(scene, 16, plain, {});
     std::vector<float> old(row.size());
     plain_sampler.ComputeRow(d, 5, old.data());
     EXPECT_EQ(diffuse, old);
@@ -173,9 +172,7 @@ TEST(GlossyPixels, UnoccludedPixelUnderAConstantSkyIsAlbedoPlusTheLobesDirection
       ASSERT_TRUE(glossy.any());
       TransportSamplerOptions o;
       o.rays_per_texel = 16;
-      o.glossy_materials = glossy.materials;
-      o.eye = eye;
-      const TransportSampler sampler(none, 32, o);
+      const TransportSampler sampler(none, 32, o, {glossy.materials, eye});
       SpatialSample s;
       s.position = p;
       s.normal = s.geometric_normal = nrm;

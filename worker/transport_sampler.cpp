@@ -11,6 +11,7 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -36,7 +37,7 @@ int StrataV(int k) {
 // Everything a row needs about its sample, computed once per call.
 struct SampleFrame {
   Vec3 normal;         // unit shading normal
-  // A glossy pixel's material (TransportSamplerOptions::glossy_materials) and its frame with the
+  // A glossy pixel's material (GlossySampling::materials) and its frame with the
   // view towards the eye; nullptr for a diffuse sample.
   const Material* material = nullptr;
   ShadingFrame shading;
@@ -60,6 +61,7 @@ struct TransportSampler::Impl {
   const EmbreeScene& scene;
   CubemapLayout layout;
   TransportSamplerOptions options;
+  GlossySampling glossy;
   int strata_u = 1;
   int strata_v = 1;
   // Ω_s for every stratum of every texel of one face (all faces share it): index
@@ -69,8 +71,8 @@ struct TransportSampler::Impl {
   std::atomic<bool> measure_trace_cpu{false};
   mutable std::atomic<uint64_t> trace_cpu_ns{0};
 
-  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o)
-      : scene(s), layout(n), options(o) {
+  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o, GlossySampling g)
+      : scene(s), layout(n), options(o), glossy(std::move(g)) {
     const int k = o.rays_per_texel;
     if (k < 1 || k > 1024) {
       throw std::invalid_argument("TransportSampler: rays_per_texel must be in [1, 1024], got " +
@@ -114,14 +116,14 @@ struct TransportSampler::Impl {
     f.ray.tfar = std::numeric_limits<float>::infinity();
     f.key = RowKey(options.seed, sample_index);
     if (sample.glossy_material != kDiffuseSample) {
-      if (sample.glossy_material >= options.glossy_materials.size()) {
+      if (sample.glossy_material >= glossy.materials.size()) {
         throw std::out_of_range("TransportSampler: sample " + std::to_string(sample_index) +
                                 " names glossy material " +
                                 std::to_string(sample.glossy_material) + " of " +
-                                std::to_string(options.glossy_materials.size()));
+                                std::to_string(glossy.materials.size()));
       }
-      f.material = &options.glossy_materials[sample.glossy_material];
-      f.shading = MakeShadingFrame(f.normal, options.eye - sample.position);
+      f.material = &glossy.materials[sample.glossy_material];
+      f.shading = MakeShadingFrame(f.normal, glossy.eye - sample.position);
     }
     return f;
   }
@@ -447,8 +449,8 @@ struct TransportSampler::Impl {
 };
 
 TransportSampler::TransportSampler(const EmbreeScene& scene, int cubemap_n,
-                                   TransportSamplerOptions options)
-    : impl_(std::make_unique<Impl>(scene, cubemap_n, options)) {}
+                                   TransportSamplerOptions options, GlossySampling glossy)
+    : impl_(std::make_unique<Impl>(scene, cubemap_n, options, std::move(glossy))) {}
 
 TransportSampler::~TransportSampler() = default;
 
@@ -457,6 +459,9 @@ const CubemapLayout& TransportSampler::layout() const {
 }
 const TransportSamplerOptions& TransportSampler::options() const {
   return impl_->options;
+}
+const GlossySampling& TransportSampler::glossy() const {
+  return impl_->glossy;
 }
 int TransportSampler::strata_u() const {
   return impl_->strata_u;

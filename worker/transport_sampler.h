@@ -35,7 +35,7 @@ struct SpatialSample {
   // environment there.
   bool background = false;
   // A glossy camera pixel (docs/image-relighting.md, "Glossy pixels"): the index of its material
-  // in TransportSamplerOptions::glossy_materials; kDiffuseSample for every other sample.
+  // in GlossySampling::materials; kDiffuseSample for every other sample.
   uint32_t glossy_material = 0xFFFFFFFFu;
 };
 inline constexpr uint32_t kDiffuseSample = 0xFFFFFFFFu;
@@ -52,16 +52,19 @@ struct TransportSamplerOptions {
   // coordinates (u, v) with b the largest divisor of k not above √k and a = k/b (2×2 for 4).
   int rays_per_texel = 4;
   uint64_t seed = 1;  // rows are a pure function of (seed, global sample index)
-  // Glossy camera pixels (docs/image-relighting.md, "Glossy pixels"): a sample with
-  // glossy_material = i has the row
-  //   T[x][j] = ∫_texel_j V(x, ω) · [k_d/π + k_s·f_s(ω, ω_o)] · max(0, n·ω) dω
-  // with k_d = glossy_materials[i].diffuse[0], k_s = .specular[0], f_s its lobe
-  // (runtime/brdf.h) and ω_o = normalize(eye − x), estimated by the same strata and rays as the
-  // diffuse row: each ray's weight Ω_s·cos/π becomes Ω_s·cos·(k_d/π + k_s·f_s), so the lobe is
-  // sampled at the texel's rays_per_texel jittered directions and a lobe narrower than a texel
-  // is under-resolved (docs/image-relighting.md measures it). The unoccluded estimate
-  // (ComputeUnoccludedTexels) and the variance carry the same weights.
-  std::vector<Material> glossy_materials;
+};
+
+// Glossy camera pixels (docs/image-relighting.md, "Glossy pixels"): a sample with
+// glossy_material = i has the row
+//   T[x][j] = ∫_texel_j V(x, ω) · [k_d/π + k_s·f_s(ω, ω_o)] · max(0, n·ω) dω
+// with k_d = materials[i].diffuse[0], k_s = .specular[0], f_s its lobe (runtime/brdf.h) and
+// ω_o = normalize(eye − x), estimated by the same strata and rays as the diffuse row: each ray's
+// weight Ω_s·cos/π becomes Ω_s·cos·(k_d/π + k_s·f_s), so the lobe is sampled at the texel's
+// rays_per_texel jittered directions and a lobe narrower than a texel is under-resolved
+// (docs/image-relighting.md measures it). The unoccluded estimate (ComputeUnoccludedTexels)
+// and the variance carry the same weights.
+struct GlossySampling {
+  std::vector<Material> materials;
   Vec3 eye{0, 0, 0};
 };
 
@@ -87,13 +90,15 @@ class TransportSampler {
  public:
   // cubemap_n: a power of two in [1, 256] (CubemapLayout). Throws std::invalid_argument on a bad
   // n or rays_per_texel outside [1, 1024].
-  TransportSampler(const EmbreeScene& scene, int cubemap_n, TransportSamplerOptions options);
+  TransportSampler(const EmbreeScene& scene, int cubemap_n, TransportSamplerOptions options,
+                   GlossySampling glossy = {});
   ~TransportSampler();
   TransportSampler(const TransportSampler&) = delete;
   TransportSampler& operator=(const TransportSampler&) = delete;
 
   const CubemapLayout& layout() const;
   const TransportSamplerOptions& options() const;
+  const GlossySampling& glossy() const;
   // The stratum grid: strata_u() × strata_v() = rays_per_texel; stratum s = sv·strata_u() + su.
   int strata_u() const;
   int strata_v() const;
