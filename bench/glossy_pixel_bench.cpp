@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
               for (std::size_t j = 0; j < row.size(); ++j) b += row[j] * light.Channel(c)[j];
               num += (b - ref[k][c]) * (b - ref[k][c]);
               den += ref[k][c] * ref[k][c];
-              mean += std::abs(ref[k][c]) / (3.0 * cs.size());
+              mean += std::abs(ref[k][c]) / (3.0 * static_cast<double>(cs.size()));
             }
           }
           std::printf("%-12s %9.2f %4d %6d %11.3f%% %12.4g\n", name.c_str(), r, n, rays,

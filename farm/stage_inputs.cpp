@@ -116,13 +116,13 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
           list.push_back(nullptr);
           continue;
         }
-        const Material& m = glossy.materials[i];
-        list.push_back({{"model", static_cast<int>(m.model)},
-                        {"k_d", m.diffuse[0]},
-                        {"k_s", m.specular[0]},
-                        {"exponent", m.exponent},
-                        {"exponent_v", m.exponent_v},
-                        {"roughness", m.roughness}});
+        const Material& mat = glossy.materials[i];
+        list.push_back({{"model", static_cast<int>(mat.model)},
+                        {"k_d", mat.diffuse[0]},
+                        {"k_s", mat.specular[0]},
+                        {"exponent", mat.exponent},
+                        {"exponent_v", mat.exponent_v},
+                        {"roughness", mat.roughness}});
       }
       rows["glossy_pixels"] = std::move(list);
     }
