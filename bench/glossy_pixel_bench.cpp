@@ -68,14 +68,20 @@ std::vector<double> RelitImage(const std::string& run, const prt::CubemapRgb& li
   const std::vector<Rgb> w = PixelAlbedo(im, mesh_albedo);
   const TransportFileReader r(run + "/transport.prtt");
   const std::size_t cols = r.info().cols(), rows = r.info().rows;
-  std::vector<float> row(cols);
+  // A block of rows at a time (a packed file decodes whole blocks).
+  const std::size_t step = r.info().rows_per_block;
+  std::vector<float> block(step * cols);
   std::vector<double> out(3 * rows);
-  for (std::size_t p = 0; p < rows; ++p) {
-    r.ReadRows(p, 1, row.data());
-    for (int c = 0; c < 3; ++c) {
-      double b = 0;
-      for (std::size_t j = 0; j < cols; ++j) b += row[j] * light.Channel(c)[j];
-      out[3 * p + c] = w[p][c] * b;
+  for (std::size_t first = 0; first < rows; first += step) {
+    const std::size_t count = std::min(step, rows - first);
+    r.ReadRows(first, count, block.data());
+    for (std::size_t i = 0; i < count; ++i) {
+      const float* row = block.data() + i * cols;
+      for (int c = 0; c < 3; ++c) {
+        double b = 0;
+        for (std::size_t j = 0; j < cols; ++j) b += row[j] * light.Channel(c)[j];
+        out[3 * (first + i) + c] = w[first + i][c] * b;
+      }
     }
   }
   pixel_mesh = im.pixel_mesh;
