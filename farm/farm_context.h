@@ -37,6 +37,7 @@
 #include "vocabulary/envmap.h"
 #include "vocabulary/scene.h"
 #include "worker/embree_scene.h"
+#include "worker/glossy_pixels.h"
 #include "worker/sparse_precomputation.h"
 #include "worker/transport_sampler.h"
 #include "worker/visibility_sampler.h"
@@ -87,6 +88,9 @@ struct SetupParams {
   // (rows = width·height in raster order), 0 for mesh vertices.
   int32_t image = 0;
   Camera camera;
+  // Image runs with glossy pixels (worker/glossy_pixels.h): the size of the per-mesh table rank 0
+  // broadcasts after the geometry; 0 when every pixel is diffuse.
+  uint64_t glossy_bytes = 0;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
@@ -183,6 +187,8 @@ struct FarmContext {
   std::vector<uint32_t> pixel_mesh;
   // Image runs: per pixel, the longest edge of the triangle it sees (CameraSamples::pixel_edge).
   std::vector<float> pixel_edge;
+  // Image runs: the glossy pixels' materials per mesh (empty when every pixel is diffuse).
+  GlossyPixels glossy_pixels;
   // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
@@ -218,11 +224,14 @@ struct FarmContext {
   Rgb GroupAlbedo(std::size_t g) const {
     return params.image ? Rgb{1.f, 1.f, 1.f} : geometry.meshes[g].albedo;
   }
-  // The albedo of row `row`'s surface (0 for a background pixel).
+  // The albedo of row `row`'s surface (0 for a background pixel; a glossy pixel's weight,
+  // worker/glossy_pixels.h).
   Rgb RowAlbedo(uint64_t row) const {
     if (!params.image) return geometry.meshes[geometry.MeshOfVertex(row)].albedo;
     const uint32_t m = pixel_mesh[row];
-    return m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : geometry.meshes[m].albedo;
+    if (m == kImageBackground) return Rgb{0.f, 0.f, 0.f};
+    if (m < glossy_pixels.glossy.size() && glossy_pixels.glossy[m]) return glossy_pixels.weight[m];
+    return geometry.meshes[m].albedo;
   }
   // transport.prtt.partial's dimensions (as setup created it).
   TransportFileInfo RowsFileInfo() const {

@@ -34,6 +34,7 @@
 #include "vocabulary/scene.h"
 #include "worker/bounce_gather.h"
 #include "worker/camera_samples.h"
+#include "worker/glossy_pixels.h"
 #include "worker/surface_hit.h"
 
 #ifndef PRT_DEFAULT_DATA_DIR
@@ -154,6 +155,19 @@ SceneGeometry ResolveSampling(FarmContext& ctx, const SceneDescription& scene,
     throw InputError(scene.file,
                      "samples = \"camera\" needs job \"transport\" (visibility cubemaps are "
                      "per vertex, for glossy meshes)");
+  if (visibility) {
+    for (const MeshInstance& mi : scene.meshes)
+      if (mi.glossy.brdf == "ggx")
+        throw InputError(scene.file,
+                         "[[mesh]] '" + mi.name + "': brdf = \"ggx\" with job \"visibility\": "
+                         "triple products do not evaluate GGX; set [scene] samples = \"camera\" "
+                         "(glossy pixels, exact for one view, docs/image-relighting.md) or brdf = "
+                         "\"phong\"");
+    if (scene.ground.enabled && scene.ground.glossy.brdf == "ggx")
+      throw InputError(scene.file,
+                       "[ground]: brdf = \"ggx\" with job \"visibility\": triple products do "
+                       "not evaluate GGX; set [scene] samples = \"camera\" or brdf = \"phong\"");
+  }
   const VisibilitySettings& vis = scene.visibility;
   const int n = visibility ? vis.n : scene.cubemap_n;
   const int rays = visibility             ? vis.supersample * vis.supersample
@@ -233,6 +247,20 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
                      "= \"features\": set it to \"combination\" (the default: only the dense "
                      "pixels gather, about dense_budget of the gather's cost) or \"full\" "
                      "(every surface pixel gathers)");
+  if (image && bounces > 0 && !visibility) {
+    const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
+    for (std::size_t i = 0; i < glossy.glossy.size(); ++i)
+      if (glossy.glossy[i])
+        throw InputError(scene.file,
+                         "mesh '" + geometry.meshes[i].name + "' has glossy pixels (brdf = \"" +
+                             (geometry.meshes[i].is_ground ? scene.ground.glossy.brdf
+                                                           : scene.meshes[i].glossy.brdf) +
+                             "\") and bounces = " + std::to_string(bounces) +
+                             ": the pixels' bounce light is not built for glossy pixels (it "
+                             "would be gathered through the diffuse BRDF); set [sampling] "
+                             "bounces = 0 (direct light only: the interreflected light is "
+                             "lost) or brdf = \"lambert\" on that mesh");
+  }
   // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
   // 2 features.
   ctx.params.sparse_indirect = 0;
@@ -590,7 +618,7 @@ void PrepareRunFolder(FarmContext& ctx, const RunManifest& manifest, const std::
 // manifest (every stage's inputs and key, farm/run_manifest.h), the report's settings, then
 // the run folder. Throws InputError (exit code 2) for a bad scene, FileIoError (3) for the
 // folder.
-void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes) {
+void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes, std::string& glossy_bytes) {
   // 1. The scene (bad input: exit code 2).
   std::string scene_text;
   SceneDescription scene = LoadScene(ctx, scene_text);
@@ -598,6 +626,20 @@ void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes) {
   const SceneGeometry geometry = ResolveSampling(ctx, scene, resolved, geometry_bytes);
   ResolveInterreflection(ctx, scene, geometry, resolved);
   const bool visibility = resolved.job == "visibility";
+  // Glossy pixels (docs/image-relighting.md): every rank weighs those pixels' rays alike.
+  if (ctx.params.image) {
+    const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
+    if (glossy.any()) {
+      glossy_bytes = SerializeGlossyPixels(glossy);
+      ctx.params.glossy_bytes = glossy_bytes.size();
+      for (std::size_t i = 0; i < glossy.glossy.size(); ++i)
+        if (glossy.glossy[i])
+          spdlog::info("glossy pixels: mesh '{}' ({}): rows carry its BRDF with the camera's view",
+                       geometry.meshes[i].name,
+                       geometry.meshes[i].is_ground ? scene.ground.glossy.brdf
+                                                    : scene.meshes[i].glossy.brdf);
+    }
+  }
   const RunManifest manifest =
       MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, ctx.options,
                       visibility ? nullptr : &ctx.results.Put(CompressionPlan{}));
@@ -615,11 +657,11 @@ class SetupPhase final : public FarmPhase {
   const char* stage() const override { return kStageAssets; }
 
   void Run(FarmContext& ctx) override {
-    std::string geometry_bytes;
+    std::string geometry_bytes, glossy_bytes;
     int status = kExitOk;
     if (ctx.rank == 0) {
       try {
-        PrepareOnRank0(ctx, geometry_bytes);
+        PrepareOnRank0(ctx, geometry_bytes, glossy_bytes);
       } catch (...) {
         std::string message;
         status = ExitCodeOf(std::current_exception(), message);
@@ -637,6 +679,7 @@ class SetupPhase final : public FarmPhase {
     }
     if (ctx.params.visibility) ctx.method = kVisibilityPhaseName;
     BroadcastBytes(ctx, geometry_bytes, ctx.params.geometry_bytes);
+    if (ctx.params.glossy_bytes > 0) BroadcastBytes(ctx, glossy_bytes, ctx.params.glossy_bytes);
 
     // Every rank, rank 0 included, samples the geometry decoded from the same bytes.
     int local = kExitOk;
@@ -651,9 +694,15 @@ class SetupPhase final : public FarmPhase {
         ctx.samples = std::move(pixels.samples);
         ctx.pixel_mesh = std::move(pixels.pixel_mesh);
         ctx.pixel_edge = std::move(pixels.pixel_edge);
+        ImageSamplesInfo image_info{ctx.params.camera, ctx.pixel_mesh, {}, {}};
+        if (ctx.params.glossy_bytes > 0) {
+          ctx.glossy_pixels = ParseGlossyPixels(glossy_bytes);
+          MarkGlossyPixels(ctx.glossy_pixels, ctx.pixel_mesh, ctx.samples);
+          image_info.glossy_mesh = ctx.glossy_pixels.glossy;
+          image_info.glossy_weight = ctx.glossy_pixels.weight;
+        }
         if (ctx.rank == 0) {
-          WriteImageSamplesFile(ctx.folder.image,
-                                ImageSamplesInfo{ctx.params.camera, ctx.pixel_mesh});
+          WriteImageSamplesFile(ctx.folder.image, image_info);
           const std::size_t background = BackgroundPixels(ctx.pixel_mesh);
           spdlog::info("image relighting: {} of {} pixels see the environment (background)",
                        background, ctx.pixel_mesh.size());
@@ -682,7 +731,9 @@ class SetupPhase final : public FarmPhase {
         TransportSamplerOptions so;
         so.rays_per_texel = ctx.params.rays_per_texel;
         so.seed = ctx.params.seed;
-        ctx.sampler = std::make_unique<TransportSampler>(*ctx.embree, ctx.params.cubemap_n, so);
+        ctx.sampler = std::make_unique<TransportSampler>(
+            *ctx.embree, ctx.params.cubemap_n, so,
+            GlossySampling{ctx.glossy_pixels.materials, ctx.params.camera.eye});
       }
     } catch (...) {
       std::string message;

@@ -9,6 +9,7 @@
 #include "vocabulary/durable_file.h"
 #include "vocabulary/hash.h"
 #include "worker/column_order.h"
+#include "worker/glossy_pixels.h"
 
 namespace prt {
 
@@ -105,6 +106,26 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
                       {"fov", k.fov_deg},
                       {"width", k.width},
                       {"height", k.height}};
+    // Glossy pixels carry their materials in the rows (keyed only where there are any, so the
+    // keys of diffuse image runs stay as they were).
+    const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
+    if (glossy.any() && !visibility) {
+      Json list = Json::array();
+      for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
+        if (!glossy.glossy[i]) {
+          list.push_back(nullptr);
+          continue;
+        }
+        const Material& mat = glossy.materials[i];
+        list.push_back({{"model", static_cast<int>(mat.model)},
+                        {"k_d", mat.diffuse[0]},
+                        {"k_s", mat.specular[0]},
+                        {"exponent", mat.exponent},
+                        {"exponent_v", mat.exponent_v},
+                        {"roughness", mat.roughness}});
+      }
+      rows["glossy_pixels"] = std::move(list);
+    }
   }
   if (visibility) {
     rows["visibility_bits"] = scene.visibility.bits;

@@ -15,12 +15,15 @@ namespace prt {
 namespace {
 
 constexpr char kImageMagic[8] = {'P', 'R', 'T', 'I', 'M', 'G', '0', '1'};
+// Glossy pixels: the same, then u32 mesh_count and per mesh u32 flags (1 = glossy), f32[3] weight.
+constexpr char kImageMagicGlossy[8] = {'P', 'R', 'T', 'I', 'M', 'G', '0', '2'};
 
 }  // namespace
 
 std::string SerializeImageSamples(const ImageSamplesInfo& info) {
   ByteWriter w;
-  w.PutBytes(kImageMagic, 8);
+  const bool glossy = info.has_glossy_pixels();
+  w.PutBytes(glossy ? kImageMagicGlossy : kImageMagic, 8);
   w.Put<uint32_t>(static_cast<uint32_t>(info.camera.width));
   w.Put<uint32_t>(static_cast<uint32_t>(info.camera.height));
   for (const Vec3& v : {info.camera.eye, info.camera.target, info.camera.up}) {
@@ -30,6 +33,13 @@ std::string SerializeImageSamples(const ImageSamplesInfo& info) {
   }
   w.Put(info.camera.fov_deg);
   w.PutBytes(info.pixel_mesh.data(), info.pixel_mesh.size() * sizeof(uint32_t));
+  if (glossy) {
+    w.Put<uint32_t>(static_cast<uint32_t>(info.glossy_mesh.size()));
+    for (std::size_t m = 0; m < info.glossy_mesh.size(); ++m) {
+      w.Put<uint32_t>(info.glossy_mesh[m]);
+      for (int c = 0; c < 3; ++c) w.Put<float>(info.glossy_weight[m][c]);
+    }
+  }
   std::string& out = w.bytes();
   w.Put<uint64_t>(Checksum64(out.data(), out.size()));
   return std::move(out);
@@ -37,8 +47,10 @@ std::string SerializeImageSamples(const ImageSamplesInfo& info) {
 
 ImageSamplesInfo ParseImageSamples(std::string_view bytes, const std::string& name,
                                    uint32_t mesh_count) {
-  if (bytes.size() < 16 || std::memcmp(bytes.data(), kImageMagic, 8) != 0)
+  if (bytes.size() < 16 || (std::memcmp(bytes.data(), kImageMagic, 8) != 0 &&
+                            std::memcmp(bytes.data(), kImageMagicGlossy, 8) != 0))
     throw InputError(name, "not a prtfarm image file (bad magic)");
+  const bool glossy = std::memcmp(bytes.data(), kImageMagicGlossy, 8) == 0;
   const std::size_t body = bytes.size() - 8;
   if (Checksum64(bytes.data(), body) != LoadAt<uint64_t>(bytes, body))
     throw InputError(name, "image file checksum mismatch: the file is damaged");
@@ -62,12 +74,35 @@ ImageSamplesInfo ParseImageSamples(std::string_view bytes, const std::string& na
   info.camera.fov_deg = in.Get<double>("camera");
   if (!(info.camera.fov_deg > 0 && info.camera.fov_deg < 180))
     throw InputError(name, "camera fov outside (0, 180) degrees");
-  if (in.remaining() != info.pixels() * sizeof(uint32_t))
-    throw InputError(name, "holds " + std::to_string(in.remaining()) + " bytes of pixels for a " +
-                               std::to_string(w) + "×" + std::to_string(h) + " image");
+  const std::size_t table = glossy ? 4 + std::size_t{16} * mesh_count : 0;
+  if (in.remaining() != info.pixels() * sizeof(uint32_t) + table)
+    throw InputError(name, "holds " + std::to_string(in.remaining()) + " bytes of pixels" +
+                               (glossy ? " and mesh table" : "") + " for a " + std::to_string(w) +
+                               "×" + std::to_string(h) + " image" +
+                               (glossy ? " of " + std::to_string(mesh_count) + " meshes" : ""));
   info.pixel_mesh.resize(info.pixels());
-  std::memcpy(info.pixel_mesh.data(), in.Take(in.remaining(), "pixels").data(),
+  std::memcpy(info.pixel_mesh.data(), in.Take(info.pixels() * sizeof(uint32_t), "pixels").data(),
               info.pixel_mesh.size() * sizeof(uint32_t));
+  if (glossy) {
+    if (in.Get<uint32_t>("mesh table") != mesh_count)
+      throw InputError(name, "glossy-pixel table does not have one entry per mesh (" +
+                                 std::to_string(mesh_count) + ")");
+    info.glossy_mesh.resize(mesh_count);
+    info.glossy_weight.resize(mesh_count);
+    for (uint32_t m = 0; m < mesh_count; ++m) {
+      const auto flags = in.Get<uint32_t>("mesh table");
+      if (flags > 1)
+        throw InputError(name, "mesh " + std::to_string(m) + " has glossy flags " +
+                                   std::to_string(flags) + " (0 or 1)");
+      info.glossy_mesh[m] = static_cast<uint8_t>(flags);
+      for (int c = 0; c < 3; ++c) {
+        const float x = in.Get<float>("mesh table");
+        if (!(x >= 0.f && x <= 1.f))
+          throw InputError(name, "mesh " + std::to_string(m) + " has a glossy weight outside [0, 1]");
+        info.glossy_weight[m][c] = x;
+      }
+    }
+  }
   for (std::size_t p = 0; p < info.pixel_mesh.size(); ++p) {
     const uint32_t m = info.pixel_mesh[p];
     if (m != kImageBackground && m >= mesh_count)

@@ -31,24 +31,42 @@ inline std::size_t BackgroundPixels(std::span<const uint32_t> pixel_mesh) {
 struct ImageSamplesInfo {
   Camera camera;                     // width and height are the image's
   std::vector<uint32_t> pixel_mesh;  // width·height, mesh index or kImageBackground
+  // Glossy pixels (PRTIMG02; docs/image-relighting.md, "Glossy pixels"), one entry per mesh, or
+  // both empty (PRTIMG01: every pixel diffuse). glossy_mesh[m] = 1: the rows of the pixels that
+  // see mesh m hold its whole BRDF (diffuse and specular, the view from the camera), and their
+  // relit radiance is glossy_weight[m] ⊙ (T·L) instead of albedo ⊙ (T·L).
+  std::vector<uint8_t> glossy_mesh{};
+  std::vector<Rgb> glossy_weight{};
   std::size_t pixels() const { return static_cast<std::size_t>(camera.width) * camera.height; }
   std::size_t background_pixels() const { return BackgroundPixels(pixel_mesh); }
+  bool has_glossy_pixels() const {
+    return std::find(glossy_mesh.begin(), glossy_mesh.end(), uint8_t{1}) != glossy_mesh.end();
+  }
 };
 
-// Each pixel's albedo: its mesh's (mesh_albedo[m]), 0 for background. The caller has checked the
-// indices (ParseImageSamples does).
+// Each pixel's weight of T·L: its mesh's albedo (mesh_albedo[m]), or its glossy_weight for a
+// glossy mesh; 0 for background. The caller has checked the indices (ParseImageSamples does).
 inline std::vector<Rgb> PixelAlbedo(const ImageSamplesInfo& info,
                                     std::span<const Rgb> mesh_albedo) {
   std::vector<Rgb> out;
   out.reserve(info.pixel_mesh.size());
-  for (uint32_t m : info.pixel_mesh)
-    out.push_back(m == kImageBackground ? Rgb{0.f, 0.f, 0.f} : mesh_albedo[m]);
+  for (uint32_t m : info.pixel_mesh) {
+    if (m == kImageBackground)
+      out.push_back(Rgb{0.f, 0.f, 0.f});
+    else if (m < info.glossy_mesh.size() && info.glossy_mesh[m])
+      out.push_back(info.glossy_weight[m]);
+    else
+      out.push_back(mesh_albedo[m]);
+  }
   return out;
 }
 
+// PRTIMG01 when no mesh is glossy (glossy_mesh all 0 or empty: the bytes of before glossy
+// pixels), else PRTIMG02 with the per-mesh table.
 std::string SerializeImageSamples(const ImageSamplesInfo& info);
-// Throws InputError naming `name` on a bad magic, checksum, size, non-finite camera, or a pixel
-// naming a mesh ≥ mesh_count.
+// Throws InputError naming `name` on a bad magic, checksum, size, non-finite camera, a pixel
+// naming a mesh ≥ mesh_count, or (PRTIMG02) a mesh table whose size is not mesh_count or whose
+// flags are not 0/1 or weights outside [0, 1].
 ImageSamplesInfo ParseImageSamples(std::string_view bytes, const std::string& name,
                                    uint32_t mesh_count);
 void WriteImageSamplesFile(const std::string& path, const ImageSamplesInfo& info);

@@ -45,6 +45,42 @@ TEST(ImageSamplesFile, RoundTripsExactly) {
   EXPECT_EQ(b.pixel_mesh, a.pixel_mesh);
 }
 
+// Glossy pixels (PRTIMG02): the per-mesh table round trips and weighs the pixels; a table that
+// names no glossy mesh writes PRTIMG01's bytes; a bad table is refused.
+TEST(ImageSamplesFile, GlossyTableRoundTripsAndWeighsPixels) {
+  ImageSamplesInfo a = Small();
+  const std::string plain = SerializeImageSamples(a);
+  a.glossy_mesh = {0, 0};
+  a.glossy_weight = {Rgb{0.5f, 0.5f, 0.5f}, Rgb{0.2f, 0.2f, 0.2f}};
+  EXPECT_EQ(SerializeImageSamples(a), plain);
+  a.glossy_mesh = {1, 0};
+  a.glossy_weight = {Rgb{0.9f, 0.6f, 0.3f}, Rgb{0.f, 0.f, 0.f}};
+  const std::string bytes = SerializeImageSamples(a);
+  EXPECT_EQ(bytes.substr(0, 8), "PRTIMG02");
+  EXPECT_EQ(bytes.size(), plain.size() + 4 + 2 * 16u);
+  const ImageSamplesInfo b = ParseImageSamples(bytes, "image.prti", 2);
+  EXPECT_EQ(b.pixel_mesh, a.pixel_mesh);
+  EXPECT_EQ(b.glossy_mesh, a.glossy_mesh);
+  EXPECT_EQ(b.glossy_weight, a.glossy_weight);
+  EXPECT_TRUE(b.has_glossy_pixels());
+  const std::vector<Rgb> mesh_albedo = {Rgb{0.1f, 0.1f, 0.1f}, Rgb{0.7f, 0.7f, 0.7f}};
+  const std::vector<Rgb> w = PixelAlbedo(b, mesh_albedo);
+  EXPECT_EQ(w[0], (Rgb{0.9f, 0.6f, 0.3f}));  // glossy mesh 0: its weight
+  EXPECT_EQ(w[1], mesh_albedo[1]);           // diffuse mesh 1: its albedo
+  EXPECT_EQ(w[3], (Rgb{0.f, 0.f, 0.f}));     // background
+  auto refused = [](const std::string& b2, uint32_t meshes) {
+    EXPECT_THROW(ParseImageSamples(b2, "run/image.prti", meshes), InputError);
+  };
+  refused(bytes, 3);  // a table of 2 for 3 meshes
+  std::string flag = bytes;
+  flag[flag.size() - 8 - 32] = 2;  // mesh 0's flags
+  refused(Resealed(flag), 2);
+  std::string weight = bytes;
+  const float big = 1.5f;
+  std::memcpy(weight.data() + weight.size() - 8 - 12, &big, 4);  // mesh 1's red weight
+  refused(Resealed(weight), 2);
+}
+
 TEST(ImageSamplesFile, HostileBytesAreInputErrorsNamingTheFile) {
   const std::string good = SerializeImageSamples(Small());
   auto refused = [](const std::string& bytes, uint32_t meshes, const std::string& what) {

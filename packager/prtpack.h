@@ -69,7 +69,9 @@ typedef struct prtpack_block_info {
 
 /* Image relighting (.prtpack 1.2, the IMGE section): the rows of T are the pixels of a fixed
  * camera, row-major from the top-left (V = width·height), instead of mesh vertices. A pixel's
- * radiance is B_c(p) = albedo_c(pixel_mesh[p]) · Σ_j T[c·V + p][j]·L_c[j]; a pixel whose
+ * radiance is B_c(p) = w_c(pixel_mesh[p]) · Σ_j T[c·V + p][j]·L_c[j], w the mesh's weight from
+ * prtpack_get_image_weight: its albedo, or for glossy pixels (.prtpack 1.4) the colour their
+ * rows were normalised by (docs/image-relighting.md, "Glossy pixels"); a pixel whose
  * pixel_mesh is PRTPACK_BACKGROUND sees the environment itself (its row is 0): draw the
  * environment map along the camera ray (pinhole at eye looking at target, vertical fov_deg,
  * pixel centres at +½; docs/image-relighting.md). */
@@ -182,6 +184,10 @@ int prtpack_has_image(const prtpack* pack);
  * checksum or zstd failure, a pixel naming a mesh the pack lacks, a pixel count that does not
  * match the transport's rows. */
 int prtpack_get_image(prtpack* pack, prtpack_image_info* out);
+/* The weight w of mesh `mesh`'s pixels in an image pack: *glossy = 1 where its pixels are glossy
+ * (their rows hold the whole BRDF with the camera's view; rgb is the stored weight), else 0 and
+ * rgb is the mesh's albedo. Errors: those of prtpack_get_image, mesh out of range. */
+int prtpack_get_image_weight(prtpack* pack, size_t mesh, int* glossy, float rgb[3]);
 
 /* Every checksum and structural rule (prt-pack verify). PRTPACK_OK if all hold. */
 int prtpack_verify(prtpack* pack);

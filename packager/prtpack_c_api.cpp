@@ -241,6 +241,24 @@ int prtpack_get_image(prtpack* pack, prtpack_image_info* out) {
   });
 }
 
+int prtpack_get_image_weight(prtpack* pack, size_t mesh, int* glossy, float rgb[3]) {
+  return Guard([&] {
+    if (pack == nullptr || glossy == nullptr || rgb == nullptr)
+      return Fail("prtpack_get_image_weight: NULL argument");
+    if (!pack->image) pack->image = pack->reader.ReadImage();
+    const prt::ImageSamplesInfo& im = *pack->image;
+    if (mesh < im.glossy_mesh.size() && im.glossy_mesh[mesh]) {
+      *glossy = 1;
+      for (int c = 0; c < 3; ++c) rgb[c] = im.glossy_weight[mesh][static_cast<std::size_t>(c)];
+      return PRTPACK_OK;
+    }
+    const prt::pack::MeshMaterial m = pack->reader.ReadMaterial(mesh);
+    *glossy = 0;
+    for (int c = 0; c < 3; ++c) rgb[c] = m.albedo[static_cast<std::size_t>(c)];
+    return PRTPACK_OK;
+  });
+}
+
 int prtpack_get_transport_info(prtpack* pack, prtpack_transport_info* out) {
   return Guard([&] {
     if (pack == nullptr || out == nullptr) return Fail("prtpack_get_transport_info: NULL argument");

@@ -170,6 +170,8 @@ nlohmann::json MaterialsJson(const SceneGeometry& geometry, const std::string& s
                    {"specular", {g.specular[0], g.specular[1], g.specular[2]}},
                    {"exponent", g.exponent},
                    {"exponent_v", g.exponent_v}});
+    // GGX only (older materials keep their bytes): roughness r, α = r².
+    if (g.brdf == "ggx") out.back()["roughness"] = g.roughness;
   }
   return out;
 }
@@ -441,6 +443,17 @@ std::string InspectPack(const PackReader& r) {
         << " pixels are the samples (image relighting), " << bg << " background; camera eye ("
         << im.camera.eye.x << ", " << im.camera.eye.y << ", " << im.camera.eye.z << "), fov "
         << im.camera.fov_deg << "\n";
+    if (im.has_glossy_pixels()) {
+      std::size_t glossy = 0;
+      for (uint32_t m : im.pixel_mesh)
+        if (m != kImageBackground && im.glossy_mesh[m]) ++glossy;
+      out << "glossy pixels: " << glossy << " (rows carry the BRDF with the camera's view;";
+      for (std::size_t m = 0; m < im.glossy_mesh.size(); ++m)
+        if (im.glossy_mesh[m])
+          out << " mesh " << m << " weight (" << im.glossy_weight[m][0] << ", "
+              << im.glossy_weight[m][1] << ", " << im.glossy_weight[m][2] << ")";
+      out << ")\n";
+    }
   }
   if (r.has_visibility()) {
     uint64_t vraw = 0, vstored = 0;

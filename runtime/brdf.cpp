@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <stdexcept>
+#include <string>
 
 namespace prt {
 
@@ -69,7 +71,46 @@ bool HasSpecular(const Material& m) {
 
 double EffectiveExponent(const Material& m) {
   if (m.model == BrdfModel::kAshikhminShirley) return std::max(m.exponent, m.exponent_v);
+  if (m.model == BrdfModel::kGgx) {
+    const double a = m.roughness * m.roughness;
+    return std::max(0.0, 2.0 / (a * a) - 2.0);
+  }
   return m.exponent;
+}
+
+Material MaterialOfSettings(const GlossyMaterialSettings& g, const Rgb& albedo) {
+  Material m;
+  m.diffuse = albedo;
+  if (g.brdf == "lambert") return m;
+  if (g.brdf == "phong") {
+    m.model = BrdfModel::kPhong;
+  } else if (g.brdf == "ashikhmin-shirley") {
+    m.model = BrdfModel::kAshikhminShirley;
+  } else if (g.brdf == "ggx") {
+    m.model = BrdfModel::kGgx;
+  } else {
+    throw std::invalid_argument("unknown brdf '" + g.brdf +
+                                "' (lambert, phong, ashikhmin-shirley or ggx)");
+  }
+  m.specular = g.specular;
+  m.exponent = g.exponent;
+  m.exponent_v = g.exponent_v;
+  m.roughness = g.roughness;
+  return m;
+}
+
+double GgxDistribution(double alpha, double cos_m) {
+  if (!(cos_m > 0)) return 0.0;
+  const double a2 = alpha * alpha;
+  const double d = cos_m * cos_m * (a2 - 1.0) + 1.0;
+  return a2 / (std::numbers::pi * d * d);
+}
+
+double GgxSmithG1(double alpha, double cos_v) {
+  if (!(cos_v > 0)) return 0.0;
+  const double c2 = std::min(1.0, cos_v * cos_v);
+  const double tan2 = (1.0 - c2) / c2;
+  return 2.0 / (1.0 + std::sqrt(1.0 + alpha * alpha * tan2));
 }
 
 double SpecularLobe(const Material& m, const ShadingFrame& f, const Vec3& w) {
@@ -95,6 +136,15 @@ double SpecularLobe(const Material& m, const ShadingFrame& f, const Vec3& w) {
       const double norm =
           std::sqrt((m.exponent + 1.0) * (m.exponent_v + 1.0)) / (8.0 * std::numbers::pi);
       return norm * std::pow(nh, e) / (hw * std::max(nw, nv)) * nw;
+    }
+    case BrdfModel::kGgx: {
+      // f_s·(n·ω) = D(h)·G1(ω)·G1(ω_o) / (4 (n·ω_o)): the n·ω of the denominator cancels.
+      const double nv = Dot(f.normal, f.view);
+      if (nv <= 0) return 0.0;
+      const Vec3 h = Normalize(w + f.view);
+      const double alpha = m.roughness * m.roughness;
+      return GgxDistribution(alpha, Dot(f.normal, h)) * GgxSmithG1(alpha, nw) *
+             GgxSmithG1(alpha, nv) / (4.0 * nv);
     }
   }
   return 0.0;

@@ -13,6 +13,13 @@
 //                  and bitangent, without the Fresnel factor (specular_c scales it):
 //                  √((n_u+1)(n_v+1))/(8π) · (n·h)^((n_u cos²φ_h + n_v sin²φ_h)/(1−(n·h)²))
 //                  / ((h·ω)·max(n·ω, n·ω_o)) · max(0, n·ω)
+//   GGX          Walter et al. 2007 microfacet lobe, α = roughness² (Blender, glTF, Unreal), no
+//                  Fresnel (F = 1), separable Smith masking-shadowing; Blender Cycles' Glossy BSDF
+//                  with the GGX distribution (docs/conventions.md, "The GGX material"):
+//                  f_s = D(h)·G1(ω)·G1(ω_o) / (4 |n·ω| |n·ω_o|),  h = normalize(ω + ω_o)
+//                  D(m) = α² / (π ((n·m)²(α² − 1) + 1)²)
+//                  G1(v) = 2 / (1 + √(1 + α² tan²θ_v))
+//                  and the lobe is f_s·max(0, n·ω) (0 where n·ω_o ≤ 0).
 #pragma once
 
 #include <array>
@@ -23,7 +30,7 @@
 
 namespace prt {
 
-enum class BrdfModel : uint8_t { kLambert = 0, kPhong = 1, kAshikhminShirley = 2 };
+enum class BrdfModel : uint8_t { kLambert = 0, kPhong = 1, kAshikhminShirley = 2, kGgx = 3 };
 
 struct Material {
   BrdfModel model = BrdfModel::kLambert;
@@ -31,7 +38,19 @@ struct Material {
   Rgb specular{0.f, 0.f, 0.f};    // weight of the specular lobe (diffuse + specular ≤ 1)
   double exponent = 1.0;          // Phong s; Ashikhmin–Shirley n_u
   double exponent_v = 1.0;        // Ashikhmin–Shirley n_v
+  double roughness = 0.5;         // GGX r in (0, 1]: α = r²
 };
+
+// The material of a scene's [[mesh]] or [ground] keys (docs/scene-format.md, "Glossy
+// materials"), every model included: diffuse = albedo, the lobe of g.brdf weighted by
+// g.specular. Throws std::invalid_argument on an unknown brdf name.
+Material MaterialOfSettings(const GlossyMaterialSettings& g, const Rgb& albedo);
+
+// GGX pieces (Walter et al. 2007, Eq. 33 and 34), α = roughness²: the normal distribution D of
+// a microfacet normal whose cosine with n is `cos_m`, and the Smith G1 of a direction whose
+// cosine with n is `cos_v` (0 for cos ≤ 0). ∫ D(m)·(n·m) dm = 1 over the hemisphere.
+double GgxDistribution(double alpha, double cos_m);
+double GgxSmithG1(double alpha, double cos_v);
 
 // The local frame at a vertex for one outgoing (view) direction.
 struct ShadingFrame {
@@ -53,7 +72,8 @@ double SpecularLobe(const Material& m, const ShadingFrame& f, const Vec3& w);
 double CosineWeightedBrdf(const Material& m, const ShadingFrame& f, const Vec3& w, int channel);
 
 bool HasSpecular(const Material& m);
-// The exponent the sampling rules look at (Phong s, Ashikhmin–Shirley max(n_u, n_v)).
+// The exponent the sampling rules look at (Phong s, Ashikhmin–Shirley max(n_u, n_v); GGX the
+// Phong exponent of the same peak width, 2/α² − 2, Walter et al. 2007 §5.2).
 double EffectiveExponent(const Material& m);
 
 // Appendix A: how many samples of the specular lobe a block needs (1, 4, 16 or 256), from the

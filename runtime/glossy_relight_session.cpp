@@ -13,24 +13,12 @@
 namespace prt {
 
 Material MaterialFromSettings(const GlossyMaterialSettings& g, const Rgb& albedo) {
-  Material m;
-  m.diffuse = albedo;
-  if (g.brdf == "lambert") {
-    m.model = BrdfModel::kLambert;
-    return m;
-  }
-  if (g.brdf == "phong") {
-    m.model = BrdfModel::kPhong;
-  } else if (g.brdf == "ashikhmin-shirley") {
-    m.model = BrdfModel::kAshikhminShirley;
-  } else {
-    throw std::invalid_argument("unknown brdf '" + g.brdf +
-                                "' (lambert, phong or ashikhmin-shirley)");
-  }
-  m.specular = g.specular;
-  m.exponent = g.exponent;
-  m.exponent_v = g.exponent_v;
-  return m;
+  if (g.brdf == "ggx")
+    throw std::invalid_argument(
+        "brdf \"ggx\" is not evaluated by triple products (visibility packs): bake it as glossy "
+        "pixels of an image run ([scene] samples = \"camera\", docs/image-relighting.md) or "
+        "use brdf = \"phong\" for a visibility pack");
+  return MaterialOfSettings(g, albedo);
 }
 
 std::vector<Material> GlossyMaterialsFromMetadata(const std::string& metadata_json,
@@ -74,6 +62,10 @@ std::vector<Material> GlossyMaterialsFromMetadata(const std::string& metadata_js
     g.specular = colour("specular", g.specular);
     g.exponent = number("exponent", g.exponent);
     g.exponent_v = number("exponent_v", g.exponent);
+    if (j.contains("roughness")) {
+      g.roughness = number("roughness", g.roughness);
+      if (g.roughness > 1) throw InputError(name, where + ".roughness is outside (0, 1]");
+    }
     try {
       out[i] = MaterialFromSettings(g, colour("diffuse", albedo[i]));
     } catch (const std::invalid_argument& e) {

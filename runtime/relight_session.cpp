@@ -55,7 +55,8 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
       CameraFromMetadata(reader.ReadMetadata(), pack_path, s->camera_, scene_toml_camera);
 
   if (reader.has_image()) {
-    // Image relighting: the samples are the pixels, each with its mesh's albedo.
+    // Image relighting: the samples are the pixels, each with its mesh's albedo (a glossy
+    // pixel: its weight, docs/image-relighting.md "Glossy pixels").
     s->image_ = reader.ReadImage();
     s->camera_ = s->image_->camera;
     s->camera_from_metadata_ = true;

@@ -252,10 +252,11 @@ const char* const kUpAxes[] = {"+x", "-x", "+y", "-y", "+z", "-z"};
 // The glossy-material keys of a [[mesh]] or [ground] table (docs/scene-format.md).
 template <class S>
 void ParseGlossy(S& s, const toml::table& t, const Rgb& albedo, GlossyMaterialSettings& g) {
-  g.brdf = s.Choice("brdf", g.brdf, {"lambert", "phong", "ashikhmin-shirley"});
+  g.brdf = s.Choice("brdf", g.brdf, {"lambert", "phong", "ashikhmin-shirley", "ggx"});
   g.specular = s.Albedo("specular", g.specular);
   g.exponent = s.Number("exponent", g.exponent, 0, 1e6, true);
   g.exponent_v = s.Number("exponent_v", g.exponent, 0, 1e6, true);
+  g.roughness = s.Number("roughness", g.roughness, 0, 1, true);  // GGX: α = roughness²
   for (int c = 0; c < 3; ++c) {
     if (albedo[c] + g.specular[c] > 1.0f + 1e-6f) {
       s.Fail(t.get("specular"), "specular",

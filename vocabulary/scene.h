@@ -27,14 +27,16 @@ struct FitBox {
   std::string up_axis = "+y";  // one of +x -x +y -y +z -z
 };
 
-// A mesh's material for glossy (triple-product) relighting, docs/scene-format.md "Glossy
-// materials": the mesh's albedo is the diffuse part, `specular` weighs the lobe of `brdf`
-// (runtime/brdf.h). Transport runs ignore it (their BRDF is diffuse).
+// A mesh's material for glossy relighting, docs/scene-format.md "Glossy materials": the mesh's
+// albedo is the diffuse part, `specular` weighs the lobe of `brdf` (runtime/brdf.h). Vertex
+// transport runs ignore it (their BRDF is diffuse); image runs bake it into the rows of the
+// pixels that see the mesh (docs/image-relighting.md, "Glossy pixels").
 struct GlossyMaterialSettings {
-  std::string brdf = "lambert";  // lambert | phong | ashikhmin-shirley
+  std::string brdf = "lambert";  // lambert | phong | ashikhmin-shirley | ggx
   Rgb specular{0.f, 0.f, 0.f};   // albedo + specular ≤ 1 per channel
   double exponent = 1.0;         // Phong s; Ashikhmin–Shirley n_u
   double exponent_v = 1.0;       // Ashikhmin–Shirley n_v (default: exponent)
+  double roughness = 0.5;        // GGX roughness r in (0, 1], α = r² (Blender, glTF, Unreal)
 };
 
 struct MeshInstance {

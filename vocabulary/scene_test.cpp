@@ -164,6 +164,32 @@ TEST(SceneTest, GlossyMaterialsJobAndVisibility) {
   }
 }
 
+// GGX (docs/scene-format.md, "Glossy materials"): roughness r in (0, 1], α = r².
+TEST(Scene, GgxRoughnessIsReadAndItsRangeIsEnforced) {
+  const SceneDescription s = ParseScene(
+      "[[mesh]]\npath = \"m.off\"\nalbedo = [0.4, 0.4, 0.4]\nbrdf = \"ggx\"\n"
+      "specular = [0.5, 0.5, 0.5]\nroughness = 0.35\n",
+      "g.toml", "");
+  EXPECT_EQ(s.meshes[0].glossy.brdf, "ggx");
+  EXPECT_EQ(s.meshes[0].glossy.roughness, 0.35);
+  EXPECT_EQ(ParseScene("[[mesh]]\npath = \"m.off\"\nbrdf = \"ggx\"\nroughness = 1\n", "g.toml", "")
+                .meshes[0]
+                .glossy.roughness,
+            1.0);
+  const std::string mesh = "[[mesh]]\npath = \"m.off\"\nbrdf = \"ggx\"\n";
+  for (const std::string r : {"0", "-0.1", "1.01", "2"}) {
+    try {
+      ParseScene(mesh + "roughness = " + r + "\n", "bad.toml", "");
+      ADD_FAILURE() << "accepted roughness " << r;
+    } catch (const InputError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("bad.toml: line 4"), std::string::npos) << what;
+      EXPECT_NE(what.find("roughness"), std::string::npos) << what;
+      EXPECT_NE(what.find("out of range (0, 1]"), std::string::npos) << what;
+    }
+  }
+}
+
 struct BadScene {
   std::string text;
   int line;

@@ -24,7 +24,8 @@ void UnoccludedValues(const TransportSampler& sampler, const SpatialSample& samp
   std::vector<std::size_t> where;
   for (std::size_t i = 0; i < texels.size(); ++i) {
     const uint32_t j = texels[i];
-    if (fully_above[j]) {
+    // The closed form is the diffuse row's; a glossy pixel's U is the sampler's own estimate.
+    if (fully_above[j] && sample.glossy_material == kDiffuseSample) {
       values[i] = static_cast<float>(std::max(0.0, Dot(n, phi[j])) * std::numbers::inv_pi);
     } else {
       straddling.push_back(j);

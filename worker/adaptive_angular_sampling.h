@@ -62,7 +62,8 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
 
 // Unoccluded values U_j for texels not traced: exact (n·Φ_j/π, CubemapLayout::
 // TexelVectorIrradiance) where the texel is entirely above the horizon (fully_above[j] = 1),
-// else the sampler's estimate with visibility ≡ 1.
+// else (and for every texel of a glossy pixel, SpatialSample::glossy_material) the sampler's
+// estimate with visibility ≡ 1.
 void UnoccludedValues(const TransportSampler& sampler, const SpatialSample& sample,
                       uint64_t sample_index, std::span<const uint32_t> texels,
                       const uint8_t* fully_above, float* values);

@@ -11,6 +11,7 @@
 #include <numbers>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "vocabulary/errors.h"
 #include "vocabulary/hash.h"
@@ -36,6 +37,10 @@ int StrataV(int k) {
 // Everything a row needs about its sample, computed once per call.
 struct SampleFrame {
   Vec3 normal;         // unit shading normal
+  // A glossy pixel's material (GlossySampling::materials) and its frame with the
+  // view towards the eye; nullptr for a diffuse sample.
+  const Material* material = nullptr;
+  ShadingFrame shading;
   OcclusionRay ray{};  // origin, tnear, tfar filled; direction per ray
   uint64_t key = 0;    // RowKey(seed, sample index)
 };
@@ -56,6 +61,7 @@ struct TransportSampler::Impl {
   const EmbreeScene& scene;
   CubemapLayout layout;
   TransportSamplerOptions options;
+  GlossySampling glossy;
   int strata_u = 1;
   int strata_v = 1;
   // Ω_s for every stratum of every texel of one face (all faces share it): index
@@ -65,8 +71,8 @@ struct TransportSampler::Impl {
   std::atomic<bool> measure_trace_cpu{false};
   mutable std::atomic<uint64_t> trace_cpu_ns{0};
 
-  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o)
-      : scene(s), layout(n), options(o) {
+  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o, GlossySampling g)
+      : scene(s), layout(n), options(o), glossy(std::move(g)) {
     const int k = o.rays_per_texel;
     if (k < 1 || k > 1024) {
       throw std::invalid_argument("TransportSampler: rays_per_texel must be in [1, 1024], got " +
@@ -109,6 +115,16 @@ struct TransportSampler::Impl {
     f.ray.tnear = 0.0f;
     f.ray.tfar = std::numeric_limits<float>::infinity();
     f.key = RowKey(options.seed, sample_index);
+    if (sample.glossy_material != kDiffuseSample) {
+      if (sample.glossy_material >= glossy.materials.size()) {
+        throw std::out_of_range("TransportSampler: sample " + std::to_string(sample_index) +
+                                " names glossy material " +
+                                std::to_string(sample.glossy_material) + " of " +
+                                std::to_string(glossy.materials.size()));
+      }
+      f.material = &glossy.materials[sample.glossy_material];
+      f.shading = MakeShadingFrame(f.normal, glossy.eye - sample.position);
+    }
     return f;
   }
 
@@ -280,6 +296,7 @@ struct TransportSampler::Impl {
     constexpr int kChunk = 16;
     float dir[kChunk][3];
     double cosine[kChunk];
+    Vec3 unit[kChunk];  // the directions in double (glossy pixels' BRDF)
     int su = 0, sv = 0;
     for (int s0 = 0; s0 < k; s0 += kChunk) {
       const int count = std::min(kChunk, k - s0);
@@ -293,6 +310,7 @@ struct TransportSampler::Impl {
         const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
         const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
         cosine[i] = Dot(f.normal, d);
+        unit[i] = d;
         dir[i][0] = static_cast<float>(d.x);
         dir[i][1] = static_cast<float>(d.y);
         dir[i][2] = static_cast<float>(d.z);
@@ -313,7 +331,14 @@ struct TransportSampler::Impl {
         ray.direction[0] = dir[i][0];
         ray.direction[1] = dir[i][1];
         ray.direction[2] = dir[i][2];
-        b.weight[b.count] = omega[s0 + i] * c;
+        // Diffuse: Ω_s·cos (the 1/π comes at Flush). Glossy pixel: Ω_s·(k_d·cos + π·k_s·f_s·cos).
+        b.weight[b.count] =
+            f.material == nullptr
+                ? omega[s0 + i] * c
+                : omega[s0 + i] *
+                      (f.material->diffuse[0] * c +
+                       std::numbers::pi * f.material->specular[0] *
+                           SpecularLobe(*f.material, f.shading, unit[i]));
         b.slot[b.count] = slot;
         b.stratum[b.count] = s0 + i;
         if (++b.count == Batch::kRays) {
@@ -424,8 +449,8 @@ struct TransportSampler::Impl {
 };
 
 TransportSampler::TransportSampler(const EmbreeScene& scene, int cubemap_n,
-                                   TransportSamplerOptions options)
-    : impl_(std::make_unique<Impl>(scene, cubemap_n, options)) {}
+                                   TransportSamplerOptions options, GlossySampling glossy)
+    : impl_(std::make_unique<Impl>(scene, cubemap_n, options, std::move(glossy))) {}
 
 TransportSampler::~TransportSampler() = default;
 
@@ -434,6 +459,9 @@ const CubemapLayout& TransportSampler::layout() const {
 }
 const TransportSamplerOptions& TransportSampler::options() const {
   return impl_->options;
+}
+const GlossySampling& TransportSampler::glossy() const {
+  return impl_->glossy;
 }
 int TransportSampler::strata_u() const {
   return impl_->strata_u;

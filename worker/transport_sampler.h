@@ -16,6 +16,7 @@
 #include <span>
 #include <vector>
 
+#include "runtime/brdf.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/vec3.h"
@@ -33,7 +34,11 @@ struct SpatialSample {
   // its row of T is 0 (every kernel returns zeros without tracing); the viewer draws the
   // environment there.
   bool background = false;
+  // A glossy camera pixel (docs/image-relighting.md, "Glossy pixels"): the index of its material
+  // in GlossySampling::materials; kDiffuseSample for every other sample.
+  uint32_t glossy_material = 0xFFFFFFFFu;
 };
+inline constexpr uint32_t kDiffuseSample = 0xFFFFFFFFu;
 
 // Samples of a scene in prtfarm's global order (scene.h): meshes in file order, ground last;
 // each mesh's vertices in order. The geometric normal is the normalised sum of the incident
@@ -47,6 +52,20 @@ struct TransportSamplerOptions {
   // coordinates (u, v) with b the largest divisor of k not above √k and a = k/b (2×2 for 4).
   int rays_per_texel = 4;
   uint64_t seed = 1;  // rows are a pure function of (seed, global sample index)
+};
+
+// Glossy camera pixels (docs/image-relighting.md, "Glossy pixels"): a sample with
+// glossy_material = i has the row
+//   T[x][j] = ∫_texel_j V(x, ω) · [k_d/π + k_s·f_s(ω, ω_o)] · max(0, n·ω) dω
+// with k_d = materials[i].diffuse[0], k_s = .specular[0], f_s its lobe (runtime/brdf.h) and
+// ω_o = normalize(eye − x), estimated by the same strata and rays as the diffuse row: each ray's
+// weight Ω_s·cos/π becomes Ω_s·cos·(k_d/π + k_s·f_s), so the lobe is sampled at the texel's
+// rays_per_texel jittered directions and a lobe narrower than a texel is under-resolved
+// (docs/image-relighting.md measures it). The unoccluded estimate (ComputeUnoccludedTexels)
+// and the variance carry the same weights.
+struct GlossySampling {
+  std::vector<Material> materials;
+  Vec3 eye{0, 0, 0};
 };
 
 // Counters a job reports (added up by the coordinator into run/report.json).
@@ -71,13 +90,15 @@ class TransportSampler {
  public:
   // cubemap_n: a power of two in [1, 256] (CubemapLayout). Throws std::invalid_argument on a bad
   // n or rays_per_texel outside [1, 1024].
-  TransportSampler(const EmbreeScene& scene, int cubemap_n, TransportSamplerOptions options);
+  TransportSampler(const EmbreeScene& scene, int cubemap_n, TransportSamplerOptions options,
+                   GlossySampling glossy = {});
   ~TransportSampler();
   TransportSampler(const TransportSampler&) = delete;
   TransportSampler& operator=(const TransportSampler&) = delete;
 
   const CubemapLayout& layout() const;
   const TransportSamplerOptions& options() const;
+  const GlossySampling& glossy() const;
   // The stratum grid: strata_u() × strata_v() = rays_per_texel; stratum s = sv·strata_u() + su.
   int strata_u() const;
   int strata_v() const;
