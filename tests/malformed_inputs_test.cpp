@@ -209,14 +209,19 @@ std::vector<Entry> Catalogue() {
             "[[mesh]]\nname = \"box\"\npath = \"box.off\"\n\n[ground]",
             {"line 11", "'box' is used by an earlier [[mesh]]"}),
       Scene("scene_method_unknown", "method = \"brute\"", "method = \"fast\"", {"line 18", "fast"}),
-      // An image run's bounces need the path estimator (gathering reads vertex rows).
-      {"scene_camera_samples_gather",
+      // An image run's gathered bounces do not take [sparse] indirect = "features".
+      {"scene_camera_samples_gather_features",
        Tool::kFarm,
        "{SCENE} --out {K}/run --force --quiet --bounces 1",
        kFarmInput,
-       {"{SCENE}", "estimator = \"path\""},
-       "n = 8",
-       "n = 8\nsamples = \"camera\""},
+       {"{SCENE}", "indirect = \"features\"", "set it to \"combination\""},
+       "n = 8\n\n[[mesh]]\nname = \"box\"\npath = \"box.off\"\nalbedo = [0.5, 0.5, 0.5]\n\n"
+       "[ground]\nenabled = true\nsize = 3.0\nresolution = 8\n\n"
+       "[sampling]\nrays_per_texel = 4\nseed = 3\nmethod = \"brute\"\n",
+       "n = 8\nsamples = \"camera\"\n\n[[mesh]]\nname = \"box\"\npath = \"box.off\"\n"
+       "albedo = [0.5, 0.5, 0.5]\n\n[ground]\nenabled = true\nsize = 3.0\nresolution = 8\n\n"
+       "[sampling]\nrays_per_texel = 4\nseed = 3\nmethod = \"sparse\"\n\n"
+       "[sparse]\nindirect = \"features\"\n"},
       // ---- scene files: out-of-range parameters
       Scene("scene_n_zero", "n = 8", "n = 0", {"line 3", "n", "0"}),
       Scene("scene_n_negative", "n = 8", "n = -8", {"line 3", "-8"}),
