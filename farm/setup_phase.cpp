@@ -158,11 +158,13 @@ SceneGeometry ResolveSampling(FarmContext& ctx, const SceneDescription& scene,
   if (visibility) {
     for (const MeshInstance& mi : scene.meshes)
       if (mi.glossy.brdf == "ggx")
-        throw InputError(scene.file,
-                         "[[mesh]] '" + mi.name + "': brdf = \"ggx\" with job \"visibility\": "
-                         "triple products do not evaluate GGX; set [scene] samples = \"camera\" "
-                         "(glossy pixels, exact for one view, docs/image-relighting.md) or brdf = "
-                         "\"phong\"");
+        throw InputError(
+            scene.file,
+            "[[mesh]] '" + mi.name +
+                "': brdf = \"ggx\" with job \"visibility\": "
+                "triple products do not evaluate GGX; set [scene] samples = \"camera\" "
+                "(glossy pixels, exact for one view, docs/image-relighting.md) or brdf = "
+                "\"phong\"");
     if (scene.ground.enabled && scene.ground.glossy.brdf == "ggx")
       throw InputError(scene.file,
                        "[ground]: brdf = \"ggx\" with job \"visibility\": triple products do "
@@ -358,9 +360,8 @@ RunFolderState LookAtFolder(const FarmContext& ctx, const RunManifest& manifest)
     const nlohmann::ordered_json* rows_stage = manifest.Stage(kStageRows);
     const bool image_rows = rows_stage && rows_stage->contains("camera");
     state.indirect_complete = true;
-    for (const std::string& file :
-         IndirectFiles(f, ind->at("bounces").get<int>(), ind->at("estimator") == "path",
-                       image_rows))
+    for (const std::string& file : IndirectFiles(f, ind->at("bounces").get<int>(),
+                                                 ind->at("estimator") == "path", image_rows))
       state.indirect_complete = state.indirect_complete && TransportComplete(file);
     state.indirect_unfinished = !state.indirect_complete && fs::exists(f.indirect, ec);
   }

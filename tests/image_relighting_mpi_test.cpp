@@ -17,9 +17,9 @@
 #include "formats/compressed_transport.h"
 #include "formats/image_file.h"
 #include "formats/transport_file.h"
+#include "runtime/lighting.h"
 #include "tests/run_prt_farm.h"
 #include "viewer/environment_background.h"
-#include "runtime/lighting.h"
 #include "viewer/viewer_session.h"
 #include "viewer/window_test_support.h"
 #include "vocabulary/cubemap_resample.h"
@@ -92,6 +92,25 @@ std::vector<float> Rows(const std::string& path) {
   return rows;
 }
 
+// prt-pack packs run folder `run` into `pack`, and prt-view relights it under a uniform sky of
+// radiance 1 with exact lighting into a linear EXR, read back (in `dir`: the logs, sky and EXR).
+EnvironmentImage RelitUnderUniformSky(const std::string& dir, const std::string& run,
+                                      const std::string& pack) {
+  const int packed = std::system((std::string(PRT_PACK_EXE) + " pack " + run + " --out " + pack +
+                                  " > " + dir + "/pack.log 2>&1")
+                                     .c_str());
+  EXPECT_EQ(packed, 0) << ReadWholeFile(dir + "/pack.log");
+  const std::string sky = dir + "/sky.exr", exr = dir + "/relit.exr";
+  EnvironmentImage uniform = EnvironmentImage::Zero(EnvmapLayout::kLatLong, 64, 32);
+  for (int c = 0; c < 3; ++c) std::fill(uniform.Channel(c).begin(), uniform.Channel(c).end(), 1.f);
+  WriteEnvironmentExr(uniform, sky);
+  const int viewed = std::system((std::string(PRT_VIEW_EXE) + " " + pack + " --env " + sky +
+                                  " --exact --exr " + exr + " > " + dir + "/view.log 2>&1")
+                                     .c_str());
+  EXPECT_EQ(viewed, 0) << ReadWholeFile(dir + "/view.log");
+  return ReadEnvironment(exr);
+}
+
 TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePackDrawsThem) {
   const std::string dir = WorkDir("brute");
   const std::string scene_file = ImageScene(dir, "tiny.toml");
@@ -132,20 +151,10 @@ TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePack
   // prt-pack carries the image, prt-view writes it: a background pixel shows the environment
   // (a uniform sky of 1 here), a lit ground pixel albedo·Σ T.
   const std::string pack = dir + "/tiny-image.prtpack";
-  ASSERT_EQ(std::system((std::string(PRT_PACK_EXE) + " pack " + dir + "/np2 --out " + pack + " > " +
-                         dir + "/pack.log 2>&1")
-                            .c_str()),
-            0);
-  const std::string sky = dir + "/sky.exr", exr = dir + "/relit.exr";
-  EnvironmentImage uniform = EnvironmentImage::Zero(EnvmapLayout::kLatLong, 64, 32);
-  for (int c = 0; c < 3; ++c) std::fill(uniform.Channel(c).begin(), uniform.Channel(c).end(), 1.f);
-  WriteEnvironmentExr(uniform, sky);
-  ASSERT_EQ(std::system((std::string(PRT_VIEW_EXE) + " " + pack + " --env " + sky + " --exact" +
-                         " --exr " + exr + " > " + dir + "/view.log 2>&1")
-                            .c_str()),
-            0)
-      << ReadWholeFile(dir + "/view.log");
-  const EnvironmentImage image = ReadEnvironment(exr);
+  const EnvironmentImage image = RelitUnderUniformSky(dir, dir + "/np2", pack);
+  ASSERT_FALSE(HasFailure());
+  const std::string sky = dir + "/sky.exr";  // written by RelitUnderUniformSky
+  const EnvironmentImage uniform = ReadEnvironment(sky);
   ASSERT_EQ(image.width, kWidth);
   ASSERT_EQ(image.height, kHeight);
   std::size_t checked = 0;
@@ -319,8 +328,7 @@ TEST(ImageRelightingMpiTest, GatheredBouncesAreByteIdenticalAndResume) {
   std::ofstream(features_file) << features;
   const auto refused = testing::RunPrtFarm(1, features_file + " --out " + dir + "/features");
   EXPECT_EQ(refused.exit_code, 2) << refused.output;
-  EXPECT_NE(refused.output.find("set it to \"combination\""), std::string::npos)
-      << refused.output;
+  EXPECT_NE(refused.output.find("set it to \"combination\""), std::string::npos) << refused.output;
 }
 
 // Glossy pixels (docs/image-relighting.md, "Glossy pixels"): the box in GGX (roughness 0.5,
@@ -339,7 +347,8 @@ std::string GlossyImageScene(const std::string& dir, const std::string& base) {
   return file;
 }
 
-TEST(ImageRelightingMpiTest, GlossyPixelsAreTheKernelsRowsForAnyRankCountAndRelightWithTheirWeight) {
+TEST(ImageRelightingMpiTest,
+     GlossyPixelsAreTheKernelsRowsForAnyRankCountAndRelightWithTheirWeight) {
   const std::string dir = WorkDir("glossy");
   const std::string scene_file = GlossyImageScene(dir, "tiny.toml");
   const SceneDescription scene = LoadSceneFile(scene_file);
@@ -368,22 +377,8 @@ TEST(ImageRelightingMpiTest, GlossyPixelsAreTheKernelsRowsForAnyRankCountAndReli
     EXPECT_EQ(info.glossy_mesh, glossy.glossy);
     EXPECT_NEAR(info.glossy_weight[0][1], 0.8f, 1e-6f);
   }
-  const std::string pack = dir + "/glossy.prtpack";
-  ASSERT_EQ(std::system((std::string(PRT_PACK_EXE) + " pack " + dir + "/np2 --out " + pack + " > " +
-                         dir + "/pack.log 2>&1")
-                            .c_str()),
-            0)
-      << ReadWholeFile(dir + "/pack.log");
-  const std::string sky = dir + "/sky.exr", exr = dir + "/relit.exr";
-  EnvironmentImage uniform = EnvironmentImage::Zero(EnvmapLayout::kLatLong, 64, 32);
-  for (int c = 0; c < 3; ++c) std::fill(uniform.Channel(c).begin(), uniform.Channel(c).end(), 1.f);
-  WriteEnvironmentExr(uniform, sky);
-  ASSERT_EQ(std::system((std::string(PRT_VIEW_EXE) + " " + pack + " --env " + sky + " --exact" +
-                         " --exr " + exr + " > " + dir + "/view.log 2>&1")
-                            .c_str()),
-            0)
-      << ReadWholeFile(dir + "/view.log");
-  const EnvironmentImage image = ReadEnvironment(exr);
+  const EnvironmentImage image = RelitUnderUniformSky(dir, dir + "/np2", dir + "/glossy.prtpack");
+  ASSERT_FALSE(HasFailure());
   double err2[2] = {0, 0}, ref2[2] = {0, 0};
   for (std::size_t p = 0; p < pixels.samples.size(); ++p) {
     const uint32_t m = pixels.pixel_mesh[p];

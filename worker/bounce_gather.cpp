@@ -214,10 +214,10 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   return st;
 }
 
-GatherStats BounceGatherer::GatherSumRow(const SpatialSample& x, uint64_t index,
-                                         double own_edge, int channels, const float* direct,
-                                         const float* higher, uint64_t vertex_count,
-                                         std::size_t cols, float* out, SumScratch& s) const {
+GatherStats BounceGatherer::GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge,
+                                         int channels, const float* direct, const float* higher,
+                                         uint64_t vertex_count, std::size_t cols, float* out,
+                                         SumScratch& s) const {
   const std::size_t per_row = static_cast<std::size_t>(channels) * cols;
   const bool with_near = HasNearField(1, cols);
   s.near.resize(per_row);

@@ -102,8 +102,7 @@ class BounceGatherer {
   // site: a gather away from the vertices (GatherSite).
   GatherStats Terms(const SpatialSample& x, uint64_t index, int bounce, int channels,
                     std::vector<GatherTerm>& out, float* near = nullptr,
-                    std::span<const uint32_t> near_texels = {},
-                    const GatherSite& site = {}) const;
+                    std::span<const uint32_t> near_texels = {}, const GatherSite& site = {}) const;
 
   // Tᵏ(x) for bounce k into out (channels rows of `cols` floats): Terms, ApplyGather to the
   // previous bounce's rows (prev_channels × vertex_count rows) and, in bounce 1, the near field.

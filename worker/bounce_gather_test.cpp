@@ -263,6 +263,24 @@ TEST(BounceGather, CoarsenAndRefineAreExactOnTheCoarseGrid) {
 namespace prt {
 namespace {
 
+// The CGAL dragon (10k vertices, ../shared/data's chinese_dragon_10kv through the build's data
+// folder) on the default scene's ground, n = 8.
+SceneDescription DragonOnTheDefaultGround() {
+  SceneDescription scene = LoadDefaultScene(PRT_DATA_DIR);
+  scene.meshes.at(0).path = std::string(PRT_DATA_DIR) + "/meshes/ChineseDragon-10kv.off";
+  scene.meshes.at(0).resolved_path = scene.meshes.at(0).path;
+  scene.cubemap_n = 8;
+  return scene;
+}
+
+// A uniform sky of radiance 1 as a lighting cubemap of n texels per face edge.
+CubemapRgb UniformSky(int n) {
+  CubemapRgb sky;
+  sky.n = n;
+  for (int c = 0; c < 3; ++c) sky.Channel(c).assign(CubemapLayout(n).texel_count(), 1.0f);
+  return sky;
+}
+
 // The gather against the per-element path-traced reference on a real mesh at low n: the CGAL
 // dragon (10k vertices, ../shared/data's chinese_dragon_10kv through the build's data folder)
 // on the default scene's ground, n = 8, one bounce, a uniform sky. The same seed makes the two
@@ -270,10 +288,7 @@ namespace {
 // vertices of the model and 24 of the ground its RMS must lie within the reference's own noise
 // (2× its RMS standard error, the gather's noise being smaller) and under 2% of B.
 TEST(BounceGather, AgreesWithThePathTracedReferenceOnARealMeshWithinItsNoise) {
-  SceneDescription scene = LoadDefaultScene(PRT_DATA_DIR);
-  scene.meshes.at(0).path = std::string(PRT_DATA_DIR) + "/meshes/ChineseDragon-10kv.off";
-  scene.meshes.at(0).resolved_path = scene.meshes.at(0).path;
-  scene.cubemap_n = 8;
+  SceneDescription scene = DragonOnTheDefaultGround();
   const SceneGeometry g = BuildSceneGeometry(scene);
   const EmbreeScene embree(g);
   const SceneSurfaces surfaces(g);
@@ -292,10 +307,7 @@ TEST(BounceGather, AgreesWithThePathTracedReferenceOnARealMeshWithinItsNoise) {
   po.paths = 256;
   po.rays_per_texel = 4;
   const PathTraceReference reference(embree, surfaces, 8, po);
-  CubemapRgb sky;
-  sky.n = 8;
-  for (int c = 0; c < 3; ++c) sky.Channel(c).assign(sampler.layout().texel_count(), 1.0f);
-  const std::vector<CubemapRgb> lights{sky};
+  const std::vector<CubemapRgb> lights{UniformSky(8)};
   const std::size_t model = g.meshes[0].mesh.positions.size();
   for (const auto& [first, last] :
        {std::pair{std::size_t{0}, model}, std::pair{model, samples.size()}}) {
@@ -377,12 +389,6 @@ TEST(BounceGather, NearFieldTracesWhatTheVerticesCannotResolve) {
   EXPECT_NEAR(uniform(near), truth, 4 * relit[0].indirect_standard_error + 0.02 * truth);
 }
 
-}  // namespace
-}  // namespace prt
-
-namespace prt {
-namespace {
-
 // An image run's gather (docs/image-relighting.md, "Interreflection"): at camera pixels, which
 // are not vertices, Σ_k Tᵏ in one gather from the vertices' support rows (T⁰ traced on the
 // indirect grid, bounce 1 gathered at the vertices with its near field) against the per-element
@@ -393,10 +399,7 @@ namespace {
 // of B. It fails when the pixels' gather drops T⁰ or the higher bounces at near hits, or reads
 // the support rows of the wrong bounce.
 TEST(BounceGather, PixelSumOfBouncesAgreesWithThePathTracedReference) {
-  SceneDescription scene = LoadDefaultScene(PRT_DATA_DIR);
-  scene.meshes.at(0).path = std::string(PRT_DATA_DIR) + "/meshes/ChineseDragon-10kv.off";
-  scene.meshes.at(0).resolved_path = scene.meshes.at(0).path;
-  scene.cubemap_n = 8;
+  SceneDescription scene = DragonOnTheDefaultGround();
   scene.camera.width = 40;
   scene.camera.height = 30;
   const SceneGeometry g = BuildSceneGeometry(scene);
@@ -423,8 +426,8 @@ TEST(BounceGather, PixelSumOfBouncesAgreesWithThePathTracedReference) {
     std::vector<GatherTerm> terms;
     std::vector<float> near;
     for (uint64_t v = 0; v < V; ++v)
-      gatherer.GatherRow(vertices[v], v, 1, 1, direct.data(), V, 1, cols,
-                         higher.data() + v * cols, terms, near);
+      gatherer.GatherRow(vertices[v], v, 1, 1, direct.data(), V, 1, cols, higher.data() + v * cols,
+                         terms, near);
   }
   TransportSamplerOptions to;
   to.rays_per_texel = 4;
@@ -434,10 +437,7 @@ TEST(BounceGather, PixelSumOfBouncesAgreesWithThePathTracedReference) {
   po.paths = 256;
   po.rays_per_texel = 4;
   const PathTraceReference reference(embree, surfaces, 8, po);
-  CubemapRgb sky;
-  sky.n = 8;
-  for (int c = 0; c < 3; ++c) sky.Channel(c).assign(sampler.layout().texel_count(), 1.0f);
-  const std::vector<CubemapRgb> lights{sky};
+  const std::vector<CubemapRgb> lights{UniformSky(8)};
   std::vector<uint64_t> model, ground;
   for (uint64_t p = 0; p < pixels.samples.size(); ++p) {
     if (pixels.pixel_mesh[p] == 0) model.push_back(p);

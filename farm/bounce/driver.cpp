@@ -4,6 +4,9 @@
 #include "farm/bounce/driver.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <bit>
@@ -129,6 +132,28 @@ float* AppendJobResult(std::string& out, std::size_t floats, std::size_t energie
   const std::size_t at = out.size();
   out.resize(at + sizeof(BounceResultHeader) + floats * sizeof(float) + energies * sizeof(double));
   return reinterpret_cast<float*>(out.data() + at + sizeof(BounceResultHeader));
+}
+
+void ComputeJobRows(const std::string& phase, const RowRange& range, std::size_t per_sample,
+                    std::string& out,
+                    const std::function<GatherStats(uint64_t sample, float* dst)>& row) {
+  const std::size_t at = out.size();
+  const std::size_t floats = static_cast<std::size_t>(range.count) * per_sample;
+  float* rows = AppendJobResult(out, floats, 0);
+  tbb::enumerable_thread_specific<GatherStats> stats;
+  tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 8),
+                    [&](const tbb::blocked_range<uint64_t>& r) {
+                      for (uint64_t i = r.begin(); i != r.end(); ++i)
+                        stats.local() += row(range.first + i, rows + i * per_sample);
+                    });
+  GatherStats s;
+  for (const GatherStats& l : stats) s += l;
+  BounceResultHeader h;
+  h.rows_checksum = ChecksumFiniteRows(rows, floats, per_sample, range, phase);
+  h.rays_traced = s.rays_traced;
+  h.rays_escaped = s.rays_escaped;
+  h.back_face_hits = s.back_face_hits;
+  std::memcpy(out.data() + at, &h, sizeof h);
 }
 
 uint64_t ChecksumFiniteRows(const float* rows, std::size_t floats, std::size_t per_vertex,
@@ -478,9 +503,8 @@ void ReportIndirectShare(FarmContext& ctx, nlohmann::ordered_json& figures) {
   const EstimateLights& estimate = LoadEstimateLights(ctx);
   const uint64_t V = ctx.params.rows;
   const int C = ctx.params.channels;
-  const std::vector<std::string> files =
-      IndirectFiles(ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0,
-                    ctx.params.image != 0);
+  const std::vector<std::string> files = IndirectFiles(
+      ctx.folder, ctx.params.bounces, ctx.params.path_estimator != 0, ctx.params.image != 0);
   const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
   const std::size_t cols = coarse.texel_count();
   // T⁰ coarsened, and Σ_k Tᵏ.
@@ -553,8 +577,8 @@ void BounceDriver::PredictSteps(const FarmContext& ctx, std::vector<RunStep>& st
   double rows = static_cast<double>(p.rows);
   const double threads = std::max(1, ctx.computing_ranks()) * std::max(1, ctx.threads);
   const double dense_share = p.sparse_indirect && !on_vertices_of_image()
-                                ? std::min(1.0, ctx.plan.dense_budget + 0.05)
-                                : 1.0;
+                                 ? std::min(1.0, ctx.plan.dense_budget + 0.05)
+                                 : 1.0;
   const double share = step_ ? 1 - dense_share : dense_share;
   if (k_ == 0) {
     const double cols = 6.0 * p.cubemap_n * p.cubemap_n;
@@ -568,16 +592,16 @@ void BounceDriver::PredictSteps(const FarmContext& ctx, std::vector<RunStep>& st
   }
   const double m = p.indirect_n;
   if (pass_ == BouncePass::kVertexDirect) {  // rays_per_texel shadow rays per coarse texel
-    steps.push_back({name_, "bounce", double(Rows(ctx)),
-                     6 * m * m * p.rays_per_texel * 0.5 / (1e7 * threads)});
+    steps.push_back(
+        {name_, "bounce", double(Rows(ctx)), 6 * m * m * p.rays_per_texel * 0.5 / (1e7 * threads)});
     return;
   }
   if (on_vertices_of_image()) rows = double(Rows(ctx));
   // The pixels' gather applies its terms to T⁰ and, with K > 1, to Σ_{k≥1} Tᵏ.
   const double applies = pass_ == BouncePass::kPixelGather && p.bounces > 1 ? 2.0 : 1.0;
-  const double per_vertex = (p.gather_paths / 2e6 +
-                             applies * 3.0 * p.gather_paths * 6 * m * m * p.channels / 1e9) /
-                            threads;
+  const double per_vertex =
+      (p.gather_paths / 2e6 + applies * 3.0 * p.gather_paths * 6 * m * m * p.channels / 1e9) /
+      threads;
   // The features' directions are a fraction of P.
   const double scale =
       step_ ? double(std::max(1, p.sparse_feature_paths)) / std::max(1, p.gather_paths) : 1.0;

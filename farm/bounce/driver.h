@@ -41,6 +41,7 @@
 
 #include "farm/farm_context.h"
 #include "farm/job_loop.h"
+#include "worker/bounce_gather.h"
 
 namespace prt {
 
@@ -74,6 +75,13 @@ nlohmann::ordered_json TracedFigures(const BounceTotals& totals, int k);
 // Appends room for a job's header, `floats` rows floats and `energies` doubles to `out` (zeros);
 // returns where its rows go.
 float* AppendJobResult(std::string& out, std::size_t floats, std::size_t energies);
+// A job of `range` whose rows are computed sample by sample, in parallel (TBB): appends the
+// header and range.count × per_sample floats to `out`; row(s, dst) fills sample s's rows and
+// returns its counters (called on any thread, in any order). The header gets the counters' sum
+// and the rows' checksum (ChecksumFiniteRows, naming `phase`).
+void ComputeJobRows(const std::string& phase, const RowRange& range, std::size_t per_sample,
+                    std::string& out,
+                    const std::function<GatherStats(uint64_t sample, float* dst)>& row);
 // The XXH64 of a job's rows, after checking that each is finite (a NumericalError names the
 // first vertex that is not).
 uint64_t ChecksumFiniteRows(const float* rows, std::size_t floats, std::size_t per_vertex,

@@ -7,8 +7,10 @@
 #pragma once
 
 #include <memory>
+#include <string>
 #include <vector>
 
+#include "farm/bounce/driver.h"
 #include "farm/farm_context.h"
 #include "vocabulary/cubemap.h"
 #include "worker/bounce_gather.h"
@@ -16,7 +18,8 @@
 
 namespace prt {
 
-// farm/bounce/gathering.cpp: bounce k ≥ 1 ("bounce-<k>").
+// farm/bounce/gathering.cpp: bounce k ≥ 1 ("bounce-<k>"), and an image run's vertex-bounce-<k>
+// (MakeVertexBouncePhase, below).
 // Each shares `figures`, report.json "interreflection" (farm/bounce/driver.h).
 std::unique_ptr<FarmPhase> MakeGatheringPhase(int k,
                                               std::shared_ptr<nlohmann::ordered_json> figures);
@@ -31,6 +34,14 @@ std::unique_ptr<FarmPhase> MakeFeaturesPhase(int k,
 // (docs/image-relighting.md, "Interreflection"): T⁰ at the mesh vertices on the indirect grid
 // ("vertex-direct"), bounces 1 … K−1 at the vertices ("vertex-bounce-<k>"), and the pixels'
 // Σ_k Tᵏ gathered from those ("pixel-gather").
+// Every rank, image runs: the mesh vertices as samples (made once, kept in ctx.results).
+const std::vector<SpatialSample>& ImageVertexSamples(FarmContext& ctx);
+// Reads all `channels` × `rows` rows of a support file on the `grid` into `out` (resized), or
+// adds them to `out` with `add`. Throws InputError naming the file when its shape differs.
+void ReadSupportRows(const std::string& path, uint64_t rows, int channels,
+                     const CubemapLayout& grid, std::vector<float>& out, bool add);
+// Rank 0: a support or pixel phase's figures, report.json "interreflection.image_passes[]".
+void AddImagePassFigures(BounceDriver& driver, const BounceTotals& totals, int k);
 std::unique_ptr<FarmPhase> MakeVertexDirectPhase(std::shared_ptr<nlohmann::ordered_json> figures);
 std::unique_ptr<FarmPhase> MakeVertexBouncePhase(int k,
                                                  std::shared_ptr<nlohmann::ordered_json> figures);
@@ -39,6 +50,12 @@ std::unique_ptr<FarmPhase> MakePixelGatherPhase(std::shared_ptr<nlohmann::ordere
 // The gather estimator's settings of the run ([sampling] gather_paths, seed, indirect_n,
 // near_field).
 BounceGatherOptions GatherOptionsOf(const FarmContext& ctx);
+// The gather kernels of a computing rank, with the run's settings (none elsewhere).
+struct GatherKernels {
+  explicit GatherKernels(const FarmContext& ctx);
+  std::unique_ptr<SceneSurfaces> surfaces;
+  std::unique_ptr<BounceGatherer> gatherer;
+};
 // The rows bounce k gathers from, on the indirect grid: T⁰ coarsened (k = 1, prev_channels 1) or
 // bounce k − 1's (channels rows per vertex), read from the run folder.
 std::vector<float> ReadPreviousBounce(const FarmContext& ctx, int k, const CubemapLayout& fine,

@@ -9,11 +9,7 @@
 // Method "sparse" with [sparse] indirect = "combination": only the dense vertices gather, the
 // others are combined by rank 0 after the job loop (the driver); with "features" this phase
 // writes the dense vertices' rows (bounce-<k>-dense.prtt) and farm/bounce/features.cpp the rest.
-#include <tbb/blocked_range.h>
-#include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
-
-#include <cstring>
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -27,83 +23,77 @@ namespace prt {
 
 namespace {
 
+// Bounce k on the run's samples (pass kSamples) or, in an image run, on the mesh vertices'
+// support rows (kVertexBounce, "vertex-bounce-<k>": the same gather, from the vertices' own
+// previous bounce; farm/bounce/pixel_gathering.cpp).
 class GatheringPhase final : public BouncePhase {
  public:
-  GatheringPhase(int k, std::shared_ptr<nlohmann::ordered_json> figures)
-      : BouncePhase(k, false, std::move(figures)), k_(k) {}
+  GatheringPhase(int k, std::shared_ptr<nlohmann::ordered_json> figures, BouncePass pass)
+      : BouncePhase(k, false, std::move(figures), pass), k_(k) {}
 
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
-    const uint64_t V = ctx.params.rows;
+    const bool support = driver_.on_vertices_of_image();
+    const std::vector<SpatialSample>& samples = support ? ImageVertexSamples(ctx) : ctx.samples;
+    const uint64_t V = driver_.Rows(ctx);
+    const int C = ctx.params.channels;
     const CubemapLayout fine(ctx.params.cubemap_n), coarse(ctx.params.indirect_n);
     const std::size_t cols = coarse.texel_count();
-    const int prev_channels = k_ == 1 ? 1 : ctx.params.channels;
+    const int prev_channels = k_ == 1 ? 1 : C;
     std::vector<float> previous;
-    driver_.ReadSceneRows(
-        ctx, uint64_t(prev_channels) * V * cols * sizeof(float), "the previous bounce's rows",
-        [&] { previous = ReadPreviousBounce(ctx, k_, fine, coarse, prev_channels); }, {&previous});
+    driver_.ReadSceneRows(ctx, uint64_t(prev_channels) * V * cols * sizeof(float),
+                          "the previous bounce's rows",
+                          [&] {
+                            if (support)
+                              ReadSupportRows(k_ == 1 ? ctx.folder.VertexDirectFile()
+                                                      : ctx.folder.VertexBounceFile(k_ - 1),
+                                              V, prev_channels, coarse, previous, false);
+                            else
+                              previous = ReadPreviousBounce(ctx, k_, fine, coarse, prev_channels);
+                          },
+                          {&previous});
     driver_.LoadCombination(ctx);
 
-    std::unique_ptr<SceneSurfaces> surfaces;
-    std::unique_ptr<BounceGatherer> gatherer;
-    if (ctx.computes_here()) {
-      surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
-      gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, GatherOptionsOf(ctx));
-    }
+    const GatherKernels kernels(ctx);
+    const BounceGatherer* gatherer = kernels.gatherer.get();
     BounceDriver::Jobs jobs;
     jobs.cols = cols;
-    jobs.completes_stage = k_ == ctx.params.bounces && ctx.params.sparse_indirect != 2;
+    jobs.completes_stage = !support && k_ == ctx.params.bounces && ctx.params.sparse_indirect != 2;
+    // Channels rows per vertex; zeros for a combined vertex, which rank 0 fills from the dense
+    // rows.
     jobs.compute = [&](const RowRange& range, std::string& out) {
-      Gather(ctx, *gatherer, previous, prev_channels, cols, range, out);
+      const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
+      ComputeJobRows(driver_.name(), range, per_vertex, out, [&](uint64_t v, float* dst) {
+        if (driver_.Combined(v)) {
+          std::fill_n(dst, per_vertex, 0.0f);
+          return GatherStats{};
+        }
+        thread_local std::vector<GatherTerm> terms;
+        thread_local std::vector<float> near;
+        return gatherer->GatherRow(samples[v], v, k_, C, previous.data(), V, prev_channels, cols,
+                                   dst, terms, near);
+      });
     };
     jobs.report = [&](FarmContext&, const BounceTotals& totals) {
-      driver_.figures()["per_bounce"].push_back(TracedFigures(totals, k_));
+      if (support)
+        AddImagePassFigures(driver_, totals, k_);
+      else
+        driver_.figures()["per_bounce"].push_back(TracedFigures(totals, k_));
     };
     driver_.RunJobs(ctx, jobs, start);
   }
 
  private:
-  // Vertices `range` into the payload: the header, then channels rows per vertex (vertex-major;
-  // zeros for a combined vertex, which rank 0 fills from the dense rows).
-  void Gather(const FarmContext& ctx, const BounceGatherer& gatherer,
-              const std::vector<float>& previous, int prev_channels, std::size_t cols,
-              const RowRange& range, std::string& out) const {
-    const int C = ctx.params.channels;
-    const uint64_t V = ctx.params.rows;
-    const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
-    const std::size_t at = out.size();
-    const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
-    float* rows = AppendJobResult(out, floats, 0);
-    tbb::enumerable_thread_specific<GatherStats> stats;
-    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 8),
-                      [&](const tbb::blocked_range<uint64_t>& r) {
-                        std::vector<GatherTerm> terms;
-                        std::vector<float> near;
-                        for (uint64_t i = r.begin(); i != r.end(); ++i) {
-                          const uint64_t v = range.first + i;
-                          if (driver_.Combined(v)) {
-                            std::fill_n(rows + i * per_vertex, per_vertex, 0.0f);
-                            continue;
-                          }
-                          stats.local() += gatherer.GatherRow(
-                              ctx.samples[v], v, k_, C, previous.data(), V, prev_channels, cols,
-                              rows + i * per_vertex, terms, near);
-                        }
-                      });
-    BounceResultHeader h;
-    h.rows_checksum = ChecksumFiniteRows(rows, floats, per_vertex, range, driver_.name());
-    GatherStats s;
-    for (const GatherStats& l : stats) s += l;
-    h.rays_traced = s.rays_traced;
-    h.rays_escaped = s.rays_escaped;
-    h.back_face_hits = s.back_face_hits;
-    std::memcpy(out.data() + at, &h, sizeof h);
-  }
-
   int k_;
 };
 
 }  // namespace
+
+GatherKernels::GatherKernels(const FarmContext& ctx) {
+  if (!ctx.computes_here()) return;
+  surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
+  gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, GatherOptionsOf(ctx));
+}
 
 BounceGatherOptions GatherOptionsOf(const FarmContext& ctx) {
   BounceGatherOptions go;
@@ -136,7 +126,12 @@ std::vector<float> ReadPreviousBounce(const FarmContext& ctx, int k, const Cubem
 
 std::unique_ptr<FarmPhase> MakeGatheringPhase(int k,
                                               std::shared_ptr<nlohmann::ordered_json> figures) {
-  return std::make_unique<GatheringPhase>(k, std::move(figures));
+  return std::make_unique<GatheringPhase>(k, std::move(figures), BouncePass::kSamples);
+}
+
+std::unique_ptr<FarmPhase> MakeVertexBouncePhase(int k,
+                                                 std::shared_ptr<nlohmann::ordered_json> figures) {
+  return std::make_unique<GatheringPhase>(k, std::move(figures), BouncePass::kVertexBounce);
 }
 
 }  // namespace prt

@@ -1,11 +1,13 @@
 // An image run's interreflection by bounce gathering (docs/image-relighting.md,
-// "Interreflection"; worker/bounce_gather.h). A pixel's gather interpolates the previous bounce
+// "Interreflection"; worker/bounce_gather.h; the indirect part on the low-resolution grid as in
+// Huang & Ramamoorthi 2010 §4.2 and §7). A pixel's gather interpolates the previous bounce
 // at the vertices of the triangle its direction hits, so the run computes support rows at the
 // mesh vertices first, on the indirect grid (m = indirect_n), never shipped:
 //   "vertex-direct"       T⁰(v): rays_per_texel jittered shadow rays per coarse texel
 //                         (indirect/vertex-direct.prtt, one channel);
 //   "vertex-bounce-<k>"   Tᵏ(v), k = 1 … K−1, gathered from Tᵏ⁻¹ exactly as a vertex run's
-//                         bounce k (near field in bounce 1; indirect/vertex-bounce-<k>.prtt);
+//                         bounce k (near field in bounce 1; indirect/vertex-bounce-<k>.prtt) by
+//                         farm/bounce/gathering.cpp's phase on the vertices;
 //   "pixel-gather"        the pixels' whole indirect part in one gather:
 //     Σ_{k=1..K} Tᵏ(p) = (1/P) Σ_q ρ(y_q) · Σ_{k=0..K−1} Tᵏ(y_q),
 // the same P directions for every bounce (each bounce's estimate stays unbiased; they are
@@ -18,11 +20,7 @@
 // the same bytes; each phase journals and resumes like the vertex run's bounces (the driver).
 // Method "sparse" with [sparse] indirect = "combination": only the dense pixels gather, the
 // others combine them (the driver, as for vertices).
-#include <tbb/blocked_range.h>
-#include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
-
-#include <cstring>
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -34,29 +32,22 @@
 
 namespace prt {
 
-namespace {
-
-// Every rank: the image run's mesh vertices as samples (created by the first vertex phase).
-struct ImageVertexSamples {
-  std::vector<SpatialSample> samples;
-};
-const std::vector<SpatialSample>& VertexSamples(FarmContext& ctx) {
-  if (const ImageVertexSamples* v = ctx.results.Find<ImageVertexSamples>()) return v->samples;
-  return ctx.results.Put(ImageVertexSamples{SpatialSamplesOf(ctx.geometry)}).samples;
+const std::vector<SpatialSample>& ImageVertexSamples(FarmContext& ctx) {
+  struct Kept {
+    std::vector<SpatialSample> samples;
+  };
+  if (const Kept* v = ctx.results.Find<Kept>()) return v->samples;
+  return ctx.results.Put(Kept{SpatialSamplesOf(ctx.geometry)}).samples;
 }
 
-// The gathers of pixels draw from their own stream: pixel p gathers as index kPixelStream + p.
-constexpr uint64_t kPixelStream = uint64_t{1} << 48;
-
-// Reads all `channels` × `rows` rows of a support file of the indirect grid into `out`
-// (added to what is there when `add`).
-void ReadSupport(const std::string& path, uint64_t rows, int channels, std::size_t cols, int n,
-                 std::vector<float>& out, bool add) {
+void ReadSupportRows(const std::string& path, uint64_t rows, int channels,
+                     const CubemapLayout& grid, std::vector<float>& out, bool add) {
   const TransportFileReader reader(path);
-  if (reader.info().rows != uint64_t(channels) * rows || reader.info().cubemap_n != uint32_t(n))
+  if (reader.info().rows != uint64_t(channels) * rows ||
+      reader.info().cubemap_n != uint32_t(grid.n()))
     throw InputError(path, "does not hold " + std::to_string(channels) + " × " +
-                               std::to_string(rows) + " rows at n = " + std::to_string(n));
-  const std::size_t floats = static_cast<std::size_t>(channels * rows) * cols;
+                               std::to_string(rows) + " rows at n = " + std::to_string(grid.n()));
+  const std::size_t floats = static_cast<std::size_t>(channels * rows) * grid.texel_count();
   if (!add) {
     out.resize(floats);
     reader.ReadRows(0, reader.info().rows, out.data());
@@ -67,24 +58,16 @@ void ReadSupport(const std::string& path, uint64_t rows, int channels, std::size
   for (std::size_t i = 0; i < floats; ++i) out[i] += more[i];
 }
 
-// The figures of a support or pixel phase: report.json "interreflection.image_passes".
-void AddPassFigures(BounceDriver& driver, const BounceTotals& totals, int k) {
+void AddImagePassFigures(BounceDriver& driver, const BounceTotals& totals, int k) {
   nlohmann::ordered_json f = TracedFigures(totals, k);
   f["phase"] = driver.name();
   driver.figures()["image_passes"].push_back(std::move(f));
 }
 
-// Fills the header at `at` of `out` for `floats` rows floats (checked finite).
-void FinishHeader(const BounceDriver& driver, std::string& out, std::size_t at, const float* rows,
-                  std::size_t floats, std::size_t per_row, const RowRange& range,
-                  const GatherStats& s) {
-  BounceResultHeader h;
-  h.rows_checksum = ChecksumFiniteRows(rows, floats, per_row, range, driver.name());
-  h.rays_traced = s.rays_traced;
-  h.rays_escaped = s.rays_escaped;
-  h.back_face_hits = s.back_face_hits;
-  std::memcpy(out.data() + at, &h, sizeof h);
-}
+namespace {
+
+// The gathers of pixels draw from their own stream: pixel p gathers as index kPixelStream + p.
+constexpr uint64_t kPixelStream = uint64_t{1} << 48;
 
 class VertexDirectPhase final : public BouncePhase {
  public:
@@ -93,7 +76,7 @@ class VertexDirectPhase final : public BouncePhase {
 
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
-    const std::vector<SpatialSample>& samples = VertexSamples(ctx);
+    const std::vector<SpatialSample>& samples = ImageVertexSamples(ctx);
     const std::size_t cols = CubemapLayout(ctx.params.indirect_n).texel_count();
     std::unique_ptr<TransportSampler> sampler;
     if (ctx.computes_here()) {
@@ -106,86 +89,17 @@ class VertexDirectPhase final : public BouncePhase {
     BounceDriver::Jobs jobs;
     jobs.cols = cols;
     jobs.compute = [&](const RowRange& range, std::string& out) {
-      const std::size_t at = out.size();
-      const std::size_t floats = static_cast<std::size_t>(range.count) * cols;
-      float* rows = AppendJobResult(out, floats, 0);
-      tbb::enumerable_thread_specific<uint64_t> rays(0);
-      tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 16),
-                        [&](const tbb::blocked_range<uint64_t>& r) {
-                          for (uint64_t i = r.begin(); i != r.end(); ++i) {
-                            const uint64_t v = range.first + i;
-                            rays.local() +=
-                                sampler->ComputeRow(samples[v], v, rows + i * cols).rays_traced;
-                          }
-                        });
-      GatherStats s;
-      for (uint64_t r : rays) s.rays_traced += r;
-      FinishHeader(driver_, out, at, rows, floats, cols, range, s);
+      ComputeJobRows(driver_.name(), range, cols, out, [&](uint64_t v, float* dst) {
+        GatherStats st;
+        st.rays_traced = sampler->ComputeRow(samples[v], v, dst).rays_traced;
+        return st;
+      });
     };
     jobs.report = [&](FarmContext&, const BounceTotals& totals) {
-      AddPassFigures(driver_, totals, 0);
+      AddImagePassFigures(driver_, totals, 0);
     };
     driver_.RunJobs(ctx, jobs, start);
   }
-};
-
-class VertexBouncePhase final : public BouncePhase {
- public:
-  VertexBouncePhase(int k, std::shared_ptr<nlohmann::ordered_json> figures)
-      : BouncePhase(k, false, std::move(figures), BouncePass::kVertexBounce), k_(k) {}
-
-  void Run(FarmContext& ctx) override {
-    const double start = FarmNow();
-    const std::vector<SpatialSample>& samples = VertexSamples(ctx);
-    const uint64_t V = samples.size();
-    const int C = ctx.params.channels, n = ctx.params.indirect_n;
-    const std::size_t cols = CubemapLayout(n).texel_count();
-    const int prev_channels = k_ == 1 ? 1 : C;
-    std::vector<float> previous;
-    driver_.ReadSceneRows(
-        ctx, uint64_t(prev_channels) * V * cols * sizeof(float), "the vertices' previous bounce",
-        [&] {
-          ReadSupport(k_ == 1 ? ctx.folder.VertexDirectFile() : ctx.folder.VertexBounceFile(k_ - 1),
-                      V, prev_channels, cols, n, previous, false);
-        },
-        {&previous});
-    std::unique_ptr<SceneSurfaces> surfaces;
-    std::unique_ptr<BounceGatherer> gatherer;
-    if (ctx.computes_here()) {
-      surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
-      gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, GatherOptionsOf(ctx));
-    }
-    BounceDriver::Jobs jobs;
-    jobs.cols = cols;
-    jobs.compute = [&](const RowRange& range, std::string& out) {
-      const std::size_t per_vertex = static_cast<std::size_t>(C) * cols;
-      const std::size_t at = out.size();
-      const std::size_t floats = static_cast<std::size_t>(range.count) * per_vertex;
-      float* rows = AppendJobResult(out, floats, 0);
-      tbb::enumerable_thread_specific<GatherStats> stats;
-      tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 8),
-                        [&](const tbb::blocked_range<uint64_t>& r) {
-                          std::vector<GatherTerm> terms;
-                          std::vector<float> near;
-                          for (uint64_t i = r.begin(); i != r.end(); ++i) {
-                            const uint64_t v = range.first + i;
-                            stats.local() += gatherer->GatherRow(
-                                samples[v], v, k_, C, previous.data(), V, prev_channels, cols,
-                                rows + i * per_vertex, terms, near);
-                          }
-                        });
-      GatherStats s;
-      for (const GatherStats& l : stats) s += l;
-      FinishHeader(driver_, out, at, rows, floats, per_vertex, range, s);
-    };
-    jobs.report = [&](FarmContext&, const BounceTotals& totals) {
-      AddPassFigures(driver_, totals, k_);
-    };
-    driver_.RunJobs(ctx, jobs, start);
-  }
-
- private:
-  int k_;
 };
 
 class PixelGatherPhase final : public BouncePhase {
@@ -196,56 +110,42 @@ class PixelGatherPhase final : public BouncePhase {
   void Run(FarmContext& ctx) override {
     const double start = FarmNow();
     const uint64_t V = ctx.geometry.vertex_count();
-    const int C = ctx.params.channels, K = ctx.params.bounces, n = ctx.params.indirect_n;
-    const std::size_t cols = CubemapLayout(n).texel_count();
+    const int C = ctx.params.channels, K = ctx.params.bounces;
+    const CubemapLayout grid(ctx.params.indirect_n);
+    const std::size_t cols = grid.texel_count();
     // T⁰ at the vertices (one channel) and Σ_{k=1..K−1} Tᵏ (C channels; none when K = 1).
     std::vector<float> direct, higher;
     const uint64_t bytes = (uint64_t(1) + (K > 1 ? uint64_t(C) : 0)) * V * cols * sizeof(float);
     driver_.ReadSceneRows(
         ctx, bytes, "the vertices' support rows",
         [&] {
-          ReadSupport(ctx.folder.VertexDirectFile(), V, 1, cols, n, direct, false);
+          ReadSupportRows(ctx.folder.VertexDirectFile(), V, 1, grid, direct, false);
           for (int k = 1; k < K; ++k)
-            ReadSupport(ctx.folder.VertexBounceFile(k), V, C, cols, n, higher, k > 1);
+            ReadSupportRows(ctx.folder.VertexBounceFile(k), V, C, grid, higher, k > 1);
         },
         {&direct, &higher});
     driver_.LoadCombination(ctx);
-    std::unique_ptr<SceneSurfaces> surfaces;
-    std::unique_ptr<BounceGatherer> gatherer;
-    if (ctx.computes_here()) {
-      surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
-      gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, GatherOptionsOf(ctx));
-    }
+    const GatherKernels kernels(ctx);
+    const BounceGatherer* gatherer = kernels.gatherer.get();
     BounceDriver::Jobs jobs;
     jobs.cols = cols;
     jobs.completes_stage = true;
+    // Zero rows for background pixels and combined ones (rank 0 fills those).
     jobs.compute = [&](const RowRange& range, std::string& out) {
       const std::size_t per_pixel = static_cast<std::size_t>(C) * cols;
-      const std::size_t at = out.size();
-      const std::size_t floats = static_cast<std::size_t>(range.count) * per_pixel;
-      float* rows = AppendJobResult(out, floats, 0);
-      tbb::enumerable_thread_specific<GatherStats> stats;
-      tbb::parallel_for(tbb::blocked_range<uint64_t>(0, range.count, 8),
-                        [&](const tbb::blocked_range<uint64_t>& r) {
-                          BounceGatherer::SumScratch scratch;
-                          for (uint64_t i = r.begin(); i != r.end(); ++i) {
-                            const uint64_t p = range.first + i;
-                            float* dst = rows + i * per_pixel;
-                            if (driver_.Combined(p) || ctx.samples[p].background) {
-                              std::fill_n(dst, per_pixel, 0.0f);
-                              continue;
-                            }
-                            stats.local() += gatherer->GatherSumRow(
-                                ctx.samples[p], kPixelStream + p, ctx.pixel_edge[p], C, direct.data(),
-                                higher.empty() ? nullptr : higher.data(), V, cols, dst, scratch);
-                          }
-                        });
-      GatherStats s;
-      for (const GatherStats& l : stats) s += l;
-      FinishHeader(driver_, out, at, rows, floats, per_pixel, range, s);
+      ComputeJobRows(driver_.name(), range, per_pixel, out, [&](uint64_t p, float* dst) {
+        if (driver_.Combined(p) || ctx.samples[p].background) {
+          std::fill_n(dst, per_pixel, 0.0f);
+          return GatherStats{};
+        }
+        thread_local BounceGatherer::SumScratch scratch;
+        return gatherer->GatherSumRow(ctx.samples[p], kPixelStream + p, ctx.pixel_edge[p], C,
+                                      direct.data(), higher.empty() ? nullptr : higher.data(), V,
+                                      cols, dst, scratch);
+      });
     };
     jobs.report = [&](FarmContext&, const BounceTotals& totals) {
-      AddPassFigures(driver_, totals, 0);
+      AddImagePassFigures(driver_, totals, 0);
     };
     driver_.RunJobs(ctx, jobs, start);
   }
@@ -257,11 +157,6 @@ class PixelGatherPhase final : public BouncePhase {
 
 std::unique_ptr<FarmPhase> MakeVertexDirectPhase(std::shared_ptr<nlohmann::ordered_json> figures) {
   return std::make_unique<VertexDirectPhase>(std::move(figures));
-}
-
-std::unique_ptr<FarmPhase> MakeVertexBouncePhase(int k,
-                                                 std::shared_ptr<nlohmann::ordered_json> figures) {
-  return std::make_unique<VertexBouncePhase>(k, std::move(figures));
 }
 
 std::unique_ptr<FarmPhase> MakePixelGatherPhase(std::shared_ptr<nlohmann::ordered_json> figures) {
