@@ -10,13 +10,15 @@
 #include <string>
 #include <vector>
 
-#include "farm/bounce/driver.h"
 #include "farm/farm_context.h"
 #include "vocabulary/cubemap.h"
 #include "worker/bounce_gather.h"
 #include "worker/path_trace_reference.h"
 
 namespace prt {
+
+class BounceDriver;  // farm/bounce/driver.h
+struct BounceTotals;
 
 // farm/bounce/gathering.cpp: bounce k ≥ 1 ("bounce-<k>"), and an image run's vertex-bounce-<k>
 // (MakeVertexBouncePhase, below).
