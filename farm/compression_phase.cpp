@@ -362,7 +362,7 @@ std::unique_ptr<RadianceNormAccumulator> StartRadianceNorms(
   std::vector<CubemapRgb> lights = ShareEstimateLights(
       estimate ? estimate->lights : none, static_cast<int>(header.cubemap_n), ctx.collectives);
   return std::make_unique<RadianceNormAccumulator>(std::move(lights), ctx.RowGroups(),
-                                                   ctx.params.channels);
+                                                   ctx.params.channels, ctx.SampleGroups());
 }
 
 // What a rank's transpose and column compression leave: its compressed columns and the figures

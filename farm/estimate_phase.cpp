@@ -180,9 +180,12 @@ class EstimatePhase final : public FarmPhase {
       rec["environments"] = rec_envs;
       rec["worst_relative_rms"] = rec_worst;
       out["reconstruction"] = rec;
-      const auto [tot_envs, tot_worst] = ErrorTable(
-          ctx, estimate, ev,
-          [&](std::size_t l, std::size_t m) { return ev.mc[l][m] + ev.reconstruction[l][m]; });
+      const auto [tot_envs, tot_worst] =
+          ErrorTable(ctx, estimate, ev, [&](std::size_t l, std::size_t m) {
+            Rgb3 t;
+            for (int c = 0; c < 3; ++c) t[c] = ev.mc[l][m][c] + ev.reconstruction[l][m][c];
+            return t;
+          });
       out["total"] = {{"environments", tot_envs}, {"worst_relative_rms", tot_worst}};
     }
     WriteFileDurably(f.accuracy, out.dump(2) + "\n");
@@ -193,15 +196,26 @@ class EstimatePhase final : public FarmPhase {
  private:
   // Per light and mesh: the Monte-Carlo and reconstruction variances of Σ B (albedo-weighted)
   // and Σ B² of the mesh's rows, the tables' numerators and denominators.
+  // Per colour channel too: [light][mesh][channel].
+  using Rgb3 = std::array<double, 3>;
   struct ErrorVariances {
-    std::vector<std::vector<double>> mc, reconstruction, norm;  // [light][mesh]
+    std::vector<std::vector<Rgb3>> mc, reconstruction, norm;  // [light][mesh][channel]
   };
+  static double Sum3(const Rgb3& v) { return v[0] + v[1] + v[2]; }
 
   // transport.variance, checked against this run (nothing when an older prt-farm left none).
   static std::optional<TransportVariance> ReadVariance(const FarmContext& ctx) {
     const RunFolder& f = ctx.folder;
     if (!std::filesystem::exists(f.variance)) return std::nullopt;
     TransportVariance variance = DecodeTransportVariance(ReadWholeFile(f.variance), f.variance);
+    if (ctx.params.image && variance.cubemap_n == static_cast<uint32_t>(ctx.params.cubemap_n) &&
+        variance.sums.size() == 1 && ctx.RowGroups().size() != 1) {
+      // An image run of a prt-farm before the pixels were grouped by mesh: one group of all
+      // pixels, which the per-mesh tables cannot split.
+      spdlog::warn("{}: one group of all pixels (an older prt-farm's); no Monte-Carlo estimate",
+                   f.variance);
+      return std::nullopt;
+    }
     if (variance.cubemap_n != static_cast<uint32_t>(ctx.params.cubemap_n) ||
         variance.sums.size() != ctx.RowGroups().size())
       throw InputError(f.variance, "does not describe this run's rows and meshes");
@@ -212,7 +226,7 @@ class EstimatePhase final : public FarmPhase {
   // through it, else read here from the rows.
   static RadianceNormAccumulator RadianceNorms(FarmContext& ctx, const EstimateLights& estimate,
                                                const std::vector<uint64_t>& mesh_rows) {
-    RadianceNormAccumulator norms(estimate.lights, mesh_rows);
+    RadianceNormAccumulator norms(estimate.lights, mesh_rows, 1, ctx.SampleGroups());
     if (estimate.have_norms) {
       norms.Set(estimate.norms);
       return norms;
@@ -280,44 +294,47 @@ class EstimatePhase final : public FarmPhase {
         const Rgb rho = ctx.GroupAlbedo(m);
         const std::array<double, 3> v =
             variance ? MeshRadianceVariance(*variance, m, lights[l]) : std::array<double, 3>{};
-        double var_m = 0, norm_m = 0;
+        Rgb3 var_m{}, norm_m{};
         for (int c = 0; c < 3; ++c) {
           const double r2 = double(rho[c]) * rho[c];
-          var_m += r2 * v[c];
-          norm_m += r2 * norms.norms()[l][m][c];
+          var_m[c] = r2 * v[c];
+          norm_m[c] = r2 * norms.norms()[l][m][c];
         }
         ev.mc[l].push_back(var_m);
         ev.norm[l].push_back(norm_m);
-        ev.reconstruction[l].push_back(0.0);
+        ev.reconstruction[l].push_back(Rgb3{});
       }
       if (!cv.present) continue;
-      // Σ |ΔB|² of each mesh's cross-validated vertices under this light.
-      std::vector<double> sum(meshes, 0.0);
+      // Σ |ΔB_c|² of each mesh's cross-validated vertices under this light.
+      std::vector<Rgb3> sum(meshes, Rgb3{});
       for (const auto& [m, diff] : cv.rows) {
         const Rgb rho = ctx.GroupAlbedo(m);
         for (int c = 0; c < 3; ++c) {
           double b = 0;
           const float* L = lights[l].Channel(c).data();
           for (std::size_t j = 0; j < diff.size(); ++j) b += double(diff[j]) * L[j];
-          sum[m] += double(rho[c]) * rho[c] * b * b;
+          sum[m][c] += double(rho[c]) * rho[c] * b * b;
         }
       }
       for (std::size_t m = 0; m < meshes; ++m) {
         if (cv.samples[m] == 0) continue;
-        const double mean = sum[m] / static_cast<double>(cv.samples[m]);
-        const double per_row_mc =
-            !variance || variance->rows_covered.empty() || variance->rows_covered[m] == 0
-                ? 0.0
-                : ev.mc[l][m] / static_cast<double>(variance->rows_covered[m]);
-        ev.reconstruction[l][m] =
-            static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
+        const bool covered =
+            variance && !variance->rows_covered.empty() && variance->rows_covered[m] != 0;
+        for (int c = 0; c < 3; ++c) {
+          const double mean = sum[m][c] / static_cast<double>(cv.samples[m]);
+          const double per_row_mc =
+              covered ? ev.mc[l][m][c] / static_cast<double>(variance->rows_covered[m]) : 0.0;
+          ev.reconstruction[l][m][c] =
+              static_cast<double>(cv.reconstructed[m]) * std::max(0.0, mean - per_row_mc);
+        }
       }
     }
     return ev;
   }
 
   // One table of accuracy.json: per environment, the relative RMS error of B (the variance
-  // `var_of(light, mesh)` over Σ B²), per mesh and over all; and the worst environment's.
+  // `var_of(light, mesh)`, per channel, over Σ B²), per mesh (and per colour channel) and over
+  // all; and the worst environment's.
   template <class VarianceOf>
   static std::pair<Json, double> ErrorTable(const FarmContext& ctx, const EstimateLights& estimate,
                                             const ErrorVariances& ev, VarianceOf&& var_of) {
@@ -328,12 +345,18 @@ class EstimatePhase final : public FarmPhase {
       Json per_mesh = Json::array();
       double var_all = 0, norm_all = 0;
       for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
-        const double var_m = var_of(l, m);
+        const Rgb3 var_c = var_of(l, m);
+        const double var_m = Sum3(var_c);
         var_all += var_m;
-        norm_all += ev.norm[l][m];
+        norm_all += Sum3(ev.norm[l][m]);
+        Json channels = Json::object();
+        for (int c = 0; c < 3; ++c)
+          channels[std::string(1, "rgb"[c])] = Ratio(var_c[c], ev.norm[l][m][c]);
         per_mesh.push_back(
             {{"name", ctx.GroupName(m)},
-             {"relative_rms", Ratio(var_m, ev.norm[l][m])},
+             {"rows", mesh_rows[m]},
+             {"relative_rms", Ratio(var_m, Sum3(ev.norm[l][m]))},
+             {"relative_rms_per_channel", channels},
              {"rms_radiance",
               mesh_rows[m] ? std::sqrt(var_m / (3.0 * static_cast<double>(mesh_rows[m]))) : 0.0}});
       }

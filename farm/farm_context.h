@@ -15,6 +15,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <typeindex>
 #include <unordered_map>
@@ -96,13 +97,6 @@ struct SetupParams {
   int32_t complete = 0;
 };
 
-// The row groups the per-mesh figures are taken over (variance sums, the estimate's tables): each
-// mesh's vertices in scene order, or for an image run one group of all pixels (its meshes'
-// pixels interleave in raster order).
-inline std::vector<uint64_t> RowGroupsOf(const SetupParams& params, const SceneGeometry& geometry) {
-  return params.image ? std::vector<uint64_t>{params.rows} : geometry.MeshVertexCounts();
-}
-
 // All ranks stop the run with this exit code (they have agreed on it collectively).
 struct CollectiveStop {
   int exit_code;
@@ -157,6 +151,7 @@ struct RowsStageState {
   std::optional<TransportFileWriter> writer;
   // Rank 0: the sampling jobs' Monte-Carlo variance sums (transport runs).
   std::unique_ptr<VarianceAccumulator> variance;
+  bool variance_fresh = false;  // rank 0: its log starts empty (setup)
   // Rank 0: the journal's lines of the method's phase, verified by that phase before it re-uses
   // them (brute force: already verified against the rows by setup).
   std::vector<JournalEntry> journal_entries;
@@ -189,6 +184,9 @@ struct FarmContext {
   std::vector<float> pixel_edge;
   // Image runs: the glossy pixels' materials per mesh (empty when every pixel is diffuse).
   GlossyPixels glossy_pixels;
+  // Image runs: each pixel's row group (RowGroups): the mesh it sees, or meshes.size() for a
+  // background pixel.
+  SampleGroupMap pixel_groups;
   // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
@@ -212,17 +210,32 @@ struct FarmContext {
   uint64_t indirect_key = 0;
   FarmReport report;
 
-  std::vector<uint64_t> RowGroups() const { return RowGroupsOf(params, geometry); }
+  // The row groups the per-mesh figures are taken over (variance sums, the estimate's tables,
+  // accuracy.json): each mesh's vertices in scene order; for an image run each mesh's pixels
+  // (they interleave in raster order: pixel_groups says which is whose), then the background
+  // pixels (zero rows). Image runs: only once setup has traced the camera's pixels.
+  std::vector<uint64_t> RowGroups() const {
+    if (!params.image) return geometry.MeshVertexCounts();
+    if (!pixel_groups) throw std::logic_error("RowGroups: the pixels are not traced yet");
+    std::vector<uint64_t> rows(geometry.meshes.size() + 1, 0);
+    for (uint32_t g : *pixel_groups) ++rows.at(g);
+    return rows;
+  }
+  // Each sample's group where they interleave (image runs), else null (contiguous meshes).
+  SampleGroupMap SampleGroups() const { return params.image ? pixel_groups : nullptr; }
   std::size_t GroupOfRow(uint64_t row) const {
-    return params.image ? 0 : geometry.MeshOfVertex(row);
+    return params.image ? pixel_groups->at(row) : geometry.MeshOfVertex(row);
   }
   std::string GroupName(std::size_t g) const {
-    return params.image ? std::string("image") : geometry.meshes[g].name;
+    return g < geometry.meshes.size() ? geometry.meshes[g].name : std::string("background");
   }
-  // The albedo the per-group figures weigh radiance with: the mesh's; for an image run's one
-  // group 1 (its figures are those of the irradiance-like T·L, pixels of every material alike).
+  // The albedo the per-group figures weigh radiance with: the mesh's (an image's glossy mesh:
+  // its pixels' weight, worker/glossy_pixels.h); 0 for an image's background pixels.
   Rgb GroupAlbedo(std::size_t g) const {
-    return params.image ? Rgb{1.f, 1.f, 1.f} : geometry.meshes[g].albedo;
+    if (g >= geometry.meshes.size()) return Rgb{0.f, 0.f, 0.f};
+    if (params.image && g < glossy_pixels.glossy.size() && glossy_pixels.glossy[g])
+      return glossy_pixels.weight[g];
+    return geometry.meshes[g].albedo;
   }
   // The albedo of row `row`'s surface (0 for a background pixel; a glossy pixel's weight,
   // worker/glossy_pixels.h).
@@ -243,7 +256,8 @@ struct FarmContext {
   // RankVarianceLog starts from and what a job's sums are added to.
   TransportVariance EmptyVarianceSums() const {
     return MakeTransportVariance(static_cast<uint32_t>(params.cubemap_n),
-                                 static_cast<uint32_t>(params.rays_per_texel), RowGroups());
+                                 static_cast<uint32_t>(params.rays_per_texel), RowGroups(),
+                                 SampleGroups());
   }
   bool computes_here() const { return rank != 0 || size == 1 || options.coordinator_works; }
   int computing_ranks() const {

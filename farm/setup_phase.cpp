@@ -547,10 +547,12 @@ void ReopenCheckpoints(FarmContext& ctx, const RunManifest& manifest, const Scen
   if (!RowsStage(ctx).writer && !ctx.params.visibility) {
     RowsStage(ctx).writer.emplace(TransportFileWriter::Create(f.partial, info));
   }
-  if (!ctx.params.visibility) {
+  // An image run's groups are the meshes its pixels see: its sums are opened once the pixels
+  // are traced (SetupPhase::Run).
+  RowsStage(ctx).variance_fresh = fresh;
+  if (!ctx.params.visibility && !ctx.params.image) {
     RowsStage(ctx).variance = std::make_unique<VarianceAccumulator>(
-        f, RowGroupsOf(ctx.params, geometry), ctx.params.cubemap_n, ctx.params.rays_per_texel,
-        fresh);
+        f, geometry.MeshVertexCounts(), ctx.params.cubemap_n, ctx.params.rays_per_texel, fresh);
   }
   ctx.journal = std::make_unique<CheckpointJournal>(
       f.journal, manifest.Key(),
@@ -701,6 +703,15 @@ class SetupPhase final : public FarmPhase {
           MarkGlossyPixels(ctx.glossy_pixels, ctx.pixel_mesh, ctx.samples);
           image_info.glossy_mesh = ctx.glossy_pixels.glossy;
           image_info.glossy_weight = ctx.glossy_pixels.weight;
+        }
+        auto groups = std::make_shared<std::vector<uint32_t>>(ctx.pixel_mesh);
+        for (uint32_t& g : *groups)
+          if (g == kImageBackground) g = static_cast<uint32_t>(ctx.geometry.meshes.size());
+        ctx.pixel_groups = std::move(groups);
+        if (ctx.rank == 0 && !ctx.params.visibility) {
+          RowsStage(ctx).variance = std::make_unique<VarianceAccumulator>(
+              ctx.folder, ctx.RowGroups(), ctx.params.cubemap_n, ctx.params.rays_per_texel,
+              RowsStage(ctx).variance_fresh);
         }
         if (ctx.rank == 0) {
           WriteImageSamplesFile(ctx.folder.image, image_info);

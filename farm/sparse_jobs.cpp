@@ -497,15 +497,11 @@ void ComputeSparseRows(SparseJobWork& job, ByteReader& r, SparseJobResult& res) 
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
                              std::string_view job_bytes, std::string prefix,
-                             const std::vector<uint64_t>* mesh_rows, SparseRowFiles* files) {
+                             const TransportVariance* variance_shape, SparseRowFiles* files) {
   ByteReader r = MessageReader(job_bytes);
   SparseJobWork job(sampler, samples, plan, files);
-  job.with_variance = mesh_rows != nullptr;
-  if (job.with_variance) {
-    job.sums =
-        MakeTransportVariance(static_cast<uint32_t>(sampler.layout().n()),
-                              static_cast<uint32_t>(sampler.options().rays_per_texel), *mesh_rows);
-  }
+  job.with_variance = variance_shape != nullptr;
+  if (job.with_variance) job.sums = *variance_shape;
   SparseJobResult res;
   res.header = GetHeader(r, kJobMagic);
   const double t0 = Now();

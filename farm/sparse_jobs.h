@@ -19,6 +19,7 @@
 #include <string_view>
 #include <vector>
 
+#include "formats/transport_variance.h"
 #include "worker/sparse_precomputation.h"
 
 namespace prt {
@@ -165,14 +166,15 @@ SparseJobHeader PeekSparseJobHeader(std::string_view job_bytes);
 
 // Runs one encoded job on this rank (TBB threads) and returns the encoded result. Throws
 // NumericalError for a non-finite value, std::runtime_error for a malformed job.
-// `mesh_rows` (optional): the scene's vertex count per mesh; with it, dense and sparse results
-// carry their traced texels' variance sums (SparseJobResult::variance).
+// `variance_shape` (optional): empty variance sums of the run's row groups
+// (FarmContext::EmptyVarianceSums); with them, dense and sparse results carry their traced
+// texels' variance sums (SparseJobResult::variance).
 // `files` (optional): the run's files, for jobs with in-place flags (a job with flags and no files
 // is a std::runtime_error).
 std::string ComputeSparseJob(const TransportSampler& sampler,
                              std::span<const SpatialSample> samples, const SparsePlan& plan,
                              std::string_view job_bytes, std::string prefix = {},
-                             const std::vector<uint64_t>* mesh_rows = nullptr,
+                             const TransportVariance* variance_shape = nullptr,
                              SparseRowFiles* files = nullptr);
 
 // XXH64 of what a dense job leaves on disk, per sample in order: T row, visibility row, feature

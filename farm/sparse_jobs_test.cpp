@@ -244,7 +244,9 @@ TEST_F(SparseJobsTest, JobsWithRowsInPlaceEqualJobsWithRowsInTheMessages) {
   plan_.sparse.max_residual = 0;
   const int m = SparseRankResolution(plan_, 8);
   MemoryRowFiles files(T(), m);
-  const std::vector<uint64_t> mesh_rows = {4, 36};
+  const TransportVariance mesh_rows =
+      MakeTransportVariance(static_cast<uint32_t>(sampler_.layout().n()),
+                            static_cast<uint32_t>(sampler_.options().rays_per_texel), {4, 36});
   const std::vector<uint32_t> dense = {4, 6, 8, 16, 18, 20, 28, 30, 32};
   const SparseJobHeader dh{static_cast<uint32_t>(SparseJobKind::kDense), 1, 0, dense.size()};
   const SparseJobResult plain = DecodeSparseJobResult(

@@ -307,7 +307,7 @@ class SparsePhase final : public FarmPhase {
     CompactJobExpander expander;
     RunJobPhase(
         ctx,
-        [&ctx, &files, &expander, mesh_rows = ctx.RowGroups()](
+        [&ctx, &files, &expander, variance_shape = ctx.EmptyVarianceSums()](
             const RowRange&, std::string_view payload, std::string& out) {
           if (ctx.rows_in_place && !files) files = std::make_unique<FarmSparseRowFiles>(ctx);
           std::string expanded;
@@ -316,7 +316,7 @@ class SparsePhase final : public FarmPhase {
             payload = expanded;
           }
           out = ComputeSparseJob(*ctx.sampler, ctx.samples, ctx.plan, payload, std::move(out),
-                                 &mesh_rows, files.get());
+                                 &variance_shape, files.get());
         },
         [&ctx](JobLoop& loop) {
           FarmReport& rep = ctx.report;

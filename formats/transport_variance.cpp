@@ -132,26 +132,30 @@ std::vector<double> TransportVariance::MeshSums(std::size_t m) const {
 }
 
 void TransportVariance::AddRow(uint64_t sample, const float* variance) {
-  uint64_t first = 0;
-  for (std::size_t m = 0; m < mesh_rows.size(); ++m) {
-    if (sample < first + mesh_rows[m]) {
-      std::vector<ExactVarianceSum>& s = sums[m];
-      for (std::size_t j = 0; j < s.size(); ++j) {
-        const float x = variance[j];
-        // !(x <= max) also refuses NaN.
-        if (!(x >= 0.0f && x <= static_cast<float>(kMaxRowVariance)))
-          throw NumericalError("variance " + std::to_string(x) + " of sample " +
-                               std::to_string(sample) + ", texel " + std::to_string(j) +
-                               " is not in [0, 16] (a texel's variance is at most 8/9)");
-        s[j].Add(ExactVarianceSum::FromValue(x));
-      }
-      ++rows_covered[m];
-      return;
-    }
-    first += mesh_rows[m];
+  std::size_t m = 0;
+  if (sample_group) {
+    if (sample >= sample_group->size() || (*sample_group)[sample] >= sums.size())
+      throw std::out_of_range("TransportVariance::AddRow: sample " + std::to_string(sample) +
+                              " beyond the groups' samples");
+    m = (*sample_group)[sample];
+  } else {
+    uint64_t first = 0;
+    while (m < mesh_rows.size() && sample >= first + mesh_rows[m]) first += mesh_rows[m++];
+    if (m == mesh_rows.size())
+      throw std::out_of_range("TransportVariance::AddRow: sample " + std::to_string(sample) +
+                              " beyond the meshes' rows");
   }
-  throw std::out_of_range("TransportVariance::AddRow: sample " + std::to_string(sample) +
-                          " beyond the meshes' rows");
+  std::vector<ExactVarianceSum>& s = sums[m];
+  for (std::size_t j = 0; j < s.size(); ++j) {
+    const float x = variance[j];
+    // !(x <= max) also refuses NaN.
+    if (!(x >= 0.0f && x <= static_cast<float>(kMaxRowVariance)))
+      throw NumericalError("variance " + std::to_string(x) + " of sample " +
+                           std::to_string(sample) + ", texel " + std::to_string(j) +
+                           " is not in [0, 16] (a texel's variance is at most 8/9)");
+    s[j].Add(ExactVarianceSum::FromValue(x));
+  }
+  ++rows_covered[m];
 }
 
 void TransportVariance::Add(const TransportVariance& o) {
@@ -200,7 +204,8 @@ void TransportVariance::AddDigits(std::span<const uint64_t> digits) {
 }
 
 TransportVariance MakeTransportVariance(uint32_t cubemap_n, uint32_t rays_per_texel,
-                                        std::vector<uint64_t> mesh_rows) {
+                                        std::vector<uint64_t> mesh_rows,
+                                        SampleGroupMap sample_group) {
   for (uint64_t rows : mesh_rows)
     if (rows >= kMaxMeshRows)
       throw std::invalid_argument("variance sums: a mesh of 2^36 rows or more (see kMaxMeshRows)");
@@ -212,7 +217,18 @@ TransportVariance MakeTransportVariance(uint32_t cubemap_n, uint32_t rays_per_te
   v.rows_covered.assign(mesh_rows.size(), 0);
   v.sums.assign(mesh_rows.size(),
                 std::vector<ExactVarianceSum>(static_cast<std::size_t>(v.texels())));
+  if (sample_group) {
+    std::vector<uint64_t> counted(mesh_rows.size(), 0);
+    for (uint32_t g : *sample_group) {
+      if (g >= counted.size())
+        throw std::invalid_argument("variance sums: a sample's group is beyond the groups");
+      ++counted[g];
+    }
+    if (counted != mesh_rows)
+      throw std::invalid_argument("variance sums: the samples' groups do not hold mesh_rows");
+  }
   v.mesh_rows = std::move(mesh_rows);
+  v.sample_group = std::move(sample_group);
   return v;
 }
 

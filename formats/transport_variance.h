@@ -24,6 +24,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -49,6 +50,11 @@ inline constexpr int kVarianceFractionBits = 88;
 inline constexpr double kMaxRowVariance = 16.0;
 inline constexpr uint64_t kMaxMeshRows = uint64_t{1} << 36;
 
+// The group of each sample when a run's groups are not contiguous runs of samples: an image
+// run's pixels, grouped by the mesh each sees (farm/farm_context.h, RowGroupsOf). Shared by
+// every job's sums, never copied.
+using SampleGroupMap = std::shared_ptr<const std::vector<uint32_t>>;
+
 struct TransportVariance {
   uint32_t cubemap_n = 0;
   uint32_t rays_per_texel = 0;  // 1: no variance could be estimated (every sum is 0)
@@ -58,6 +64,9 @@ struct TransportVariance {
   std::vector<uint64_t> mesh_rows;
   std::vector<uint64_t> rows_covered;
   std::vector<std::vector<ExactVarianceSum>> sums;
+  // Null: mesh m holds the mesh_rows[m] samples after the meshes before it (a vertex run).
+  // Else sample s belongs to group (*sample_group)[s] (not part of the encoded forms).
+  SampleGroupMap sample_group;
 
   uint64_t texels() const { return 6ull * cubemap_n * cubemap_n; }
   // Mesh m's 6n² sums as doubles: S[m][j].
@@ -65,8 +74,8 @@ struct TransportVariance {
   // Adds another set of sums of the same shape (a job's record). Exact: any order gives the same.
   void Add(const TransportVariance& other);
   // Adds one row's per-texel variances (texels() floats) to the mesh holding global sample
-  // `sample` (meshes in order, mesh_rows[m] samples each). Throws NumericalError on a value that
-  // is not finite or outside [0, kMaxRowVariance].
+  // `sample` (meshes in order, mesh_rows[m] samples each, or sample_group's). Throws NumericalError
+  // on a value that is not finite or outside [0, kMaxRowVariance].
   void AddRow(uint64_t sample, const float* variance);
   // The sums as 32-bit digits in 64-bit words, 4 per texel (least significant first, meshes in
   // order): adding such vectors word by word (MPI_SUM over fewer than 2^32 processes) cannot
@@ -77,8 +86,10 @@ struct TransportVariance {
 };
 
 // An empty set of sums (zeros) for meshes of the given vertex counts.
+// `sample_group` (optional): each sample's group; group m must hold mesh_rows[m] samples.
 TransportVariance MakeTransportVariance(uint32_t cubemap_n, uint32_t rays_per_texel,
-                                        std::vector<uint64_t> mesh_rows);
+                                        std::vector<uint64_t> mesh_rows,
+                                        SampleGroupMap sample_group = nullptr);
 
 // The file's format version 2 (docs/transport-format.md): the exact sums. Also the form a job's
 // sums travel in from a worker to rank 0.

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <numeric>
 #include <random>
 #include <stdexcept>
@@ -155,6 +156,31 @@ TEST(TransportVarianceTest, FixedPointUnitsAndBounds) {
   row[3] = std::nanf("");
   EXPECT_THROW(v.AddRow(1, row.data()), NumericalError);
   EXPECT_THROW(MakeTransportVariance(1, 4, {kMaxMeshRows}), std::invalid_argument);
+}
+
+// An image run's groups interleave (each pixel's mesh): AddRow adds each row to its sample's
+// group, which then equals the sums of contiguous groups of the same rows regrouped.
+TEST(TransportVarianceTest, InterleavedGroupsAddEachRowToItsSamplesGroup) {
+  const std::size_t T = 6 * kN * kN;
+  const std::vector<float> rows = RandomRows(90, T, 5);
+  auto groups = std::make_shared<std::vector<uint32_t>>(90);
+  std::vector<uint64_t> counts(3, 0);
+  for (std::size_t s = 0; s < 90; ++s) ++counts[(*groups)[s] = static_cast<uint32_t>(s * 7 % 3)];
+  TransportVariance mixed = MakeTransportVariance(kN, 4, counts, groups);
+  for (uint64_t r = 0; r < 90; ++r) mixed.AddRow(r, rows.data() + r * T);
+  // The same rows sorted by group, contiguous.
+  std::vector<float> sorted;
+  for (uint32_t g = 0; g < 3; ++g)
+    for (std::size_t s = 0; s < 90; ++s)
+      if ((*groups)[s] == g)
+        sorted.insert(sorted.end(), rows.begin() + s * T, rows.begin() + (s + 1) * T);
+  TransportVariance contiguous = MakeTransportVariance(kN, 4, counts);
+  for (uint64_t r = 0; r < 90; ++r) contiguous.AddRow(r, sorted.data() + r * T);
+  EXPECT_TRUE(mixed.sums == contiguous.sums);
+  EXPECT_EQ(mixed.rows_covered, counts);
+  // Groups that do not hold the counts, or a sample beyond them, are refused.
+  EXPECT_THROW(MakeTransportVariance(kN, 4, {30, 30, 31}, groups), std::invalid_argument);
+  EXPECT_THROW(mixed.AddRow(90, rows.data()), std::out_of_range);
 }
 
 TEST(TransportVarianceTest, FileRoundTripsAndDamageIsRefused) {

@@ -141,6 +141,48 @@ TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePack
     if (compressed.empty()) compressed = c;
     EXPECT_TRUE(c == compressed) << ranks << " rank(s): transport.prtc differs";
   }
+  // accuracy.json's groups are the meshes the pixels see, then the background: each with its
+  // pixel count, and its Σ B² (from the figures: var / relative²) that of the kernels' rows
+  // weighed by the mesh's albedo (uniform sky of radiance 1: B_c = ρ_c · Σ_j T_j).
+  {
+    const nlohmann::json acc = nlohmann::json::parse(ReadWholeFile(dir + "/np2/accuracy.json"));
+    const nlohmann::json& mc = acc.at("monte_carlo");
+    ASSERT_TRUE(mc.at("estimable").get<bool>());
+    const std::size_t T = sampler.layout().texel_count();
+    std::vector<uint64_t> count(g.meshes.size() + 1, 0);
+    std::vector<double> norm(g.meshes.size() + 1, 0.0);
+    for (std::size_t p = 0; p < pixels.samples.size(); ++p) {
+      const uint32_t m = pixels.pixel_mesh[p];
+      const std::size_t grp = m == kImageBackground ? g.meshes.size() : m;
+      ++count[grp];
+      if (m == kImageBackground) continue;
+      double sum = 0;
+      for (std::size_t j = 0; j < T; ++j) sum += kernel[p * T + j];
+      for (int c = 0; c < 3; ++c) norm[grp] += std::pow(g.meshes[m].albedo[c] * sum, 2);
+    }
+    ASSERT_EQ(mc.at("meshes").size(), g.meshes.size() + 1);
+    const nlohmann::json& uniform = mc.at("environments").at(0);
+    ASSERT_EQ(uniform.at("name"), "uniform");
+    for (std::size_t m = 0; m <= g.meshes.size(); ++m) {
+      const nlohmann::json& row = uniform.at("meshes").at(m);
+      EXPECT_EQ(row.at("name"), m < g.meshes.size() ? g.meshes[m].name : "background");
+      EXPECT_EQ(row.at("rows").get<uint64_t>(), count[m]) << m;
+      EXPECT_EQ(mc.at("meshes").at(m).at("rows_covered").get<uint64_t>(), count[m]) << m;
+      const double rel = row.at("relative_rms").get<double>();
+      const double rms = row.at("rms_radiance").get<double>();
+      if (m == g.meshes.size()) {  // zero rows: no error
+        EXPECT_EQ(rel, 0.0);
+        EXPECT_EQ(rms, 0.0);
+        continue;
+      }
+      ASSERT_GT(rel, 0.0) << m;
+      const double var = rms * rms * 3.0 * static_cast<double>(count[m]);
+      EXPECT_NEAR(var / (rel * rel), norm[m], 1e-3 * norm[m]) << g.meshes[m].name;
+      for (const char* c : {"r", "g", "b"})
+        EXPECT_NEAR(row.at("relative_rms_per_channel").at(c).get<double>(), rel, 1e-6) << c;
+    }
+  }
+
   // The compressed transport's domain is the image: one 32×16 grid.
   const CompressedTransportHeader h = ReadCompressedTransportHeader(dir + "/np2/transport.prtc");
   ASSERT_EQ(h.domain.segments.size(), 1u);

@@ -132,10 +132,13 @@ std::array<double, 3> MeshRadianceVariance(const TransportVariance& variance, st
 }
 
 RadianceNormAccumulator::RadianceNormAccumulator(std::vector<CubemapRgb> lights,
-                                                 std::vector<uint64_t> mesh_rows, int channels)
-    : lights_(std::move(lights)), channels_(channels) {
+                                                 std::vector<uint64_t> mesh_rows, int channels,
+                                                 SampleGroupMap sample_group)
+    : lights_(std::move(lights)), sample_group_(std::move(sample_group)), channels_(channels) {
   mesh_first_.push_back(0);
   for (uint64_t r : mesh_rows) mesh_first_.push_back(mesh_first_.back() + r);
+  if (sample_group_ && sample_group_->size() != mesh_first_.back())
+    throw std::invalid_argument("RadianceNormAccumulator: the sample groups miss samples");
   for (const CubemapRgb& l : lights_) grey_.push_back(l.r == l.g && l.r == l.b);
   exact_.assign(lights_.size() * mesh_rows.size() * 3, ExactSum());
   norms_.assign(lights_.size(),
@@ -158,7 +161,13 @@ void RadianceNormAccumulator::AddRows(uint64_t first, uint64_t count, const floa
           const uint64_t row = channels_ == 1 ? first + i : (first + i) % V;
           const int only = channels_ == 1 ? -1 : static_cast<int>((first + i) / V);
           std::size_t m = 0;
-          while (m + 1 < mesh_first_.size() && row >= mesh_first_[m + 1]) ++m;
+          if (sample_group_) {
+            if (row >= sample_group_->size())
+              throw std::out_of_range("RadianceNormAccumulator: row beyond the samples");
+            m = (*sample_group_)[row];
+          } else {
+            while (m + 1 < mesh_first_.size() && row >= mesh_first_[m + 1]) ++m;
+          }
           if (m >= meshes) throw std::out_of_range("RadianceNormAccumulator: row beyond meshes");
           for (std::size_t l = 0; l < lights_.size(); ++l) {
             double b = 0;

@@ -54,9 +54,11 @@ std::array<double, 3> MeshRadianceVariance(const TransportVariance& variance, st
 class RadianceNormAccumulator {
  public:
   // channels 3: T has one row per colour channel (docs/interreflection.md), row c·V + v is
-  // channel c of sample v and is relit by the light's channel c only.
+  // channel c of sample v and is relit by the light's channel c only. `sample_group`
+  // (optional): each sample's mesh when the meshes' samples interleave (an image run's pixels);
+  // mesh m must hold mesh_rows[m] of them.
   RadianceNormAccumulator(std::vector<CubemapRgb> lights, std::vector<uint64_t> mesh_rows,
-                          int channels = 1);
+                          int channels = 1, SampleGroupMap sample_group = nullptr);
   // `count` rows of 6n² floats starting at global row `first` (parallel over rows, TBB).
   void AddRows(uint64_t first, uint64_t count, const float* rows);
   // [light][mesh][channel]
@@ -71,6 +73,7 @@ class RadianceNormAccumulator {
   std::vector<CubemapRgb> lights_;
   std::vector<bool> grey_;            // the light's three channels are equal
   std::vector<uint64_t> mesh_first_;  // first row of each mesh, and the total at the end
+  SampleGroupMap sample_group_;       // or each sample's mesh
   int channels_ = 1;
   std::vector<ExactSum> exact_;                            // [light][mesh][channel], flattened
   std::vector<std::vector<std::array<double, 3>>> norms_;  // exact_ as doubles
