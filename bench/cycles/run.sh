@@ -14,16 +14,16 @@
 # renders it in Cycles with seeds 1 and 2 at PRT_CAMERA_SAMPLES samples per pixel, and
 # bench/cycles/compare.py gives the noise-corrected relative RMS error on the model and the
 # ground pixels, the error map and prtfarm | Cycles | error PNGs. A case whose scene prt-farm
-# refuses (a feature not built yet: gathering for pixels, [camera] supersample, GGX pixels)
-# prints the refusal as its row and the others go on. Finished farm runs and Cycles renders are
-# reused (delete OUT_DIR/<case> to redo one). Installs blender and python3-numpy if missing.
+# refuses (a feature not built) prints the refusal as its row and the others go on. Finished
+# farm runs and Cycles renders are reused (delete OUT_DIR/<case> to redo one). Installs blender
+# and python3-numpy if missing.
 #
 # Cost on the shared 2-core VM (160×120, 512 samples, four environments; measured 5 Dec 2026):
-# prt-farm 26 s (direct) and 34 s (path-traced K = 2), a Cycles render 11–25 s at max bounces 0
-# or 2 diffuse bounces plus a few seconds of Blender start; the whole command 5 min from nothing
-# on a quiet machine, 7–9 min while others build. The three pending cases refuse in
-# seconds. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/, <env>-prt.exr,
-# <env>-compare.json, <env>-side.png, <env>-error.png) and OUT_DIR/table.txt.
+# prt-farm 8–40 s per case except path-k2-brute16 (134 s: every pixel path traces), a Cycles
+# render 5–25 s at max bounces 0 or 2 diffuse bounces plus a few seconds of Blender start; the
+# whole command about 15 min from nothing. The supersample case refuses in seconds until
+# `[camera] supersample` exists. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/,
+# <env>-prt.exr, <env>-compare.json, <env>-side.png, <env>-error.png) and OUT_DIR/table.txt.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 BUILD_DIR="$(cd "${1:?usage: run.sh BUILD_DIR OUT_DIR}" && pwd)"
@@ -35,6 +35,8 @@ CAMERA_CASES_DEFAULT=(
   "direct|scenes/bench/bunny-direct.toml|0|0|centre"
   "path-k2|scenes/bench/bunny-path-k2.toml|2|0|centre"
   "gather-k2|scenes/bench/bunny-gather-k2.toml|2|0|centre"
+  "gather-k2-brute16|scenes/bench/bunny-gather-k2-brute16.toml|2|0|centre"
+  "path-k2-brute16|scenes/bench/bunny-path-k2-brute16.toml|2|0|centre"
   "supersample-4|scenes/bench/bunny-ss4.toml|0|0|box"
   "ggx-k0|scenes/bench/bunny-ggx-k0.toml|0|0|centre"
 )
