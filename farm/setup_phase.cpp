@@ -240,15 +240,17 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
                                      " is larger than the cubemap's n " + std::to_string(n));
   ctx.params.path_estimator = bounces > 0 && scene.sampling.estimator == "path" ? 1 : 0;
   // Image runs gather their pixels' bounce light from mesh-vertex support rows
-  // (docs/image-relighting.md, "Interreflection"): the pixels are combined with "combination"
-  // or gather themselves; "features" (a sparse pixel evaluating feature texels) is not built.
+  // (docs/image-relighting.md, "Interreflection"): the pixels gather themselves ("full", their
+  // default) or are combined ("combination"); "features" (a sparse pixel evaluating feature
+  // texels) is not built.
   if (image && bounces > 0 && !ctx.params.path_estimator && ctx.params.sparse &&
       scene.sparse.indirect == "features")
     throw InputError(scene.file,
                      "samples = \"camera\" with bounces gathered does not take [sparse] indirect "
-                     "= \"features\": set it to \"combination\" (the default: only the dense "
-                     "pixels gather, about dense_budget of the gather's cost) or \"full\" "
-                     "(every surface pixel gathers)");
+                     "= \"features\": set it to \"full\" (the default for image runs: every "
+                     "surface pixel gathers, a small part of the run next to the vertices' "
+                     "support rows) or \"combination\" (only the dense pixels gather and the "
+                     "others combine them: cheaper, but further from the reference)");
   if (image && bounces > 0 && !visibility) {
     const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
     for (std::size_t i = 0; i < glossy.glossy.size(); ++i)

@@ -370,7 +370,29 @@ TEST(ImageRelightingMpiTest, GatheredBouncesAreByteIdenticalAndResume) {
   std::ofstream(features_file) << features;
   const auto refused = testing::RunPrtFarm(1, features_file + " --out " + dir + "/features");
   EXPECT_EQ(refused.exit_code, 2) << refused.output;
-  EXPECT_NE(refused.output.find("set it to \"combination\""), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find("set it to \"full\""), std::string::npos) << refused.output;
+
+  // The sparse method: with [sparse] indirect unset an image run's pixels all gather ("full",
+  // vocabulary/scene.cpp), with "combination" only the dense ones; both byte-identical for 1 and
+  // 2 ranks, and they differ (the sparse pixels' rows are combined in one, gathered in the other).
+  for (const char* indirect : {"", "indirect = \"combination\"\n"}) {
+    std::string text = ReadWholeFile(ImageScene(dir, "sparse_tiny.toml", "bounces = 1\n"));
+    testing::ReplaceOnce(text, "[sparse]\n", std::string("[sparse]\n") + indirect);
+    const std::string name = *indirect ? "combination" : "default";
+    const std::string file = dir + "/" + name + ".toml";
+    std::ofstream(file) << text;
+    EXPECT_EQ(LoadSceneFile(file).sparse.indirect, *indirect ? "combination" : "full");
+    for (int ranks : {1, 2}) {
+      const auto r = testing::RunPrtFarm(
+          ranks, file + " --out " + dir + "/" + name + std::to_string(ranks) + kSmallJobs);
+      ASSERT_EQ(r.exit_code, 0) << r.output;
+    }
+    EXPECT_TRUE(ReadWholeFile(dir + "/" + name + "1/indirect/pixel-gather.prtt") ==
+                ReadWholeFile(dir + "/" + name + "2/indirect/pixel-gather.prtt"))
+        << name;
+  }
+  EXPECT_FALSE(ReadWholeFile(dir + "/default1/transport.prtc") ==
+               ReadWholeFile(dir + "/combination1/transport.prtc"));
 }
 
 // Glossy pixels (docs/image-relighting.md, "Glossy pixels"): the box in GGX (roughness 0.5,
