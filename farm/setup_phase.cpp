@@ -251,19 +251,28 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
                      "surface pixel gathers, a small part of the run next to the vertices' "
                      "support rows) or \"combination\" (only the dense pixels gather and the "
                      "others combine them: cheaper, but further from the reference)");
+  // Glossy pixels gather their bounce light through their lobe (GatherLobe): every glossy
+  // pixel must gather itself, with the gather estimator.
   if (image && bounces > 0 && !visibility) {
     const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
-    for (std::size_t i = 0; i < glossy.glossy.size(); ++i)
-      if (glossy.glossy[i])
+    for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
+      if (!glossy.glossy[i]) continue;
+      const std::string mesh = "mesh '" + geometry.meshes[i].name +
+                               "' has glossy pixels and bounces = " + std::to_string(bounces);
+      if (ctx.params.path_estimator)
         throw InputError(scene.file,
-                         "mesh '" + geometry.meshes[i].name + "' has glossy pixels (brdf = \"" +
-                             (geometry.meshes[i].is_ground ? scene.ground.glossy.brdf
-                                                           : scene.meshes[i].glossy.brdf) +
-                             "\") and bounces = " + std::to_string(bounces) +
-                             ": the pixels' bounce light is not built for glossy pixels (it "
-                             "would be gathered through the diffuse BRDF); set [sampling] "
-                             "bounces = 0 (direct light only: the interreflected light is "
-                             "lost) or brdf = \"lambert\" on that mesh");
+                         mesh +
+                             ": the path tracer weighs a pixel's bounce light by the diffuse "
+                             "BRDF only; set [sampling] estimator = \"gather\" (the default: "
+                             "the glossy pixels gather through their lobe) or bounces = 0 "
+                             "(direct light only: the interreflected light is lost)");
+      if (ctx.params.sparse && scene.sparse.indirect != "full")
+        throw InputError(scene.file,
+                         mesh + ": [sparse] indirect = \"" + scene.sparse.indirect +
+                             "\" would give a sparse glossy pixel its diffuse neighbours' bounce "
+                             "light; set indirect = \"full\" (the default for image runs: every "
+                             "surface pixel gathers, +7 % of the run) or method = \"brute\"");
+    }
   }
   // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
   // 2 features.
@@ -275,7 +284,17 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
   ctx.params.indirect_n = indirect_n;
   ctx.params.gather_paths = scene.sampling.gather_paths;
   ctx.params.near_field = scene.sampling.near_field;
-  ctx.params.channels = bounces > 0 && HasColouredAlbedo(geometry) ? 3 : 1;
+  // One row per channel when some surface a bounce ray reaches is coloured: a mesh's albedo, or
+  // an image run's glossy mesh's weight (a coloured metal has albedo 0; BounceAlbedo).
+  bool coloured = HasColouredAlbedo(geometry);
+  if (image && bounces > 0 && !visibility) {
+    const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
+    for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
+      const Rgb& w = glossy.weight[i];
+      if (glossy.glossy[i] && (w[0] != w[1] || w[0] != w[2])) coloured = true;
+    }
+  }
+  ctx.params.channels = bounces > 0 && coloured ? 3 : 1;
   if (bounces > 0) {
     if (ctx.params.path_estimator)
       spdlog::info(

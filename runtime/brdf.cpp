@@ -113,6 +113,28 @@ double GgxSmithG1(double alpha, double cos_v) {
   return 2.0 / (1.0 + std::sqrt(1.0 + alpha * alpha * tan2));
 }
 
+double LobeReflectance(const Material& m) {
+  if (m.model == BrdfModel::kLambert) return 0.0;
+  constexpr int kOut = 4, kGrid = 512;
+  const Vec3 n{0, 0, 1};
+  double sum = 0;
+  for (int i = 0; i < kOut * kOut; ++i) {
+    // Cosine-distributed ω_o (Malley): a uniform disk point lifted to the hemisphere.
+    const double r = std::sqrt((i % kOut + 0.5) / kOut),
+                 phi_o = 2 * std::numbers::pi * (i / kOut + 0.5) / kOut;
+    const Vec3 view{r * std::cos(phi_o), r * std::sin(phi_o), std::sqrt(1 - r * r)};
+    const ShadingFrame f = MakeShadingFrame(n, view);
+    double e = 0;
+    for (int k = 0; k < kGrid * kGrid; ++k) {
+      const double z = (k % kGrid + 0.5) / kGrid, s = std::sqrt(1 - z * z);
+      const double phi = 2 * std::numbers::pi * (k / kGrid + 0.5) / kGrid;
+      e += SpecularLobe(m, f, Vec3{s * std::cos(phi), s * std::sin(phi), z});
+    }
+    sum += e * 2 * std::numbers::pi / (kGrid * kGrid);
+  }
+  return sum / (kOut * kOut);
+}
+
 double SpecularLobe(const Material& m, const ShadingFrame& f, const Vec3& w) {
   const double nw = Dot(f.normal, w);
   if (nw <= 0) return 0.0;

@@ -467,16 +467,41 @@ TEST(ImageRelightingMpiTest,
   }
   EXPECT_TRUE(ReadWholeFile(dir + "/sparse1/transport.prtt") ==
               ReadWholeFile(dir + "/sparse2/transport.prtt"));
-  // Bounces with glossy pixels are refused, naming the keys.
-  std::string bounce_text = ReadWholeFile(scene_file);
-  testing::ReplaceOnce(bounce_text, "[sampling]\n",
-                       "[sampling]\nbounces = 1\nestimator = \"path\"\n");
-  const std::string bounce_file = dir + "/bounces.toml";
-  std::ofstream(bounce_file) << bounce_text;
-  const auto refused = testing::RunPrtFarm(1, bounce_file + " --out " + dir + "/bounces");
+  // Gathered bounces: the glossy pixels gather through their lobe (worker/bounce_gather.h,
+  // GatherLobe), the same bytes on 1 and 2 ranks; their bounce light differs from a diffuse
+  // gather's.
+  const auto with_sampling = [&](const std::string& file, const std::string& name,
+                                 const std::string& keys, const std::string& sparse = "") {
+    std::string text = ReadWholeFile(file);
+    testing::ReplaceOnce(text, "[sampling]\n", "[sampling]\n" + keys);
+    if (!sparse.empty()) testing::ReplaceOnce(text, "[sparse]\n", "[sparse]\n" + sparse);
+    const std::string out = dir + "/" + name + ".toml";
+    std::ofstream(out) << text;
+    return out;
+  };
+  const std::string gathered = with_sampling(scene_file, "gathered", "bounces = 1\n");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, gathered + " --out " + dir + "/gathered" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::string g1 = ReadWholeFile(dir + "/gathered1/indirect/pixel-gather.prtt");
+  EXPECT_TRUE(g1 == ReadWholeFile(dir + "/gathered2/indirect/pixel-gather.prtt"));
+  EXPECT_TRUE(ReadWholeFile(dir + "/gathered1/transport.prtc") ==
+              ReadWholeFile(dir + "/gathered2/transport.prtc"));
+  // Refused, naming the keys: the path tracer, and the sparse pixels' combination.
+  const auto refused = testing::RunPrtFarm(
+      1, with_sampling(scene_file, "path", "bounces = 1\nestimator = \"path\"\n") + " --out " +
+             dir + "/path");
   EXPECT_EQ(refused.exit_code, 2) << refused.output;
+  EXPECT_NE(refused.output.find("estimator = \"gather\""), std::string::npos) << refused.output;
   EXPECT_NE(refused.output.find("bounces = 0"), std::string::npos) << refused.output;
-  EXPECT_NE(refused.output.find("brdf = \"lambert\""), std::string::npos) << refused.output;
+  const auto combined = testing::RunPrtFarm(
+      1,
+      with_sampling(sparse_file, "combination", "bounces = 1\n", "indirect = \"combination\"\n") +
+          " --out " + dir + "/combination");
+  EXPECT_EQ(combined.exit_code, 2) << combined.output;
+  EXPECT_NE(combined.output.find("indirect = \"full\""), std::string::npos) << combined.output;
 }
 
 }  // namespace

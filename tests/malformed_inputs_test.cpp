@@ -214,7 +214,7 @@ std::vector<Entry> Catalogue() {
        Tool::kFarm,
        "{SCENE} --out {K}/run --force --quiet --bounces 1",
        kFarmInput,
-       {"{SCENE}", "indirect = \"features\"", "set it to \"combination\""},
+       {"{SCENE}", "indirect = \"features\"", "set it to \"full\""},
        "n = 8\n\n[[mesh]]\nname = \"box\"\npath = \"box.off\"\nalbedo = [0.5, 0.5, 0.5]\n\n"
        "[ground]\nenabled = true\nsize = 3.0\nresolution = 8\n\n"
        "[sampling]\nrays_per_texel = 4\nseed = 3\nmethod = \"brute\"\n",

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 #include <string>
 
@@ -168,7 +169,17 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
       ++(outcome == SceneSurfaces::Outcome::kEscaped ? st.rays_escaped : st.back_face_hits);
       continue;
     }
-    const Rgb& rho = surfaces_.albedo(h.mesh);
+    Rgb rho = surfaces_.albedo(h.mesh);
+    if (site.lobe) {
+      // A glossy pixel: the direction's weight k_d + π·k_s·f_s (GatherLobe); SpecularLobe has
+      // the cosine folded in, which the cosine-distributed direction's pdf takes out.
+      const Material& m = *site.lobe->material;
+      const double c = Dot(n, d);
+      const double f = m.diffuse[0] + (c > 1e-12 ? std::numbers::pi * m.specular[0] *
+                                                       SpecularLobe(m, site.lobe->frame, d) / c
+                                                 : 0.0);
+      for (int k = 0; k < 3; ++k) rho[k] = static_cast<float>(rho[k] * f);
+    }
     // Near: closer than the hit triangle's size, and a triangle coarser than x's own
     // tessellation (kNearCoarser ×), whose vertices cannot resolve what x sees of it.
     const bool is_near = near_field && hit.t < options_.near_field * h.max_edge &&
@@ -217,13 +228,14 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
 GatherStats BounceGatherer::GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge,
                                          int channels, const float* direct, const float* higher,
                                          uint64_t vertex_count, std::size_t cols, float* out,
-                                         SumScratch& s) const {
+                                         SumScratch& s, const GatherLobe* lobe) const {
   const std::size_t per_row = static_cast<std::size_t>(channels) * cols;
   const bool with_near = HasNearField(1, cols);
   s.near.resize(per_row);
   GatherSite site;
   site.own_edge = own_edge;
   site.near_terms = higher ? &s.near_terms : nullptr;
+  site.lobe = lobe;
   s.near_terms.clear();
   const GatherStats st =
       Terms(x, index, 1, channels, s.terms, with_near ? s.near.data() : nullptr, {}, site);

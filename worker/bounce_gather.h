@@ -32,6 +32,7 @@
 #include <span>
 #include <vector>
 
+#include "runtime/brdf.h"
 #include "vocabulary/cubemap.h"
 #include "worker/embree_scene.h"
 #include "worker/surface_hit.h"
@@ -68,6 +69,16 @@ struct GatherStats {
   }
 };
 
+// A glossy camera pixel's BRDF in its gather (docs/image-relighting.md, "Glossy pixels"): its
+// material with k_d in diffuse[0] and k_s in specular[0] (GlossySampling's), and its shading
+// frame with the view towards the eye. The gather's directions are cosine-distributed, so the
+// row T(x) = ∫ [k_d/π + k_s·f_s(ω, ω_o)]·cos·L_in(ω) dω is estimated by weighing direction ω_q's
+// terms by k_d + π·k_s·f_s(ω_q, ω_o) (1 for a diffuse pixel, whose arithmetic is untouched).
+struct GatherLobe {
+  const Material* material = nullptr;
+  ShadingFrame frame;
+};
+
 // Where a gather is taken when it is not at a mesh vertex (an image run's pixel,
 // docs/image-relighting.md "Interreflection").
 struct GatherSite {
@@ -78,6 +89,8 @@ struct GatherSite {
   // same weights ρ_c·b_i/P as `out`'s), which Terms otherwise drops: what a gather of
   // Σ_k Tᵏ applies to the bounces k ≥ 1 at those hits, whose T⁰ the near field traces.
   std::vector<GatherTerm>* near_terms = nullptr;
+  // A glossy pixel's lobe (nullptr: diffuse).
+  const GatherLobe* lobe = nullptr;
 };
 
 // Thread-safe after construction; the scene and surfaces must outlive it.
@@ -130,9 +143,11 @@ class BounceGatherer {
     std::vector<GatherTerm> terms, near_terms;
     std::vector<float> near, part;
   };
+  // `lobe`: a glossy pixel's BRDF (GatherLobe), nullptr for a diffuse one.
   GatherStats GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge, int channels,
                            const float* direct, const float* higher, uint64_t vertex_count,
-                           std::size_t cols, float* out, SumScratch& scratch) const;
+                           std::size_t cols, float* out, SumScratch& scratch,
+                           const GatherLobe* lobe = nullptr) const;
   // Whether bounce `bounce` on rows of `cols` texels traces a near field.
   bool HasNearField(int bounce, std::size_t cols) const;
 

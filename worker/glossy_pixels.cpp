@@ -58,18 +58,33 @@ GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeome
     if (!proportional)
       throw InputError(
           scene.file,
-          what + ": glossy pixels need `specular` proportional to `albedo` (both grey, or the "
-                 "same hue): one row per pixel carries both lobes and one colour. A lobe coloured "
-                 "unlike the diffuse part needs a row per colour channel (3× the rows, the "
-                 "farm's time and the pack's bytes), which image runs do not build: make "
-                 "`specular` proportional to `albedo`, or set brdf = \"lambert\" for diffuse "
-                 "pixels");
+          what +
+              ": glossy pixels need `specular` proportional to `albedo` (both grey, or the "
+              "same hue): one row per pixel carries both lobes and one colour. A lobe coloured "
+              "unlike the diffuse part needs a row per colour channel (3× the rows, the "
+              "farm's time and the pack's bytes), which image runs do not build: make "
+              "`specular` proportional to `albedo`, or set brdf = \"lambert\" for diffuse "
+              "pixels");
     const double ks = 1.0 - kd;
     m.diffuse = {static_cast<float>(kd), static_cast<float>(kd), static_cast<float>(kd)};
     m.specular = {static_cast<float>(ks), static_cast<float>(ks), static_cast<float>(ks)};
     out.materials[i] = m;
     out.glossy[i] = 1;
     out.weight[i] = w;
+  }
+  return out;
+}
+
+std::vector<Rgb> BounceAlbedo(const GlossyPixels& glossy, const SceneGeometry& geometry) {
+  std::vector<Rgb> out;
+  for (std::size_t m = 0; m < geometry.meshes.size(); ++m) {
+    Rgb a = geometry.meshes[m].albedo;
+    if (m < glossy.glossy.size() && glossy.glossy[m]) {
+      const Material& mat = glossy.materials[m];
+      const double r = mat.diffuse[0] + mat.specular[0] * LobeReflectance(mat);
+      for (int c = 0; c < 3; ++c) a[c] = static_cast<float>(glossy.weight[m][c] * r);
+    }
+    out.push_back(a);
   }
   return out;
 }

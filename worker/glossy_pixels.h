@@ -39,6 +39,13 @@ GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeome
 void MarkGlossyPixels(const GlossyPixels& glossy, std::span<const uint32_t> pixel_mesh,
                       std::vector<SpatialSample>& samples);
 
+// What a bounce ray sees at each mesh of an image run with glossy pixels and bounces: a glossy
+// mesh reflects its diffuse part plus its lobe's hemispherical reflectance, spread as if diffuse,
+//   ρ_bounce = albedo + specular · ρ_hh(lobe) = w · (k_d + k_s · LobeReflectance(material)),
+// (the vertices' support rows are diffuse: the lobe's energy is kept, not its direction;
+// docs/image-relighting.md "Glossy pixels" measures it); a diffuse mesh its albedo.
+std::vector<Rgb> BounceAlbedo(const GlossyPixels& glossy, const SceneGeometry& geometry);
+
 // Bytes for the broadcast from rank 0 (same machine layout on every rank), and back. Parse
 // throws std::runtime_error on a size that does not fit.
 std::string SerializeGlossyPixels(const GlossyPixels& glossy);

@@ -3,10 +3,15 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <stdexcept>
+#include <utility>
 
 namespace prt {
 
-SceneSurfaces::SceneSurfaces(const SceneGeometry& geometry) : geometry_(geometry) {
+SceneSurfaces::SceneSurfaces(const SceneGeometry& geometry, std::vector<Rgb> albedo)
+    : geometry_(geometry), albedo_(std::move(albedo)) {
+  if (!albedo_.empty() && albedo_.size() != geometry.meshes.size())
+    throw std::invalid_argument("SceneSurfaces: one albedo per mesh");
   uint64_t at = 0;
   first_.reserve(geometry.meshes.size());
   for (const SceneMesh& m : geometry.meshes) {

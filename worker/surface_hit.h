@@ -34,7 +34,9 @@ struct SurfaceHit {
 // outlive it. Thread-safe after construction.
 class SceneSurfaces {
  public:
-  explicit SceneSurfaces(const SceneGeometry& geometry);
+  // `albedo` (optional, one per mesh): the reflectance a bounce ray sees at each mesh instead of
+  // the mesh's albedo (an image run's glossy meshes, worker/glossy_pixels.h BounceAlbedo).
+  explicit SceneSurfaces(const SceneGeometry& geometry, std::vector<Rgb> albedo = {});
 
   // Resolves Embree's closest hit `hit` of `ray` (EmbreeScene::Intersect). The shading normal is
   // the barycentric interpolation of the vertex normals (the geometric normal where they cancel).
@@ -46,7 +48,9 @@ class SceneSurfaces {
                 SurfaceHit& out) const;
   // Global sample index of vertex `local` of mesh `mesh`.
   uint64_t GlobalVertex(uint32_t mesh, uint32_t local) const { return first_[mesh] + local; }
-  const Rgb& albedo(uint32_t mesh) const { return geometry_.meshes[mesh].albedo; }
+  const Rgb& albedo(uint32_t mesh) const {
+    return albedo_.empty() ? geometry_.meshes[mesh].albedo : albedo_[mesh];
+  }
   // The longest edge of the triangles around global vertex `vertex` (its tessellation's scale).
   double VertexEdge(uint64_t vertex) const { return vertex_edge_[vertex]; }
   const SceneGeometry& geometry() const { return geometry_; }
@@ -55,6 +59,7 @@ class SceneSurfaces {
   const SceneGeometry& geometry_;
   std::vector<uint64_t> first_;  // first global sample index of each mesh
   std::vector<double> vertex_edge_;
+  std::vector<Rgb> albedo_;  // empty: the meshes' albedos
 };
 
 // Whether a scene needs one transport row per colour channel once light bounces: some albedo

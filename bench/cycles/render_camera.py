@@ -29,6 +29,9 @@ geometry, shading normals, camera and materials). What the render is:
   (alpha = r^2), has no Fresnel on the Glossy BSDF and uses separable Smith G1*G1. Shading
   normals are the farm's per-vertex normals (custom split normals, smooth shading).
   Shadow-terminator offsets are 0 (rays leave the true surface).
+  --glossy-camera-only: Mix(Diffuse, Add(Diffuse, Glossy), Light Path "Is Camera Ray"), so that
+  bounce rays see a GGX surface's diffuse part only (what prtfarm's glossy pixels with bounces
+  assume of the surfaces their bounce rays reach, docs/image-relighting.md "Glossy pixels").
 * World: the environment's file values as radiance (no colour transform), Closest interpolation
   (piecewise-constant pixels, as prtfarm reads a map), importance sampled with a map of the
   environment's own width.
@@ -62,6 +65,9 @@ def parse_args():
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--bounces", type=int, default=0, help="diffuse bounces (0 = direct only)")
     p.add_argument("--glossy-bounces", type=int, default=0)
+    p.add_argument("--glossy-camera-only", action="store_true",
+                   help="a GGX material's glossy lobe for camera rays only; other rays see its "
+                        "Diffuse BSDF (prtfarm's approximation for glossy pixels with bounces)")
     p.add_argument("--pixel", choices=["centre", "box"], default="centre",
                    help="centre: one ray through the pixel centre (Gaussian filter of width "
                         "0.01); box: the pixel's footprint (box filter, width 1)")
@@ -108,7 +114,7 @@ def load_mesh(base, m):
     return ob
 
 
-def material(m):
+def material(m, glossy_camera_only=False):
     mat_desc = m["material"]
     if "unsupported" in mat_desc:
         sys.exit("render_camera.py: mesh %r: %s" % (m["name"], mat_desc["unsupported"]))
@@ -131,6 +137,15 @@ def material(m):
         nt.links.new(diffuse.outputs["BSDF"], add.inputs[0])
         nt.links.new(glossy.outputs["BSDF"], add.inputs[1])
         shader = add.outputs["Shader"]
+        if glossy_camera_only:
+            # Mix(Diffuse, Diffuse + Glossy, Is Camera Ray): a bounce ray that reaches this
+            # surface sees its diffuse part only, as prtfarm's vertex support rows do.
+            path = nt.nodes.new("ShaderNodeLightPath")
+            mix = nt.nodes.new("ShaderNodeMixShader")
+            nt.links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+            nt.links.new(diffuse.outputs["BSDF"], mix.inputs[1])
+            nt.links.new(add.outputs["Shader"], mix.inputs[2])
+            shader = mix.outputs["Shader"]
     nt.links.new(shader, out.inputs["Surface"])
     return mat
 
@@ -274,7 +289,7 @@ def main():
     objects = []
     for m in desc["meshes"]:
         ob = load_mesh(base, m)
-        assign(ob, material(m))
+        assign(ob, material(m, a.glossy_camera_only))
         objects.append(ob)
     world, env_size = setup_world(scene, a.env)
     setup_camera(scene, desc["camera"])
@@ -286,6 +301,7 @@ def main():
     meta = dict(scene=os.path.abspath(a.scene), env=os.path.abspath(a.env), env_size=env_size,
                 samples=a.samples, seed=a.seed, diffuse_bounces=a.bounces,
                 glossy_bounces=a.glossy_bounces, pixel=a.pixel,
+                glossy_camera_only=a.glossy_camera_only,
                 filter=list(PIXEL_FILTERS[a.pixel]),
                 seconds=seconds, blender=bpy.app.version_string,
                 threads=scene.render.threads)

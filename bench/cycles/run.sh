@@ -39,6 +39,7 @@ CAMERA_CASES_DEFAULT=(
   "path-k2-brute16|scenes/bench/bunny-path-k2-brute16.toml|2|0|centre"
   "supersample-4|scenes/bench/bunny-ss4.toml|0|0|box"
   "ggx-k0|scenes/bench/bunny-ggx-k0.toml|0|0|centre"
+  "ggx-k2|scenes/bench/bunny-ggx-k2.toml|2|1|centre"
 )
 dir="$OUT" shared="${PRT_SHARED_DATA:-$ROOT/../shared/data}"
 samples="${PRT_CAMERA_SAMPLES:-512}" envs="${PRT_CAMERA_ENVS:-sunrise city studio interior}"

@@ -91,7 +91,12 @@ class GatheringPhase final : public BouncePhase {
 
 GatherKernels::GatherKernels(const FarmContext& ctx) {
   if (!ctx.computes_here()) return;
-  surfaces = std::make_unique<SceneSurfaces>(ctx.geometry);
+  // An image run's glossy meshes, reached by bounce rays, reflect as worker/glossy_pixels.h's
+  // BounceAlbedo says (their lobe's energy, spread diffusely).
+  surfaces = std::make_unique<SceneSurfaces>(ctx.geometry,
+                                             ctx.params.image && ctx.glossy_pixels.any()
+                                                 ? BounceAlbedo(ctx.glossy_pixels, ctx.geometry)
+                                                 : std::vector<Rgb>{});
   gatherer = std::make_unique<BounceGatherer>(*ctx.embree, *surfaces, GatherOptionsOf(ctx));
 }
 

@@ -139,9 +139,17 @@ class PixelGatherPhase final : public BouncePhase {
           return GatherStats{};
         }
         thread_local BounceGatherer::SumScratch scratch;
-        return gatherer->GatherSumRow(ctx.samples[p], kPixelStream + p, ctx.pixel_edge[p], C,
-                                      direct.data(), higher.empty() ? nullptr : higher.data(), V,
-                                      cols, dst, scratch);
+        const SpatialSample& x = ctx.samples[p];
+        // A glossy pixel gathers through its lobe, with the view from the camera
+        // (docs/image-relighting.md, "Glossy pixels").
+        GatherLobe lobe;
+        if (x.glossy_material != kDiffuseSample) {
+          lobe.material = &ctx.glossy_pixels.materials.at(x.glossy_material);
+          lobe.frame = MakeShadingFrame(x.normal, ctx.params.camera.eye - x.position);
+        }
+        return gatherer->GatherSumRow(x, kPixelStream + p, ctx.pixel_edge[p], C, direct.data(),
+                                      higher.empty() ? nullptr : higher.data(), V, cols, dst,
+                                      scratch, lobe.material ? &lobe : nullptr);
       });
     };
     jobs.report = [&](FarmContext&, const BounceTotals& totals) {
