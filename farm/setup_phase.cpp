@@ -254,15 +254,18 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
                      "= \"features\": set it to \"combination\" (the default: only the dense "
                      "pixels gather, about dense_budget of the gather's cost) or \"full\" "
                      "(every surface pixel gathers)");
-  // Supersampled pixels' bounce light is not built (docs/image-relighting.md, "Supersampling").
-  if (image && bounces > 0 && scene.camera.supersample > 1)
+  // Supersampled pixels gather their bounce light from their footprints
+  // (docs/image-relighting.md, "Supersampling"); the per-pixel path tracer does not take them.
+  if (image && bounces > 0 && scene.camera.supersample > 1 && ctx.params.path_estimator)
     throw InputError(
         scene.file,
-        "[camera] supersample = " + std::to_string(scene.camera.supersample) + " with bounces = " +
-            std::to_string(bounces) + " (estimator \"" + scene.sampling.estimator +
-            "\"): the bounce light of supersampled pixels is not built; set [camera] supersample "
-            "= 1 (one ray through each pixel centre: aliased edges, the same rows' cost) or "
-            "[sampling] bounces = 0 (direct light only: the interreflected light is lost)");
+        "[camera] supersample = " + std::to_string(scene.camera.supersample) +
+            " with bounces = " + std::to_string(bounces) +
+            " and [sampling] estimator = \"path\": the path tracer does not trace supersampled "
+            "pixels; set estimator = \"gather\" (the default: the bounce light gathered from "
+            "the footprint, about the path tracer's cost), [camera] supersample = 1 (one ray "
+            "through each pixel centre: aliased edges, the same rows' cost) or [sampling] bounces "
+            "= 0 (direct light only: the interreflected light is lost)");
   if (image && bounces > 0 && !visibility) {
     const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
     for (std::size_t i = 0; i < glossy.glossy.size(); ++i)

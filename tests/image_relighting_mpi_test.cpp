@@ -365,12 +365,27 @@ TEST(ImageRelightingMpiTest, SupersampledRowsAreByteIdenticalAndThePackBlendsThe
   EXPECT_FALSE(Rows(dir + "/np1/transport.prtt") == kernel);
   EXPECT_EQ(ReadImageSamplesFile(dir + "/np1/image.prti", 2).supersample, 2);
 
-  // Bounces are refused with the keys to change.
-  const std::string bounces = ImageScene(dir, "tiny.toml", "bounces = 1\n", "supersample = 2\n");
-  const auto refused = testing::RunPrtFarm(1, bounces + " --out " + dir + "/bounces");
+  // Gathered bounces from the footprints: the same bytes for 1 and 2 ranks, some bounce light;
+  // the path tracer is refused with the keys to change.
+  const std::string gather =
+      ImageScene(dir, "tiny.toml", "bounces = 1\ngather_paths = 8\n", "supersample = 2\n");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, gather + " --out " + dir + "/gather" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::vector<float> g1 = Rows(dir + "/gather1/indirect/pixel-gather.prtt");
+  EXPECT_TRUE(g1 == Rows(dir + "/gather2/indirect/pixel-gather.prtt"));
+  double bounce = 0;
+  for (float x : g1) bounce += x;
+  EXPECT_GT(bounce, 0.0);
+  const std::string path =
+      ImageScene(dir, "tiny.toml", "bounces = 1\nestimator = \"path\"\n", "supersample = 2\n");
+  const auto refused = testing::RunPrtFarm(1, path + " --out " + dir + "/path");
   EXPECT_EQ(refused.exit_code, 2);
   EXPECT_NE(refused.output.find("supersample = 1"), std::string::npos) << refused.output;
   EXPECT_NE(refused.output.find("bounces = 0"), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find("estimator = \"gather\""), std::string::npos) << refused.output;
 }
 
 // Gathering, the default estimator (docs/image-relighting.md, "Interreflection"): the vertices'

@@ -128,25 +128,50 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   };
   thread_local std::vector<NearHit> near_hits;
   near_hits.clear();
-  const double ln = Length(x.normal);
-  if (!Finite(x.position) || !Finite(x.normal) || !(ln > 0))
-    throw NumericalError("bounce gathering: sample " + std::to_string(index) +
-                         " has a non-finite position or a zero normal");
-  const Vec3 n = x.normal / ln;
-  Vec3 t, b;
-  OrthonormalFrame(n, t, b);
-  // Origins on both sides of the surface: a cosine direction about the shading normal may dip
-  // below the geometric surface; it leaves from the side it goes to (as pbrt's SpawnRay), so it
-  // reaches the surface's own back or escapes instead of hitting its own front.
-  float above[3], below[3];
-  scene_.RobustOrigin(x.position, x.geometric_normal, above);
-  scene_.RobustOrigin(x.position, -x.geometric_normal, below);
+  // The points the directions leave from: x, or a supersampled pixel's sub-samples.
+  struct Origin {
+    Vec3 n, t, b, ng;
+    float above[3], below[3];
+    double edge;
+  };
+  thread_local std::vector<Origin> origins;
+  origins.clear();
+  auto add_origin = [&](const SpatialSample& at, double edge) {
+    const double ln = Length(at.normal);
+    if (!Finite(at.position) || !Finite(at.normal) || !(ln > 0))
+      throw NumericalError("bounce gathering: sample " + std::to_string(index) +
+                           " has a non-finite position or a zero normal");
+    Origin o;
+    o.n = at.normal / ln;
+    OrthonormalFrame(o.n, o.t, o.b);
+    o.ng = at.geometric_normal;
+    o.edge = edge;
+    // Origins on both sides of the surface: a cosine direction about the shading normal may dip
+    // below the geometric surface; it leaves from the side it goes to (as pbrt's SpawnRay), so
+    // it reaches the surface's own back or escapes instead of hitting its own front.
+    scene_.RobustOrigin(at.position, at.geometric_normal, o.above);
+    scene_.RobustOrigin(at.position, -at.geometric_normal, o.below);
+    origins.push_back(o);
+  };
+  const SampleFootprints* fp = site.count > 0 ? site.footprint : nullptr;
+  if (fp != nullptr) {
+    if (site.first + site.count > fp->subs.size() || fp->cdf.size() != fp->subs.size() ||
+        fp->edge.size() != fp->subs.size())
+      throw std::logic_error("bounce gathering: sample " + std::to_string(index) +
+                             " names a footprint outside its table");
+    for (std::size_t i = site.first; i < site.first + site.count; ++i)
+      add_origin(fp->subs[i], fp->edge[i]);
+  } else {
+    add_origin(x, own_edge);
+  }
   OcclusionRay ray{};
   ray.tnear = 0;
   ray.tfar = std::numeric_limits<float>::infinity();
   const uint64_t key = SplitMix64(SplitMix64(options_.seed ^ 0x5052544245434E31ull) ^ index) ^
                        SplitMix64(static_cast<uint64_t>(bounce));
   const double inv_p = 1.0 / options_.paths;
+  const double* cdf = fp != nullptr ? fp->cdf.data() + site.first : nullptr;
+  const double phi = fp != nullptr ? Unit(SplitMix64(key ^ 0x464F4F5450524E54ull)) : 0.0;
   std::vector<GatherTerm> raw, raw_near;
   raw.reserve(3 * static_cast<std::size_t>(options_.paths));
   for (int p = 0; p < options_.paths; ++p) {
@@ -154,11 +179,19 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     const uint64_t bits2 = SplitMix64(key + 2 * static_cast<uint64_t>(p) + 1);
     const double u1 = (p % su_ + Unit(bits)) / su_;
     const double u2 = (p / su_ + Unit(bits2)) / sv_;
-    const Vec3 d = CosineDirection(n, t, b, u1, u2);
+    std::size_t pick = 0;
+    if (cdf != nullptr) {  // stratified inverse CDF of λ
+      double u = (p + 0.5) * inv_p + phi;
+      u -= std::floor(u);
+      pick = std::min(static_cast<std::size_t>(std::upper_bound(cdf, cdf + site.count, u) - cdf),
+                      site.count - 1);
+    }
+    const Origin& o = origins[pick];
+    const Vec3 d = CosineDirection(o.n, o.t, o.b, u1, u2);
     ray.direction[0] = static_cast<float>(d.x);
     ray.direction[1] = static_cast<float>(d.y);
     ray.direction[2] = static_cast<float>(d.z);
-    const float* origin = Dot(d, x.geometric_normal) >= 0 ? above : below;
+    const float* origin = Dot(d, o.ng) >= 0 ? o.above : o.below;
     std::copy_n(origin, 3, ray.origin);
     ++st.rays_traced;
     RayHit hit;
@@ -172,7 +205,7 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     // Near: closer than the hit triangle's size, and a triangle coarser than x's own
     // tessellation (kNearCoarser ×), whose vertices cannot resolve what x sees of it.
     const bool is_near = near_field && hit.t < options_.near_field * h.max_edge &&
-                         h.max_edge > kNearCoarser * own_edge;
+                         h.max_edge > kNearCoarser * o.edge;
     if (is_near) {
       // Near field: traced below, once the vertex's near hits are known.
       ++st.near_hits;
@@ -217,13 +250,16 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
 GatherStats BounceGatherer::GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge,
                                          int channels, const float* direct, const float* higher,
                                          uint64_t vertex_count, std::size_t cols, float* out,
-                                         SumScratch& s) const {
+                                         SumScratch& s, const GatherSite& footprint) const {
   const std::size_t per_row = static_cast<std::size_t>(channels) * cols;
   const bool with_near = HasNearField(1, cols);
   s.near.resize(per_row);
   GatherSite site;
   site.own_edge = own_edge;
   site.near_terms = higher ? &s.near_terms : nullptr;
+  site.footprint = footprint.footprint;
+  site.first = footprint.first;
+  site.count = footprint.count;
   s.near_terms.clear();
   const GatherStats st =
       Terms(x, index, 1, channels, s.terms, with_near ? s.near.data() : nullptr, {}, site);

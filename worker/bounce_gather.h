@@ -78,6 +78,13 @@ struct GatherSite {
   // same weights ρ_c·b_i/P as `out`'s), which Terms otherwise drops: what a gather of
   // Σ_k Tᵏ applies to the bounces k ≥ 1 at those hits, whose T⁰ the near field traces.
   std::vector<GatherTerm>* near_terms = nullptr;
+  // A supersampled pixel (docs/image-relighting.md, "Supersampling"): its footprint's surface
+  // sub-samples (footprint->subs[first … first + count), their cdf and edge). Direction p then
+  // leaves the sub-sample picked by the stratified inverse CDF of λ at frac((p + ½)/P + φ), φ
+  // uniform per pixel, from its point and normals, with its edge as own_edge: an unbiased
+  // estimate of Σ_s λ_s Σ_k Tᵏ(x_s). count 0: x alone (x then only names the pixel).
+  const SampleFootprints* footprint = nullptr;
+  std::size_t first = 0, count = 0;
 };
 
 // Thread-safe after construction; the scene and surfaces must outlive it.
@@ -130,9 +137,12 @@ class BounceGatherer {
     std::vector<GatherTerm> terms, near_terms;
     std::vector<float> near, part;
   };
+  // footprint: a supersampled pixel's footprint (its footprint, first and count fields; see
+  // GatherSite), whose sub-samples' edges replace own_edge.
   GatherStats GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge, int channels,
                            const float* direct, const float* higher, uint64_t vertex_count,
-                           std::size_t cols, float* out, SumScratch& scratch) const;
+                           std::size_t cols, float* out, SumScratch& scratch,
+                           const GatherSite& footprint = {}) const;
   // Whether bounce `bounce` on rows of `cols` texels traces a near field.
   bool HasNearField(int bounce, std::size_t cols) const;
 

@@ -87,7 +87,7 @@ CameraSamples Supersampled(CameraSamples& out, int k, uint64_t seed, Trace& trac
   for (std::size_t p = 0; p < pixels; ++p) {
     fp->subs.insert(fp->subs.end(), subs[p].begin(), subs[p].end());
     out.sub_mesh.insert(out.sub_mesh.end(), meshes[p].begin(), meshes[p].end());
-    out.sub_edge.insert(out.sub_edge.end(), edges[p].begin(), edges[p].end());
+    fp->edge.insert(fp->edge.end(), edges[p].begin(), edges[p].end());
     fp->offset.push_back(static_cast<uint32_t>(fp->subs.size()));
   }
   fp->cdf.assign(fp->subs.size(), 1.0);

@@ -51,11 +51,10 @@ struct CameraSamples {
   int supersample = 1;
   // Per pixel: the fraction of its k² rays that hit a surface.
   std::vector<float> coverage;
-  // The surface sub-samples of every pixel (indexed by pixel; cdf filled by WeighFootprints),
-  // their meshes and triangles' longest edges (parallel to footprints->subs).
+  // The surface sub-samples of every pixel (indexed by pixel; cdf filled by WeighFootprints, edge
+  // their triangles' longest edges) and their meshes (parallel to footprints->subs).
   std::shared_ptr<SampleFootprints> footprints;
   std::vector<uint32_t> sub_mesh;
-  std::vector<float> sub_edge;
   // Per pixel (WeighFootprints): w_c(p) = (1/k²) Σ_s a_c(s), background sub-samples 0.
   std::vector<Rgb> pixel_weight;
 };

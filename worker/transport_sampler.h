@@ -88,6 +88,9 @@ struct SampleFootprints {
   std::vector<uint32_t> offset;
   std::vector<SpatialSample> subs;
   std::vector<double> cdf;
+  // Parallel to subs: the longest edge of each sub-sample's triangle (the bounce gather's near
+  // field compares hits with it, as with CameraSamples::pixel_edge).
+  std::vector<float> edge;
 };
 
 // Counters a job reports (added up by the coordinator into run/report.json).

@@ -139,9 +139,17 @@ class PixelGatherPhase final : public BouncePhase {
           return GatherStats{};
         }
         thread_local BounceGatherer::SumScratch scratch;
+        // A supersampled pixel gathers from its footprint's sub-samples (docs/image-relighting.md,
+        // "Supersampling").
+        GatherSite footprint;
+        if (ctx.samples[p].supersampled && ctx.footprints) {
+          footprint.footprint = ctx.footprints.get();
+          footprint.first = ctx.footprints->offset[p];
+          footprint.count = ctx.footprints->offset[p + 1] - ctx.footprints->offset[p];
+        }
         return gatherer->GatherSumRow(ctx.samples[p], kPixelStream + p, ctx.pixel_edge[p], C,
                                       direct.data(), higher.empty() ? nullptr : higher.data(), V,
-                                      cols, dst, scratch);
+                                      cols, dst, scratch, footprint);
       });
     };
     jobs.report = [&](FarmContext&, const BounceTotals& totals) {
