@@ -143,9 +143,9 @@ TEST(ImageSamplesFile, SupersampledPixelsRoundTripAndBlendTheEnvironment) {
     std::memcpy(c.data() + at, &x, 4);
     return Resealed(c);
   };
-  auto refused = [](const std::string& b, const std::string& what) {
+  auto refused = [](const std::string& hostile, const std::string& what) {
     try {
-      ParseImageSamples(b, "image.prti", 2);
+      ParseImageSamples(hostile, "image.prti", 2);
       ADD_FAILURE() << "accepted: " << what;
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find("image.prti"), std::string::npos) << e.what();

@@ -172,6 +172,17 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   const double inv_p = 1.0 / options_.paths;
   const double* cdf = fp != nullptr ? fp->cdf.data() + site.first : nullptr;
   const double phi = fp != nullptr ? Unit(SplitMix64(key ^ 0x464F4F5450524E54ull)) : 0.0;
+  // The sub-samples go to the directions in a random order (Fisher–Yates from the pixel's key):
+  // in path order they would take whole bands of the cosine strata each.
+  thread_local std::vector<uint32_t> order;
+  if (fp != nullptr) {
+    order.resize(static_cast<std::size_t>(options_.paths));
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(i);
+    for (std::size_t i = order.size(); i > 1; --i) {
+      const uint64_t r = SplitMix64(key ^ (0x5045524D00000000ull + i));
+      std::swap(order[i - 1], order[static_cast<std::size_t>(r % i)]);
+    }
+  }
   std::vector<GatherTerm> raw, raw_near;
   raw.reserve(3 * static_cast<std::size_t>(options_.paths));
   for (int p = 0; p < options_.paths; ++p) {
@@ -181,7 +192,7 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     const double u2 = (p / su_ + Unit(bits2)) / sv_;
     std::size_t pick = 0;
     if (cdf != nullptr) {  // stratified inverse CDF of λ
-      double u = (p + 0.5) * inv_p + phi;
+      double u = (order[static_cast<std::size_t>(p)] + 0.5) * inv_p + phi;
       u -= std::floor(u);
       pick = std::min(static_cast<std::size_t>(std::upper_bound(cdf, cdf + site.count, u) - cdf),
                       site.count - 1);

@@ -478,5 +478,68 @@ TEST(BounceGather, PixelSumOfBouncesAgreesWithThePathTracedReference) {
   }
 }
 
+// A supersampled pixel's gather (docs/image-relighting.md, "Supersampling"): a footprint of one
+// sub-sample, the pixel's own point, gives the unsupersampled bytes; a footprint of a model and a
+// ground point with λ = (¼, ¾) gathers ¼ and ¾ of their own gathers, within the noise.
+TEST(BounceGather, AFootprintGathersTheLambdaMixOfItsSubSamples) {
+  SceneDescription scene = DragonOnTheDefaultGround();
+  scene.camera.width = 40;
+  scene.camera.height = 30;
+  const SceneGeometry g = BuildSceneGeometry(scene);
+  const EmbreeScene embree(g);
+  const SceneSurfaces surfaces(g);
+  const std::vector<SpatialSample> vertices = SpatialSamplesOf(g);
+  const CameraSamples pixels = ComputeCameraSamples(embree, surfaces, scene.camera);
+  const uint64_t V = vertices.size();
+  constexpr int kM = 2;
+  const std::size_t cols = CubemapLayout(kM).texel_count();
+  TransportSamplerOptions so;
+  so.rays_per_texel = 4;
+  const TransportSampler coarse_sampler(embree, kM, so);
+  std::vector<float> direct(V * cols);
+  coarse_sampler.ComputeRows(vertices, 0, direct.data());
+  BounceGatherOptions go;
+  go.paths = 4096;
+  go.indirect_n = kM;
+  go.near_field = 0;  // the near field's thinned rows are far noisier than the mix tested here
+  const BounceGatherer gatherer(embree, surfaces, go);
+  uint64_t model = 0, ground = 0;
+  for (uint64_t p = 0; p < pixels.samples.size(); ++p) {
+    if (pixels.pixel_mesh[p] == 0) model = p;  // the last: the model's foot, lit by the ground
+    if (pixels.pixel_mesh[p] == 1 && pixels.samples[p].position.y < 0.01 &&
+        std::abs(pixels.samples[p].position.x) < 0.3)
+      ground = p;
+  }
+  ASSERT_GT(model, 0u);
+  ASSERT_GT(ground, 0u);
+  BounceGatherer::SumScratch scratch;
+  auto gather = [&](uint64_t p, const GatherSite& site) {
+    std::vector<float> sum(cols);
+    gatherer.GatherSumRow(pixels.samples[p], p, pixels.pixel_edge[p], 1, direct.data(), nullptr, V,
+                          cols, sum.data(), scratch, site);
+    return sum;
+  };
+  SampleFootprints fp;
+  fp.subs = {pixels.samples[model], pixels.samples[model], pixels.samples[ground]};
+  fp.edge = {pixels.pixel_edge[model], pixels.pixel_edge[model], pixels.pixel_edge[ground]};
+  fp.cdf = {1.0, 0.25, 1.0};
+  GatherSite one;
+  one.footprint = &fp;
+  one.first = 0;
+  one.count = 1;
+  EXPECT_TRUE(gather(model, one) == gather(model, {}));
+  GatherSite two;
+  two.footprint = &fp;
+  two.first = 1;
+  two.count = 2;
+  const std::vector<float> mixed = gather(model, two);
+  const std::vector<float> a = gather(model, {}), b = gather(ground, {});
+  const double m = std::accumulate(mixed.begin(), mixed.end(), 0.0);
+  const double want = 0.25 * std::accumulate(a.begin(), a.end(), 0.0) +
+                      0.75 * std::accumulate(b.begin(), b.end(), 0.0);
+  EXPECT_GT(want, 0.0);
+  EXPECT_NEAR(m, want, 0.05 * want) << std::accumulate(a.begin(), a.end(), 0.0) << " "
+                                    << std::accumulate(b.begin(), b.end(), 0.0);
+}
 }  // namespace
 }  // namespace prt

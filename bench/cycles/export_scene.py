@@ -85,7 +85,9 @@ def read_geometry(path):
 def read_image(path):
     data = open(path, "rb").read()
     r = Reader(data, path)
-    if r.raw(8) != b"PRTIMG01":
+    # PRTIMG02 (glossy pixels) and PRTIMG03 (supersampled) add tables after the pixels; the
+    # camera and the per-pixel mesh come first in all three.
+    if r.raw(8) not in (b"PRTIMG01", b"PRTIMG02", b"PRTIMG03"):
         sys.exit(f"{path}: not an image.prti")
     width, height = r.take("I", 2)
     eye, target, up = r.take("d", 3), r.take("d", 3), r.take("d", 3)
