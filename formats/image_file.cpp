@@ -46,7 +46,7 @@ std::string SerializeImageSamples(const ImageSamplesInfo& info) {
   }
   if (supersampled) {
     if (info.coverage.size() != info.pixels() || info.pixel_weight.size() != info.pixels())
-      throw std::invalid_argument("SerializeImageSamples: coverage or weights not per pixel");
+      throw std::invalid_argument("SerializeImageSamples: coverage or weights not per pixel (" + std::to_string(info.coverage.size()) + ", " + std::to_string(info.pixel_weight.size()) + " for " + std::to_string(info.pixels()) + ")");
     w.Put<uint32_t>(static_cast<uint32_t>(info.supersample));
     for (float c : info.coverage) w.Put<float>(c);
     for (const Rgb& a : info.pixel_weight)

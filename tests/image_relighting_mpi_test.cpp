@@ -358,9 +358,10 @@ TEST(ImageRelightingMpiTest, SupersampledRowsAreByteIdenticalAndThePackBlendsThe
   EXPECT_TRUE(ReadWholeFile(dir + "/sparse1/transport.prtt") ==
               ReadWholeFile(dir + "/sparse2/transport.prtt"));
 
-  // Another k re-samples the rows (the stage key holds it).
+  // Another k re-samples the rows on --resume (the stage key holds it).
   const std::string k2 = ImageScene(dir, "tiny.toml", "", "supersample = 2\n");
-  const auto again = testing::RunPrtFarm(1, k2 + " --out " + dir + "/np1" + kSmallJobs);
+  const auto again =
+      testing::RunPrtFarm(1, k2 + " --out " + dir + "/np1 --resume" + kSmallJobs);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_FALSE(Rows(dir + "/np1/transport.prtt") == kernel);
   EXPECT_EQ(ReadImageSamplesFile(dir + "/np1/image.prti", 2).supersample, 2);
