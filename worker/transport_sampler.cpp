@@ -47,6 +47,9 @@ struct SampleFrame {
   // for every other sample.
   std::vector<SampleFrame> subs;
   const double* cdf = nullptr;
+  // Per texel: above the horizon of any sub-sample (CubemapLayout::AboveHorizonMask of each
+  // distinct sub-sample normal, OR-ed; the same corner test as TexelAboveHorizon).
+  std::vector<uint8_t> above;
 };
 
 // The texel offset φ_j of a supersampled pixel's stratified sub-sample choice, in [0, 1).
@@ -126,6 +129,16 @@ struct TransportSampler::Impl {
     f.subs.reserve(end - begin);
     for (uint32_t i = begin; i < end; ++i) f.subs.push_back(PointFrame(fp->subs[i], sample_index));
     f.cdf = fp->cdf.data() + begin;
+    const std::size_t count = layout.texel_count();
+    f.above.assign(count, 0);
+    std::vector<uint8_t> mask(count);
+    std::vector<Vec3> seen;
+    for (const SampleFrame& sub : f.subs) {
+      if (std::find(seen.begin(), seen.end(), sub.normal) != seen.end()) continue;
+      seen.push_back(sub.normal);
+      layout.AboveHorizonMask(sub.normal, mask.data());
+      for (std::size_t j = 0; j < count; ++j) f.above[j] |= mask[j];
+    }
     return f;
   }
 
@@ -422,9 +435,7 @@ struct TransportSampler::Impl {
   }
   bool Above(std::size_t j, const SampleFrame& f) const {
     if (f.subs.empty()) return layout.TexelAboveHorizon(j, f.normal);
-    for (const SampleFrame& sub : f.subs)
-      if (layout.TexelAboveHorizon(j, sub.normal)) return true;
-    return false;
+    return f.above[j] != 0;
   }
 
   SampleStats Row(const SpatialSample& sample, uint64_t sample_index, float* row,

@@ -14,14 +14,14 @@
 # renders it in Cycles with seeds 1 and 2 at PRT_CAMERA_SAMPLES samples per pixel, and
 # bench/cycles/compare.py gives the noise-corrected relative RMS error on the model and the
 # ground pixels, the error map and prtfarm | Cycles | error PNGs. A case whose scene prt-farm
-# refuses (a feature not built yet: gathering for pixels, [camera] supersample, GGX pixels)
+# refuses (a feature not built yet)
 # prints the refusal as its row and the others go on. Finished farm runs and Cycles renders are
 # reused (delete OUT_DIR/<case> to redo one). Installs blender and python3-numpy if missing.
 #
 # Cost on the shared 2-core VM (160×120, 512 samples, four environments; measured 5 Dec 2026):
 # prt-farm 26 s (direct) and 34 s (path-traced K = 2), a Cycles render 11–25 s at max bounces 0
 # or 2 diffuse bounces plus a few seconds of Blender start; the whole command 5 min from nothing
-# on a quiet machine, 7–9 min while others build. The three pending cases refuse in
+# on a quiet machine, 7–9 min while others build. A pending case refuses in
 # seconds. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/, <env>-prt.exr,
 # <env>-compare.json, <env>-side.png, <env>-error.png) and OUT_DIR/table.txt.
 set -euo pipefail
