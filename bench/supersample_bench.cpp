@@ -139,7 +139,8 @@ int main(int argc, char** argv) {
     std::printf("edge pixels %zu, interior surface pixels %zu (of %d×%d); reference k = %d, rows "
                 "%.1f s\n",
                 edges, interior, w, h, ref.image.supersample, ref.rows_seconds);
-    std::printf("%-12s %4s %10s %12s %14s\n", "map", "k", "rows [s]", "edge RMS", "interior RMS");
+    std::printf("%-12s %4s %10s %12s %14s %16s\n", "map", "k", "rows [s]", "edge RMS",
+                "interior RMS", "interior ratio");
     for (const std::string& path : envs) {
       const EnvironmentImage image = ReadEnvironment(path);
       const TransportFileReader probe(reference + "/transport.prtt");
@@ -149,7 +150,7 @@ int main(int argc, char** argv) {
       const std::string name = path.substr(path.find_last_of('/') + 1);
       for (const Run& r : rs) {
         const std::vector<double> b = Relit(r, light, env);
-        double en = 0, ed = 0, in = 0, id = 0;
+        double en = 0, ed = 0, in = 0, id = 0, is = 0, irs = 0;
         for (std::size_t p = 0; p < edge.size(); ++p) {
           const bool is_edge = edge[p] != 0;
           if (!is_edge && ref.image.pixel_mesh[p] == kImageBackground) continue;
@@ -157,11 +158,16 @@ int main(int argc, char** argv) {
             const double d = b[3 * p + c] - b_ref[3 * p + c];
             (is_edge ? en : in) += d * d;
             (is_edge ? ed : id) += b_ref[3 * p + c] * b_ref[3 * p + c];
+            if (!is_edge) {
+              is += b[3 * p + c];
+              irs += b_ref[3 * p + c];
+            }
           }
         }
-        std::printf("%-12s %4d %10.1f %11.2f%% %13.2f%%\n", name.c_str(), r.image.supersample,
-                    r.rows_seconds, ed > 0 ? 100 * std::sqrt(en / ed) : 0.0,
-                    id > 0 ? 100 * std::sqrt(in / id) : 0.0);
+        // interior ratio: Σ B / Σ B_ref over the interior pixels (a bias).
+        std::printf("%-12s %4d %10.1f %11.2f%% %13.2f%% %16.4f\n", name.c_str(),
+                    r.image.supersample, r.rows_seconds, ed > 0 ? 100 * std::sqrt(en / ed) : 0.0,
+                    id > 0 ? 100 * std::sqrt(in / id) : 0.0, irs > 0 ? is / irs : 0.0);
       }
     }
   } catch (const std::exception& e) {
