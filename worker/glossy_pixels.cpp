@@ -58,13 +58,12 @@ GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeome
     if (!proportional)
       throw InputError(
           scene.file,
-          what +
-              ": glossy pixels need `specular` proportional to `albedo` (both grey, or the "
-              "same hue): one row per pixel carries both lobes and one colour. A lobe coloured "
-              "unlike the diffuse part needs a row per colour channel (3× the rows, the "
-              "farm's time and the pack's bytes), which image runs do not build: make "
-              "`specular` proportional to `albedo`, or set brdf = \"lambert\" for diffuse "
-              "pixels");
+          what + ": glossy pixels need `specular` proportional to `albedo` (both grey, or the "
+                 "same hue): one row per pixel carries both lobes and one colour. A lobe coloured "
+                 "unlike the diffuse part needs a row per colour channel (3× the rows, the "
+                 "farm's time and the pack's bytes), which image runs do not build: make "
+                 "`specular` proportional to `albedo`, or set brdf = \"lambert\" for diffuse "
+                 "pixels");
     const double ks = 1.0 - kd;
     m.diffuse = {static_cast<float>(kd), static_cast<float>(kd), static_cast<float>(kd)};
     m.specular = {static_cast<float>(ks), static_cast<float>(ks), static_cast<float>(ks)};

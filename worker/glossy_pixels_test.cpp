@@ -44,8 +44,8 @@ Material Ggx(double roughness, double kd, double ks) {
 // ∫ over texel j of V·(k_d/π + k_s f_s)·cos dω by a q×q midpoint grid in the face coordinates,
 // each cell weighted by its exact solid angle; V from the analytic square occluder
 // |x|, |z| ≤ half at height h (none when half = 0).
-double ReferenceTexel(const CubemapLayout& layout, std::size_t j, const Vec3& p, const Material& m,
-                      const ShadingFrame& f, double half, double h, int q) {
+double ReferenceTexel(const CubemapLayout& layout, std::size_t j, const Vec3& p,
+                      const Material& m, const ShadingFrame& f, double half, double h, int q) {
   const TexelCoord c = layout.Coord(j);
   const double size = 2.0 / layout.n();
   const double u0 = -1 + size * c.x, v0 = -1 + size * c.y, d = size / q;
@@ -61,8 +61,8 @@ double ReferenceTexel(const CubemapLayout& layout, std::size_t j, const Vec3& p,
         const Vec3 hit = p + w * t;
         if (std::abs(hit.x) <= half && std::abs(hit.z) <= half) continue;
       }
-      const double omega =
-          FaceRectSolidAngle(u0 + a * d, u0 + (a + 1) * d, v0 + b * d, v0 + (b + 1) * d);
+      const double omega = FaceRectSolidAngle(u0 + a * d, u0 + (a + 1) * d, v0 + b * d,
+                                              v0 + (b + 1) * d);
       acc += omega * (m.diffuse[0] * cosine / kPi + m.specular[0] * SpecularLobe(m, f, w));
     }
   }
@@ -94,7 +94,8 @@ TEST(GlossyPixels, RowIsTheBrdfWeightedVisibilityIntegral) {
     const ShadingFrame f = MakeShadingFrame({0, 1, 0}, eye - p);
     double diff = 0, norm = 0, sum = 0, ref_sum = 0;
     for (std::size_t j = 0; j < row.size(); ++j) {
-      const double ref = ReferenceTexel(sampler.layout(), j, p, gs.materials[0], f, half, h, 24);
+      const double ref = ReferenceTexel(sampler.layout(), j, p, gs.materials[0], f, half,
+                                        h, 24);
       diff += std::abs(row[j] - ref);
       norm += std::abs(ref);
       sum += row[j];
