@@ -10,11 +10,13 @@
 // interior surface pixels, with the rows' seconds from each run's report.json (the `brute` or
 // `sparse` phase).
 //
-// Usage: supersample_bench --reference RUN16 RUN1 RUN2 RUN4 [--env file]...
+// Usage: supersample_bench --reference RUN16 RUN1 RUN2 RUN4 [--env file]... [--dump PREFIX]
+// (--dump writes each image relit under the first map, for comparing with prt-view's EXRs.)
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -105,6 +107,10 @@ int main(int argc, char** argv) {
   app.add_option("--env", envs, "environment maps (lat-long)");
   app.add_option("--reference", reference, "the reference run (k = 16)")->required();
   app.add_option("runs", runs, "image runs of the same scene and camera")->required();
+  std::string dump;
+  app.add_option("--dump", dump,
+                 "write each run's relit image under the first map as PREFIX<i>.f32 (3 float32 per "
+                 "pixel, raster order; i = 0 the reference, then the runs in order)");
   CLI11_PARSE(app, argc, argv);
   try {
     const Run ref = OpenRun(reference);
@@ -136,9 +142,10 @@ int main(int argc, char** argv) {
         return 1;
       }
     }
-    std::printf("edge pixels %zu, interior surface pixels %zu (of %d×%d); reference k = %d, rows "
-                "%.1f s\n",
-                edges, interior, w, h, ref.image.supersample, ref.rows_seconds);
+    std::printf(
+        "edge pixels %zu, interior surface pixels %zu (of %d×%d); reference k = %d, rows "
+        "%.1f s\n",
+        edges, interior, w, h, ref.image.supersample, ref.rows_seconds);
     std::printf("%-12s %4s %10s %12s %14s %16s\n", "map", "k", "rows [s]", "edge RMS",
                 "interior RMS", "interior ratio");
     for (const std::string& path : envs) {
@@ -148,8 +155,19 @@ int main(int argc, char** argv) {
       const EnvironmentLookup env(image, path);
       const std::vector<double> b_ref = Relit(ref, light, env);
       const std::string name = path.substr(path.find_last_of('/') + 1);
+      auto write = [&](const std::vector<double>& b, std::size_t i) {
+        if (dump.empty() || path != envs.front()) return;
+        std::vector<float> f(b.begin(), b.end());
+        std::FILE* out = std::fopen((dump + std::to_string(i) + ".f32").c_str(), "wb");
+        if (out == nullptr) throw std::runtime_error("cannot write " + dump);
+        std::fwrite(f.data(), sizeof(float), f.size(), out);
+        std::fclose(out);
+      };
+      write(b_ref, 0);
+      std::size_t index = 0;
       for (const Run& r : rs) {
         const std::vector<double> b = Relit(r, light, env);
+        write(b, ++index);
         double en = 0, ed = 0, in = 0, id = 0, is = 0, irs = 0;
         for (std::size_t p = 0; p < edge.size(); ++p) {
           const bool is_edge = edge[p] != 0;
