@@ -182,6 +182,9 @@ struct FarmContext {
   std::vector<uint32_t> pixel_mesh;
   // Image runs: per pixel, the longest edge of the triangle it sees (CameraSamples::pixel_edge).
   std::vector<float> pixel_edge;
+  // Image runs with [camera] supersample > 1: every pixel's surface sub-samples and mixing
+  // weights (CameraSamples::footprints; the sampler reads them), else null.
+  std::shared_ptr<const SampleFootprints> footprints;
   // Image runs: the glossy pixels' materials per mesh (empty when every pixel is diffuse).
   GlossyPixels glossy_pixels;
   // Image runs: each pixel's row group (RowGroups): the mesh it sees, or meshes.size() for a

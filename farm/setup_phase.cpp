@@ -151,6 +151,11 @@ SceneGeometry ResolveSampling(FarmContext& ctx, const SceneDescription& scene,
   const bool visibility = job == "visibility";
   if (visibility) ctx.method = kVisibilityPhaseName;
   const bool image = scene.samples == SpatialSamples::kCameraPixels;
+  if (!image && scene.camera.supersample > 1)
+    throw InputError(scene.file,
+                     "[camera] supersample = " + std::to_string(scene.camera.supersample) +
+                         " needs [scene] samples = \"camera\" (image relighting); a "
+                         "vertex run's rows are at the vertices: set supersample = 1");
   if (image && visibility)
     throw InputError(scene.file,
                      "samples = \"camera\" needs job \"transport\" (visibility cubemaps are "
@@ -251,6 +256,18 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
                      "surface pixel gathers, a small part of the run next to the vertices' "
                      "support rows) or \"combination\" (only the dense pixels gather and the "
                      "others combine them: cheaper, but further from the reference)");
+  // Supersampled pixels gather their bounce light from their footprints
+  // (docs/image-relighting.md, "Supersampling"); the per-pixel path tracer does not take them.
+  if (image && bounces > 0 && scene.camera.supersample > 1 && ctx.params.path_estimator)
+    throw InputError(
+        scene.file,
+        "[camera] supersample = " + std::to_string(scene.camera.supersample) +
+            " with bounces = " + std::to_string(bounces) +
+            " and [sampling] estimator = \"path\": the path tracer does not trace supersampled "
+            "pixels; set estimator = \"gather\" (the default: the bounce light gathered from "
+            "the footprint, about the path tracer's cost), [camera] supersample = 1 (one ray "
+            "through each pixel centre: aliased edges, the same rows' cost) or [sampling] bounces "
+            "= 0 (direct light only: the interreflected light is lost)");
   // Glossy pixels gather their bounce light through their lobe (GatherLobe): every glossy
   // pixel must gather itself, with the gather estimator.
   if (image && bounces > 0 && !visibility) {
@@ -713,14 +730,32 @@ class SetupPhase final : public FarmPhase {
         // Every rank traces the same primary rays (a few per pixel's worth of one texel).
         ctx.embree = std::make_unique<EmbreeScene>(ctx.geometry);
         const SceneSurfaces surfaces(ctx.geometry);
-        CameraSamples pixels =
-            ComputeCameraSamples(*ctx.embree, surfaces, ctx.params.camera, "the scene's camera");
+        CameraSamples pixels = ComputeCameraSamples(*ctx.embree, surfaces, ctx.params.camera,
+                                                    "the scene's camera", ctx.params.seed);
+        if (ctx.params.glossy_bytes > 0) ctx.glossy_pixels = ParseGlossyPixels(glossy_bytes);
+        if (pixels.supersample > 1) {
+          // Supersampling (docs/image-relighting.md): λ and w from each mesh's relighting weight
+          // (its albedo, a glossy mesh's w); the sub-samples of glossy meshes carry their BRDF.
+          std::vector<Rgb> mesh_weight;
+          for (std::size_t m = 0; m < ctx.geometry.meshes.size(); ++m)
+            mesh_weight.push_back(m < ctx.glossy_pixels.glossy.size() && ctx.glossy_pixels.glossy[m]
+                                      ? ctx.glossy_pixels.weight[m]
+                                      : ctx.geometry.meshes[m].albedo);
+          WeighFootprints(pixels, mesh_weight);
+          if (ctx.params.glossy_bytes > 0)
+            MarkGlossyPixels(ctx.glossy_pixels, pixels.sub_mesh, pixels.footprints->subs);
+          ctx.footprints = pixels.footprints;
+        }
         ctx.samples = std::move(pixels.samples);
         ctx.pixel_mesh = std::move(pixels.pixel_mesh);
         ctx.pixel_edge = std::move(pixels.pixel_edge);
         ImageSamplesInfo image_info{ctx.params.camera, ctx.pixel_mesh, {}, {}};
+        if (pixels.supersample > 1) {
+          image_info.supersample = pixels.supersample;
+          image_info.coverage = std::move(pixels.coverage);
+          image_info.pixel_weight = std::move(pixels.pixel_weight);
+        }
         if (ctx.params.glossy_bytes > 0) {
-          ctx.glossy_pixels = ParseGlossyPixels(glossy_bytes);
           MarkGlossyPixels(ctx.glossy_pixels, ctx.pixel_mesh, ctx.samples);
           image_info.glossy_mesh = ctx.glossy_pixels.glossy;
           image_info.glossy_weight = ctx.glossy_pixels.weight;
@@ -739,10 +774,19 @@ class SetupPhase final : public FarmPhase {
           const std::size_t background = BackgroundPixels(ctx.pixel_mesh);
           spdlog::info("image relighting: {} of {} pixels see the environment (background)",
                        background, ctx.pixel_mesh.size());
-          ctx.report.SetSection("image", nlohmann::json{{"width", ctx.params.camera.width},
-                                                        {"height", ctx.params.camera.height},
-                                                        {"background_pixels", background}}
-                                             .dump());
+          nlohmann::json section{{"width", ctx.params.camera.width},
+                                 {"height", ctx.params.camera.height},
+                                 {"background_pixels", background}};
+          if (image_info.supersample > 1) {
+            std::size_t partial = 0;
+            for (float c : image_info.coverage) partial += c > 0.f && c < 1.f ? 1 : 0;
+            section["supersample"] = image_info.supersample;
+            section["partly_covered_pixels"] = partial;
+            section["footprint_samples"] = ctx.footprints->subs.size();
+            spdlog::info("image relighting: {}×{} rays per pixel, {} pixels partly covered",
+                         image_info.supersample, image_info.supersample, partial);
+          }
+          ctx.report.SetSection("image", section.dump());
         }
       } else {
         ctx.samples = SpatialSamplesOf(ctx.geometry);
@@ -766,7 +810,7 @@ class SetupPhase final : public FarmPhase {
         so.seed = ctx.params.seed;
         ctx.sampler = std::make_unique<TransportSampler>(
             *ctx.embree, ctx.params.cubemap_n, so,
-            GlossySampling{ctx.glossy_pixels.materials, ctx.params.camera.eye});
+            GlossySampling{ctx.glossy_pixels.materials, ctx.params.camera.eye}, ctx.footprints);
       }
     } catch (...) {
       std::string message;

@@ -106,6 +106,19 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
                       {"fov", k.fov_deg},
                       {"width", k.width},
                       {"height", k.height}};
+    // Supersampled pixels (keyed only when k > 1, so other runs keep their keys): k, and each
+    // mesh's mean relighting weight, which sets the footprint's mixing weights λ.
+    if (k.supersample > 1 && !visibility) {
+      rows["camera"]["supersample"] = k.supersample;
+      const GlossyPixels weights = ResolveGlossyPixels(scene, geometry);
+      Json lambda = Json::array();
+      for (std::size_t i = 0; i < geometry.meshes.size(); ++i) {
+        const Rgb a = i < weights.glossy.size() && weights.glossy[i] ? weights.weight[i]
+                                                                     : geometry.meshes[i].albedo;
+        lambda.push_back((static_cast<double>(a[0]) + a[1] + a[2]) / 3.0);
+      }
+      rows["camera"]["footprint_weights"] = std::move(lambda);
+    }
     // Glossy pixels carry their materials in the rows (keyed only where there are any, so the
     // keys of diffuse image runs stay as they were).
     const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);

@@ -188,6 +188,16 @@ int prtpack_get_image(prtpack* pack, prtpack_image_info* out);
  * (their rows hold the whole BRDF with the camera's view; rgb is the stored weight), else 0 and
  * rgb is the mesh's albedo. Errors: those of prtpack_get_image, mesh out of range. */
 int prtpack_get_image_weight(prtpack* pack, size_t mesh, int* glossy, float rgb[3]);
+/* Supersampled image packs (.prtpack 1.5; docs/image-relighting.md, "Supersampling"): a pixel
+ * is k×k rays over its footprint, and its radiance is
+ *   B_c(p) = w_c(p) · Σ_j T[c·V + p][j]·L_c[j] + (1 − coverage(p)) · E_c(p),
+ * E the environment along the pixel's centre ray. prtpack_get_image_pixel gives every image
+ * pack's pixel its own weight w_c(p) and coverage: in a supersampled pack the stored ones, in
+ * any other the pixel's mesh weight (prtpack_get_image_weight) and coverage 1 (0 and weight 0
+ * for background). *supersample is k (1 for a pack that is not supersampled). Errors: those of
+ * prtpack_get_image, pixel out of range. */
+int prtpack_get_image_supersample(prtpack* pack, int* supersample);
+int prtpack_get_image_pixel(prtpack* pack, size_t pixel, float rgb[3], float* coverage);
 
 /* Every checksum and structural rule (prt-pack verify). PRTPACK_OK if all hold. */
 int prtpack_verify(prtpack* pack);

@@ -259,6 +259,42 @@ int prtpack_get_image_weight(prtpack* pack, size_t mesh, int* glossy, float rgb[
   });
 }
 
+int prtpack_get_image_supersample(prtpack* pack, int* supersample) {
+  return Guard([&] {
+    if (pack == nullptr || supersample == nullptr)
+      return Fail("prtpack_get_image_supersample: NULL argument");
+    if (!pack->image) pack->image = pack->reader.ReadImage();
+    *supersample = pack->image->supersample;
+    return PRTPACK_OK;
+  });
+}
+
+int prtpack_get_image_pixel(prtpack* pack, size_t pixel, float rgb[3], float* coverage) {
+  return Guard([&] {
+    if (pack == nullptr || rgb == nullptr || coverage == nullptr)
+      return Fail("prtpack_get_image_pixel: NULL argument");
+    if (!pack->image) pack->image = pack->reader.ReadImage();
+    const prt::ImageSamplesInfo& im = *pack->image;
+    if (pixel >= im.pixel_mesh.size())
+      return Fail("prtpack_get_image_pixel: pixel " + std::to_string(pixel) + " of " +
+                  std::to_string(im.pixel_mesh.size()));
+    if (im.supersample > 1) {
+      *coverage = im.coverage[pixel];
+      for (int c = 0; c < 3; ++c) rgb[c] = im.pixel_weight[pixel][static_cast<std::size_t>(c)];
+      return PRTPACK_OK;
+    }
+    const uint32_t m = im.pixel_mesh[pixel];
+    if (m == prt::kImageBackground) {
+      *coverage = 0.f;
+      for (int c = 0; c < 3; ++c) rgb[c] = 0.f;
+      return PRTPACK_OK;
+    }
+    *coverage = 1.f;
+    int glossy = 0;
+    return prtpack_get_image_weight(pack, m, &glossy, rgb);
+  });
+}
+
 int prtpack_get_transport_info(prtpack* pack, prtpack_transport_info* out) {
   return Guard([&] {
     if (pack == nullptr || out == nullptr) return Fail("prtpack_get_transport_info: NULL argument");

@@ -310,6 +310,8 @@ TEST(PrtpackCorruption, WriteSeedCorpus) {
   seeds.emplace_back("visibility.prtpack", WritePack(testing::MakeSmallGlossyInput()));
   seeds.emplace_back("compressed_transport_rgb.prtpack", WritePack(SmallThreeChannelInput()));
   seeds.emplace_back("image.prtpack", WritePack(testing::MakeImageInput()));
+  seeds.emplace_back("image_supersampled.prtpack",
+                     WritePack(testing::MakeSupersampledImageInput()));
   seeds.emplace_back("cpca.prtpack", WritePack(testing::MakeSmallCpcaInput()));
   PackInput real;
   // A real mesh from the Debian data package the build extracts (always present, unlike

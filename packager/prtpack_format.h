@@ -22,12 +22,16 @@ inline constexpr uint16_t kVersionMajor = 1;
 // 1.2 adds the IMGE section (image relighting, kTypeImage), written only by packs that have one.
 // 1.3 adds the CPCA section (clustered-PCA transport, kTypeCpca), written only by packs that have
 // one (instead of TRNS).
-inline constexpr uint16_t kVersionMinor = 4;
+inline constexpr uint16_t kVersionMinor = 5;
 inline constexpr uint16_t kVersionMinorChannels = 1;
 inline constexpr uint16_t kVersionMinorImage = 2;
 inline constexpr uint16_t kVersionMinorCpca = 3;
-// 1.4: an IMGE section holding PRTIMG02 (glossy pixels: per-mesh weights, docs/image-relighting.md).
+// 1.4: an IMGE section holding PRTIMG02 (glossy pixels: per-mesh weights,
+// docs/image-relighting.md).
 inline constexpr uint16_t kVersionMinorGlossyPixels = 4;
+// 1.5: an IMGE section holding PRTIMG03 (supersampled pixels: per-pixel coverage and weights,
+// docs/image-relighting.md, "Supersampling"); a 1.4 reader refuses its magic.
+inline constexpr uint16_t kVersionMinorSupersampled = 5;
 inline constexpr uint32_t kHeaderSize = 64;
 inline constexpr uint32_t kEntrySize = 64;
 inline constexpr uint32_t kDefaultAlignment = 64;

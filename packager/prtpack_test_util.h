@@ -78,6 +78,24 @@ inline PackInput MakeImageInput() {
   return in;
 }
 
+// A supersampled image pack (IMGE holding PRTIMG03, 1.5): MakeImageInput at k = 4 with each
+// pixel's coverage (pixel 1 half covered) and weight (coverage × its mesh's albedo).
+inline PackInput MakeSupersampledImageInput() {
+  PackInput in = MakeImageInput();
+  ImageSamplesInfo& im = *in.image;
+  im.supersample = 4;
+  im.coverage.assign(im.pixels(), 1.f);
+  im.pixel_weight.resize(im.pixels());
+  for (std::size_t p = 0; p < im.pixels(); ++p) {
+    const uint32_t m = im.pixel_mesh[p];
+    const float cov = m == kImageBackground ? 0.f : (p == 1 ? 0.5f : 1.f);
+    im.coverage[p] = cov;
+    for (std::size_t c = 0; c < 3; ++c)
+      im.pixel_weight[p][c] = m == kImageBackground ? 0.f : cov * in.meshes[m].albedo[c];
+  }
+  return in;
+}
+
 // Visibility maps at n = 16 for `vertices` vertices with every block kind: face 0 all visible,
 // face 1 occluded, the other faces a vertex-dependent pattern (mixed blocks).
 inline std::vector<uint8_t> MakeSmallVisibility(std::size_t vertices, uint32_t seed) {

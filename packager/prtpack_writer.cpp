@@ -70,6 +70,7 @@ nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
 // 1.1 only where the pack uses what 1.1 defines (a TRNS channel count other than 1), so that
 // every other pack keeps the bytes 1.0 writers gave it; likewise 1.2 for IMGE and 1.3 for CPCA.
 uint16_t MinorVersionOf(const PackInput& input) {
+  if (input.image && input.image->supersample > 1) return kVersionMinorSupersampled;
   if (input.image && input.image->has_glossy_pixels()) return kVersionMinorGlossyPixels;
   if (input.cpca) return kVersionMinorCpca;
   if (input.image) return kVersionMinorImage;

@@ -307,6 +307,7 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
                      {"up", {k.up.x, k.up.y, k.up.z}},
                      {"fov", k.fov_deg},
                      {"background_pixels", in.image->background_pixels()}};
+    if (in.image->supersample > 1) meta["image"]["supersample"] = in.image->supersample;
   }
   const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
                                                             : fs::path(options.transport_file);
@@ -453,6 +454,32 @@ std::string InspectPack(const PackReader& r) {
           out << " mesh " << m << " weight (" << im.glossy_weight[m][0] << ", "
               << im.glossy_weight[m][1] << ", " << im.glossy_weight[m][2] << ")";
       out << ")\n";
+    }
+    if (im.supersample > 1) {
+      // Edge pixels: those whose 3×3 neighbourhood sees more than one mesh (or background).
+      const int w = im.camera.width, h = im.camera.height;
+      std::size_t edges = 0, partial = 0;
+      double edge_cov = 0;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          const std::size_t p = static_cast<std::size_t>(y) * w + x;
+          bool edge = false;
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+              const int u = x + dx, v = y + dy;
+              if (u >= 0 && v >= 0 && u < w && v < h &&
+                  im.pixel_mesh[static_cast<std::size_t>(v) * w + u] != im.pixel_mesh[p])
+                edge = true;
+            }
+          if (im.coverage[p] > 0.f && im.coverage[p] < 1.f) ++partial;
+          if (!edge) continue;
+          ++edges;
+          edge_cov += im.coverage[p];
+        }
+      std::snprintf(line, sizeof line, "%.3f", edges > 0 ? edge_cov / double(edges) : 0.0);
+      out << "supersample: " << im.supersample << "x" << im.supersample
+          << " rays per pixel (box filter); " << partial << " pixels partly covered; " << edges
+          << " edge pixels, mean coverage " << line << "\n";
     }
   }
   if (r.has_visibility()) {

@@ -577,6 +577,21 @@ int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background,
   });
 }
 
+int prt_runtime_get_image_coverage(const prt_runtime* rt, float* coverage, size_t samples) {
+  return Guard("prt_runtime_get_image_coverage", [&] {
+    RequireHandle(rt);
+    Require(coverage != nullptr, "coverage is NULL");
+    const prt::ImageSamplesInfo* image = rt->glossy ? nullptr : rt->session->image();
+    Require(image != nullptr, rt->name + " is a vertex pack: it has no pixel coverage");
+    const std::size_t ns = rt->samples();
+    Require(samples == ns,
+            "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
+    Require(image->pixel_mesh.size() == ns, rt->name + ": pixel count differs from samples");
+    const std::vector<float> share = prt::PixelEnvironmentShare(*image);
+    for (std::size_t p = 0; p < ns; ++p) coverage[p] = 1.0f - share[p];
+  });
+}
+
 int prt_runtime_get_camera(const prt_runtime* rt, float eye[3], float target[3], float up[3],
                            float* fov_deg, int* width, int* height) {
   return Guard("prt_runtime_get_camera", [&] {

@@ -125,6 +125,14 @@ int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t t
  * draws the environment there, as prt-view does. `samples` must equal prt_runtime_sample_count;
  * PRT_RUNTIME_ERROR_ARGUMENT for a vertex pack. */
 int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background, size_t samples);
+/* How much of each pixel of an image pack is surface: coverage[i] in [0, 1], one float per sample
+ * in the same order as prt_runtime_get_image_background. 1 on surface pixels and 0 on background
+ * ones, except in a supersampled pack ([camera] supersample = k > 1, .prtpack 1.5;
+ * docs/image-relighting.md, "Supersampling"), where it is the fraction of the pixel's k² rays that
+ * hit a surface. A viewer draws radiance + (1 − coverage) · environment along the pixel's ray
+ * (the runtime's radiance already holds the pixel's own weight). Errors as
+ * prt_runtime_get_image_background. */
+int prt_runtime_get_image_coverage(const prt_runtime* rt, float* coverage, size_t samples);
 
 /* The camera the pack was baked with (an image pack's fixed view; a vertex pack's scene camera,
  * or prt-view's default when its scene had none): eye, target, up, vertical field of view in

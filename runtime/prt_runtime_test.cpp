@@ -88,7 +88,7 @@ std::string Pack(const std::string& kind) {
     std::vector<float> hat = tiny.rows;
     PrepareRows(h, o, hat.data(), ns);
     in.cpca = CompressCpca(hat.data(), h, CpcaOptionsFrom(h), nullptr, nullptr);
-  } else {  // "image"
+  } else {  // "image", or "image-ss": the same supersampled 2×2 with row y = 3 half covered
     const uint32_t w = 24, hgt = 16, texels = 6 * 64;
     ImageSamplesInfo info;
     info.camera.width = static_cast<int>(w);
@@ -112,6 +112,19 @@ std::string Pack(const std::string& kind) {
       }
     const CompressedTransport ct = CompressTransport(rows.data(), 8, ImageDomain(w, hgt), o);
     in.transport = pack::MakeTransportInput(ct, 64);
+    if (kind == "image-ss") {
+      info.supersample = 2;
+      info.coverage.assign(info.pixels(), 1.f);
+      info.pixel_weight.resize(info.pixels());
+      for (std::size_t p = 0; p < info.pixels(); ++p) {
+        const uint32_t m = info.pixel_mesh[p];
+        const float cov = m == kImageBackground ? 0.f : (p / w == 3 ? 0.5f : 1.f);
+        info.coverage[p] = cov;
+        for (int c = 0; c < 3; ++c)
+          info.pixel_weight[p][c] =
+              m == kImageBackground ? 0.f : cov * tiny.geometry.meshes[m].albedo[c];
+      }
+    }
     in.image = info;
   }
   pack::WritePackFile(path.string(), in);
@@ -587,6 +600,37 @@ TEST(RuntimeGeometry, ImageBackground) {
   std::vector<uint8_t> vb(nv);
   EXPECT_EQ(prt_runtime_get_image_background(v.rt, vb.data(), nv), PRT_RUNTIME_ERROR_ARGUMENT);
   EXPECT_NE(std::string(prt_runtime_last_error()).find("vertex pack"), std::string::npos);
+}
+
+// A supersampled image pack (docs/image-relighting.md, "Supersampling"): each pixel's coverage,
+// and its radiance weighed by its own weight (the half-covered row at half the unsupersampled
+// pack's radiance, the rest equal).
+TEST(RuntimeGeometry, SupersampledImageCoverageAndWeights) {
+  Handle a(Pack("image")), b(Pack("image-ss"));
+  ASSERT_NE(b.rt, nullptr) << prt_runtime_last_error();
+  const std::size_t n = prt_runtime_sample_count(b.rt);
+  ASSERT_EQ(prt_runtime_sample_count(a.rt), n);
+  std::vector<float> ca(n, 7.f), cb(n, 7.f);
+  ASSERT_EQ(prt_runtime_get_image_coverage(a.rt, ca.data(), n), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_get_image_coverage(b.rt, cb.data(), n), PRT_RUNTIME_OK);
+  const std::size_t w = 24;
+  for (std::size_t p = 0; p < n; ++p) {
+    EXPECT_EQ(ca[p], p / w < 3 ? 0.f : 1.f) << p;
+    EXPECT_EQ(cb[p], p / w < 3 ? 0.f : (p / w == 3 ? 0.5f : 1.f)) << p;
+  }
+  std::vector<float> map(3 * 32 * 16, 1.0f), ra(3 * n), rb(3 * n);
+  for (prt_runtime* rt : {a.rt, b.rt}) {
+    ASSERT_EQ(prt_runtime_set_environment_latlong(rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  }
+  ASSERT_EQ(prt_runtime_relight(a.rt, 0, ra.data(), n), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(b.rt, 0, rb.data(), n), PRT_RUNTIME_OK);
+  for (std::size_t p = 3 * w; p < n; ++p)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(rb[3 * p + c], (p / w == 3 ? 0.5f : 1.f) * ra[3 * p + c],
+                  1e-6f + 1e-5f * std::abs(ra[3 * p + c]))
+          << p;
+  EXPECT_EQ(prt_runtime_get_image_coverage(b.rt, cb.data(), n + 1), PRT_RUNTIME_ERROR_ARGUMENT);
+  EXPECT_EQ(prt_runtime_get_image_coverage(b.rt, nullptr, n), PRT_RUNTIME_ERROR_ARGUMENT);
 }
 
 // A glossy pack through the C API: what it holds, prt-view's radiance towards the pack's camera

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -332,6 +332,25 @@ run_camera() {
     "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$OUT/camera"
 }
 
+# [camera] supersample (docs/image-relighting.md, "Supersampling"): scenes/bench/bunny-direct.toml
+# at k = 1, 2, 4 and a k = 16 reference, brute force at PRT_SS_RAYS rays per texel (16), raw rows
+# kept; supersample_bench prints edge and interior error under sunrise and city and the rows'
+# seconds. About 4 min on the 2-core VM. Output: $OUT/supersample/{k1,k2,k4,k16,table.txt}.
+run_supersample() {
+  local d="$OUT/supersample" rays="${PRT_SS_RAYS:-16}"
+  mkdir -p "$d"
+  for k in 16 1 2 4; do
+    sed "s/^height = 120$/height = 120\nsupersample = $k/" "$ROOT/scenes/bench/bunny-direct.toml" \
+      > "$d/bunny-k$k.toml"
+    PRT_DATA_PATH="$BUILD_DIR/data" mpirun -np 2 --bind-to none "$BUILD_DIR/farm/prt-farm" \
+      "$d/bunny-k$k.toml" --out "$d/k$k" --method brute --rays-per-texel "$rays" --no-compress \
+      --force -q
+  done
+  "$BUILD_DIR/bench/supersample_bench" --reference "$d/k16" "$d/k1" "$d/k2" "$d/k4" \
+    --env "$BUILD_DIR/data/envmaps/sunrise.exr" --env "$BUILD_DIR/data/envmaps/city.exr" |
+    tee "$d/table.txt"
+}
+
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy; run_tp ;;
   transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake) "run_$WHAT" ;;
@@ -340,5 +359,6 @@ case "$WHAT" in
   sparse-gi) run_sparse_gi ;;
   image) run_image ;;
   camera) run_camera ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera] [--quick]" >&2; exit 1 ;;
+  supersample) run_supersample ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample] [--quick]" >&2; exit 1 ;;
 esac

@@ -52,14 +52,14 @@ std::string WorkDir(const std::string& name) {
 
 // tests/data/<base> seen by a camera; `sampling` is appended to its [sampling] table.
 std::string ImageScene(const std::string& dir, const std::string& base,
-                       const std::string& sampling = "") {
+                       const std::string& sampling = "", const std::string& camera = "") {
   std::string text = ReadWholeFile(std::string(PRT_TESTS_DATA_DIR) + "/" + base);
   testing::ReplaceOnce(text, "[scene]\n", "[scene]\nsamples = \"camera\"\n");
   testing::ReplaceOnce(
       text, "[sampling]\n",
       "[camera]\neye = [0.4, 1.6, 3.2]\ntarget = [0.0, 0.2, 0.0]\nfov = 30.0\nwidth = " +
-          std::to_string(kWidth) + "\nheight = " + std::to_string(kHeight) + "\n\n[sampling]\n" +
-          sampling);
+          std::to_string(kWidth) + "\nheight = " + std::to_string(kHeight) + "\n" + camera +
+          "\n[sampling]\n" + sampling);
   return testing::WriteTestScene(text, dir + "/" + base);
 }
 
@@ -315,6 +315,120 @@ TEST(ImageRelightingMpiTest, PathTracedBouncesAreByteIdentical) {
   double bounce = 0;
   for (float x : a) bounce += x;
   EXPECT_GT(bounce, 0.0);  // the box and the ground light each other
+}
+
+// Supersampling (docs/image-relighting.md, "Supersampling"): 3×3 rays per pixel. The rows are
+// the kernels' (the footprints weighed by the albedos), byte-identical for 1 and 2 ranks by brute
+// force and by the sparse method; image.prti carries k, coverage and weights; the pack is 1.5 and
+// prt-view blends the environment into partly covered pixels; changing k re-samples; bounces
+// are refused naming the keys.
+TEST(ImageRelightingMpiTest, SupersampledRowsAreByteIdenticalAndThePackBlendsTheEnvironment) {
+  const std::string dir = WorkDir("supersample");
+  const std::string scene_file = ImageScene(dir, "tiny.toml", "", "supersample = 3\n");
+  const KernelScene k(scene_file);
+  ASSERT_EQ(k.scene.camera.supersample, 3);
+  // The kernels: the camera's footprints (seeded with the scene's seed), weighed by albedo.
+  CameraSamples pixels = ComputeCameraSamples(k.embree, SceneSurfaces(k.g), k.scene.camera,
+                                              "camera", k.scene.sampling.seed);
+  std::vector<Rgb> albedo;
+  for (const SceneMesh& m : k.g.meshes) albedo.push_back(m.albedo);
+  WeighFootprints(pixels, albedo);
+  const TransportSampler sampler(k.embree, k.scene.cubemap_n, KernelScene::Options(k.scene),
+                                 GlossySampling{}, pixels.footprints);
+  const std::size_t T = sampler.layout().texel_count();
+  std::vector<float> kernel(pixels.samples.size() * T);
+  sampler.ComputeRows(pixels.samples, 0, kernel.data());
+  std::size_t partial = 0;
+  for (float c : pixels.coverage) partial += c > 0.f && c < 1.f ? 1 : 0;
+  ASSERT_GT(partial, 10u);
+
+  for (int ranks : {1, 2}) {
+    const std::string run = dir + "/np" + std::to_string(ranks);
+    const auto r = testing::RunPrtFarm(ranks, scene_file + " --out " + run + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const std::vector<float> rows = Rows(run + "/transport.prtt");
+    ASSERT_EQ(rows.size(), kernel.size());
+    EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0) << ranks;
+    const ImageSamplesInfo info =
+        ReadImageSamplesFile(run + "/image.prti", static_cast<uint32_t>(k.g.meshes.size()));
+    EXPECT_EQ(info.supersample, 3);
+    EXPECT_EQ(info.pixel_mesh, pixels.pixel_mesh);
+    EXPECT_EQ(info.coverage, pixels.coverage);
+    ASSERT_EQ(info.pixel_weight.size(), pixels.pixel_weight.size());
+    for (std::size_t p = 0; p < info.pixels(); ++p)
+      ASSERT_EQ(info.pixel_weight[p][0], pixels.pixel_weight[p][0]) << p;
+    const std::string manifest = ReadWholeFile(run + "/checkpoints/manifest.json");
+    EXPECT_NE(manifest.find("\"supersample\""), std::string::npos) << manifest;
+  }
+  EXPECT_TRUE(ReadWholeFile(dir + "/np1/transport.prtc") ==
+              ReadWholeFile(dir + "/np2/transport.prtc"));
+
+  // The pack under a uniform sky of 1: B = w·Σ R + (1 − cov)·1 on every pixel.
+  const std::string pack = dir + "/tiny-ss.prtpack";
+  const EnvironmentImage image = RelitUnderUniformSky(dir, dir + "/np2", pack);
+  ASSERT_FALSE(HasFailure());
+  double err2 = 0, ref2 = 0;
+  std::size_t blended = 0;
+  for (std::size_t p = 0; p < pixels.samples.size(); ++p) {
+    double sum = 0;
+    for (std::size_t j = 0; j < T; ++j) sum += kernel[p * T + j];
+    const double want = pixels.pixel_weight[p][0] * sum + (1.0 - pixels.coverage[p]);
+    const double d = image.r[p] - want;
+    err2 += d * d;
+    ref2 += want * want;
+    if (pixels.coverage[p] > 0.f && pixels.coverage[p] < 1.f) {
+      ++blended;
+      EXPECT_NEAR(image.r[p], want, 0.08) << p;
+    }
+  }
+  EXPECT_GT(blended, 10u);
+  EXPECT_LT(std::sqrt(err2 / ref2), 0.02);
+  const std::string inspect = dir + "/inspect.txt";
+  ASSERT_EQ(std::system((std::string(PRT_PACK_EXE) + " inspect " + pack + " > " + inspect).c_str()),
+            0);
+  EXPECT_NE(ReadWholeFile(inspect).find("supersample: 3x3 rays per pixel"), std::string::npos)
+      << ReadWholeFile(inspect);
+  EXPECT_NE(ReadWholeFile(inspect).find("1.5"), std::string::npos) << ReadWholeFile(inspect);
+
+  // The sparse method on the footprints: the same bytes for 1 and 2 ranks.
+  const std::string sparse_file = ImageScene(dir, "sparse_tiny.toml", "", "supersample = 2\n");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, sparse_file + " --out " + dir + "/sparse" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  EXPECT_TRUE(ReadWholeFile(dir + "/sparse1/transport.prtt") ==
+              ReadWholeFile(dir + "/sparse2/transport.prtt"));
+
+  // Another k re-samples the rows on --resume (the stage key holds it).
+  const std::string k2 = ImageScene(dir, "tiny.toml", "", "supersample = 2\n");
+  const auto again =
+      testing::RunPrtFarm(1, k2 + " --out " + dir + "/np1 --resume" + kSmallJobs);
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_FALSE(Rows(dir + "/np1/transport.prtt") == kernel);
+  EXPECT_EQ(ReadImageSamplesFile(dir + "/np1/image.prti", 2).supersample, 2);
+
+  // Gathered bounces from the footprints: the same bytes for 1 and 2 ranks, some bounce light;
+  // the path tracer is refused with the keys to change.
+  const std::string gather =
+      ImageScene(dir, "tiny.toml", "bounces = 1\ngather_paths = 8\n", "supersample = 2\n");
+  for (int ranks : {1, 2}) {
+    const auto r = testing::RunPrtFarm(
+        ranks, gather + " --out " + dir + "/gather" + std::to_string(ranks) + kSmallJobs);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const std::vector<float> g1 = Rows(dir + "/gather1/indirect/pixel-gather.prtt");
+  EXPECT_TRUE(g1 == Rows(dir + "/gather2/indirect/pixel-gather.prtt"));
+  double bounce = 0;
+  for (float x : g1) bounce += x;
+  EXPECT_GT(bounce, 0.0);
+  const std::string path =
+      ImageScene(dir, "tiny.toml", "bounces = 1\nestimator = \"path\"\n", "supersample = 2\n");
+  const auto refused = testing::RunPrtFarm(1, path + " --out " + dir + "/path");
+  EXPECT_EQ(refused.exit_code, 2);
+  EXPECT_NE(refused.output.find("supersample = 1"), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find("bounces = 0"), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find("estimator = \"gather\""), std::string::npos) << refused.output;
 }
 
 // Gathering, the default estimator (docs/image-relighting.md, "Interreflection"): the vertices'

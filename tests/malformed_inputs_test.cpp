@@ -222,6 +222,27 @@ std::vector<Entry> Catalogue() {
        "albedo = [0.5, 0.5, 0.5]\n\n[ground]\nenabled = true\nsize = 3.0\nresolution = 8\n\n"
        "[sampling]\nrays_per_texel = 4\nseed = 3\nmethod = \"sparse\"\n\n"
        "[sparse]\nindirect = \"features\"\n"},
+      // An image run's supersampled pixels (docs/image-relighting.md, "Supersampling") gather
+      // their bounce light; the path tracer is refused naming the keys and what each costs.
+      {"scene_camera_supersample_path",
+       Tool::kFarm,
+       "{SCENE} --out {K}/run --force --quiet --bounces 1",
+       kFarmInput,
+       {"{SCENE}", "estimator = \"gather\"", "supersample = 1", "bounces = 0",
+        "interreflected light is lost"},
+       "n = 8\n\n[[mesh]]\nname = \"box\"\npath = \"box.off\"\nalbedo = [0.5, 0.5, 0.5]\n\n"
+       "[ground]\nenabled = true\nsize = 3.0\nresolution = 8\n\n"
+       "[sampling]\nrays_per_texel = 4\nseed = 3\nmethod = \"brute\"\n",
+       "n = 8\nsamples = \"camera\"\n\n[[mesh]]\nname = \"box\"\npath = \"box.off\"\n"
+       "albedo = [0.5, 0.5, 0.5]\n\n[ground]\nenabled = true\nsize = 3.0\nresolution = 8\n\n"
+       "[camera]\nwidth = 16\nheight = 8\nsupersample = 2\n\n"
+       "[sampling]\nrays_per_texel = 4\nseed = 3\nmethod = \"brute\"\nestimator = \"path\"\n"},
+      // Supersampling is for image runs only.
+      Scene("scene_camera_supersample_vertices", "method = \"brute\"",
+            "method = \"brute\"\n\n[camera]\nsupersample = 2",
+            {"supersample", "samples = \"camera\""}),
+      Scene("scene_camera_supersample_too_large", "method = \"brute\"",
+            "method = \"brute\"\n\n[camera]\nsupersample = 17", {"supersample", "17"}),
       // ---- scene files: out-of-range parameters
       Scene("scene_n_zero", "n = 8", "n = 0", {"line 3", "n", "0"}),
       Scene("scene_n_negative", "n = 8", "n = -8", {"line 3", "-8"}),

@@ -79,10 +79,24 @@ ImageRgb ViewerSession::RenderImage(std::span<const float> sample_rgb,
   const CameraProjection cam(k);
   ImageRgb image(k.width, k.height);
   const std::span<const uint32_t> coefficient = relighter().coefficient_of_sample();
+  const std::vector<float> share = PixelEnvironmentShare(*this->image());
   tbb::parallel_for(0, k.height, [&](int y) {
     for (int x = 0; x < k.width; ++x) {
       const std::size_t p = static_cast<std::size_t>(y) * k.width + x;
       float* out = image.pixels.data() + 3 * p;
+      // A supersampled pixel partly on a surface: its shaded value (w(p)·T·L) plus its share
+      // (1 − coverage) of the environment along its ray (docs/image-relighting.md).
+      if (share[p] > 0.f && share[p] < 1.f) {
+        const Rgb c = background ? background(cam.PixelDirection(x + 0.5, y + 0.5)) : Rgb{};
+        const float* shaded = sample_rgb.data() + 3 * static_cast<std::size_t>(coefficient[p]);
+        for (int i = 0; i < 3; ++i) {
+          if (!std::isfinite(c[i]))
+            throw NumericalError("background of pixel (" + std::to_string(x) + ", " +
+                                 std::to_string(y) + ") is not finite");
+          out[i] = shaded[i] + share[p] * c[i];
+        }
+        continue;
+      }
       if (this->image()->pixel_mesh[p] == kImageBackground) {
         const Rgb c = background ? background(cam.PixelDirection(x + 0.5, y + 0.5)) : Rgb{};
         for (int i = 0; i < 3; ++i) {

@@ -360,6 +360,7 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     c.fov_deg = s.Number("fov", c.fov_deg, 0, 180, true, true);
     c.width = static_cast<int>(s.Integer("width", c.width, 1, 16384));
     c.height = static_cast<int>(s.Integer("height", c.height, 1, 16384));
+    c.supersample = static_cast<int>(s.Integer("supersample", c.supersample, 1, 16));
     const Vec3 view = c.target - c.eye;
     if (Length(view) == 0) s.Fail(t ? t->get("target") : nullptr, "target", "equals eye");
     if (Length(Cross(Normalize(view), Normalize(c.up))) < 1e-6) {

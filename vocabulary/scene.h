@@ -72,6 +72,9 @@ struct Camera {
   double fov_deg = 40.0;  // vertical
   int width = 640;
   int height = 480;
+  // Image relighting: k×k stratified primary rays per pixel footprint (box filter), 1…16; 1 is
+  // one ray through the pixel centre (docs/image-relighting.md, "Supersampling").
+  int supersample = 1;
 };
 
 enum class SpatialSamples { kVertices, kCameraPixels };

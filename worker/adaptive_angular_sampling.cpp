@@ -25,7 +25,7 @@ void UnoccludedValues(const TransportSampler& sampler, const SpatialSample& samp
   for (std::size_t i = 0; i < texels.size(); ++i) {
     const uint32_t j = texels[i];
     // The closed form is the diffuse row's; a glossy pixel's U is the sampler's own estimate.
-    if (fully_above[j] && sample.glossy_material == kDiffuseSample) {
+    if (fully_above[j] && sample.glossy_material == kDiffuseSample && !sample.supersampled) {
       values[i] = static_cast<float>(std::max(0.0, Dot(n, phi[j])) * std::numbers::inv_pi);
     } else {
       straddling.push_back(j);
@@ -37,12 +37,32 @@ void UnoccludedValues(const TransportSampler& sampler, const SpatialSample& samp
   for (std::size_t k = 0; k < where.size(); ++k) values[where[k]] = u[k];
 }
 
+std::size_t SampleHorizonMask(const TransportSampler& sampler, const SpatialSample& sample,
+                              uint64_t sample_index, uint8_t* mask, uint8_t* fully_above) {
+  const CubemapLayout& layout = sampler.layout();
+  const SampleFootprints* fp = sampler.footprints();
+  if (!sample.supersampled || fp == nullptr || sample_index + 1 >= fp->offset.size())
+    return layout.AboveHorizonMask(sample.normal, mask, fully_above);
+  const std::size_t count = layout.texel_count();
+  std::fill(mask, mask + count, uint8_t{0});
+  if (fully_above != nullptr) std::fill(fully_above, fully_above + count, uint8_t{1});
+  std::vector<uint8_t> above(count), fully(count);
+  for (uint32_t s = fp->offset[sample_index]; s < fp->offset[sample_index + 1]; ++s) {
+    layout.AboveHorizonMask(fp->subs[s].normal, above.data(), fully.data());
+    for (std::size_t j = 0; j < count; ++j) {
+      mask[j] = static_cast<uint8_t>(mask[j] | above[j]);
+      if (fully_above != nullptr) fully_above[j] = static_cast<uint8_t>(fully_above[j] & fully[j]);
+    }
+  }
+  return static_cast<std::size_t>(std::count(mask, mask + count, uint8_t{1}));
+}
+
 void VisibilityOfRow(const TransportSampler& sampler, const SpatialSample& sample,
                      uint64_t sample_index, const float* transport, float* visibility) {
   const CubemapLayout& layout = sampler.layout();
   const std::size_t count = layout.texel_count();
   std::vector<uint8_t> above(count);
-  layout.AboveHorizonMask(sample.normal, above.data());
+  SampleHorizonMask(sampler, sample, sample_index, above.data());
   std::vector<uint32_t> list;
   list.reserve(count);
   for (std::size_t j = 0; j < count; ++j) {
@@ -79,7 +99,8 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
   AngularStats stats;
 
   std::vector<uint8_t> above(count), fully(count);
-  stats.texels_above_horizon = layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
+  stats.texels_above_horizon =
+      SampleHorizonMask(sampler, sample, sample_index, above.data(), fully.data());
 
   // Pass 1: the regular grid (half resolution per face axis by default). The same rays give the
   // unoccluded estimate U_j, so v_j = T_j / U_j is exactly 1 where nothing blocks the texel.

@@ -60,6 +60,12 @@ AngularStats SampleDenseRowAdaptive(const TransportSampler& sampler, const Spati
                                     uint64_t sample_index, const AngularOptions& options,
                                     DenseRow& out);
 
+// The texels above the sample's horizon (CubemapLayout::AboveHorizonMask of its normal), or, for a
+// supersampled camera pixel (SpatialSample::supersampled), above the horizon of any of its
+// footprint's sub-samples (fully_above: of every one). Returns the count of `mask`.
+std::size_t SampleHorizonMask(const TransportSampler& sampler, const SpatialSample& sample,
+                              uint64_t sample_index, uint8_t* mask, uint8_t* fully_above = nullptr);
+
 // Unoccluded values U_j for texels not traced: exact (n·Φ_j/π, CubemapLayout::
 // TexelVectorIrradiance) where the texel is entirely above the horizon (fully_above[j] = 1),
 // else (and for every texel of a glossy pixel, SpatialSample::glossy_material) the sampler's

@@ -129,25 +129,71 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
   };
   thread_local std::vector<NearHit> near_hits;
   near_hits.clear();
-  const double ln = Length(x.normal);
-  if (!Finite(x.position) || !Finite(x.normal) || !(ln > 0))
-    throw NumericalError("bounce gathering: sample " + std::to_string(index) +
-                         " has a non-finite position or a zero normal");
-  const Vec3 n = x.normal / ln;
-  Vec3 t, b;
-  OrthonormalFrame(n, t, b);
-  // Origins on both sides of the surface: a cosine direction about the shading normal may dip
-  // below the geometric surface; it leaves from the side it goes to (as pbrt's SpawnRay), so it
-  // reaches the surface's own back or escapes instead of hitting its own front.
-  float above[3], below[3];
-  scene_.RobustOrigin(x.position, x.geometric_normal, above);
-  scene_.RobustOrigin(x.position, -x.geometric_normal, below);
+  // The points the directions leave from: x, or a supersampled pixel's sub-samples.
+  struct Origin {
+    Vec3 n, t, b, ng;
+    float above[3], below[3];
+    double edge;
+    const Material* material;  // a glossy point's lobe (GatherLobe), or nullptr
+    ShadingFrame frame;
+  };
+  thread_local std::vector<Origin> origins;
+  origins.clear();
+  auto add_origin = [&](const SpatialSample& at, double edge) {
+    const double ln = Length(at.normal);
+    if (!Finite(at.position) || !Finite(at.normal) || !(ln > 0))
+      throw NumericalError("bounce gathering: sample " + std::to_string(index) +
+                           " has a non-finite position or a zero normal");
+    Origin o;
+    o.n = at.normal / ln;
+    OrthonormalFrame(o.n, o.t, o.b);
+    o.ng = at.geometric_normal;
+    o.edge = edge;
+    o.material = nullptr;
+    if (site.lobe != nullptr && at.glossy_material != kDiffuseSample) {
+      if (at.glossy_material >= site.lobe->materials.size())
+        throw std::logic_error("bounce gathering: sample " + std::to_string(index) +
+                               " names a glossy material beyond the table");
+      o.material = &site.lobe->materials[at.glossy_material];
+      o.frame = MakeShadingFrame(at.normal, site.lobe->eye - at.position);
+    }
+    // Origins on both sides of the surface: a cosine direction about the shading normal may dip
+    // below the geometric surface; it leaves from the side it goes to (as pbrt's SpawnRay), so
+    // it reaches the surface's own back or escapes instead of hitting its own front.
+    scene_.RobustOrigin(at.position, at.geometric_normal, o.above);
+    scene_.RobustOrigin(at.position, -at.geometric_normal, o.below);
+    origins.push_back(o);
+  };
+  const SampleFootprints* fp = site.count > 0 ? site.footprint : nullptr;
+  if (fp != nullptr) {
+    if (site.first + site.count > fp->subs.size() || fp->cdf.size() != fp->subs.size() ||
+        fp->edge.size() != fp->subs.size())
+      throw std::logic_error("bounce gathering: sample " + std::to_string(index) +
+                             " names a footprint outside its table");
+    for (std::size_t i = site.first; i < site.first + site.count; ++i)
+      add_origin(fp->subs[i], fp->edge[i]);
+  } else {
+    add_origin(x, own_edge);
+  }
   OcclusionRay ray{};
   ray.tnear = 0;
   ray.tfar = std::numeric_limits<float>::infinity();
   const uint64_t key = SplitMix64(SplitMix64(options_.seed ^ 0x5052544245434E31ull) ^ index) ^
                        SplitMix64(static_cast<uint64_t>(bounce));
   const double inv_p = 1.0 / options_.paths;
+  const double* cdf = fp != nullptr ? fp->cdf.data() + site.first : nullptr;
+  const double phi = fp != nullptr ? Unit(SplitMix64(key ^ 0x464F4F5450524E54ull)) : 0.0;
+  // The sub-samples go to the directions in a random order (Fisher–Yates from the pixel's key):
+  // in path order they would take whole bands of the cosine strata each.
+  thread_local std::vector<uint32_t> order;
+  if (fp != nullptr) {
+    order.resize(static_cast<std::size_t>(options_.paths));
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(i);
+    for (std::size_t i = order.size(); i > 1; --i) {
+      const uint64_t r = SplitMix64(key ^ (0x5045524D00000000ull + i));
+      std::swap(order[i - 1], order[static_cast<std::size_t>(r % i)]);
+    }
+  }
   std::vector<GatherTerm> raw, raw_near;
   raw.reserve(3 * static_cast<std::size_t>(options_.paths));
   for (int p = 0; p < options_.paths; ++p) {
@@ -155,11 +201,19 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
     const uint64_t bits2 = SplitMix64(key + 2 * static_cast<uint64_t>(p) + 1);
     const double u1 = (p % su_ + Unit(bits)) / su_;
     const double u2 = (p / su_ + Unit(bits2)) / sv_;
-    const Vec3 d = CosineDirection(n, t, b, u1, u2);
+    std::size_t pick = 0;
+    if (cdf != nullptr) {  // stratified inverse CDF of λ
+      double u = (order[static_cast<std::size_t>(p)] + 0.5) * inv_p + phi;
+      u -= std::floor(u);
+      pick = std::min(static_cast<std::size_t>(std::upper_bound(cdf, cdf + site.count, u) - cdf),
+                      site.count - 1);
+    }
+    const Origin& o = origins[pick];
+    const Vec3 d = CosineDirection(o.n, o.t, o.b, u1, u2);
     ray.direction[0] = static_cast<float>(d.x);
     ray.direction[1] = static_cast<float>(d.y);
     ray.direction[2] = static_cast<float>(d.z);
-    const float* origin = Dot(d, x.geometric_normal) >= 0 ? above : below;
+    const float* origin = Dot(d, o.ng) >= 0 ? o.above : o.below;
     std::copy_n(origin, 3, ray.origin);
     ++st.rays_traced;
     RayHit hit;
@@ -170,20 +224,20 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
       continue;
     }
     Rgb rho = surfaces_.albedo(h.mesh);
-    if (site.lobe) {
-      // A glossy pixel: the direction's weight k_d + π·k_s·f_s (GatherLobe); SpecularLobe has
+    if (o.material != nullptr) {
+      // A glossy point: the direction's weight k_d + π·k_s·f_s (GatherLobe); SpecularLobe has
       // the cosine folded in, which the cosine-distributed direction's pdf takes out.
-      const Material& m = *site.lobe->material;
-      const double c = Dot(n, d);
-      const double f = m.diffuse[0] + (c > 1e-12 ? std::numbers::pi * m.specular[0] *
-                                                       SpecularLobe(m, site.lobe->frame, d) / c
-                                                 : 0.0);
+      const Material& m = *o.material;
+      const double c = Dot(o.n, d);
+      const double f =
+          m.diffuse[0] +
+          (c > 1e-12 ? std::numbers::pi * m.specular[0] * SpecularLobe(m, o.frame, d) / c : 0.0);
       for (int k = 0; k < 3; ++k) rho[k] = static_cast<float>(rho[k] * f);
     }
     // Near: closer than the hit triangle's size, and a triangle coarser than x's own
     // tessellation (kNearCoarser ×), whose vertices cannot resolve what x sees of it.
     const bool is_near = near_field && hit.t < options_.near_field * h.max_edge &&
-                         h.max_edge > kNearCoarser * own_edge;
+                         h.max_edge > kNearCoarser * o.edge;
     if (is_near) {
       // Near field: traced below, once the vertex's near hits are known.
       ++st.near_hits;
@@ -228,14 +282,17 @@ GatherStats BounceGatherer::Terms(const SpatialSample& x, uint64_t index, int bo
 GatherStats BounceGatherer::GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge,
                                          int channels, const float* direct, const float* higher,
                                          uint64_t vertex_count, std::size_t cols, float* out,
-                                         SumScratch& s, const GatherLobe* lobe) const {
+                                         SumScratch& s, const GatherSite& where) const {
   const std::size_t per_row = static_cast<std::size_t>(channels) * cols;
   const bool with_near = HasNearField(1, cols);
   s.near.resize(per_row);
   GatherSite site;
   site.own_edge = own_edge;
   site.near_terms = higher ? &s.near_terms : nullptr;
-  site.lobe = lobe;
+  site.lobe = where.lobe;
+  site.footprint = where.footprint;
+  site.first = where.first;
+  site.count = where.count;
   s.near_terms.clear();
   const GatherStats st =
       Terms(x, index, 1, channels, s.terms, with_near ? s.near.data() : nullptr, {}, site);

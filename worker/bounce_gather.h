@@ -69,14 +69,15 @@ struct GatherStats {
   }
 };
 
-// A glossy camera pixel's BRDF in its gather (docs/image-relighting.md, "Glossy pixels"): its
-// material with k_d in diffuse[0] and k_s in specular[0] (GlossySampling's), and its shading
-// frame with the view towards the eye. The gather's directions are cosine-distributed, so the
-// row T(x) = ∫ [k_d/π + k_s·f_s(ω, ω_o)]·cos·L_in(ω) dω is estimated by weighing direction ω_q's
-// terms by k_d + π·k_s·f_s(ω_q, ω_o) (1 for a diffuse pixel, whose arithmetic is untouched).
+// Glossy camera pixels in a gather (docs/image-relighting.md, "Glossy pixels"): a sample with
+// glossy_material = i has the material materials[i] (k_d in diffuse[0], k_s in specular[0], as
+// GlossySampling's) and the view towards `eye`. The gather's directions are cosine-distributed,
+// so its row T(x) = ∫ [k_d/π + k_s·f_s(ω, ω_o)]·cos·L_in(ω) dω is estimated by weighing
+// direction ω_q's terms by k_d + π·k_s·f_s(ω_q, ω_o) (a diffuse sample's arithmetic is
+// untouched).
 struct GatherLobe {
-  const Material* material = nullptr;
-  ShadingFrame frame;
+  std::span<const Material> materials;
+  Vec3 eye{0, 0, 0};
 };
 
 // Where a gather is taken when it is not at a mesh vertex (an image run's pixel,
@@ -89,8 +90,16 @@ struct GatherSite {
   // same weights ρ_c·b_i/P as `out`'s), which Terms otherwise drops: what a gather of
   // Σ_k Tᵏ applies to the bounces k ≥ 1 at those hits, whose T⁰ the near field traces.
   std::vector<GatherTerm>* near_terms = nullptr;
-  // A glossy pixel's lobe (nullptr: diffuse).
+  // Glossy pixels (nullptr: every sample diffuse): each point the directions leave from (x or a
+  // footprint's sub-sample) weighs them by its own lobe when it is glossy (GatherLobe).
   const GatherLobe* lobe = nullptr;
+  // A supersampled pixel (docs/image-relighting.md, "Supersampling"): its footprint's surface
+  // sub-samples (footprint->subs[first … first + count), their cdf and edge). Direction p then
+  // leaves the sub-sample picked by the stratified inverse CDF of λ at frac((p + ½)/P + φ), φ
+  // uniform per pixel, from its point and normals, with its edge as own_edge: an unbiased
+  // estimate of Σ_s λ_s Σ_k Tᵏ(x_s). count 0: x alone (x then only names the pixel).
+  const SampleFootprints* footprint = nullptr;
+  std::size_t first = 0, count = 0;
 };
 
 // Thread-safe after construction; the scene and surfaces must outlive it.
@@ -143,11 +152,12 @@ class BounceGatherer {
     std::vector<GatherTerm> terms, near_terms;
     std::vector<float> near, part;
   };
-  // `lobe`: a glossy pixel's BRDF (GatherLobe), nullptr for a diffuse one.
+  // where: a supersampled pixel's footprint (its footprint, first and count fields; see
+  // GatherSite), whose sub-samples' edges replace own_edge, and glossy pixels' lobes (lobe).
   GatherStats GatherSumRow(const SpatialSample& x, uint64_t index, double own_edge, int channels,
                            const float* direct, const float* higher, uint64_t vertex_count,
                            std::size_t cols, float* out, SumScratch& scratch,
-                           const GatherLobe* lobe = nullptr) const;
+                           const GatherSite& where = {}) const;
   // Whether bounce `bounce` on rows of `cols` texels traces a near field.
   bool HasNearField(int bounce, std::size_t cols) const;
 

@@ -9,10 +9,20 @@
 // the camera, as a renderer shades a two-sided surface. A ray that hits nothing makes a
 // background pixel: SpatialSample::background, a zero row, and the viewer draws the environment
 // map there at its own resolution.
+//
+// Supersampling ([camera] supersample = k > 1; docs/image-relighting.md, "Supersampling"): k×k
+// stratified jittered primary rays per pixel square (stratum (i, j), the jitter a pure function
+// of the seed, the pixel and the stratum, so every rank traces the same rays). The surface hits
+// are the pixel's footprint (SampleFootprints); the pixel's coverage is the fraction of rays that
+// hit a surface, its mesh the one most rays see (ties: the lowest index; background when none
+// hit), its sample the surface hit nearest the pixel centre (marked `supersampled`: its row is
+// the footprint's mix, WeighFootprints).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -36,13 +46,32 @@ struct CameraSamples {
   // near field compares hits with it, as with a vertex's SceneSurfaces::VertexEdge).
   std::vector<float> pixel_edge;
   std::size_t background_count() const { return BackgroundPixels(pixel_mesh); }
+
+  // Supersampling (k = camera.supersample > 1); otherwise 1 and the rest empty.
+  int supersample = 1;
+  // Per pixel: the fraction of its k² rays that hit a surface.
+  std::vector<float> coverage;
+  // The surface sub-samples of every pixel (indexed by pixel; cdf filled by WeighFootprints, edge
+  // their triangles' longest edges) and their meshes (parallel to footprints->subs).
+  std::shared_ptr<SampleFootprints> footprints;
+  std::vector<uint32_t> sub_mesh;
+  // Per pixel (WeighFootprints): w_c(p) = (1/k²) Σ_s a_c(s), background sub-samples 0.
+  std::vector<Rgb> pixel_weight;
 };
 
 // Traces the primary rays of `camera` (parallel over rows, TBB). A background pixel's sample
 // lies 100 scene diagonals out along its ray (finite, and farther from any surface sample than
 // any neighbour radius) with its normals towards the camera. Throws InputError naming `name` on a
 // degenerate camera (CameraProjection's conditions) or one whose eye is not finite.
+// camera.supersample = k > 1 traces k×k rays per pixel (above), jittered from `seed`.
 CameraSamples ComputeCameraSamples(const EmbreeScene& scene, const SceneSurfaces& surfaces,
-                                   const Camera& camera, const std::string& name = "camera");
+                                   const Camera& camera, const std::string& name = "camera",
+                                   uint64_t seed = 1);
+
+// Supersampled pixels' weights from each mesh's relighting weight a (its albedo, or a glossy
+// mesh's w; mesh_weight[m] for mesh m): the mixing weights λ_s = ā(s) / Σ ā over the pixel's
+// surface sub-samples (ā the mean of the channels; uniform when every ā is 0) into
+// footprints->cdf, and pixel_weight. A no-op when supersample is 1.
+void WeighFootprints(CameraSamples& pixels, std::span<const Rgb> mesh_weight);
 
 }  // namespace prt

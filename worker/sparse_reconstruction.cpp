@@ -177,7 +177,7 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
   above.resize(total);
   fully.resize(total);
   const std::size_t above_count =
-      layout.AboveHorizonMask(sample.normal, above.data(), fully.data());
+      SampleHorizonMask(sampler, sample, sample_index, above.data(), fully.data());
   const Runs runs = RunsOf(above.data(), total);
   std::vector<float>& var = scratch.var;
   std::vector<uint16_t>& featcount = scratch.feat;

@@ -36,14 +36,28 @@ int StrataV(int k) {
 
 // Everything a row needs about its sample, computed once per call.
 struct SampleFrame {
-  Vec3 normal;         // unit shading normal
+  Vec3 normal;  // unit shading normal
   // A glossy pixel's material (GlossySampling::materials) and its frame with the
   // view towards the eye; nullptr for a diffuse sample.
   const Material* material = nullptr;
   ShadingFrame shading;
   OcclusionRay ray{};  // origin, tnear, tfar filled; direction per ray
   uint64_t key = 0;    // RowKey(seed, sample index)
+  // A supersampled pixel (SampleFootprints): its sub-samples' frames and cumulative λ; empty
+  // for every other sample.
+  std::vector<SampleFrame> subs;
+  const double* cdf = nullptr;
+  // Per texel: above the horizon of any sub-sample (CubemapLayout::AboveHorizonMask of each
+  // distinct sub-sample normal, OR-ed; the same corner test as TexelAboveHorizon).
+  std::vector<uint8_t> above;
 };
+
+// The texel offset φ_j of a supersampled pixel's stratified sub-sample choice, in [0, 1).
+double FootprintOffset(uint64_t key, std::size_t texel) {
+  const uint64_t bits =
+      SplitMix64(SplitMix64(key ^ 0x464F4F5450524E54ull) ^ static_cast<uint64_t>(texel));
+  return static_cast<double>(bits >> 11) * 0x1p-53;
+}
 
 // What happens to the generated rays (Impl::Flush): traced by Embree, taken as unoccluded, or
 // collected. One compiled EvaluateTexel and one Flush serve every mode (a predictable branch per
@@ -62,6 +76,7 @@ struct TransportSampler::Impl {
   CubemapLayout layout;
   TransportSamplerOptions options;
   GlossySampling glossy;
+  std::shared_ptr<const SampleFootprints> footprints;
   int strata_u = 1;
   int strata_v = 1;
   // Ω_s for every stratum of every texel of one face (all faces share it): index
@@ -71,8 +86,9 @@ struct TransportSampler::Impl {
   std::atomic<bool> measure_trace_cpu{false};
   mutable std::atomic<uint64_t> trace_cpu_ns{0};
 
-  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o, GlossySampling g)
-      : scene(s), layout(n), options(o), glossy(std::move(g)) {
+  Impl(const EmbreeScene& s, int n, const TransportSamplerOptions& o, GlossySampling g,
+       std::shared_ptr<const SampleFootprints> fp)
+      : scene(s), layout(n), options(o), glossy(std::move(g)), footprints(std::move(fp)) {
     const int k = o.rays_per_texel;
     if (k < 1 || k > 1024) {
       throw std::invalid_argument("TransportSampler: rays_per_texel must be in [1, 1024], got " +
@@ -100,6 +116,33 @@ struct TransportSampler::Impl {
   }
 
   SampleFrame Frame(const SpatialSample& sample, uint64_t sample_index) const {
+    SampleFrame f = PointFrame(sample, sample_index);
+    if (!sample.supersampled) return f;
+    const SampleFootprints* fp = footprints.get();
+    if (fp == nullptr || sample_index + 1 >= fp->offset.size() ||
+        fp->offset[sample_index] >= fp->offset[sample_index + 1] ||
+        fp->offset[sample_index + 1] > fp->subs.size() || fp->cdf.size() != fp->subs.size()) {
+      throw std::logic_error("TransportSampler: supersampled sample " +
+                             std::to_string(sample_index) + " has no footprint");
+    }
+    const uint32_t begin = fp->offset[sample_index], end = fp->offset[sample_index + 1];
+    f.subs.reserve(end - begin);
+    for (uint32_t i = begin; i < end; ++i) f.subs.push_back(PointFrame(fp->subs[i], sample_index));
+    f.cdf = fp->cdf.data() + begin;
+    const std::size_t count = layout.texel_count();
+    f.above.assign(count, 0);
+    std::vector<uint8_t> mask(count);
+    std::vector<Vec3> seen;
+    for (const SampleFrame& sub : f.subs) {
+      if (std::find(seen.begin(), seen.end(), sub.normal) != seen.end()) continue;
+      seen.push_back(sub.normal);
+      layout.AboveHorizonMask(sub.normal, mask.data());
+      for (std::size_t j = 0; j < count; ++j) f.above[j] |= mask[j];
+    }
+    return f;
+  }
+
+  SampleFrame PointFrame(const SpatialSample& sample, uint64_t sample_index) const {
     SampleFrame f;
     const double len = Length(sample.normal);
     if (!IsFinite(sample.position) || !std::isfinite(len) || len == 0) {
@@ -118,9 +161,8 @@ struct TransportSampler::Impl {
     if (sample.glossy_material != kDiffuseSample) {
       if (sample.glossy_material >= glossy.materials.size()) {
         throw std::out_of_range("TransportSampler: sample " + std::to_string(sample_index) +
-                                " names glossy material " +
-                                std::to_string(sample.glossy_material) + " of " +
-                                std::to_string(glossy.materials.size()));
+                                " names glossy material " + std::to_string(sample.glossy_material) +
+                                " of " + std::to_string(glossy.materials.size()));
       }
       f.material = &glossy.materials[sample.glossy_material];
       f.shading = MakeShadingFrame(f.normal, glossy.eye - sample.position);
@@ -296,7 +338,10 @@ struct TransportSampler::Impl {
     constexpr int kChunk = 16;
     float dir[kChunk][3];
     double cosine[kChunk];
-    Vec3 unit[kChunk];  // the directions in double (glossy pixels' BRDF)
+    Vec3 unit[kChunk];                // the directions in double (glossy pixels' BRDF)
+    const SampleFrame* from[kChunk];  // the point each ray leaves (a sub-sample, or the sample)
+    const std::size_t subs = f.subs.size();
+    const double phi = subs == 0 ? 0.0 : FootprintOffset(f.key, texel);
     int su = 0, sv = 0;
     for (int s0 = 0; s0 < k; s0 += kChunk) {
       const int count = std::min(kChunk, k - s0);
@@ -309,7 +354,15 @@ struct TransportSampler::Impl {
         const double v = v0 + (sv + jv) * dv;
         const double inv = 1.0 / std::sqrt(1.0 + u * u + v * v);
         const Vec3 d = CubemapLayout::FacePoint(face, u, v) * inv;
-        cosine[i] = Dot(f.normal, d);
+        from[i] = &f;
+        if (subs != 0) {  // stratified inverse CDF of λ
+          double w = (s0 + i + 0.5) / k + phi;
+          w -= std::floor(w);
+          const std::size_t pick =
+              static_cast<std::size_t>(std::upper_bound(f.cdf, f.cdf + subs, w) - f.cdf);
+          from[i] = &f.subs[std::min(pick, subs - 1)];
+        }
+        cosine[i] = Dot(from[i]->normal, d);
         unit[i] = d;
         dir[i][0] = static_cast<float>(d.x);
         dir[i][1] = static_cast<float>(d.y);
@@ -326,19 +379,19 @@ struct TransportSampler::Impl {
           continue;
         }
         ++stats.rays_traced;
+        const SampleFrame& p = *from[i];
         OcclusionRay& ray = b.rays[b.count];
-        ray = f.ray;
+        ray = p.ray;
         ray.direction[0] = dir[i][0];
         ray.direction[1] = dir[i][1];
         ray.direction[2] = dir[i][2];
         // Diffuse: Ω_s·cos (the 1/π comes at Flush). Glossy pixel: Ω_s·(k_d·cos + π·k_s·f_s·cos).
         b.weight[b.count] =
-            f.material == nullptr
+            p.material == nullptr
                 ? omega[s0 + i] * c
-                : omega[s0 + i] *
-                      (f.material->diffuse[0] * c +
-                       std::numbers::pi * f.material->specular[0] *
-                           SpecularLobe(*f.material, f.shading, unit[i]));
+                : omega[s0 + i] * (p.material->diffuse[0] * c +
+                                   std::numbers::pi * p.material->specular[0] *
+                                       SpecularLobe(*p.material, p.shading, unit[i]));
         b.slot[b.count] = slot;
         b.stratum[b.count] = s0 + i;
         if (++b.count == Batch::kRays) {
@@ -368,6 +421,23 @@ struct TransportSampler::Impl {
     return below == 4 ? FaceSide::kBelow : (above == 4 ? FaceSide::kAbove : FaceSide::kMixed);
   }
 
+  // Whether texel j (its face `face`) is above the horizon of the sample, or of any sub-sample of
+  // a supersampled pixel.
+  FaceSide Side(int face, const SampleFrame& f) const {
+    if (f.subs.empty()) return ClassifyFace(face, f.normal);
+    bool below = true, above = true;
+    for (const SampleFrame& sub : f.subs) {
+      const FaceSide side = ClassifyFace(face, sub.normal);
+      below = below && side == FaceSide::kBelow;
+      above = above && side == FaceSide::kAbove;
+    }
+    return below ? FaceSide::kBelow : (above ? FaceSide::kAbove : FaceSide::kMixed);
+  }
+  bool Above(std::size_t j, const SampleFrame& f) const {
+    if (f.subs.empty()) return layout.TexelAboveHorizon(j, f.normal);
+    return f.above[j] != 0;
+  }
+
   SampleStats Row(const SpatialSample& sample, uint64_t sample_index, float* row,
                   const Tracer& trace, float* variance = nullptr) const {
     if (sample.background) {  // no surface: T = 0, nothing traced
@@ -382,7 +452,7 @@ struct TransportSampler::Impl {
     const int n = layout.n();
     std::size_t j = 0;
     for (int face = 0; face < 6; ++face) {
-      const FaceSide side = ClassifyFace(face, f.normal);
+      const FaceSide side = Side(face, f);
       if (side == FaceSide::kBelow) {
         stats.texels_below_horizon += layout.face_size();
         if (row != nullptr) std::fill(row + j, row + j + layout.face_size(), 0.0f);
@@ -394,7 +464,7 @@ struct TransportSampler::Impl {
       }
       for (int y = 0; y < n; ++y) {
         for (int x = 0; x < n; ++x, ++j) {
-          if (side == FaceSide::kMixed && !layout.TexelAboveHorizon(j, f.normal)) {
+          if (side == FaceSide::kMixed && !Above(j, f)) {
             ++stats.texels_below_horizon;
             if (row != nullptr) row[j] = 0.0f;
             if (variance != nullptr) variance[j] = 0.0f;
@@ -431,7 +501,7 @@ struct TransportSampler::Impl {
     Batch batch;
     for (std::size_t i = 0; i < texels.size(); ++i) {
       const std::size_t j = texels[i];
-      if (!layout.TexelAboveHorizon(j, f.normal)) {
+      if (!Above(j, f)) {
         ++stats.texels_below_horizon;
         values[i] = 0.0f;
         if (unoccluded != nullptr) unoccluded[i] = 0.0f;
@@ -449,8 +519,10 @@ struct TransportSampler::Impl {
 };
 
 TransportSampler::TransportSampler(const EmbreeScene& scene, int cubemap_n,
-                                   TransportSamplerOptions options, GlossySampling glossy)
-    : impl_(std::make_unique<Impl>(scene, cubemap_n, options, std::move(glossy))) {}
+                                   TransportSamplerOptions options, GlossySampling glossy,
+                                   std::shared_ptr<const SampleFootprints> footprints)
+    : impl_(std::make_unique<Impl>(scene, cubemap_n, options, std::move(glossy),
+                                   std::move(footprints))) {}
 
 TransportSampler::~TransportSampler() = default;
 
@@ -462,6 +534,9 @@ const TransportSamplerOptions& TransportSampler::options() const {
 }
 const GlossySampling& TransportSampler::glossy() const {
   return impl_->glossy;
+}
+const SampleFootprints* TransportSampler::footprints() const {
+  return impl_->footprints.get();
 }
 int TransportSampler::strata_u() const {
   return impl_->strata_u;

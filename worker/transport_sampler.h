@@ -34,6 +34,10 @@ struct SpatialSample {
   // its row of T is 0 (every kernel returns zeros without tracing); the viewer draws the
   // environment there.
   bool background = false;
+  // A supersampled camera pixel (docs/image-relighting.md, "Supersampling"): its row is the
+  // λ-weighted mix of its footprint's sub-samples' rows (SampleFootprints), and this sample is
+  // only the representative point (the sparse method's neighbour position).
+  bool supersampled = false;
   // A glossy camera pixel (docs/image-relighting.md, "Glossy pixels"): the index of its material
   // in GlossySampling::materials; kDiffuseSample for every other sample.
   uint32_t glossy_material = 0xFFFFFFFFu;
@@ -68,6 +72,27 @@ struct GlossySampling {
   Vec3 eye{0, 0, 0};
 };
 
+// Supersampled camera pixels (docs/image-relighting.md, "Supersampling"): the surface
+// sub-samples of each pixel footprint and their mixing weights λ (Σ λ = 1). A sample with
+// `supersampled` set and global index i has the row
+//   R[i][j] = Σ_s λ_s T(x_s)[j]
+// estimated at the cost of one row: the same strata and jittered directions as an ordinary row,
+// each ray r of texel j taking sub-sample s by the stratified inverse CDF of λ at
+// u = frac((r + ½)/rays + φ_j), φ_j uniform per texel (from the sample's stream), and its weight
+// Ω_r·V·cos/π (or the glossy weight) evaluated at that sub-sample's point, normal and material:
+// unbiased for Σ_s λ_s T_s. A texel is skipped only below the horizon of every sub-sample. The
+// unoccluded estimate is the same mix with V ≡ 1.
+struct SampleFootprints {
+  // Sample i's sub-samples are subs[offset[i] … offset[i+1]) with cumulative λ in cdf (the last
+  // of each range is 1); offset has one entry per sample plus one.
+  std::vector<uint32_t> offset;
+  std::vector<SpatialSample> subs;
+  std::vector<double> cdf;
+  // Parallel to subs: the longest edge of each sub-sample's triangle (the bounce gather's near
+  // field compares hits with it, as with CameraSamples::pixel_edge).
+  std::vector<float> edge;
+};
+
 // Counters a job reports (added up by the coordinator into run/report.json).
 struct SampleStats {
   uint64_t rays_traced = 0;           // occlusion rays given to Embree
@@ -90,8 +115,11 @@ class TransportSampler {
  public:
   // cubemap_n: a power of two in [1, 256] (CubemapLayout). Throws std::invalid_argument on a bad
   // n or rays_per_texel outside [1, 1024].
+  // footprints: the sub-samples of supersampled camera pixels (indexed by the global sample
+  // index), or null; a sample with `supersampled` set needs its (non-empty) entry.
   TransportSampler(const EmbreeScene& scene, int cubemap_n, TransportSamplerOptions options,
-                   GlossySampling glossy = {});
+                   GlossySampling glossy = {},
+                   std::shared_ptr<const SampleFootprints> footprints = nullptr);
   ~TransportSampler();
   TransportSampler(const TransportSampler&) = delete;
   TransportSampler& operator=(const TransportSampler&) = delete;
@@ -99,6 +127,7 @@ class TransportSampler {
   const CubemapLayout& layout() const;
   const TransportSamplerOptions& options() const;
   const GlossySampling& glossy() const;
+  const SampleFootprints* footprints() const;
   // The stratum grid: strata_u() × strata_v() = rays_per_texel; stratum s = sv·strata_u() + su.
   int strata_u() const;
   int strata_v() const;
@@ -110,8 +139,8 @@ class TransportSampler {
 
   // Full row of T for one sample (layout().texel_count() floats). `sample_index` is the
   // sample's global index: it seeds the jitter, so a row is identical whichever rank, thread
-  // or batch computes it. Thread-safe; no allocation inside.
-  // variance (optional, texel_count floats): each texel's Monte-Carlo variance Var(T_j),
+  // or batch computes it. Thread-safe; no allocation inside (but a supersampled pixel's sub-sample
+  // frames). variance (optional, texel_count floats): each texel's Monte-Carlo variance Var(T_j),
   // estimated from the same rays by collapsing neighbouring strata in pairs (docs/
   // transport-sampling.md, "Monte-Carlo error"); 0 below the horizon, and 0 everywhere when
   // !VarianceEstimable(). The row's bytes do not depend on whether it is asked for.

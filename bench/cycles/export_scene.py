@@ -85,11 +85,10 @@ def read_geometry(path):
 def read_image(path):
     data = open(path, "rb").read()
     r = Reader(data, path)
-    # PRTIMG01, or PRTIMG02 (glossy pixels: a per-mesh table follows the pixels, which the
-    # export does not need: the materials come from scene.toml). The camera and the pixels'
-    # meshes come first in both (docs/transport-format.md).
-    if r.raw(8) not in (b"PRTIMG01", b"PRTIMG02"):
-        sys.exit(f"{path}: not an image.prti (PRTIMG01 or PRTIMG02)")
+    # PRTIMG02 (glossy pixels) and PRTIMG03 (supersampled) add tables after the pixels; the
+    # camera and the per-pixel mesh come first in all three.
+    if r.raw(8) not in (b"PRTIMG01", b"PRTIMG02", b"PRTIMG03"):
+        sys.exit(f"{path}: not an image.prti (PRTIMG01, 02 or 03)")
     width, height = r.take("I", 2)
     eye, target, up = r.take("d", 3), r.take("d", 3), r.take("d", 3)
     (fov,) = r.take("d")

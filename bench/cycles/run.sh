@@ -21,8 +21,7 @@
 # Cost on the shared 2-core VM (160×120, 512 samples, four environments; measured 5 Dec 2026):
 # prt-farm 8–40 s per case except path-k2-brute16 (134 s: every pixel path traces), a Cycles
 # render 5–25 s at max bounces 0 or 2 diffuse bounces plus a few seconds of Blender start; the
-# whole command about 15 min from nothing. The supersample case refuses in seconds until
-# `[camera] supersample` exists. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/,
+# whole command about 15 min from nothing. Output: OUT_DIR/<case>/ (run/, <case>.prtpack, cycles/,
 # <env>-prt.exr, <env>-compare.json, <env>-side.png, <env>-error.png) and OUT_DIR/table.txt.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"

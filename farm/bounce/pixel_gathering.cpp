@@ -139,17 +139,20 @@ class PixelGatherPhase final : public BouncePhase {
           return GatherStats{};
         }
         thread_local BounceGatherer::SumScratch scratch;
-        const SpatialSample& x = ctx.samples[p];
-        // A glossy pixel gathers through its lobe, with the view from the camera
-        // (docs/image-relighting.md, "Glossy pixels").
-        GatherLobe lobe;
-        if (x.glossy_material != kDiffuseSample) {
-          lobe.material = &ctx.glossy_pixels.materials.at(x.glossy_material);
-          lobe.frame = MakeShadingFrame(x.normal, ctx.params.camera.eye - x.position);
+        // A supersampled pixel gathers from its footprint's sub-samples (docs/image-relighting.md,
+        // "Supersampling"); a glossy point (the pixel's, or a sub-sample's) through its lobe, with
+        // the view from the camera ("Glossy pixels").
+        GatherSite where;
+        if (ctx.samples[p].supersampled && ctx.footprints) {
+          where.footprint = ctx.footprints.get();
+          where.first = ctx.footprints->offset[p];
+          where.count = ctx.footprints->offset[p + 1] - ctx.footprints->offset[p];
         }
-        return gatherer->GatherSumRow(x, kPixelStream + p, ctx.pixel_edge[p], C, direct.data(),
-                                      higher.empty() ? nullptr : higher.data(), V, cols, dst,
-                                      scratch, lobe.material ? &lobe : nullptr);
+        const GatherLobe lobe{ctx.glossy_pixels.materials, ctx.params.camera.eye};
+        if (ctx.glossy_pixels.any()) where.lobe = &lobe;
+        return gatherer->GatherSumRow(ctx.samples[p], kPixelStream + p, ctx.pixel_edge[p], C,
+                                      direct.data(), higher.empty() ? nullptr : higher.data(), V,
+                                      cols, dst, scratch, where);
       });
     };
     jobs.report = [&](FarmContext&, const BounceTotals& totals) {

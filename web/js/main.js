@@ -160,7 +160,7 @@ function makeView() {
   if (pack.isImage) {
     gl.hidden = true;
     img.hidden = false;
-    app.view = new ImageView(img, cam, pack.imageBackground());
+    app.view = new ImageView(img, cam, pack.imageBackground(), pack.imageCoverage());
   } else {
     img.hidden = true;
     gl.hidden = false;

@@ -96,6 +96,22 @@ export class Pack {
     }
   }
 
+  /**
+   * How much of each pixel of an image pack is surface (docs/image-relighting.md,
+   * "Supersampling"): 1 float per sample, 1 surface, 0 background, in between on the partly
+   * covered pixels of a supersampled pack, which show (1 − coverage) of the environment.
+   */
+  imageCoverage() {
+    const M = this.M;
+    const ptr = M._malloc(Math.max(4, 4 * this.samples));
+    try {
+      this.check(M._prt_runtime_get_image_coverage(this.rt, ptr, this.samples), 'coverage');
+      return M.HEAPF32.slice(ptr >> 2, (ptr >> 2) + this.samples);
+    } finally {
+      M._free(ptr);
+    }
+  }
+
   /** The baked camera: {eye, target, up, fov (degrees, vertical), width, height}. */
   camera() {
     const M = this.M;

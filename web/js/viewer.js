@@ -255,7 +255,7 @@ function environmentRadiance(env, d, rotation, out) {
  * that see no surface (prt_runtime_get_image_background) show the environment, as in prt-view.
  */
 export class ImageView {
-  constructor(canvas, camera, background) {
+  constructor(canvas, camera, background, coverage = null) {
     const {width, height} = camera;
     this.canvas = canvas;
     canvas.width = width;
@@ -271,6 +271,9 @@ export class ImageView {
     this.exposure = 1;
     this.rgb = new Float32Array(3 * width * height);
     this.background = background;  // 1 byte per pixel
+    // Supersampled packs: each pixel's surface fraction; (1 − coverage) of the environment is
+    // added to a partly covered pixel's radiance (docs/image-relighting.md, "Supersampling").
+    this.coverage = coverage;
     this.env = null;
     this.rotation = 0;
     this.backgroundRgb = null;  // the environment at the background pixels, for this rotation
@@ -322,7 +325,8 @@ export class ImageView {
     if (!this.env) return;
     const out = [0, 0, 0];
     for (let p = 0; p < n; ++p) {
-      if (!this.background[p]) continue;
+      const partial = this.coverage && this.coverage[p] > 0 && this.coverage[p] < 1;
+      if (!this.background[p] && !partial) continue;
       environmentRadiance(this.env, this.direction(p % this.width, Math.floor(p / this.width)),
                           this.rotation, out);
       this.backgroundRgb.set(out, 3 * p);
@@ -334,7 +338,17 @@ export class ImageView {
     const d = this.image.data;
     const e = this.exposure;
     const n = this.width * this.height;
+    const c = this.coverage;
     for (let i = 0; i < n; ++i) {
+      if (c && c[i] > 0 && c[i] < 1) {
+        const share = 1 - c[i];
+        for (let k = 0; k < 3; ++k) {
+          const v = this.rgb[3 * i + k] + share * this.backgroundRgb[3 * i + k];
+          d[4 * i + k] = Math.round(255 * srgbEncode(v * e));
+        }
+        d[4 * i + 3] = 255;
+        continue;
+      }
       const src = this.background[i] ? this.backgroundRgb : this.rgb;
       d[4 * i] = Math.round(255 * srgbEncode(src[3 * i] * e));
       d[4 * i + 1] = Math.round(255 * srgbEncode(src[3 * i + 1] * e));
