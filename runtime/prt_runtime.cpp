@@ -451,6 +451,22 @@ void CopyOut(const prt_runtime& rt, std::size_t first, std::size_t count, float*
     std::memcpy(out + 3 * v, src + 3 * static_cast<std::size_t>(pos[v]), sizeof(float) * 3);
 }
 
+// The checks of a per-pixel output of an image pack: a handle, an output array of `samples`
+// entries (`what`), an image pack (`vertex_lacks`: what a vertex pack has not); its image.
+template <class T>
+const prt::ImageSamplesInfo& PerPixelOutput(const prt_runtime* rt, const T* out, size_t samples,
+                                            const char* what, const char* vertex_lacks) {
+  RequireHandle(rt);
+  Require(out != nullptr, std::string(what) + " is NULL");
+  const prt::ImageSamplesInfo* image = rt->glossy ? nullptr : rt->session->image();
+  Require(image != nullptr, rt->name + " is a vertex pack: it has no " + vertex_lacks);
+  const std::size_t ns = rt->samples();
+  Require(samples == ns,
+          "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
+  Require(image->pixel_mesh.size() == ns, rt->name + ": pixel count differs from samples");
+  return *image;
+}
+
 }  // namespace
 
 extern "C" {
@@ -564,30 +580,20 @@ int prt_runtime_get_triangles(const prt_runtime* rt, uint32_t* indices, size_t t
 
 int prt_runtime_get_image_background(const prt_runtime* rt, uint8_t* background, size_t samples) {
   return Guard("prt_runtime_get_image_background", [&] {
-    RequireHandle(rt);
-    Require(background != nullptr, "background is NULL");
-    const prt::ImageSamplesInfo* image = rt->glossy ? nullptr : rt->session->image();
-    Require(image != nullptr, rt->name + " is a vertex pack: it has no background pixels");
-    const std::size_t ns = rt->samples();
-    Require(samples == ns,
-            "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
-    Require(image->pixel_mesh.size() == ns, rt->name + ": pixel count differs from samples");
+    const prt::ImageSamplesInfo& image =
+        PerPixelOutput(rt, background, samples, "background", "background pixels");
+    const std::size_t ns = samples;
     for (std::size_t p = 0; p < ns; ++p)
-      background[p] = image->pixel_mesh[p] == prt::kImageBackground ? 1 : 0;
+      background[p] = image.pixel_mesh[p] == prt::kImageBackground ? 1 : 0;
   });
 }
 
 int prt_runtime_get_image_coverage(const prt_runtime* rt, float* coverage, size_t samples) {
   return Guard("prt_runtime_get_image_coverage", [&] {
-    RequireHandle(rt);
-    Require(coverage != nullptr, "coverage is NULL");
-    const prt::ImageSamplesInfo* image = rt->glossy ? nullptr : rt->session->image();
-    Require(image != nullptr, rt->name + " is a vertex pack: it has no pixel coverage");
-    const std::size_t ns = rt->samples();
-    Require(samples == ns,
-            "room for " + std::to_string(samples) + " samples, the pack has " + std::to_string(ns));
-    Require(image->pixel_mesh.size() == ns, rt->name + ": pixel count differs from samples");
-    const std::vector<float> share = prt::PixelEnvironmentShare(*image);
+    const prt::ImageSamplesInfo& image =
+        PerPixelOutput(rt, coverage, samples, "coverage", "pixel coverage");
+    const std::size_t ns = samples;
+    const std::vector<float> share = prt::PixelEnvironmentShare(image);
     for (std::size_t p = 0; p < ns; ++p) coverage[p] = 1.0f - share[p];
   });
 }
