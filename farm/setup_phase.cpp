@@ -269,27 +269,27 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
             "through each pixel centre: aliased edges, the same rows' cost) or [sampling] bounces "
             "= 0 (direct light only: the interreflected light is lost)");
   // Glossy pixels gather their bounce light through their lobe (GatherLobe): every glossy
-  // pixel must gather itself, with the gather estimator.
-  if (image && bounces > 0 && !visibility) {
-    const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
-    for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
-      if (!glossy.glossy[i]) continue;
-      const std::string mesh = "mesh '" + geometry.meshes[i].name +
-                               "' has glossy pixels and bounces = " + std::to_string(bounces);
-      if (ctx.params.path_estimator)
-        throw InputError(scene.file,
-                         mesh +
-                             ": the path tracer weighs a pixel's bounce light by the diffuse "
-                             "BRDF only; set [sampling] estimator = \"gather\" (the default: "
-                             "the glossy pixels gather through their lobe) or bounces = 0 "
-                             "(direct light only: the interreflected light is lost)");
-      if (ctx.params.sparse && scene.sparse.indirect != "full")
-        throw InputError(scene.file,
-                         mesh + ": [sparse] indirect = \"" + scene.sparse.indirect +
-                             "\" would give a sparse glossy pixel its diffuse neighbours' bounce "
-                             "light; set indirect = \"full\" (the default for image runs: every "
-                             "surface pixel gathers, +7 % of the run) or method = \"brute\"");
-    }
+  // pixel must gather itself, with the gather estimator. `glossy`: an image run's glossy meshes
+  // with bounces (none otherwise), also for the row channels below.
+  const GlossyPixels glossy =
+      image && bounces > 0 && !visibility ? ResolveGlossyPixels(scene, geometry) : GlossyPixels{};
+  for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
+    if (!glossy.glossy[i]) continue;
+    const std::string mesh = "mesh '" + geometry.meshes[i].name +
+                             "' has glossy pixels and bounces = " + std::to_string(bounces);
+    if (ctx.params.path_estimator)
+      throw InputError(scene.file,
+                       mesh +
+                           ": the path tracer weighs a pixel's bounce light by the diffuse "
+                           "BRDF only; set [sampling] estimator = \"gather\" (the default: "
+                           "the glossy pixels gather through their lobe) or bounces = 0 "
+                           "(direct light only: the interreflected light is lost)");
+    if (ctx.params.sparse && scene.sparse.indirect != "full")
+      throw InputError(scene.file,
+                       mesh + ": [sparse] indirect = \"" + scene.sparse.indirect +
+                           "\" would give a sparse glossy pixel its diffuse neighbours' bounce "
+                           "light; set indirect = \"full\" (the default for image runs: every "
+                           "surface pixel gathers, +7 % of the run) or method = \"brute\"");
   }
   // [sparse] indirect (docs/sparse-precomputation.md, "With interreflection"): 1 combination,
   // 2 features.
@@ -304,12 +304,9 @@ void ResolveInterreflection(FarmContext& ctx, const SceneDescription& scene,
   // One row per channel when some surface a bounce ray reaches is coloured: a mesh's albedo, or
   // an image run's glossy mesh's weight (a coloured metal has albedo 0; BounceAlbedo).
   bool coloured = HasColouredAlbedo(geometry);
-  if (image && bounces > 0 && !visibility) {
-    const GlossyPixels glossy = ResolveGlossyPixels(scene, geometry);
-    for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
-      const Rgb& w = glossy.weight[i];
-      if (glossy.glossy[i] && (w[0] != w[1] || w[0] != w[2])) coloured = true;
-    }
+  for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
+    const Rgb& w = glossy.weight[i];
+    if (glossy.glossy[i] && (w[0] != w[1] || w[0] != w[2])) coloured = true;
   }
   ctx.params.channels = bounces > 0 && coloured ? 3 : 1;
   if (bounces > 0) {

@@ -111,6 +111,17 @@ EnvironmentImage RelitUnderUniformSky(const std::string& dir, const std::string&
   return ReadEnvironment(exr);
 }
 
+// prt-farm on `ranks` ranks farms `scene_file` into `run`, whose transport.prtt must hold the
+// kernels' rows to the bit.
+void FarmAndExpectTheKernelsRows(int ranks, const std::string& scene_file, const std::string& run,
+                                 const std::vector<float>& kernel) {
+  const auto r = testing::RunPrtFarm(ranks, scene_file + " --out " + run + kSmallJobs);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::vector<float> rows = Rows(run + "/transport.prtt");
+  ASSERT_EQ(rows.size(), kernel.size());
+  EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0) << ranks << " rank(s)";
+}
+
 TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePackDrawsThem) {
   const std::string dir = WorkDir("brute");
   const std::string scene_file = ImageScene(dir, "tiny.toml");
@@ -128,11 +139,8 @@ TEST(ImageRelightingMpiTest, BruteRowsAreTheKernelsRowsForAnyRankCountAndThePack
   std::string compressed;
   for (int ranks : {1, 2, 3}) {
     const std::string run = dir + "/np" + std::to_string(ranks);
-    const auto r = testing::RunPrtFarm(ranks, scene_file + " --out " + run + kSmallJobs);
-    ASSERT_EQ(r.exit_code, 0) << r.output;
-    const std::vector<float> rows = Rows(run + "/transport.prtt");
-    ASSERT_EQ(rows.size(), kernel.size());
-    EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0) << ranks;
+    FarmAndExpectTheKernelsRows(ranks, scene_file, run, kernel);
+    if (HasFatalFailure()) return;
     const ImageSamplesInfo info =
         ReadImageSamplesFile(run + "/image.prti", static_cast<uint32_t>(g.meshes.size()));
     EXPECT_EQ(info.pixel_mesh, pixels.pixel_mesh);
@@ -344,11 +352,8 @@ TEST(ImageRelightingMpiTest, SupersampledRowsAreByteIdenticalAndThePackBlendsThe
 
   for (int ranks : {1, 2}) {
     const std::string run = dir + "/np" + std::to_string(ranks);
-    const auto r = testing::RunPrtFarm(ranks, scene_file + " --out " + run + kSmallJobs);
-    ASSERT_EQ(r.exit_code, 0) << r.output;
-    const std::vector<float> rows = Rows(run + "/transport.prtt");
-    ASSERT_EQ(rows.size(), kernel.size());
-    EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0) << ranks;
+    FarmAndExpectTheKernelsRows(ranks, scene_file, run, kernel);
+    if (HasFatalFailure()) return;
     const ImageSamplesInfo info =
         ReadImageSamplesFile(run + "/image.prti", static_cast<uint32_t>(k.g.meshes.size()));
     EXPECT_EQ(info.supersample, 3);
@@ -402,8 +407,7 @@ TEST(ImageRelightingMpiTest, SupersampledRowsAreByteIdenticalAndThePackBlendsThe
 
   // Another k re-samples the rows on --resume (the stage key holds it).
   const std::string k2 = ImageScene(dir, "tiny.toml", "", "supersample = 2\n");
-  const auto again =
-      testing::RunPrtFarm(1, k2 + " --out " + dir + "/np1 --resume" + kSmallJobs);
+  const auto again = testing::RunPrtFarm(1, k2 + " --out " + dir + "/np1 --resume" + kSmallJobs);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_FALSE(Rows(dir + "/np1/transport.prtt") == kernel);
   EXPECT_EQ(ReadImageSamplesFile(dir + "/np1/image.prti", 2).supersample, 2);
@@ -546,11 +550,8 @@ TEST(ImageRelightingMpiTest,
   ASSERT_GT(glossy_pixels, 20u);
   for (int ranks : {1, 2}) {
     const std::string run = dir + "/np" + std::to_string(ranks);
-    const auto r = testing::RunPrtFarm(ranks, scene_file + " --out " + run + kSmallJobs);
-    ASSERT_EQ(r.exit_code, 0) << r.output;
-    const std::vector<float> rows = Rows(run + "/transport.prtt");
-    ASSERT_EQ(rows.size(), kernel.size());
-    EXPECT_EQ(std::memcmp(rows.data(), kernel.data(), rows.size() * 4), 0) << ranks;
+    FarmAndExpectTheKernelsRows(ranks, scene_file, run, kernel);
+    if (HasFatalFailure()) return;
     const ImageSamplesInfo info = ReadImageSamplesFile(run + "/image.prti", 2);
     EXPECT_EQ(info.glossy_mesh, glossy.glossy);
     EXPECT_NEAR(info.glossy_weight[0][1], 0.8f, 1e-6f);

@@ -312,10 +312,8 @@ TEST(CameraSupersample, SilhouettePixelsCoverTheirAnalyticFractionAndBlendTheEnv
                                            pixels.coverage.begin(), pixels.coverage.end(), 0.f)));
 }
 
-TEST(CameraSupersample, APixelStraddlingTwoMeshesIsTheLambdaWeightedMixOfItsSubSamplesRows) {
-  // The wall (albedo 0.5, facing the camera) standing on the ground (0.8): pixels along its
-  // foot see both; λ = ā / Σ ā weighs the ground's sub-samples 1.6× the wall's.
-  const SceneGeometry g = GroundAndWall();
+// GroundAndWall's wall standing on the ground, 48×36 at k = 3: pixels along its foot see both.
+Camera WallFootCamera() {
   Camera cam;
   cam.eye = {0.2, 0.9, 3.0};
   cam.target = {0.0, 0.0, -0.5};
@@ -323,6 +321,14 @@ TEST(CameraSupersample, APixelStraddlingTwoMeshesIsTheLambdaWeightedMixOfItsSubS
   cam.height = 36;
   cam.fov_deg = 40;
   cam.supersample = 3;
+  return cam;
+}
+
+TEST(CameraSupersample, APixelStraddlingTwoMeshesIsTheLambdaWeightedMixOfItsSubSamplesRows) {
+  // The wall (albedo 0.5, facing the camera) standing on the ground (0.8): pixels along its
+  // foot see both; λ = ā / Σ ā weighs the ground's sub-samples 1.6× the wall's.
+  const SceneGeometry g = GroundAndWall();
+  const Camera cam = WallFootCamera();
   // 64 rays per texel: each ray picks one sub-sample, so the row's noise includes the spread
   // between the sub-samples' rows (about 5 % of the row sum at 4 rays here, 0.8 % at 64).
   const SupersampledImage im(g, cam, 8, 64);
@@ -414,13 +420,7 @@ TEST(CameraSupersample, GlossySubSamplesCarryTheirMaterialAndView) {
   // ground's diffuse: a pixel along the wall's foot mixes a glossy and a diffuse row, each
   // sub-sample with its own view direction towards the eye.
   const SceneGeometry g = GroundAndWall();
-  Camera cam;
-  cam.eye = {0.2, 0.9, 3.0};
-  cam.target = {0.0, 0.0, -0.5};
-  cam.width = 48;
-  cam.height = 36;
-  cam.fov_deg = 40;
-  cam.supersample = 3;
+  const Camera cam = WallFootCamera();
   const EmbreeScene scene(g);
   const SceneSurfaces surfaces(g);
   CameraSamples pixels = ComputeCameraSamples(scene, surfaces, cam);
