@@ -152,4 +152,53 @@ BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& opt
   return out;
 }
 
+GlossyFactorTable FactorGlossyMeshes(const GlossyPixels& glossy,
+                                     const FactorisationOptions& options) {
+  GlossyFactorTable t;
+  if (!glossy.any()) return t;
+  t.terms = options.terms;
+  for (std::size_t m = 0; m < glossy.glossy.size(); ++m) {
+    t.mesh_weight.push_back(glossy.weight[m]);
+    if (!glossy.glossy[m]) {
+      t.mesh_factor.push_back(GlossyFactorTable::kDiffuseMesh);
+      continue;
+    }
+    t.mesh_factor.push_back(static_cast<uint32_t>(t.factors.size()));
+    t.factors.push_back(FactorBrdf(glossy.materials[m], options));
+  }
+  return t;
+}
+
+std::vector<SpatialSample> TermSamples(const std::vector<SpatialSample>& vertices,
+                                       const SceneGeometry& geometry,
+                                       const GlossyFactorTable& table) {
+  const std::vector<uint32_t> mesh = TermSampleMeshes(geometry, 1);
+  if (mesh.size() != vertices.size())
+    throw std::logic_error("TermSamples: the samples are not the geometry's vertices");
+  std::vector<SpatialSample> out;
+  out.reserve(vertices.size() * table.terms);
+  for (int t = 0; t < table.terms; ++t)
+    for (std::size_t v = 0; v < vertices.size(); ++v) {
+      SpatialSample s = vertices[v];
+      if (table.glossy(mesh[v])) {
+        s.glossy_material = table.mesh_factor[mesh[v]];
+        s.term = static_cast<uint8_t>(t);
+      } else if (t > 0) {
+        s.background = true;  // a diffuse vertex has no term t > 0: a zero row
+      }
+      out.push_back(s);
+    }
+  return out;
+}
+
+std::vector<uint32_t> TermSampleMeshes(const SceneGeometry& geometry, int terms) {
+  std::vector<uint32_t> one;
+  for (std::size_t m = 0; m < geometry.meshes.size(); ++m)
+    one.insert(one.end(), geometry.meshes[m].mesh.positions.size(), static_cast<uint32_t>(m));
+  std::vector<uint32_t> out;
+  out.reserve(one.size() * terms);
+  for (int t = 0; t < terms; ++t) out.insert(out.end(), one.begin(), one.end());
+  return out;
+}
+
 }  // namespace prt

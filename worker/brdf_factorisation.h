@@ -13,8 +13,15 @@
 // algebra, per-entry parallel BRDF evaluation).
 #pragma once
 
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
 #include "formats/glossy_factors.h"
 #include "runtime/brdf.h"
+#include "worker/glossy_pixels.h"
+#include "worker/transport_sampler.h"
 
 namespace prt {
 
@@ -39,6 +46,21 @@ BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& opt
 // (index m − 1): how fast the factorisation converges (bench and report).
 std::vector<double> TruncationErrors(const Material& material, const FactorisationOptions& options,
                                      int max_terms);
+
+// The factor table of a vertex run (docs/glossy-transport.md): one BrdfFactors per glossy mesh
+// of `glossy` (ResolveGlossyMaterials; its materials carry k_d and k_s), every mesh's weight w.
+// Empty (terms 0) when no mesh is glossy.
+GlossyFactorTable FactorGlossyMeshes(const GlossyPixels& glossy,
+                                     const FactorisationOptions& options);
+
+// A vertex run's samples with terms: the vertices once per term, term-major (sample t·V + v is
+// vertex v's term t). A glossy mesh's vertex names its factors and term; a diffuse mesh's vertex
+// is its ordinary (Lambert) row in term 0 and a zero row (background: nothing traced) after it.
+std::vector<SpatialSample> TermSamples(const std::vector<SpatialSample>& vertices,
+                                       const SceneGeometry& geometry,
+                                       const GlossyFactorTable& table);
+// Each of those samples' mesh (the farm's row groups).
+std::vector<uint32_t> TermSampleMeshes(const SceneGeometry& geometry, int terms);
 
 // A short description of the material ("ggx r=0.35 kd=0.4 ks=0.6").
 std::string DescribeMaterial(const Material& material);
