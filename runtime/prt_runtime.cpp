@@ -347,7 +347,7 @@ void ComputeFrame(prt_runtime& rt, unsigned terms) {
       radiance = rt.pbi->Radiance();
     }
   }
-  rt.frame_rgb = s.Shade(radiance);
+  rt.frame_rgb = s.Shade(radiance, rt.eye);  // a glossy vertex pack: its terms for the eye
 }
 
 // Makes (or restarts) the incremental relighter of the mode for a budget of `terms`.
