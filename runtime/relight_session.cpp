@@ -236,8 +236,7 @@ std::vector<float> RelightSession::Shade(const SampleRadiance& radiance, const V
 
 // Huang & Ramamoorthi 2010 Eq. 3: B(x, ω_o) = Σ_i g_i(ω_o) Σ_j T_i(x, ω_j) L(ω_j), the inner sums
 // already in `radiance` (term-major); here the outer sum with each vertex's view in its frame.
-SampleRadiance RelightSession::CombineTerms(const SampleRadiance& radiance,
-                                            const Vec3& eye) const {
+SampleRadiance RelightSession::CombineTerms(const SampleRadiance& radiance, const Vec3& eye) const {
   const std::size_t ns = sample_count(), m = terms();
   if (radiance.size() != m * ns)
     throw std::invalid_argument("CombineTerms: " + std::to_string(radiance.size()) +

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -351,6 +351,16 @@ run_supersample() {
     tee "$d/table.txt"
 }
 
+# Glossy vertex transport against Cycles (issue 39, docs/glossy-transport.md): the GGX bunny
+# baked per vertex with [glossy] terms (scenes/bench/bunny-ggx-vertex-*.toml), relit by prt-view
+# from the scene's camera, against Cycles at max bounces 0, through bench/cycles/run.sh.
+# PRT_CAMERA_ENVS picks the environments (default: all four). Output: $OUT/glossy-cycles/.
+run_glossy_cycles() {
+  PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" \
+    PRT_CAMERA_CASES="${PRT_CAMERA_CASES:-vertex-ggx-k0|scenes/bench/bunny-ggx-vertex-k0.toml|0|0|centre}" \
+    "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$OUT/glossy-cycles"
+}
+
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy; run_tp ;;
   transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake) "run_$WHAT" ;;
@@ -360,5 +370,6 @@ case "$WHAT" in
   image) run_image ;;
   camera) run_camera ;;
   supersample) run_supersample ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample] [--quick]" >&2; exit 1 ;;
+  glossy-cycles) run_glossy_cycles ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles] [--quick]" >&2; exit 1 ;;
 esac
