@@ -97,6 +97,10 @@ int main(int argc, char** argv) {
       o.terms = t;
       factor_error[t] = FactorBrdf(m, o).relative_error;
     }
+    const std::vector<double> trunc = TruncationErrors(m, fo, 16);
+    std::printf("r = %.2f truncation error (SVD grid) m = 1/2/4/8/16: %.1f/%.1f/%.1f/%.1f/%.1f%%\n",
+                r, 100 * trunc[0], 100 * trunc[1], 100 * trunc[3], 100 * trunc[7],
+                100 * trunc[15]);
     const TransportSampler exact(embree, n, so, GlossySampling{{m}, eye});
     const TransportSampler terms(embree, n, so, GlossySampling{{}, {}, table});
     // Per vertex: exact B and the 8 term radiances, per environment and channel.
