@@ -357,7 +357,7 @@ run_supersample() {
 # PRT_CAMERA_ENVS picks the environments (default: all four). Output: $OUT/glossy-cycles/.
 run_glossy_cycles() {
   PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" \
-    PRT_CAMERA_CASES="${PRT_CAMERA_CASES:-vertex-ggx-k0|scenes/bench/bunny-ggx-vertex-k0.toml|0|0|centre}" \
+    PRT_CAMERA_CASES="${PRT_CAMERA_CASES:-vertex-ggx-k0|scenes/bench/bunny-ggx-vertex-k0.toml|0|0|centre vertex-ggx-r08-k0|scenes/bench/bunny-ggx-vertex-r08-k0.toml|0|0|centre}" \
     "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$OUT/glossy-cycles"
 }
 
