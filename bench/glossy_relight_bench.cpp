@@ -31,8 +31,8 @@ double MedianMs(int repeats, F&& f) {
   for (int i = 0; i < repeats; ++i) {
     const auto a = std::chrono::steady_clock::now();
     f(i);
-    t.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a)
-                    .count());
+    t.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count());
   }
   std::sort(t.begin(), t.end());
   return t[t.size() / 2];
@@ -54,14 +54,13 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   UseTbbParallelism();
   const EnvironmentImage image = ReadEnvironment(env);
-  std::printf("%-10s %9s %6s %10s %11s %11s %11s %10s\n", "pack", "vertices", "terms",
-              "size MB", "exact ms", "NWA ms", "camera ms", "shade ms");
+  std::printf("%-10s %9s %6s %10s %11s %11s %11s %10s\n", "pack", "vertices", "terms", "size MB",
+              "exact ms", "NWA ms", "camera ms", "shade ms");
   double base[4] = {0, 0, 0, 0};
   for (std::size_t k = 0; k < packs.size(); ++k) {
     const auto s = RelightSession::Open(packs[k]);
     const WaveletLighting lighting = ProjectLighting(ResampleToCubemap(image, s->cubemap_n()));
-    const double exact =
-        MedianMs(repeats, [&](int) { (void)s->RelightExact(lighting); });
+    const double exact = MedianMs(repeats, [&](int) { (void)s->RelightExact(lighting); });
     const double nwa = MedianMs(repeats, [&](int) {
       (void)RelightApproximate(s->transport(), lighting, LightingMode::kNwa, terms);
     });
@@ -81,10 +80,10 @@ int main(int argc, char** argv) {
                 k == 0 ? "glossy" : "diffuse", s->sample_count(), s->terms(), mb, exact, nwa,
                 camera, shade);
     if (k == 1) {
-      std::printf("glossy / diffuse: size %.2fx, exact %.2fx, NWA-%zu %.2fx, camera move %.2fx of "
-                  "the diffuse frame's shade (%.2f ms vs %.2f ms)\n",
-                  base[0] / mb, base[1] / exact, terms, base[2] / nwa, base[3] / shade, base[3],
-                  shade);
+      std::printf(
+          "glossy / diffuse: size %.2fx, exact %.2fx, NWA-%zu %.2fx, camera move %.2fx of "
+          "the diffuse frame's shade (%.2f ms vs %.2f ms)\n",
+          base[0] / mb, base[1] / exact, terms, base[2] / nwa, base[3] / shade, base[3], shade);
     } else {
       base[0] = mb;
       base[1] = exact;

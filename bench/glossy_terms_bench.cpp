@@ -29,16 +29,16 @@
 #include <string>
 #include <vector>
 
+#include "formats/transport_file.h"
+#include "runtime/lighting.h"
+#include "runtime/relight_session.h"
 #include "vocabulary/cubemap_resample.h"
+#include "vocabulary/durable_file.h"
 #include "vocabulary/environment_io.h"
 #include "vocabulary/hash.h"
 #include "vocabulary/parallel.h"
 #include "vocabulary/scene.h"
 #include "vocabulary/tbb_parallel.h"
-#include "formats/transport_file.h"
-#include "runtime/lighting.h"
-#include "runtime/relight_session.h"
-#include "vocabulary/durable_file.h"
 #include "worker/brdf_factorisation.h"
 #include "worker/embree_scene.h"
 #include "worker/transport_sampler.h"
@@ -156,7 +156,8 @@ int main(int argc, char** argv) {
     lights.push_back(ResampleToCubemap(
         ReadEnvironment(std::string(PRT_DATA_DIR) + "/envmaps/" + e + ".exr"), n));
   std::filesystem::create_directories(out);
-  if (!run.empty()) return SplitPipelineError(run, pack, scene, geometry, embree, picked, lights, envs);
+  if (!run.empty())
+    return SplitPipelineError(run, pack, scene, geometry, embree, picked, lights, envs);
   std::ofstream csv(out + "/table.csv");
   csv << "roughness,terms,environment,relative_rms,factorisation_error\n";
   std::printf("%-6s %-5s %-10s %10s %12s\n", "r", "m", "env", "rel RMS", "factor err");
@@ -186,8 +187,7 @@ int main(int argc, char** argv) {
     }
     const std::vector<double> trunc = TruncationErrors(m, fo, 16);
     std::printf("r = %.2f truncation error (SVD grid) m = 1/2/4/8/16: %.1f/%.1f/%.1f/%.1f/%.1f%%\n",
-                r, 100 * trunc[0], 100 * trunc[1], 100 * trunc[3], 100 * trunc[7],
-                100 * trunc[15]);
+                r, 100 * trunc[0], 100 * trunc[1], 100 * trunc[3], 100 * trunc[7], 100 * trunc[15]);
     const TransportSampler exact(embree, n, so, GlossySampling{{m}, eye});
     const TransportSampler terms(embree, n, so, GlossySampling{{}, {}, table});
     // Per vertex: exact B and the 8 term radiances, per environment and channel.
