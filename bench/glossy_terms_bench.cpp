@@ -243,27 +243,44 @@ int main(int argc, char** argv) {
   std::printf(
       "vertices %zu (camera-facing bunny vertices), n = %d, %d rays per texel; %s/table.csv\n",
       picked.size(), n, so.rays_per_texel, out.c_str());
-  // The plot: relit error against m, one line per (r, environment).
-  const std::string gp = out + "/terms.gp";
-  std::ofstream g(gp);
-  g << "set terminal pngcairo size 800,500\nset output '" << out << "/terms.png'\n"
-    << "set datafile separator ','\nset logscale y\nset xlabel 'BRDF terms m'\n"
-    << "set ylabel 'relit error vs exact BRDF (relative RMS)'\nset key outside right\n"
-    << "set xtics (1,2,4,8,16)\nset logscale x 2\nset grid\nplot ";
-  bool first = true;
-  for (double r : {0.2, 0.35, 0.5, 0.8})
-    for (const std::string& e : envs) {
-      if (!first) g << ", ";
-      first = false;
-      char sel[160];
-      std::snprintf(sel, sizeof sel,
-                    "'%s/table.csv' using ($1==%.2f && strcol(3) eq '%s' ? $2 : 1/0):4 with "
-                    "linespoints title 'r = %.2f, %s'",
-                    out.c_str(), r, e.c_str(), r, e.c_str());
-      g << sel;
+  // The plot: relit error against m, one line per (r, environment), from series.dat (one block
+  // per line, as gnuplot's `index` reads them).
+  {
+    std::ifstream in(out + "/table.csv");
+    std::string line;
+    std::getline(in, line);
+    std::vector<std::vector<std::string>> rowsv;
+    while (std::getline(in, line)) {
+      std::vector<std::string> f;
+      std::size_t a0 = 0, b0;
+      while ((b0 = line.find(',', a0)) != std::string::npos) {
+        f.push_back(line.substr(a0, b0 - a0));
+        a0 = b0 + 1;
+      }
+      f.push_back(line.substr(a0));
+      rowsv.push_back(f);
     }
-  g << "\n";
-  g.close();
+    std::ofstream series(out + "/series.dat");
+    std::ofstream g(out + "/terms.gp");
+    g << "set terminal pngcairo size 800,500\nset output '" << out << "/terms.png'\n"
+      << "set logscale y\nset logscale x 2\nset xrange [0.8:20]\nset xlabel 'BRDF terms m'\n"
+      << "set ylabel 'relit error vs exact BRDF (relative RMS)'\nset key outside right\n"
+      << "set xtics (1,2,4,8,16)\nset grid\nplot ";
+    int block = 0;
+    for (double r : {0.2, 0.35, 0.5, 0.8})
+      for (const std::string& e : envs) {
+        char key[32];
+        std::snprintf(key, sizeof key, "%g", r);
+        for (const auto& f : rowsv)
+          if (std::abs(std::stod(f[0]) - r) < 1e-9 && f[2] == e) series << f[1] << " " << f[3] << "\n";
+        series << "\n\n";
+        g << (block ? ", " : "") << "'" << out << "/series.dat' index " << block
+          << " with linespoints title 'r = " << key << ", " << e << "'";
+        ++block;
+      }
+    g << "\n";
+  }
+  const std::string gp = out + "/terms.gp";
   if (std::system(("gnuplot " + gp + " 2>/dev/null").c_str()) == 0)
     std::printf("plot: %s/terms.png\n", out.c_str());
   return 0;

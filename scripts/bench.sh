@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles|glossy-terms] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -361,6 +361,13 @@ run_glossy_cycles() {
     "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$OUT/glossy-cycles"
 }
 
+# The BRDF factorisation of glossy vertex transport against the exact BRDF on the same rays, per
+# roughness and term count, plus the error split of a finished run (docs/glossy-transport.md).
+# About 2 min. Output: $OUT/glossy-terms/{table.csv,terms.png}.
+run_glossy_terms() {
+  "$BUILD_DIR/bench/glossy_terms_bench" --out "$OUT/glossy-terms" | tee "$OUT/glossy-terms.txt"
+}
+
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy; run_tp ;;
   transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake) "run_$WHAT" ;;
@@ -371,5 +378,6 @@ case "$WHAT" in
   camera) run_camera ;;
   supersample) run_supersample ;;
   glossy-cycles) run_glossy_cycles ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles] [--quick]" >&2; exit 1 ;;
+  glossy-terms) run_glossy_terms ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles|glossy-terms] [--quick]" >&2; exit 1 ;;
 esac
