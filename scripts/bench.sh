@@ -355,10 +355,23 @@ run_supersample() {
 # baked per vertex with [glossy] terms (scenes/bench/bunny-ggx-vertex-*.toml), relit by prt-view
 # from the scene's camera, against Cycles at max bounces 0, through bench/cycles/run.sh.
 # PRT_CAMERA_ENVS picks the environments (default: all four). Output: $OUT/glossy-cycles/.
+# A second view of the r = 0.8 bake re-uses its run folder (the rows do not depend on the camera):
+# the view2 scene replaces run/scene.toml in a copy, and only the pack, prt-view and Cycles run.
 run_glossy_cycles() {
+  local d="$OUT/glossy-cycles"
   PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" \
     PRT_CAMERA_CASES="${PRT_CAMERA_CASES:-vertex-ggx-k0|scenes/bench/bunny-ggx-vertex-k0.toml|0|0|centre vertex-ggx-r08-k0|scenes/bench/bunny-ggx-vertex-r08-k0.toml|0|0|centre}" \
-    "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$OUT/glossy-cycles"
+    "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$d"
+  if [ -f "$d/vertex-ggx-r08-k0/run/report.json" ] && [ -z "${PRT_CAMERA_CASES:-}" ]; then
+    rm -rf "$d/vertex-ggx-r08-k0-view2"
+    mkdir -p "$d/vertex-ggx-r08-k0-view2"
+    cp -a "$d/vertex-ggx-r08-k0/run" "$d/vertex-ggx-r08-k0-view2/run"
+    cp "$ROOT/scenes/bench/bunny-ggx-vertex-r08-k0-view2.toml" "$d/vertex-ggx-r08-k0-view2/run/scene.toml"
+    touch "$d/vertex-ggx-r08-k0-view2/run/report.json"
+    PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" PRT_CAMERA_APPEND=1 \
+      PRT_CAMERA_CASES="vertex-ggx-r08-k0-view2|scenes/bench/bunny-ggx-vertex-r08-k0-view2.toml|0|0|centre" \
+      "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$d"
+  fi
 }
 
 # The BRDF factorisation of glossy vertex transport against the exact BRDF on the same rays, per

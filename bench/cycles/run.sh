@@ -53,7 +53,7 @@ if ! command -v blender >/dev/null 2>&1 || ! "$py" -c 'import numpy' 2>/dev/null
   $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq blender python3-numpy
 fi
 mkdir -p "$dir"
-: > "$dir/results.list"
+[ -n "${PRT_CAMERA_APPEND:-}" ] || : > "$dir/results.list"  # PRT_CAMERA_APPEND=1: add to the table
 for spec in "${cases[@]}"; do
   name="" scene="" dbounce="" gbounce="" pixel=""
   IFS='|' read -r name scene dbounce gbounce pixel <<< "$spec"
