@@ -136,8 +136,10 @@ int main(int argc, char** argv) {
   app.add_option("--pack", pack, "that run's pack");
   CLI11_PARSE(app, argc, argv);
   UseTbbParallelism();
+  // With --run: that run's own scene (its roughness and terms).
   const std::string scene_file =
-      std::string(PRT_SOURCE_DIR) + "/scenes/bench/bunny-ggx-vertex-k0.toml";
+      run.empty() ? std::string(PRT_SOURCE_DIR) + "/scenes/bench/bunny-ggx-vertex-k0.toml"
+                  : run + "/scene.toml";
   const SceneDescription scene = LoadSceneFile(scene_file, {PRT_DATA_DIR});
   const SceneGeometry geometry = BuildSceneGeometry(scene);
   const EmbreeScene embree(geometry);
