@@ -58,13 +58,14 @@ void SquareFromHemisphere(const Vec3& d, double& u, double& v) {
   }
   double x = d.x / len, y = d.y / len;
   double z = std::max(0.0, d.z / len);
+  // std::hypot is several times slower than the plain root, and these are unit-scale values.
   if (d.z < 0) {  // below the horizon: onto it
-    const double h = std::hypot(x, y);
+    const double h = std::sqrt(x * x + y * y);
     if (h > 0) x /= h, y /= h;
     z = 0;
   }
   const double r = std::sqrt(std::max(0.0, 1 - z));  // disk radius
-  const double h = std::hypot(x, y);
+  const double h = std::sqrt(x * x + y * y);
   if (!(h > 0) || r == 0) {
     u = v = 0.5;
     return;
