@@ -123,6 +123,8 @@ struct PackReader::Impl {
   VisibilityBlocks Visibility(std::size_t i) const;
   ImageSamplesInfo Image() const;
   GlossyFactorTable Glossy() const;
+  // Section i's bytes: checked, decompressed when zstd (IMGE, GLSY).
+  std::string SectionText(std::size_t i) const;
   // The CPCA section decompressed, its 32-byte header checked against raw_size.
   struct CpcaPayload {
     std::vector<uint8_t> raw;
@@ -511,17 +513,22 @@ VisibilityBlocks PackReader::Impl::Visibility(std::size_t i) const {
   return v;
 }
 
-GlossyFactorTable PackReader::Impl::Glossy() const {
-  if (!has_glossy) Fail("has no GLSY (glossy factors) section");
-  const SectionInfo& s = sections[glossy];
-  const std::string where = SectionName(glossy);
-  const uint8_t* p = CheckedBytes(glossy);
+std::string PackReader::Impl::SectionText(std::size_t i) const {
+  const SectionInfo& s = sections[i];
+  const uint8_t* p = CheckedBytes(i);
   std::string raw(s.raw_size, '\0');
   if (s.codec == uint32_t(Codec::kZstd)) {
-    Unzstd(p, s.stored_size, reinterpret_cast<uint8_t*>(raw.data()), s.raw_size, where);
+    Unzstd(p, s.stored_size, reinterpret_cast<uint8_t*>(raw.data()), s.raw_size, SectionName(i));
   } else {
     raw.assign(reinterpret_cast<const char*>(p), s.stored_size);
   }
+  return raw;
+}
+
+GlossyFactorTable PackReader::Impl::Glossy() const {
+  if (!has_glossy) Fail("has no GLSY (glossy factors) section");
+  const std::string where = SectionName(glossy);
+  const std::string raw = SectionText(glossy);
   GlossyFactorTable t = ParseGlossyFactors(raw, name + ": " + where);
   if (t.mesh_factor.size() != mesh_sections.size())
     Fail(where + " has " + std::to_string(t.mesh_factor.size()) + " meshes for the pack's " +
@@ -544,15 +551,8 @@ GlossyFactorTable PackReader::Impl::Glossy() const {
 
 ImageSamplesInfo PackReader::Impl::Image() const {
   if (!has_image) Fail("has no IMGE (image) section");
-  const SectionInfo& s = sections[image];
   const std::string where = SectionName(image);
-  const uint8_t* p = CheckedBytes(image);
-  std::string raw(s.raw_size, '\0');
-  if (s.codec == uint32_t(Codec::kZstd)) {
-    Unzstd(p, s.stored_size, reinterpret_cast<uint8_t*>(raw.data()), s.raw_size, where);
-  } else {
-    raw.assign(reinterpret_cast<const char*>(p), s.stored_size);
-  }
+  const std::string raw = SectionText(image);
   ImageSamplesInfo info =
       ParseImageSamples(raw, name + ": " + where, static_cast<uint32_t>(mesh_sections.size()));
   if (has_transport) {

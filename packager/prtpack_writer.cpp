@@ -69,6 +69,18 @@ nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
 
 // 1.1 only where the pack uses what 1.1 defines (a TRNS channel count other than 1), so that
 // every other pack keeps the bytes 1.0 writers gave it; likewise 1.2 for IMGE and 1.3 for CPCA.
+// A CRITICAL section of `bytes`, zstd-compressed (IMGE, GLSY).
+PendingSection CriticalZstdSection(uint32_t type, const std::string& bytes, int level,
+                                   const char* what) {
+  PendingSection s;
+  s.type = type;
+  s.flags = kFlagCritical;
+  s.codec = Codec::kZstd;
+  s.raw_size = bytes.size();
+  s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(), level, what);
+  return s;
+}
+
 uint16_t MinorVersionOf(const PackInput& input) {
   if (input.glossy) return kVersionMinorGlossyTerms;
   if (input.image && input.image->supersample > 1) return kVersionMinorSupersampled;
@@ -317,14 +329,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
       throw InputError("image", std::to_string(im.pixels()) + " pixels do not match the " +
                                     std::to_string(input.cpca->header.sample_count) +
                                     " rows of the CPCA transport");
-    PendingSection s;
-    s.type = kTypeImage;
-    s.flags = kFlagCritical;
-    s.codec = Codec::kZstd;
-    s.raw_size = bytes.size();
-    s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
-                           options.zstd_level, "image");
-    sections.push_back(std::move(s));
+    sections.push_back(CriticalZstdSection(kTypeImage, bytes, options.zstd_level, "image"));
   }
   if (input.glossy) {
     const std::string bytes = SerializeGlossyFactors(*input.glossy, false);
@@ -343,14 +348,8 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
                                              std::to_string(vertices) +
                                              " vertices do not match the " + std::to_string(rows) +
                                              " rows of the transport");
-    PendingSection s;
-    s.type = kTypeGlossy;
-    s.flags = kFlagCritical;
-    s.codec = Codec::kZstd;
-    s.raw_size = bytes.size();
-    s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
-                           options.zstd_level, "glossy factors");
-    sections.push_back(std::move(s));
+    sections.push_back(
+        CriticalZstdSection(kTypeGlossy, bytes, options.zstd_level, "glossy factors"));
   }
   if (input.transport)
     sections.push_back(TransportSection(*input.transport, options, MinorVersionOf(input)));
