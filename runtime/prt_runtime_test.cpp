@@ -25,6 +25,8 @@
 
 #include "formats/image_file.h"
 #include "packager/prtpack_writer.h"
+#include "runtime/lighting.h"
+#include "runtime/relight_session.h"
 #include "viewer/tiny_scene_test_support.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/cubemap_resample.h"
@@ -572,6 +574,54 @@ TEST(RuntimeGeometry, PositionsTrianglesAndOrders) {
   EXPECT_GT(fov, 0.0f);
   EXPECT_GT(w, 0);
   EXPECT_GT(hgt, 0);
+}
+
+// A glossy vertex pack (docs/glossy-transport.md; the committed seed glossy_terms.prtpack is
+// tests/data/glossy_vertex_tiny.toml farmed and packed, 3 BRDF terms): the C API relights it for
+// its eye and equals the session's Shade for that eye; a new eye changes the box's colours and
+// not the diffuse ground's; ranges are refused with a state error.
+TEST(RuntimeGlossyTerms, TheEyeMovesTheGlossyVerticesOnly) {
+  using namespace prt;
+  const auto message = [] { return std::string(prt_runtime_last_error()); };
+  const std::string pack = kCorpus + "/glossy_terms.prtpack";
+  Handle h(pack);
+  ASSERT_NE(h.rt, nullptr) << message();
+  EXPECT_EQ(prt_runtime_brdf_terms(h.rt), 3u);
+  EXPECT_EQ(prt_runtime_is_glossy(h.rt), 0);
+  const std::size_t n = prt_runtime_sample_count(h.rt);
+  ASSERT_EQ(n, 72u);  // the box's 8 vertices, then the 8×8 ground
+  std::vector<float> map(3 * 32 * 16, 0.5f), a(3 * n), b(3 * n);
+  for (std::size_t i = 0; i < 40; ++i) map[3 * (i * 11 % 512)] = 8.0f;  // a few bright texels
+  ASSERT_EQ(prt_runtime_set_environment_latlong(h.rt, map.data(), 32, 16), PRT_RUNTIME_OK);
+  float eye[3];
+  ASSERT_EQ(prt_runtime_get_eye(h.rt, eye), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, a.data(), n), PRT_RUNTIME_OK) << message();
+  // The session, for the same eye, in the pack's order.
+  const auto session = RelightSession::Open(pack);
+  EnvironmentImage env;  // the interleaved map back into channels (Interleaved's inverse)
+  env.width = 32;
+  env.height = 16;
+  for (int c = 0; c < 3; ++c)
+    for (std::size_t i = 0; i < 512; ++i) env.Channel(c).push_back(map[3 * i + c]);
+  const SampleRadiance r =
+      session->RelightExact(ProjectLighting(ResampleToCubemap(env, session->cubemap_n())));
+  const std::vector<float> ref =
+      session->ToPackOrder(session->Shade(r, Vec3{eye[0], eye[1], eye[2]}));
+  for (std::size_t k = 0; k < 3 * n; ++k) ASSERT_NEAR(a[k], ref[k], 1e-5f * (1 + std::abs(ref[k])));
+  const float other[3] = {2.5f, 1.0f, -1.0f};
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, other), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_relight(h.rt, 0, b.data(), n), PRT_RUNTIME_OK);
+  int box_moved = 0;
+  for (std::size_t v = 0; v < n; ++v)
+    for (int c = 0; c < 3; ++c) {
+      if (v >= 8) {
+        ASSERT_EQ(a[3 * v + c], b[3 * v + c]) << v;
+      }
+      box_moved += v < 8 && std::abs(a[3 * v + c] - b[3 * v + c]) > 1e-6f ? 1 : 0;
+    }
+  EXPECT_GT(box_moved, 0);
+  EXPECT_EQ(prt_runtime_prepare(h.rt, 100), PRT_RUNTIME_ERROR_STATE);
+  EXPECT_NE(message().find("glossy vertex pack"), std::string::npos) << message();
 }
 
 // An image pack's background pixels: the ones its pixel_mesh marks, radiance 0 under any map;
