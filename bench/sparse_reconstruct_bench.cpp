@@ -10,14 +10,14 @@
 // the same in both paths: TransportSampler::MeasureTraceCpu), the rest, and both ratios; then
 // whether the two paths agree (outcomes, weights and rows bit for bit). Usage:
 //   prt-sparse-reconstruct-bench [--scene default] [--problems 2000] [--reps 3]
+#include <tbb/parallel_for.h>
+
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-
-#include <tbb/parallel_for.h>
 
 #include "bench/bench_scenes.h"
 #include "vocabulary/tbb_parallel.h"
@@ -56,6 +56,8 @@ using Reconstruct = SparseOutcome (*)(const TransportSampler&, const SpatialSamp
                                       L1Solver&, float*, SparseStats&, float*,
                                       std::vector<NeighborWeight>*);
 
+// fn == nullptr: the fast path in batches of kSparseRowBatch consecutive vertices, as the farm
+// and the in-process driver call it.
 PathResult RunPath(Reconstruct fn, TransportSampler& sampler,
                    std::span<const SpatialSample> samples, const std::vector<Problem>& problems,
                    const SparsePlan& plan, std::size_t T) {
@@ -69,11 +71,27 @@ PathResult RunPath(Reconstruct fn, TransportSampler& sampler,
   SparseStats st;
   sampler.MeasureTraceCpu(true);
   const double c0 = ThreadCpuSeconds();
-  for (std::size_t i = 0; i < problems.size(); ++i) {
-    const Problem& p = problems[i];
-    r.outcome[i] = static_cast<uint8_t>(fn(sampler, samples[p.sample], p.sample, p.neighbors,
-                                           plan.sparse, solver, r.rows.data() + i * T, st,
-                                           nullptr, &r.weights[i]));
+  std::vector<SparseRowTask> batch;
+  for (std::size_t first = 0; first < problems.size(); first += kSparseRowBatch) {
+    const std::size_t last = std::min(problems.size(), first + kSparseRowBatch);
+    if (fn != nullptr) {
+      for (std::size_t i = first; i < last; ++i) {
+        const Problem& p = problems[i];
+        r.outcome[i] =
+            static_cast<uint8_t>(fn(sampler, samples[p.sample], p.sample, p.neighbors, plan.sparse,
+                                    solver, r.rows.data() + i * T, st, nullptr, &r.weights[i]));
+      }
+      continue;
+    }
+    batch.clear();
+    for (std::size_t i = first; i < last; ++i) {
+      const Problem& p = problems[i];
+      batch.push_back({&samples[p.sample], p.sample, p.neighbors, r.rows.data() + i * T, nullptr,
+                       &r.weights[i]});
+    }
+    ReconstructSparseRows(sampler, batch, plan.sparse, solver, st);
+    for (std::size_t i = first; i < last; ++i)
+      r.outcome[i] = static_cast<uint8_t>(batch[i - first].outcome);
   }
   r.cpu = ThreadCpuSeconds() - c0;
   r.trace = sampler.trace_cpu_seconds();
@@ -113,9 +131,8 @@ int main(int argc, char** argv) {
   const SparsePlan plan = PlanFromSettings(scene.sparse, geometry.diagonal(), n);
 
   // The dense set: the plan's budget, at random (the farm's is denser near occluders).
-  const std::vector<uint32_t> dense =
-      InitialDenseSet(N, static_cast<std::size_t>(plan.dense_budget * static_cast<double>(N)),
-                      plan.seed);
+  const std::vector<uint32_t> dense = InitialDenseSet(
+      N, static_cast<std::size_t>(plan.dense_budget * static_cast<double>(N)), plan.seed);
   std::vector<uint8_t> is_dense(N, 0);
   std::vector<Vec3> dense_pos;
   for (uint32_t d : dense) {
@@ -132,8 +149,8 @@ int main(int argc, char** argv) {
   std::vector<uint32_t> chosen;
   const std::size_t per_run = std::max<std::size_t>(1, problem_count / std::max(runs, 1));
   for (int r = 0; r < runs; ++r) {
-    const std::size_t first = sparse.size() * static_cast<std::size_t>(r) /
-                              static_cast<std::size_t>(std::max(runs, 1));
+    const std::size_t first =
+        sparse.size() * static_cast<std::size_t>(r) / static_cast<std::size_t>(std::max(runs, 1));
     for (std::size_t i = first; i < std::min(sparse.size(), first + per_run); ++i)
       chosen.push_back(sparse[i]);
   }
@@ -172,7 +189,7 @@ int main(int argc, char** argv) {
   PathResult ref, fast;
   for (int rep = 0; rep < reps; ++rep) {
     ref = RunPath(&ReconstructSparseRowReference, sampler, samples, problems, plan, T);
-    fast = RunPath(&ReconstructSparseRow, sampler, samples, problems, plan, T);
+    fast = RunPath(nullptr, sampler, samples, problems, plan, T);
     old_cpu.push_back(ref.cpu);
     old_trace.push_back(ref.trace);
     new_cpu.push_back(fast.cpu);
@@ -189,8 +206,8 @@ int main(int argc, char** argv) {
       "\nper vertex (median of %d): reference %.3f ms (sampler %.3f, rest %.3f), fast %.3f ms "
       "(sampler %.3f, rest %.3f)\n",
       reps, Median(old_cpu) * per, Median(old_trace) * per,
-      (Median(old_cpu) - Median(old_trace)) * per, Median(new_cpu) * per,
-      Median(new_trace) * per, (Median(new_cpu) - Median(new_trace)) * per);
+      (Median(old_cpu) - Median(old_trace)) * per, Median(new_cpu) * per, Median(new_trace) * per,
+      (Median(new_cpu) - Median(new_trace)) * per);
   std::printf("speed-up, one thread, same problems: %.2fx whole row, %.2fx without the sampler\n",
               Median(ratio), Median(rest_ratio));
 
@@ -207,8 +224,8 @@ int main(int argc, char** argv) {
     if (std::memcmp(ref.rows.data() + i * T, fast.rows.data() + i * T, T * sizeof(float)) != 0)
       ++row_diff;
     for (std::size_t j = 0; j < T; ++j)
-      max_row = std::max(max_row, static_cast<double>(std::abs(ref.rows[i * T + j] -
-                                                               fast.rows[i * T + j])));
+      max_row = std::max(max_row,
+                         static_cast<double>(std::abs(ref.rows[i * T + j] - fast.rows[i * T + j])));
     const auto& a = ref.weights[i];
     const auto& b = fast.weights[i];
     if (a.size() != b.size()) {

@@ -125,11 +125,12 @@ std::vector<uint32_t> ChooseFromStatistics(const uint8_t* above, std::size_t tot
 }
 }  // namespace
 
-SparseOutcome ReconstructSparseRowReference(const TransportSampler& sampler, const SpatialSample& sample,
-                                   uint64_t sample_index, std::span<const DenseNeighbor> neighbors,
-                                   const SparseOptions& options, L1Solver& solver, float* row,
-                                   SparseStats& stats, float* variance,
-                                   std::vector<NeighborWeight>* weights) {
+SparseOutcome ReconstructSparseRowReference(const TransportSampler& sampler,
+                                            const SpatialSample& sample, uint64_t sample_index,
+                                            std::span<const DenseNeighbor> neighbors,
+                                            const SparseOptions& options, L1Solver& solver,
+                                            float* row, SparseStats& stats, float* variance,
+                                            std::vector<NeighborWeight>* weights) {
   std::vector<DenseNeighbor> same_side;
   std::vector<uint32_t> kept;  // index into the caller's neighbours of each one used
   if (options.min_normal_cos > -1) {
