@@ -49,6 +49,7 @@ struct PathResult {
   std::vector<float> rows;
   std::vector<std::vector<NeighborWeight>> weights;
   double cpu = 0, trace = 0;
+  SparseStats stats;
 };
 
 using Reconstruct = SparseOutcome (*)(const TransportSampler&, const SpatialSample&, uint64_t,
@@ -95,6 +96,7 @@ PathResult RunPath(Reconstruct fn, TransportSampler& sampler,
   }
   r.cpu = ThreadCpuSeconds() - c0;
   r.trace = sampler.trace_cpu_seconds();
+  r.stats = st;
   sampler.MeasureTraceCpu(false);
   return r;
 }
@@ -239,6 +241,15 @@ int main(int argc, char** argv) {
     }
     weight_diff += !same;
   }
+  std::printf(
+      "solves: %llu LARS, %llu ADMM, %llu zero systems; fallbacks: %llu too few "
+      "neighbours, %llu failed, %llu poor fits\n",
+      static_cast<unsigned long long>(fast.stats.solved_lars),
+      static_cast<unsigned long long>(fast.stats.solved_admm),
+      static_cast<unsigned long long>(fast.stats.zero_systems),
+      static_cast<unsigned long long>(fast.stats.fallback_too_few_neighbors),
+      static_cast<unsigned long long>(fast.stats.fallback_solve_failed),
+      static_cast<unsigned long long>(fast.stats.fallback_poor_fit));
   std::printf(
       "agreement: %zu of %zu outcomes differ; of %zu reconstructed rows %zu differ in any bit "
       "(max |difference| %.3g), %zu weight supports differ (max |Δα| %.3g)\n",
