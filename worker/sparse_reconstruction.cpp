@@ -361,11 +361,9 @@ SparseOutcome FinishRow(const TransportSampler& sampler, const SparseRowTask& ta
   std::vector<NeighborWeight>* weights = task.weights;
   const std::span<const DenseNeighbor> neighbors = st.neighbors;
   const std::vector<uint32_t>& kept = st.kept;
-  const std::vector<uint8_t>& above = st.above;
   const std::vector<uint8_t>& fully = st.fully;
   const Runs& runs = st.runs;
   const std::size_t above_count = st.above_count;
-  (void)above;
   const std::size_t total = sampler.layout().texel_count();
   RowScratch& scratch = ThreadScratch();
   const bool vis = options.mode == InterpolationMode::kVisibility;
