@@ -92,6 +92,11 @@ struct SetupParams {
   // Image runs with glossy pixels (worker/glossy_pixels.h): the size of the per-mesh table rank 0
   // broadcasts after the geometry; 0 when every pixel is diffuse.
   uint64_t glossy_bytes = 0;
+  // Glossy vertex transport (docs/glossy-transport.md): the BRDF factorisation's terms m (rows
+  // = m × vertices, term-major; 1 when every mesh is diffuse) and the size of the factor table
+  // (run/glossy.prtf) rank 0 broadcasts after the geometry.
+  int32_t terms = 1;
+  uint64_t factor_bytes = 0;
   // 1: --resume of a run whose every stage is re-used (only scene.toml/geometry.prtg may have
   // been rewritten): no phase runs; 2: not even those changed (the report stays as it is).
   int32_t complete = 0;
@@ -188,8 +193,10 @@ struct FarmContext {
   // Image runs: the glossy pixels' materials per mesh (empty when every pixel is diffuse).
   GlossyPixels glossy_pixels;
   // Image runs: each pixel's row group (RowGroups): the mesh it sees, or meshes.size() for a
-  // background pixel.
+  // background pixel. Glossy vertex runs (terms > 1): each row's mesh.
   SampleGroupMap pixel_groups;
+  // Glossy vertex runs: the factor table (run/glossy.prtf), which the sampler shares.
+  std::shared_ptr<const GlossyFactorTable> glossy_factors;
   // Ranks that compute (computes_here()): the Embree scene and the job's sampler.
   std::unique_ptr<EmbreeScene> embree;
   std::unique_ptr<TransportSampler> sampler;
@@ -217,17 +224,19 @@ struct FarmContext {
   // accuracy.json): each mesh's vertices in scene order; for an image run each mesh's pixels
   // (they interleave in raster order: pixel_groups says which is whose), then the background
   // pixels (zero rows). Image runs: only once setup has traced the camera's pixels.
+  // Glossy vertex runs: each mesh's rows of every term.
   std::vector<uint64_t> RowGroups() const {
-    if (!params.image) return geometry.MeshVertexCounts();
+    if (!GroupsByMap()) return geometry.MeshVertexCounts();
     if (!pixel_groups) throw std::logic_error("RowGroups: the pixels are not traced yet");
-    std::vector<uint64_t> rows(geometry.meshes.size() + 1, 0);
+    std::vector<uint64_t> rows(geometry.meshes.size() + (params.image ? 1 : 0), 0);
     for (uint32_t g : *pixel_groups) ++rows.at(g);
     return rows;
   }
-  // Each sample's group where they interleave (image runs), else null (contiguous meshes).
-  SampleGroupMap SampleGroups() const { return params.image ? pixel_groups : nullptr; }
+  bool GroupsByMap() const { return params.image || params.terms > 1; }
+  // Each sample's group where they interleave (image runs, terms), else null (contiguous meshes).
+  SampleGroupMap SampleGroups() const { return GroupsByMap() ? pixel_groups : nullptr; }
   std::size_t GroupOfRow(uint64_t row) const {
-    return params.image ? pixel_groups->at(row) : geometry.MeshOfVertex(row);
+    return GroupsByMap() ? pixel_groups->at(row) : geometry.MeshOfVertex(row);
   }
   std::string GroupName(std::size_t g) const {
     return g < geometry.meshes.size() ? geometry.meshes[g].name : std::string("background");
@@ -236,14 +245,13 @@ struct FarmContext {
   // its pixels' weight, worker/glossy_pixels.h); 0 for an image's background pixels.
   Rgb GroupAlbedo(std::size_t g) const {
     if (g >= geometry.meshes.size()) return Rgb{0.f, 0.f, 0.f};
-    if (params.image && g < glossy_pixels.glossy.size() && glossy_pixels.glossy[g])
-      return glossy_pixels.weight[g];
+    if (g < glossy_pixels.glossy.size() && glossy_pixels.glossy[g]) return glossy_pixels.weight[g];
     return geometry.meshes[g].albedo;
   }
   // The albedo of row `row`'s surface (0 for a background pixel; a glossy pixel's weight,
   // worker/glossy_pixels.h).
   Rgb RowAlbedo(uint64_t row) const {
-    if (!params.image) return geometry.meshes[geometry.MeshOfVertex(row)].albedo;
+    if (!params.image) return GroupAlbedo(GroupOfRow(row));
     const uint32_t m = pixel_mesh[row];
     if (m == kImageBackground) return Rgb{0.f, 0.f, 0.f};
     if (m < glossy_pixels.glossy.size() && glossy_pixels.glossy[m]) return glossy_pixels.weight[m];

@@ -31,8 +31,10 @@
 #include "formats/transport_file.h"
 #include "vocabulary/durable_file.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/hash.h"
 #include "vocabulary/scene.h"
 #include "worker/bounce_gather.h"
+#include "worker/brdf_factorisation.h"
 #include "worker/camera_samples.h"
 #include "worker/glossy_pixels.h"
 #include "worker/surface_hit.h"
@@ -585,7 +587,7 @@ void ReopenCheckpoints(FarmContext& ctx, const RunManifest& manifest, const Scen
   // An image run's groups are the meshes its pixels see: its sums are opened once the pixels
   // are traced (SetupPhase::Run).
   RowsStage(ctx).variance_fresh = fresh;
-  if (!ctx.params.visibility && !ctx.params.image) {
+  if (!ctx.params.visibility && !ctx.GroupsByMap()) {
     RowsStage(ctx).variance = std::make_unique<VarianceAccumulator>(
         f, geometry.MeshVertexCounts(), ctx.params.cubemap_n, ctx.params.rays_per_texel, fresh);
   }
@@ -656,7 +658,67 @@ void PrepareRunFolder(FarmContext& ctx, const RunManifest& manifest, const std::
 // manifest (every stage's inputs and key, farm/run_manifest.h), the report's settings, then
 // the run folder. Throws InputError (exit code 2) for a bad scene, FileIoError (3) for the
 // folder.
-void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes, std::string& glossy_bytes) {
+// Glossy vertex transport (docs/glossy-transport.md): the factorisation of every glossy mesh,
+// its error logged and reported, the rows counted once per term. Throws InputError for what is
+// not built yet (bounces with glossy vertices).
+void ResolveGlossyTerms(FarmContext& ctx, const SceneDescription& scene,
+                        const SceneGeometry& geometry, ResolvedSampling& resolved,
+                        std::string& factor_bytes) {
+  const GlossyPixels glossy = ResolveGlossyMaterials(scene, geometry);
+  if (!glossy.any()) return;
+  for (std::size_t i = 0; i < glossy.glossy.size(); ++i)
+    if (glossy.glossy[i] && ctx.params.bounces > 0)
+      throw InputError(scene.file,
+                       "mesh '" + geometry.meshes[i].name +
+                           "' is glossy and bounces = " + std::to_string(ctx.params.bounces) +
+                           ": glossy vertex transport bakes the direct term only (the bounce "
+                           "gather through each term's f_i is not built yet, "
+                           "docs/glossy-transport.md); set bounces = 0, brdf = \"lambert\", or "
+                           "[scene] samples = \"camera\" (glossy pixels with bounces)");
+  FactorisationOptions fo;
+  fo.terms = scene.glossy.terms;
+  const double t0 = FarmNow();
+  const GlossyFactorTable table = FactorGlossyMeshes(glossy, fo);
+  nlohmann::json meshes = nlohmann::json::array();
+  for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
+    if (!glossy.glossy[i]) continue;
+    const BrdfFactors& f = table.factors[table.mesh_factor[i]];
+    const std::vector<double> trunc = TruncationErrors(glossy.materials[i], fo, 8);
+    spdlog::info(
+        "glossy mesh '{}' ({}): {} BRDF terms, factorisation error {:.1f}% (truncation "
+        "m=1/2/4/8: {:.1f}/{:.1f}/{:.1f}/{:.1f}%)",
+        geometry.meshes[i].name, f.description, fo.terms, 100 * f.relative_error, 100 * trunc[0],
+        100 * trunc[1], 100 * trunc[3], 100 * trunc[7]);
+    meshes.push_back({{"mesh", geometry.meshes[i].name},
+                      {"material", f.description},
+                      {"relative_error", f.relative_error},
+                      {"truncation_error_by_terms", trunc}});
+  }
+  factor_bytes = SerializeGlossyFactors(table, true);
+  ctx.params.factor_bytes = factor_bytes.size();
+  ctx.params.terms = fo.terms;
+  ctx.params.rows *= static_cast<uint64_t>(fo.terms);
+  resolved.rows = ctx.params.rows;
+  resolved.terms = fo.terms;
+  resolved.glossy_factors = Checksum64(factor_bytes.data(), factor_bytes.size());
+  if (ctx.params.sparse) {  // each term's neighbours in its own copy of the scene
+    double extent = geometry.diagonal();
+    for (int a = 0; a < 3; ++a)
+      extent =
+          std::max({extent, std::abs(geometry.bounds_min[a]), std::abs(geometry.bounds_max[a])});
+    ctx.plan.term_offset = 4 * extent + 1;
+  }
+  ctx.report.SetSection("glossy", nlohmann::json{{"terms", fo.terms},
+                                                 {"view_n", fo.view_n},
+                                                 {"light_n", fo.light_n},
+                                                 {"svd_light_n", fo.svd_light_n},
+                                                 {"seconds", FarmNow() - t0},
+                                                 {"meshes", meshes}}
+                                      .dump());
+}
+
+void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes, std::string& glossy_bytes,
+                    std::string& factor_bytes) {
   // 1. The scene (bad input: exit code 2).
   std::string scene_text;
   SceneDescription scene = LoadScene(ctx, scene_text);
@@ -678,6 +740,8 @@ void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes, std::string& 
                                                     : scene.meshes[i].glossy.brdf);
     }
   }
+  if (!ctx.params.image && !visibility)
+    ResolveGlossyTerms(ctx, scene, geometry, resolved, factor_bytes);
   const RunManifest manifest =
       MakeRunManifest(scene, scene_text, geometry, geometry_bytes, resolved, ctx.options,
                       visibility ? nullptr : &ctx.results.Put(CompressionPlan{}));
@@ -687,6 +751,29 @@ void PrepareOnRank0(FarmContext& ctx, std::string& geometry_bytes, std::string& 
 
   // 2. The run folder (I/O errors: exit code 3).
   PrepareRunFolder(ctx, manifest, scene_text, geometry_bytes, geometry);
+  if (!factor_bytes.empty()) WriteFileDurably(ctx.folder.glossy, factor_bytes);
+}
+
+// Every rank: the factor table from rank 0's bytes, the samples once per term, each row's mesh as
+// its group, and (rank 0) the variance sums over those groups.
+void SetUpGlossyTerms(FarmContext& ctx, const std::string& factor_bytes) {
+  auto table =
+      std::make_shared<GlossyFactorTable>(ParseGlossyFactors(factor_bytes, kGlossyFactorFileName));
+  ctx.samples = TermSamples(ctx.samples, ctx.geometry, *table);
+  ctx.glossy_pixels.materials.assign(ctx.geometry.meshes.size(), Material{});
+  ctx.glossy_pixels.glossy.clear();
+  for (std::size_t m = 0; m < ctx.geometry.meshes.size(); ++m)
+    ctx.glossy_pixels.glossy.push_back(table->glossy(m) ? 1 : 0);
+  ctx.glossy_pixels.weight = table->mesh_weight;
+  ctx.glossy_factors = std::move(table);
+  if (ctx.params.terms > 1) {
+    ctx.pixel_groups =
+        std::make_shared<std::vector<uint32_t>>(TermSampleMeshes(ctx.geometry, ctx.params.terms));
+    if (ctx.rank == 0)
+      RowsStage(ctx).variance = std::make_unique<VarianceAccumulator>(
+          ctx.folder, ctx.RowGroups(), ctx.params.cubemap_n, ctx.params.rays_per_texel,
+          RowsStage(ctx).variance_fresh);
+  }
 }
 
 class SetupPhase final : public FarmPhase {
@@ -695,11 +782,11 @@ class SetupPhase final : public FarmPhase {
   const char* stage() const override { return kStageAssets; }
 
   void Run(FarmContext& ctx) override {
-    std::string geometry_bytes, glossy_bytes;
+    std::string geometry_bytes, glossy_bytes, factor_bytes;
     int status = kExitOk;
     if (ctx.rank == 0) {
       try {
-        PrepareOnRank0(ctx, geometry_bytes, glossy_bytes);
+        PrepareOnRank0(ctx, geometry_bytes, glossy_bytes, factor_bytes);
       } catch (...) {
         std::string message;
         status = ExitCodeOf(std::current_exception(), message);
@@ -718,6 +805,7 @@ class SetupPhase final : public FarmPhase {
     if (ctx.params.visibility) ctx.method = kVisibilityPhaseName;
     BroadcastBytes(ctx, geometry_bytes, ctx.params.geometry_bytes);
     if (ctx.params.glossy_bytes > 0) BroadcastBytes(ctx, glossy_bytes, ctx.params.glossy_bytes);
+    if (ctx.params.factor_bytes > 0) BroadcastBytes(ctx, factor_bytes, ctx.params.factor_bytes);
 
     // Every rank, rank 0 included, samples the geometry decoded from the same bytes.
     int local = kExitOk;
@@ -787,6 +875,7 @@ class SetupPhase final : public FarmPhase {
         }
       } else {
         ctx.samples = SpatialSamplesOf(ctx.geometry);
+        if (ctx.params.factor_bytes > 0) SetUpGlossyTerms(ctx, factor_bytes);
       }
       if (ctx.samples.size() != ctx.params.rows) {
         throw std::logic_error("sample count " + std::to_string(ctx.samples.size()) +
@@ -807,7 +896,8 @@ class SetupPhase final : public FarmPhase {
         so.seed = ctx.params.seed;
         ctx.sampler = std::make_unique<TransportSampler>(
             *ctx.embree, ctx.params.cubemap_n, so,
-            GlossySampling{ctx.glossy_pixels.materials, ctx.params.camera.eye}, ctx.footprints);
+            GlossySampling{ctx.glossy_pixels.materials, ctx.params.camera.eye, ctx.glossy_factors},
+            ctx.footprints);
       }
     } catch (...) {
       std::string message;

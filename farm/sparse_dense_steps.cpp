@@ -126,8 +126,8 @@ std::vector<double> FarmSparseSteps::Rank(const std::string& name, int,
     // Rows in place: the worker reads the union's downsampled rows from dense_low.bin.
     job.in_place = ctx_.rows_in_place ? kReadRowsInPlace : 0;
     for (uint64_t i = h.first; i < h.first + h.count; ++i) {
-      for (uint32_t d : index.RadiusSearch(ctx_.samples[cand[i]].position, ctx_.plan.radius,
-                                           ctx_.plan.max_neighbors)) {
+      for (uint32_t d : index.RadiusSearch(ctx_.plan.SearchPosition(ctx_.samples[cand[i]]),
+                                           ctx_.plan.radius, ctx_.plan.max_neighbors)) {
         auto [at, added] = local.emplace(d, static_cast<uint32_t>(local.size()));
         if (added && job.in_place) job.union_ids.push_back(d);
         if (added && !job.in_place)

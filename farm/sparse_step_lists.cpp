@@ -17,11 +17,11 @@ namespace prt {
 
 namespace fs = std::filesystem;
 
-std::vector<Vec3> DenseIndexPoints(std::span<const SpatialSample> samples,
+std::vector<Vec3> DenseIndexPoints(const SparsePlan& plan, std::span<const SpatialSample> samples,
                                    std::span<const uint32_t> dense) {
   std::vector<Vec3> pts;
   pts.reserve(dense.size());
-  for (uint32_t d : dense) pts.push_back(samples[d].position);
+  for (uint32_t d : dense) pts.push_back(plan.SearchPosition(samples[d]));
   return pts;
 }
 
@@ -32,7 +32,7 @@ uint64_t ListNeighbours(const NeighborIndex& index, std::span<const SpatialSampl
   std::unordered_map<uint32_t, uint32_t> local;
   std::vector<uint32_t> nbs;
   for (uint64_t i = first; i < first + count; ++i) {
-    nbs = index.RadiusSearch(samples[items[i]].position, plan.radius,
+    nbs = index.RadiusSearch(plan.SearchPosition(samples[items[i]]), plan.radius,
                              plan.max_neighbors + (exclude_self ? 1 : 0));
     if (exclude_self) {
       nbs.erase(std::remove(nbs.begin(), nbs.end(), items[i]), nbs.end());
@@ -122,7 +122,8 @@ std::string CompactJobExpander::Expand(const FarmContext& ctx, std::string_view 
   if (!index_ || h.phase != step_) {
     index_.reset();
     ReadStepLists(StepListsPath(ctx.folder, h.phase), ctx.samples.size(), dense_, items_);
-    index_ = std::make_unique<NeighborIndex>(DenseIndexPoints(ctx.samples, dense_), dense_);
+    index_ =
+        std::make_unique<NeighborIndex>(DenseIndexPoints(ctx.plan, ctx.samples, dense_), dense_);
     step_ = h.phase;
   }
   if (h.first + h.count > items_.size() || h.count == 0)

@@ -20,7 +20,7 @@ namespace prt {
 
 // The points a step's NeighborIndex is built over: the dense samples' positions in the dense
 // list's order (rank 0 and, with rows in place, every worker build the same index from them).
-std::vector<Vec3> DenseIndexPoints(std::span<const SpatialSample> samples,
+std::vector<Vec3> DenseIndexPoints(const SparsePlan& plan, std::span<const SpatialSample> samples,
                                    std::span<const uint32_t> dense);
 
 // Huang & Ramamoorthi 2010 §4.1 (a candidate's local rank over its dense neighbours) and §5.3

@@ -102,7 +102,7 @@ class FarmSparseSteps final : public SparseSteps {
 
  private:
   NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
-    return NeighborIndex(DenseIndexPoints(ctx_.samples, dense), dense);
+    return NeighborIndex(DenseIndexPoints(ctx_.plan, ctx_.samples, dense), dense);
   }
 
   // Adds a job's counters to the report (this run's figures only for `this_run`).

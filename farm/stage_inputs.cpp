@@ -49,7 +49,8 @@ std::string CompressedHeaderKey(const CompressedTransportHeader& header) {
 }
 
 CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
-                                int cubemap_n, const FarmOptions& options, int channels) {
+                                int cubemap_n, const FarmOptions& options, int channels,
+                                int terms) {
   CompressionPlan plan;
   plan.options = CompressionOptionsFrom(scene.compression, scene.file);
   if (!options.compression_scheme.empty())
@@ -63,7 +64,13 @@ CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeomet
           ? ImageDomain(static_cast<uint32_t>(scene.camera.width),
                         static_cast<uint32_t>(scene.camera.height), c)
           : SpatialDomainOf(geometry, scene.compression.order_normal_weight, c);
-  plan.header = MakeCompressedHeader(plan.options, cubemap_n, domain, c);
+  // Glossy vertex transport: the m terms' rows are m copies of the vertices (term-major), each
+  // its own copy of the segments, so that no column transform mixes two terms; to the codec and
+  // every relighter they are m·V samples of one channel (docs/glossy-transport.md).
+  SpatialDomain layered;
+  for (int t = 0; t < terms; ++t)
+    layered.segments.insert(layered.segments.end(), domain.segments.begin(), domain.segments.end());
+  plan.header = MakeCompressedHeader(plan.options, cubemap_n, terms > 1 ? layered : domain, c);
   return plan;
 }
 
@@ -147,6 +154,11 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
     rows["rows_per_block"] = options.rows_per_block;
     if (s.method == "sparse") rows["sparse"] = SparseJson(scene.sparse);
   }
+  // Glossy vertex transport (keyed only where there are terms, so other runs keep their keys).
+  if (s.terms > 1 || s.glossy_factors != 0) {
+    rows["glossy_terms"] = s.terms;
+    rows["glossy_factors_xxh64"] = Hex16(s.glossy_factors);
+  }
   m.SetStage(kStageRows, std::move(rows));
 
   if (!visibility && s.bounces > 0) {
@@ -162,7 +174,8 @@ RunManifest MakeRunManifest(const SceneDescription& scene, const std::string& sc
   }
 
   if (!visibility) {
-    CompressionPlan plan = PlanCompression(scene, geometry, s.cubemap_n, options, s.channels);
+    CompressionPlan plan =
+        PlanCompression(scene, geometry, s.cubemap_n, options, s.channels, s.terms);
     // CPCA of a sparse run: Huang §6's dense pass and re-clustering (farm/cpca_phase.h).
     if (plan.header.scheme == CompressionScheme::kCpca && s.method == "sparse")
       plan.header.cpca_method = plan.options.cpca_method = CpcaMethod::kDenseRecluster;

@@ -20,9 +20,11 @@ struct CompressionPlan {
   CompressionOptions options;
   CompressedTransportHeader header;
 };
-// channels: rows of T per sample (3 with bounces and coloured albedos, docs/interreflection.md).
+// channels: rows of T per sample (3 with bounces and coloured albedos, docs/interreflection.md);
+// terms: the glossy factorisation's (docs/glossy-transport.md), the domain's segments once each.
 CompressionPlan PlanCompression(const SceneDescription& scene, const SceneGeometry& geometry,
-                                int cubemap_n, const FarmOptions& options, int channels = 1);
+                                int cubemap_n, const FarmOptions& options, int channels = 1,
+                                int terms = 1);
 
 // What setup resolved from the scene and the command line (the overrides applied).
 struct ResolvedSampling {
@@ -39,6 +41,10 @@ struct ResolvedSampling {
   int gather_paths = 1024;
   double near_field = 1.0;
   int channels = 1;
+  // Glossy vertex transport (docs/glossy-transport.md): the factorisation's terms (rows already
+  // counts them) and the XXH64 of run/glossy.prtf's bytes; 1 and 0 when every mesh is diffuse.
+  int terms = 1;
+  uint64_t glossy_factors = 0;
 };
 
 // XXH64 of what the rays see of the geometry: every mesh's positions, normals and triangles,

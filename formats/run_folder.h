@@ -13,6 +13,8 @@ inline constexpr const char* kTransportPartialSuffix = ".partial";   // while sa
 inline constexpr const char* kGeometryFileName = "geometry.prtg";    // the samples' geometry
 // Image relighting: the camera and each pixel's mesh (formats/image_file.h).
 inline constexpr const char* kImageFileName = "image.prti";
+// Glossy vertex transport: the BRDF factor table (formats/glossy_factors.h).
+inline constexpr const char* kGlossyFactorFileName = "glossy.prtf";
 inline constexpr const char* kSceneCopyFileName = "scene.toml";                // the scene as given
 inline constexpr const char* kReportFileName = "report.json";                  // what the run did
 inline constexpr const char* kCompressedTransportFileName = "transport.prtc";  // compressed T
@@ -41,6 +43,7 @@ struct RunFolder {
     geometry = (p / kGeometryFileName).string();
     scene_copy = (p / kSceneCopyFileName).string();
     image = (p / kImageFileName).string();
+    glossy = (p / kGlossyFactorFileName).string();
     report = (p / kReportFileName).string();
     checkpoints = (p / kCheckpointsDirName).string();
     manifest = (p / kCheckpointsDirName / kManifestFileName).string();
@@ -95,6 +98,7 @@ struct RunFolder {
   }
   std::string dir;
   std::string image;              // image.prti (image-relighting runs only)
+  std::string glossy;             // glossy.prtf (vertex runs with glossy meshes only)
   std::string transport;          // transport.prtt (final, complete)
   std::string partial;            // transport.prtt.partial (rows written in place while running)
   std::string geometry;           // geometry.prtg

@@ -22,7 +22,7 @@ inline constexpr uint16_t kVersionMajor = 1;
 // 1.2 adds the IMGE section (image relighting, kTypeImage), written only by packs that have one.
 // 1.3 adds the CPCA section (clustered-PCA transport, kTypeCpca), written only by packs that have
 // one (instead of TRNS).
-inline constexpr uint16_t kVersionMinor = 5;
+inline constexpr uint16_t kVersionMinor = 6;
 inline constexpr uint16_t kVersionMinorChannels = 1;
 inline constexpr uint16_t kVersionMinorImage = 2;
 inline constexpr uint16_t kVersionMinorCpca = 3;
@@ -32,6 +32,9 @@ inline constexpr uint16_t kVersionMinorGlossyPixels = 4;
 // 1.5: an IMGE section holding PRTIMG03 (supersampled pixels: per-pixel coverage and weights,
 // docs/image-relighting.md, "Supersampling"); a 1.4 reader refuses its magic.
 inline constexpr uint16_t kVersionMinorSupersampled = 5;
+// 1.6: a GLSY section (glossy vertex transport, docs/glossy-transport.md): the BRDF factor table
+// whose m terms the TRNS/CPCA rows hold (m × V rows, term-major).
+inline constexpr uint16_t kVersionMinorGlossyTerms = 6;
 inline constexpr uint32_t kHeaderSize = 64;
 inline constexpr uint32_t kEntrySize = 64;
 inline constexpr uint32_t kDefaultAlignment = 64;
@@ -85,6 +88,9 @@ inline constexpr uint32_t kTypeImage = FourCC("IMGE");
 // formats/cpca_transport.h; CRITICAL (a reader that skipped it would take the pack for one
 // without transport, or relight its visibility alone).
 inline constexpr uint32_t kTypeCpca = FourCC("CPCA");
+// Glossy vertex transport (1.6, issue #39): formats/glossy_factors.h's bytes without the f tables;
+// CRITICAL (a reader that skipped it would take m × V term rows for V vertex rows).
+inline constexpr uint32_t kTypeGlossy = FourCC("GLSY");
 
 inline std::string FourCCString(uint32_t v) {
   std::string s(4, ' ');

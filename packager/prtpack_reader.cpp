@@ -71,7 +71,7 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
   if (type == kTypeMeta) return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   if (type == kTypeMesh) return codec == uint32_t(Codec::kDraco);
   if (type == kTypeMaterial || type == kTypeTransport) return codec == uint32_t(Codec::kNone);
-  if (type == kTypeVisibility || type == kTypeImage || type == kTypeCpca) {
+  if (type == kTypeVisibility || type == kTypeImage || type == kTypeCpca || type == kTypeGlossy) {
     return codec == uint32_t(Codec::kNone) || codec == uint32_t(Codec::kZstd);
   }
   return true;
@@ -80,7 +80,7 @@ bool KnownCodecFor(uint32_t type, uint32_t codec) {
 bool IsKnownType(uint32_t type) {
   return type == kTypeMeta || type == kTypeMesh || type == kTypeMaterial ||
          type == kTypeTransport || type == kTypeVisibility || type == kTypeImage ||
-         type == kTypeCpca;
+         type == kTypeCpca || type == kTypeGlossy;
 }
 
 }  // namespace
@@ -99,6 +99,8 @@ struct PackReader::Impl {
   std::size_t image = 0;
   bool has_cpca = false;
   std::size_t cpca = 0;
+  bool has_glossy = false;
+  std::size_t glossy = 0;
 
   [[noreturn]] void Fail(const std::string& what) const { throw InputError(name, what); }
   const uint8_t* data() const { return storage->data; }
@@ -120,6 +122,7 @@ struct PackReader::Impl {
   TransportIndex Transport() const;
   VisibilityBlocks Visibility(std::size_t i) const;
   ImageSamplesInfo Image() const;
+  GlossyFactorTable Glossy() const;
   // The CPCA section decompressed, its 32-byte header checked against raw_size.
   struct CpcaPayload {
     std::vector<uint8_t> raw;
@@ -187,7 +190,7 @@ void PackReader::Impl::Parse() {
          "): the header or section table is corrupted");
   }
   uint64_t previous_end = table_offset + table_size;
-  int metas = 0, transports = 0, images = 0, cpcas = 0;
+  int metas = 0, transports = 0, images = 0, cpcas = 0, glossies = 0;
   std::vector<int64_t> mesh_by_id, material_by_id, visibility_by_id;
   for (uint32_t i = 0; i < count; ++i) {
     const std::span<const uint8_t> e =
@@ -235,6 +238,9 @@ void PackReader::Impl::Parse() {
     } else if (s.type_code == kTypeCpca) {
       ++cpcas;
       cpca = i;
+    } else if (s.type_code == kTypeGlossy) {
+      ++glossies;
+      glossy = i;
     } else {
       auto& by_id = s.type_code == kTypeMesh       ? mesh_by_id
                     : s.type_code == kTypeMaterial ? material_by_id
@@ -249,6 +255,9 @@ void PackReader::Impl::Parse() {
   if (transports > 1) Fail("has more than one TRNS section");
   if (images > 1) Fail("has more than one IMGE section");
   if (cpcas > 1) Fail("has more than one CPCA section");
+  if (glossies > 1) Fail("has more than one GLSY section");
+  if (glossies == 1 && images == 1) Fail("has both GLSY (vertex terms) and IMGE (pixels)");
+  has_glossy = glossies == 1;
   if (cpcas == 1 && transports == 1) {
     Fail("has both a TRNS and a CPCA transport (a pack has one or the other)");
   }
@@ -502,6 +511,37 @@ VisibilityBlocks PackReader::Impl::Visibility(std::size_t i) const {
   return v;
 }
 
+GlossyFactorTable PackReader::Impl::Glossy() const {
+  if (!has_glossy) Fail("has no GLSY (glossy factors) section");
+  const SectionInfo& s = sections[glossy];
+  const std::string where = SectionName(glossy);
+  const uint8_t* p = CheckedBytes(glossy);
+  std::string raw(s.raw_size, '\0');
+  if (s.codec == uint32_t(Codec::kZstd)) {
+    Unzstd(p, s.stored_size, reinterpret_cast<uint8_t*>(raw.data()), s.raw_size, where);
+  } else {
+    raw.assign(reinterpret_cast<const char*>(p), s.stored_size);
+  }
+  GlossyFactorTable t = ParseGlossyFactors(raw, name + ": " + where);
+  if (t.mesh_factor.size() != mesh_sections.size())
+    Fail(where + " has " + std::to_string(t.mesh_factor.size()) + " meshes for the pack's " +
+         std::to_string(mesh_sections.size()));
+  uint64_t vertices = 0;
+  for (std::size_t m = 0; m < mesh_sections.size(); ++m) {
+    const SectionInfo& mesh = sections[mesh_sections[m]];
+    vertices += PeekDracoMeshCounts(CheckedBytes(mesh_sections[m]), mesh.stored_size,
+                                    name + ": " + SectionName(mesh_sections[m]))
+                    .points;
+  }
+  uint64_t rows = 0;
+  if (has_transport) rows = Transport().row_count;
+  if (has_cpca) rows = CpcaBytes().row_count;
+  if ((has_transport || has_cpca) && rows != vertices * uint64_t(t.terms))
+    Fail(where + " has " + std::to_string(t.terms) + " terms × " + std::to_string(vertices) +
+         " vertices for " + std::to_string(rows) + " transport rows");
+  return t;
+}
+
 ImageSamplesInfo PackReader::Impl::Image() const {
   if (!has_image) Fail("has no IMGE (image) section");
   const SectionInfo& s = sections[image];
@@ -674,6 +714,14 @@ bool PackReader::has_visibility() const {
   return !impl_->visibility_sections.empty();
 }
 
+bool PackReader::has_glossy() const {
+  return impl_->has_glossy;
+}
+
+GlossyFactorTable PackReader::ReadGlossy() const {
+  return impl_->Glossy();
+}
+
 bool PackReader::has_image() const {
   return impl_->has_image;
 }
@@ -746,6 +794,7 @@ void PackReader::VerifyAll() const {
   for (std::size_t m = 0; m < mesh_count(); ++m) impl_->Mesh(m);
   if (has_visibility()) ReadAllVisibility();
   if (impl_->has_image) impl_->Image();
+  if (impl_->has_glossy) impl_->Glossy();
   if (impl_->has_cpca) impl_->Cpca();
   if (impl_->has_transport) {
     const TransportIndex t = impl_->Transport();

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "formats/cpca_transport.h"
+#include "formats/glossy_factors.h"
 #include "formats/image_file.h"
 #include "formats/visibility_blocks.h"
 #include "vocabulary/mesh.h"
@@ -128,6 +129,13 @@ class PackReader {
   // pixel naming a mesh the pack does not have included), or a pixel count that is not the
   // transport's (TRNS or CPCA) rows / channels.
   ImageSamplesInfo ReadImage() const;
+  // True for a glossy vertex pack (a GLSY section, 1.6; docs/glossy-transport.md): its rows are
+  // the vertices once per BRDF term.
+  bool has_glossy() const;
+  // The GLSY section's factor table (without f). Throws InputError when there is none, on a
+  // checksum or zstd failure, on content ParseGlossyFactors refuses, on a mesh count that is not
+  // the pack's, or when terms × the vertices is not the transport's (TRNS or CPCA) rows.
+  GlossyFactorTable ReadGlossy() const;
 
   // The META section's JSON text. Verifies the section checksum and the decompressed size;
   // throws InputError if either fails or the text is not a JSON object.

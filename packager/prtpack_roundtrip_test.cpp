@@ -834,3 +834,60 @@ TEST(PrtpackRoundTrip, CpcaReaderRefusesInconsistentSections) {
 
 }  // namespace
 }  // namespace prt::pack
+
+namespace prt::pack {
+namespace {
+
+// Glossy vertex packs (docs/glossy-transport.md): the GLSY section holds the factor table (g
+// only), the pack is 1.6, the transport has terms × vertices rows, and disagreements are refused.
+GlossyFactorTable SmallFactorTable(int terms) {
+  GlossyFactorTable t;
+  t.terms = terms;
+  t.mesh_factor = {0, GlossyFactorTable::kDiffuseMesh};
+  t.mesh_weight = {Rgb{0.8f, 0.7f, 0.6f}, Rgb{0.5f, 0.5f, 0.5f}};
+  BrdfFactors f;
+  f.terms = terms;
+  f.view_n = f.light_n = 2;
+  for (int i = 0; i < 4 * terms; ++i) {
+    f.g.push_back(0.25f * float(i + 1));
+    f.f.push_back(-0.5f * float(i));
+  }
+  f.relative_error = 0.25;
+  f.description = "ggx r=0.5";
+  t.factors.push_back(f);
+  return t;
+}
+
+TEST(PrtpackRoundTrip, GlossyVertexPacksAre16AndCarryTheirFactorTable) {
+  PackInput in = testing::MakeSmallInput();
+  in.transport->row_count = 24;  // 2 terms × the 12 vertices
+  in.glossy = SmallFactorTable(2);
+  const std::vector<uint8_t> bytes = WritePack(in);
+  const PackReader r = PackReader::OpenMemory(bytes.data(), bytes.size());
+  EXPECT_EQ(r.version_minor(), 6);
+  ASSERT_TRUE(r.has_glossy());
+  const GlossyFactorTable back = r.ReadGlossy();
+  EXPECT_EQ(back.terms, 2);
+  EXPECT_EQ(back.mesh_factor, in.glossy->mesh_factor);
+  EXPECT_EQ(back.mesh_weight[0], in.glossy->mesh_weight[0]);
+  EXPECT_EQ(back.factors[0].g, in.glossy->factors[0].g);
+  EXPECT_TRUE(back.factors[0].f.empty());  // the farm's f tables stay in the run folder
+  EXPECT_NO_THROW(r.VerifyAll());
+  // terms × vertices must be the transport's rows, and the table must name every mesh.
+  PackInput bad = in;
+  bad.transport->row_count = 12;
+  EXPECT_THROW(WritePack(bad), InputError);
+  bad = in;
+  bad.glossy->mesh_factor.pop_back();
+  bad.glossy->mesh_weight.pop_back();
+  EXPECT_THROW(WritePack(bad), InputError);
+  // No GLSY: the pack of before, and no glossy table.
+  const std::vector<uint8_t> plain = WritePack(testing::MakeSmallInput());
+  const PackReader p = PackReader::OpenMemory(plain.data(), plain.size());
+  EXPECT_FALSE(p.has_glossy());
+  EXPECT_LT(p.version_minor(), 6);
+  EXPECT_THROW(p.ReadGlossy(), InputError);
+}
+
+}  // namespace
+}  // namespace prt::pack

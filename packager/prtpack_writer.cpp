@@ -70,6 +70,7 @@ nlohmann::json MeshSummary(const PackMeshInput& m, const WriterOptions& o) {
 // 1.1 only where the pack uses what 1.1 defines (a TRNS channel count other than 1), so that
 // every other pack keeps the bytes 1.0 writers gave it; likewise 1.2 for IMGE and 1.3 for CPCA.
 uint16_t MinorVersionOf(const PackInput& input) {
+  if (input.glossy) return kVersionMinorGlossyTerms;
   if (input.image && input.image->supersample > 1) return kVersionMinorSupersampled;
   if (input.image && input.image->has_glossy_pixels()) return kVersionMinorGlossyPixels;
   if (input.cpca) return kVersionMinorCpca;
@@ -264,7 +265,7 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     s.type = LoadAt<uint32_t>(x.type, 0);
     if (s.type == kTypeMeta || s.type == kTypeMesh || s.type == kTypeMaterial ||
         s.type == kTypeTransport || s.type == kTypeVisibility || s.type == kTypeImage ||
-        s.type == kTypeCpca) {
+        s.type == kTypeCpca || s.type == kTypeGlossy) {
       throw InputError("extra section", "type " + x.type + " is reserved");
     }
     s.flags = x.flags;
@@ -323,6 +324,32 @@ std::vector<uint8_t> WritePack(const PackInput& input, const WriterOptions& opti
     s.raw_size = bytes.size();
     s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
                            options.zstd_level, "image");
+    sections.push_back(std::move(s));
+  }
+  if (input.glossy) {
+    const std::string bytes = SerializeGlossyFactors(*input.glossy, false);
+    const GlossyFactorTable t = ParseGlossyFactors(bytes, "glossy factors");
+    if (t.mesh_factor.size() != input.meshes.size())
+      throw InputError("glossy factors", std::to_string(t.mesh_factor.size()) +
+                                             " meshes for the pack's " +
+                                             std::to_string(input.meshes.size()));
+    uint64_t vertices = 0;
+    for (const PackMeshInput& m : input.meshes) vertices += m.mesh.positions.size();
+    const uint64_t rows = input.transport ? input.transport->row_count
+                          : input.cpca    ? input.cpca->header.sample_count
+                                          : 0;
+    if (rows != 0 && rows != vertices * uint64_t(t.terms))
+      throw InputError("glossy factors", std::to_string(t.terms) + " terms × " +
+                                             std::to_string(vertices) +
+                                             " vertices do not match the " + std::to_string(rows) +
+                                             " rows of the transport");
+    PendingSection s;
+    s.type = kTypeGlossy;
+    s.flags = kFlagCritical;
+    s.codec = Codec::kZstd;
+    s.raw_size = bytes.size();
+    s.bytes = ZstdCompress(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size(),
+                           options.zstd_level, "glossy factors");
     sections.push_back(std::move(s));
   }
   if (input.transport)

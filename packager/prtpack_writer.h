@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "formats/cpca_transport.h"
+#include "formats/glossy_factors.h"
 #include "formats/image_file.h"
 #include "vocabulary/mesh.h"
 #include "vocabulary/scene_geometry.h"
@@ -73,6 +74,9 @@ struct PackInput {
   // Image relighting (the IMGE section, 1.2): the rows of T are this image's pixels in raster
   // order, each naming the mesh (material) it sees or background.
   std::optional<ImageSamplesInfo> image;
+  // Glossy vertex transport (the GLSY section, 1.6; docs/glossy-transport.md): the factor table
+  // whose terms the transport's rows hold (terms × vertices rows). Written without its f tables.
+  std::optional<GlossyFactorTable> glossy;
 };
 
 struct WriterOptions {

@@ -14,6 +14,7 @@
 #include "formats/compressed_transport.h"
 #include "formats/cpca_transport.h"
 #include "formats/geometry_file.h"
+#include "formats/glossy_factors.h"
 #include "formats/image_file.h"
 #include "formats/transport_file.h"
 #include "formats/visibility_blocks.h"
@@ -81,21 +82,23 @@ nlohmann::json CpcaParametersJson(const CompressedTransportHeader& h) {
 
 // A transport's rows against the run's samples: channels × the image's pixels in an image run,
 // else channels × the geometry's vertices.
+// Glossy vertex transport: terms × (channels × the vertices).
 void CheckTransportRows(const CompressedTransportHeader& h, const SceneGeometry& geometry,
                         const std::optional<ImageSamplesInfo>& image, const std::string& file,
-                        const std::string& image_file) {
+                        const std::string& image_file, int terms) {
   if (image) {
     if (static_cast<uint64_t>(h.sample_count) != uint64_t{h.channels} * image->pixels())
       throw InputError(file, "transport has " + std::to_string(h.sample_count) +
                                  " rows but the image " + image_file + " has " +
                                  std::to_string(image->pixels()) + " pixels");
   } else if (static_cast<uint64_t>(h.sample_count) !=
-             uint64_t{h.channels} * geometry.vertex_count()) {
+             uint64_t{h.channels} * uint64_t(terms) * geometry.vertex_count()) {
     throw InputError(file, "transport has " + std::to_string(h.sample_count) + " rows (" +
                                std::to_string(h.channels) + " colour channel(s) × " +
                                std::to_string(h.spatial_count()) +
                                " samples) but the geometry has " +
-                               std::to_string(geometry.vertex_count()) + " vertices");
+                               std::to_string(geometry.vertex_count()) + " vertices" +
+                               (terms > 1 ? " × " + std::to_string(terms) + " BRDF terms" : ""));
   }
 }
 
@@ -309,6 +312,26 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
                      {"background_pixels", in.image->background_pixels()}};
     if (in.image->supersample > 1) meta["image"]["supersample"] = in.image->supersample;
   }
+  // Glossy vertex transport: the farm's glossy.prtf becomes the GLSY section (without f).
+  const fs::path glossy_file = dir / kGlossyFactorFileName;
+  int terms = 1;
+  if (fs::exists(glossy_file)) {
+    in.glossy = ParseGlossyFactors(ReadWholeFile(glossy_file.string()), glossy_file.string());
+    if (in.glossy->mesh_factor.size() != geometry.meshes.size())
+      throw InputError(glossy_file.string(),
+                       "names " + std::to_string(in.glossy->mesh_factor.size()) +
+                           " meshes; the geometry has " + std::to_string(geometry.meshes.size()));
+    terms = in.glossy->terms;
+    nlohmann::json list = nlohmann::json::array();
+    for (std::size_t m = 0; m < geometry.meshes.size(); ++m) {
+      if (!in.glossy->glossy(m)) continue;
+      const BrdfFactors& f = in.glossy->factors[in.glossy->mesh_factor[m]];
+      list.push_back({{"mesh", geometry.meshes[m].name},
+                      {"material", f.description},
+                      {"relative_error", f.relative_error}});
+    }
+    meta["glossy"] = {{"terms", terms}, {"meshes", list}};
+  }
   const fs::path transport = options.transport_file.empty() ? dir / kCompressedTransportFileName
                                                             : fs::path(options.transport_file);
   if (fs::exists(transport)) {
@@ -321,12 +344,14 @@ PackInput PackInputFromRunFolder(const std::string& run_dir, const RunPackOption
     if (DecodeCompressedFileStart(bytes, transport.string(), body).scheme ==
         CompressionScheme::kCpca) {
       CpcaTransport t = DecodeCpcaTransport(bytes, transport.string());
-      CheckTransportRows(t.header, geometry, in.image, transport.string(), image_file.string());
+      CheckTransportRows(t.header, geometry, in.image, transport.string(), image_file.string(),
+                         terms);
       meta["parameters"] = CpcaParametersJson(t.header);
       in.cpca = std::move(t);
     } else {
       const CompressedTransport t = DecodeCompressedTransport(bytes, transport.string());
-      CheckTransportRows(t.header, geometry, in.image, transport.string(), image_file.string());
+      CheckTransportRows(t.header, geometry, in.image, transport.string(), image_file.string(),
+                         terms);
       in.transport = MakeTransportInput(t, options.columns_per_block);
       meta["parameters"] = ParametersJson(t.header, options.columns_per_block);
     }

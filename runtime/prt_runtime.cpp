@@ -347,7 +347,7 @@ void ComputeFrame(prt_runtime& rt, unsigned terms) {
       radiance = rt.pbi->Radiance();
     }
   }
-  rt.frame_rgb = s.Shade(radiance);
+  rt.frame_rgb = s.Shade(radiance, rt.eye);  // a glossy vertex pack: its terms for the eye
 }
 
 // Makes (or restarts) the incremental relighter of the mode for a budget of `terms`.
@@ -510,6 +510,10 @@ int prt_runtime_is_image(const prt_runtime* rt) {
 
 int prt_runtime_is_glossy(const prt_runtime* rt) {
   return rt != nullptr && rt->glossy ? 1 : 0;
+}
+
+unsigned prt_runtime_brdf_terms(const prt_runtime* rt) {
+  return rt != nullptr && rt->session ? static_cast<unsigned>(rt->session->terms()) : 0;
 }
 
 unsigned prt_runtime_transport_channels(const prt_runtime* rt) {
@@ -699,7 +703,9 @@ int prt_runtime_set_eye(prt_runtime* rt, const float eye[3]) {
     Require(eye != nullptr, "eye is NULL");
     for (int i = 0; i < 3; ++i)
       Require(std::isfinite(eye[i]), "eye[" + std::to_string(i) + "] is not finite");
-    rt->eye = {eye[0], eye[1], eye[2]};  // a vertex pack's radiance does not depend on it
+    // A diffuse vertex pack's radiance does not depend on it; a glossy one's (triple products,
+    // or BRDF terms) from the next relight on.
+    rt->eye = {eye[0], eye[1], eye[2]};
   });
 }
 
@@ -825,6 +831,11 @@ int prt_runtime_prepare(prt_runtime* rt, unsigned terms) {
       throw StateError("the previous frame relit " + std::to_string(rt->relit.load()) + " of " +
                        std::to_string(rt->samples()) +
                        " samples; its incremental state would be torn");
+    if (rt->session && rt->session->terms() > 1)
+      throw StateError(rt->name + ": a glossy vertex pack (" +
+                       std::to_string(rt->session->terms()) +
+                       " BRDF terms) relights with prt_runtime_relight; ranges over its terms "
+                       "are not built (docs/glossy-transport.md)");
     rt->prepared = prt_runtime::Prepared::kNone;
     PrepareFrame(*rt, terms);
     rt->relit.store(0);

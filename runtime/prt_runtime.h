@@ -103,6 +103,13 @@ int prt_runtime_is_image(const prt_runtime* rt);
  * every relight is the full frame, whatever `terms`. Everything else (maps, rotation, preview,
  * ranges, the task runner) works as for a vertex pack. */
 int prt_runtime_is_glossy(const prt_runtime* rt);
+/* BRDF terms m of a glossy vertex pack (a GLSY section, docs/glossy-transport.md): its transport
+ * holds m rows per vertex, relit like any vertex pack (every lighting mode, terms, PBI) and
+ * combined per vertex for the eye (prt_runtime_set_eye) as B = w ⊙ Σ_i g_i(ω_o)·(T_i·L). A new
+ * eye changes the next relight's colours only through that m-term sum; with PBI and unchanged
+ * lighting the relight after an orbit step costs little more than the sum. 1 for any other
+ * pack with a transport, 0 for a triple-product glossy pack. */
+unsigned prt_runtime_brdf_terms(const prt_runtime* rt);
 /* Colour channels of the transport (1, or 3 with coloured interreflection); 0 for a glossy
  * pack. */
 unsigned prt_runtime_transport_channels(const prt_runtime* rt);

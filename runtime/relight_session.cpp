@@ -11,6 +11,7 @@
 #include "runtime/camera_metadata.h"
 #include "runtime/per_band_incremental.h"
 #include "vocabulary/errors.h"
+#include "vocabulary/parallel.h"
 
 namespace prt {
 
@@ -65,6 +66,8 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
       mesh_albedo.push_back(reader.ReadMaterial(m).albedo);
     s->albedo_ = PixelAlbedo(*s->image_, mesh_albedo);
   }
+  // Glossy vertex packs: each vertex's factors, frame and weight w (docs/glossy-transport.md).
+  if (reader.has_glossy()) s->glossy_ = reader.ReadGlossy();
   std::size_t offset = 0;
   for (std::size_t m = 0; !s->image_ && m < reader.mesh_count(); ++m) {
     const pack::UnpackedMesh mesh = reader.ReadMesh(m);
@@ -72,7 +75,12 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
     for (std::size_t v = 0; v < nv; ++v) {
       s->positions_.push_back(
           {mesh.positions[3 * v], mesh.positions[3 * v + 1], mesh.positions[3 * v + 2]});
-      s->albedo_.push_back(mesh.albedo);
+      s->albedo_.push_back(s->glossy_ ? s->glossy_->mesh_weight[m] : mesh.albedo);
+      if (s->glossy_) {
+        s->sample_factor_.push_back(s->glossy_->mesh_factor[m]);
+        s->frames_.push_back(MakeFactorFrame(
+            {mesh.normals[3 * v], mesh.normals[3 * v + 1], mesh.normals[3 * v + 2]}));
+      }
     }
     for (std::size_t t = 0; t < mesh.triangle_count(); ++t)
       s->triangles_.push_back({static_cast<uint32_t>(offset + mesh.triangles[3 * t]),
@@ -87,8 +95,14 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
   }
   const CompressedTransportHeader& h =
       s->cpca_transport_ ? s->cpca_transport_->header : s->compressed_->header;
-  // channels × V rows, channel-major (formats/compressed_transport.h).
-  if (static_cast<uint64_t>(h.sample_count) != uint64_t{h.channels} * s->albedo_.size())
+  s->eye_ = s->camera_.eye;
+  // channels × V rows, channel-major (formats/compressed_transport.h); a glossy pack's terms
+  // × V (one channel).
+  if (s->glossy_ && h.channels != 1)
+    throw InputError(pack_path, "a glossy pack's transport has " + std::to_string(h.channels) +
+                                    " colour channels (terms need one)");
+  if (static_cast<uint64_t>(h.sample_count) !=
+      uint64_t{h.channels} * s->terms() * s->albedo_.size())
     throw InputError(pack_path, "the transport has " + std::to_string(h.sample_count) + " rows (" +
                                     std::to_string(h.channels) + " colour channel(s) × " +
                                     std::to_string(h.spatial_count()) + " samples) but the " +
@@ -121,6 +135,12 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
   // is p. The per-sample arrays move to it once, and the triangles follow their vertices.
   const std::span<const uint32_t> coefficient = s->relighter_->coefficient_of_sample();
   const std::size_t ns = s->albedo_.size();
+  // Every term's samples keep term 0's order (each term is its own copy of the segments).
+  for (std::size_t t = 1; t < s->terms(); ++t)
+    for (std::size_t v = 0; v < ns; ++v)
+      if (coefficient[t * ns + v] != t * ns + coefficient[v])
+        throw InputError(pack_path, "the transport's term " + std::to_string(t) +
+                                        " is not laid out as its first term");
   s->pack_sample_.resize(ns);
   for (std::size_t v = 0; v < ns; ++v) s->pack_sample_[coefficient[v]] = static_cast<uint32_t>(v);
   s->session_position_.assign(coefficient.begin(), coefficient.end());
@@ -130,6 +150,10 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
     for (std::size_t p = 0; p < ns; ++p) values[p] = pack_order[s->pack_sample_[p]];
   };
   to_session(s->albedo_);
+  if (s->glossy_) {
+    to_session(s->sample_factor_);
+    to_session(s->frames_);
+  }
   if (!s->image_) to_session(s->positions_);
   for (auto& t : s->triangles_)
     for (uint32_t& v : t) v = coefficient[v];
@@ -190,7 +214,7 @@ SampleRadiance RelightSession::RelightExact(const WaveletLighting& lighting) con
       CheckFloatLighting(v, j, c, path_);  // the relighter's lighting is float
       l[c * cols + j] = static_cast<float>(v);
     }
-  const std::size_t ns = sample_count();
+  const std::size_t ns = sample_count() * terms();
   std::vector<float> b(3 * ns);
   // Finite: the relighter throws NumericalError naming the pack and the sample when its float
   // accumulation overflows (compressed_relight.h), and its inputs are finite floats.
@@ -202,7 +226,42 @@ SampleRadiance RelightSession::RelightExact(const WaveletLighting& lighting) con
 }
 
 std::vector<float> RelightSession::Shade(const SampleRadiance& radiance) const {
+  return Shade(radiance, eye_);
+}
+
+std::vector<float> RelightSession::Shade(const SampleRadiance& radiance, const Vec3& eye) const {
+  if (glossy_) return ShadeSamples(CombineTerms(radiance, eye), albedo_, path_, pack_sample_);
   return ShadeSamples(radiance, albedo_, path_, pack_sample_);
+}
+
+// Huang & Ramamoorthi 2010 Eq. 3: B(x, ω_o) = Σ_i g_i(ω_o) Σ_j T_i(x, ω_j) L(ω_j), the inner sums
+// already in `radiance` (term-major); here the outer sum with each vertex's view in its frame.
+SampleRadiance RelightSession::CombineTerms(const SampleRadiance& radiance, const Vec3& eye) const {
+  const std::size_t ns = sample_count(), m = terms();
+  if (radiance.size() != m * ns)
+    throw std::invalid_argument("CombineTerms: " + std::to_string(radiance.size()) +
+                                " samples for " + std::to_string(m) + " terms × " +
+                                std::to_string(ns));
+  if (!glossy_) return radiance;
+  SampleRadiance out(ns);
+  constexpr std::size_t kPart = 1024;
+  ParallelFor((ns + kPart - 1) / kPart, [&](std::size_t part) {
+    float g[16];
+    for (std::size_t p = part * kPart; p < std::min(ns, (part + 1) * kPart); ++p) {
+      const uint32_t f = sample_factor_[p];
+      if (f == GlossyFactorTable::kDiffuseMesh) {
+        for (int c = 0; c < 3; ++c) out.channel[c][p] = radiance.channel[c][p];
+        continue;
+      }
+      glossy_->factors[f].GAll(frames_[p].ToLocal(eye - positions_[p]), g);
+      for (int c = 0; c < 3; ++c) {
+        double b = 0;
+        for (std::size_t t = 0; t < m; ++t) b += g[t] * radiance.channel[c][t * ns + p];
+        out.channel[c][p] = b;
+      }
+    }
+  });
+  return out;
 }
 
 double RelativeRmsError(std::span<const float> b, std::span<const float> ref) {

@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/glossy_factors.h"
 #include "formats/image_file.h"
 #include "runtime/camera_metadata.h"
 #include "runtime/compressed_relight.h"
@@ -91,6 +92,19 @@ class RelightSession {
   // order is then the pack's.
   const CpcaRelighter* cpca() const { return cpca_relighter_.get(); }
   const TransportOperator& transport() const { return *transport_op_; }
+  // Glossy vertex packs (a GLSY section, docs/glossy-transport.md): the BRDF factor table, else
+  // nullptr. transport() then has terms × sample_count() samples (term t of session sample p at
+  // t·sample_count() + p, the session's order in every term), and Shade combines them with the
+  // view: B(x) = w ⊙ Σ_t g_t(ω_o(x))·(T_t·L)(x), ω_o = eye − x in x's factor frame (Eq. 3).
+  const GlossyFactorTable* glossy() const { return glossy_ ? &*glossy_ : nullptr; }
+  // The eye the glossy terms are combined for (the pack's camera eye until SetEye).
+  const Vec3& eye() const { return eye_; }
+  void SetEye(const Vec3& eye) { eye_ = eye; }
+  // Rows of the transport per sample and channel: the BRDF terms of a glossy pack, else 1.
+  std::size_t terms() const { return glossy_ ? static_cast<std::size_t>(glossy_->terms) : 1; }
+  // Σ_t g_t(ω_o)·radiance[t·V + p] per sample p (the identity for a pack without terms; a
+  // diffuse mesh's vertex takes its term 0): radiance of terms() × sample_count() samples.
+  SampleRadiance CombineTerms(const SampleRadiance& radiance, const Vec3& eye) const;
   // Albedo and position per spatial sample, and the triangles over them, in the session's order.
   const std::vector<Rgb>& albedo() const { return albedo_; }
   std::span<const Vec3> positions() const { return positions_; }
@@ -112,6 +126,8 @@ class RelightSession {
   // Throws NumericalError naming the pack and the pack's sample number when a colour is not a
   // finite float.
   std::vector<float> Shade(const SampleRadiance& radiance) const;
+  // The same with a glossy pack's terms combined for `eye` instead of eye().
+  std::vector<float> Shade(const SampleRadiance& radiance, const Vec3& eye) const;
 
  protected:
   RelightSession() = default;
@@ -132,6 +148,10 @@ class RelightSession {
   std::unique_ptr<CompressedTransportOperator> operator_;
   const TransportOperator* transport_op_ = nullptr;
   std::vector<Rgb> albedo_;
+  std::optional<GlossyFactorTable> glossy_;
+  std::vector<uint32_t> sample_factor_;  // glossy packs: per session sample, factors or diffuse
+  std::vector<FactorFrame> frames_;      // glossy packs: per session sample
+  Vec3 eye_{0, 0, 0};
   std::vector<Vec3> positions_;
   std::vector<std::array<uint32_t, 3>> triangles_;
   std::vector<uint32_t> pack_sample_;       // session position → pack sample

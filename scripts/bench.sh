@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Long benchmarks, never part of the test suite. Each prints ratios measured in one run on this
 # machine (against raw Embree, against brute force, against the 2D baseline), because the
-# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample] [--quick]
+# machines are shared and noisy. Usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles|glossy-terms] [--quick]
 # `sweep` is prt-bench (docs/benchmarks.md): every setting's run time against error, Pareto fronts
 # and plots in $OUT/prt-bench; PRT_BENCH_NP=K runs it under mpirun -np K, PRT_BENCH_ARGS adds options.
 set -euo pipefail
@@ -351,6 +351,36 @@ run_supersample() {
     tee "$d/table.txt"
 }
 
+# Glossy vertex transport against Cycles (issue 39, docs/glossy-transport.md): the GGX bunny
+# baked per vertex with [glossy] terms (scenes/bench/bunny-ggx-vertex-*.toml), relit by prt-view
+# from the scene's camera, against Cycles at max bounces 0, through bench/cycles/run.sh.
+# PRT_CAMERA_ENVS picks the environments (default: all four). Output: $OUT/glossy-cycles/.
+# A second view of the r = 0.8 bake re-uses its run folder (the rows do not depend on the camera):
+# the view2 scene replaces run/scene.toml in a copy, and only the pack, prt-view and Cycles run.
+run_glossy_cycles() {
+  local d="$OUT/glossy-cycles"
+  PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" \
+    PRT_CAMERA_CASES="${PRT_CAMERA_CASES:-vertex-ggx-k0|scenes/bench/bunny-ggx-vertex-k0.toml|0|0|centre vertex-ggx-r08-k0|scenes/bench/bunny-ggx-vertex-r08-k0.toml|0|0|centre}" \
+    "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$d"
+  if [ -f "$d/vertex-ggx-r08-k0/run/report.json" ] && [ -z "${PRT_CAMERA_CASES:-}" ]; then
+    rm -rf "$d/vertex-ggx-r08-k0-view2"
+    mkdir -p "$d/vertex-ggx-r08-k0-view2"
+    cp -a "$d/vertex-ggx-r08-k0/run" "$d/vertex-ggx-r08-k0-view2/run"
+    cp "$ROOT/scenes/bench/bunny-ggx-vertex-r08-k0-view2.toml" "$d/vertex-ggx-r08-k0-view2/run/scene.toml"
+    touch "$d/vertex-ggx-r08-k0-view2/run/report.json"
+    PRT_SHARED_DATA="${PRT_SHARED_DATA:-$ROOT/../shared/data}" PRT_CAMERA_APPEND=1 \
+      PRT_CAMERA_CASES="vertex-ggx-r08-k0-view2|scenes/bench/bunny-ggx-vertex-r08-k0-view2.toml|0|0|centre" \
+      "$ROOT/bench/cycles/run.sh" "$BUILD_DIR" "$d"
+  fi
+}
+
+# The BRDF factorisation of glossy vertex transport against the exact BRDF on the same rays, per
+# roughness and term count, plus the error split of a finished run (docs/glossy-transport.md).
+# About 2 min. Output: $OUT/glossy-terms/{table.csv,terms.png}.
+run_glossy_terms() {
+  "$BUILD_DIR/bench/glossy_terms_bench" --out "$OUT/glossy-terms" | tee "$OUT/glossy-terms.txt"
+}
+
 case "$WHAT" in
   all) run_transport; run_scaling; run_sparse; run_compression; run_cpca; run_compress; run_figure9; run_viewer; run_relight; run_runtime; run_glossy; run_tp ;;
   transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake) "run_$WHAT" ;;
@@ -360,5 +390,7 @@ case "$WHAT" in
   image) run_image ;;
   camera) run_camera ;;
   supersample) run_supersample ;;
-  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample] [--quick]" >&2; exit 1 ;;
+  glossy-cycles) run_glossy_cycles ;;
+  glossy-terms) run_glossy_terms ;;
+  *) echo "usage: scripts/bench.sh [all|transport|scaling|million|sparse|compression|cpca|compress|figure9|viewer|relight|runtime|glossy|tp|sweep|stress|rebake|mc-error|gi|sparse-gi|image|camera|supersample|glossy-cycles|glossy-terms] [--quick]" >&2; exit 1 ;;
 esac

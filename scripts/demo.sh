@@ -31,11 +31,24 @@ for env in sunrise city; do
     --exact --exposure "${EXPOSURE[$env]}" --out "$OUT/$env.png" --exr "$OUT/$env.exr"
 done
 
+# Glossy vertex transport (docs/glossy-transport.md): the GGX dragon baked once, relit from two
+# views (the view moves at relight time; no ray is traced again).
+echo "== glossy: mpirun -np $RANKS prt-farm scenes/glossy-vertex.toml (4 BRDF terms per vertex) =="
+rm -rf "$OUT/glossy-run"
+mpirun -np "$RANKS" "$BUILD_DIR/farm/prt-farm" "$ROOT/scenes/glossy-vertex.toml" --out "$OUT/glossy-run"
+"$BUILD_DIR/packager/prt-pack" pack "$OUT/glossy-run" --out "$OUT/glossy.prtpack"
+declare -A VIEW=([front]="0,1.2,3.2,0,0.4,0" [side]="2.4,1.0,1.8,0,0.35,0")
+for view in front side; do
+  "$BUILD_DIR/viewer/prt-view" "$OUT/glossy.prtpack" --env "$BUILD_DIR/data/envmaps/sunrise.exr" \
+    --exact --exposure 0.45 --camera "${VIEW[$view]}" --out "$OUT/glossy-sunrise-$view.png"
+done
+
 echo
 echo "Results:"
 echo "  run folder (transport, report.json): $OUT/run"
 echo "  packed asset:                        $OUT/default.prtpack"
 for env in sunrise city; do printf '  relit image (%s):%*s%s\n' "$env" $((20 - ${#env})) "" "$OUT/$env.png"; done
+echo "  glossy dragon, two views:            $OUT/glossy-sunrise-front.png $OUT/glossy-sunrise-side.png"
 echo
 echo "The pack in the browser (docs/web.md): builds the WebAssembly page, serves it on localhost:"
 echo "  $ROOT/scripts/serve-web.sh"

@@ -238,7 +238,7 @@ int Run(const Options& o) {
       o.exact ? session->RelightExact(lighting)
               : prt::RelightApproximate(session->transport(), lighting, mode, o.terms);
   const double relight_s = Seconds(t_relight);
-  const std::vector<float> rgb = session->Shade(radiance);
+  const std::vector<float> rgb = session->Shade(radiance, camera.eye);
   if (!o.radiance_out.empty())  // the session's order → the pack's (viewer_session.h)
     prt::WriteNpyFloat32(o.radiance_out, session->ToPackOrder(rgb), session->sample_count(), 3);
   const auto t_raster = std::chrono::steady_clock::now();

@@ -181,10 +181,10 @@ int RunViewerWindow(const prt::ViewerSession& session,
       }
       radiance = pbi->Radiance();
     }
-    const prt::ImageRgb image =
-        // An image pack's view is fixed (its rows are the camera's pixels): no orbit.
-        session.Render(session.image() != nullptr ? camera : Orbit(camera, st.orbit_deg),
-                       session.Shade(radiance), background);
+    // An image pack's view is fixed (its rows are the camera's pixels): no orbit. A glossy
+    // pack's terms are combined for the orbiting eye (only the m-term sum per vertex).
+    const prt::Camera view = session.image() != nullptr ? camera : Orbit(camera, st.orbit_deg);
+    const prt::ImageRgb image = session.Render(view, session.Shade(radiance, view.eye), background);
     for (std::size_t i = 0; i < rgb8.size(); ++i) rgb8[i] = prt::ToSrgb8(image.pixels[i], tone);
     SDL_UpdateTexture(texture, nullptr, rgb8.data(), 3 * camera.width);
     SDL_RenderClear(renderer);

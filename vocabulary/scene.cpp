@@ -404,6 +404,12 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     s.RejectUnknown();
   }
   {
+    const toml::table* t = section("glossy");
+    Section s(t ? *t : kEmpty, "[glossy]", file);
+    scene.glossy.terms = static_cast<int>(s.Integer("terms", scene.glossy.terms, 1, 16));
+    s.RejectUnknown();
+  }
+  {
     const toml::table* t = section("sparse");
     Section s(t ? *t : kEmpty, "[sparse]", file);
     SparseSettings& p = scene.sparse;
@@ -429,8 +435,8 @@ SceneDescription ParseTable(const toml::table& root, const std::string& file,
     // Unset, an image run with gathered bounces takes "full": every surface pixel gathers, which
     // costs little next to the vertices' support rows and is 0.7–1.5 points closer to Cycles
     // than the dense pixels' combination (docs/image-relighting.md, "Interreflection").
-    const bool image_gather = scene.samples == SpatialSamples::kCameraPixels &&
-                              scene.sampling.estimator == "gather";
+    const bool image_gather =
+        scene.samples == SpatialSamples::kCameraPixels && scene.sampling.estimator == "gather";
     p.indirect = s.Choice("indirect", image_gather ? std::string("full") : p.indirect,
                           {"combination", "features", "full"});
     p.feature_paths = static_cast<int>(s.Integer("feature_paths", p.feature_paths, 0, 65536));

@@ -29,8 +29,9 @@ struct FitBox {
 
 // A mesh's material for glossy relighting, docs/scene-format.md "Glossy materials": the mesh's
 // albedo is the diffuse part, `specular` weighs the lobe of `brdf` (runtime/brdf.h). Vertex
-// transport runs ignore it (their BRDF is diffuse); image runs bake it into the rows of the
-// pixels that see the mesh (docs/image-relighting.md, "Glossy pixels").
+// transport runs bake it as [glossy] terms rows per vertex (docs/glossy-transport.md); image runs
+// bake it into the rows of the pixels that see the mesh (docs/image-relighting.md, "Glossy
+// pixels"); visibility runs relight it by triple products.
 struct GlossyMaterialSettings {
   std::string brdf = "lambert";  // lambert | phong | ashikhmin-shirley | ggx
   Rgb specular{0.f, 0.f, 0.f};   // albedo + specular ≤ 1 per channel
@@ -161,6 +162,13 @@ struct CompressionSettings {
   int coefficient_bits = 16;
 };
 
+// Glossy vertex transport (docs/glossy-transport.md): the BRDF in-out factorisation's terms m
+// (Huang & Ramamoorthi 2010 §3, Eq. 2; their §7 uses 4). A vertex transport run whose scene has
+// a glossy mesh bakes m rows per vertex.
+struct GlossyTransportSettings {
+  int terms = 4;
+};
+
 struct SceneDescription {
   std::string file;  // the scene file itself (or the name given to ParseScene)
   std::string name = "scene";
@@ -173,6 +181,7 @@ struct SceneDescription {
   SparseSettings sparse;
   CompressionSettings compression;
   VisibilitySettings visibility;
+  GlossyTransportSettings glossy;
   // Environment maps for the demo and benchmarks: resolved where found at parse time, else as
   // written (they are only checked when used: call ResolveScenePath for a precise error).
   std::vector<std::string> environments;

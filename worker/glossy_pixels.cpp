@@ -17,6 +17,19 @@ bool GlossyPixels::any() const {
 }
 
 GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeometry& geometry) {
+  if (scene.samples != SpatialSamples::kCameraPixels) {
+    GlossyPixels out;
+    for (const SceneMesh& sm : geometry.meshes) {
+      out.materials.emplace_back();
+      out.glossy.push_back(0);
+      out.weight.push_back(sm.albedo);
+    }
+    return out;
+  }
+  return ResolveGlossyMaterials(scene, geometry);
+}
+
+GlossyPixels ResolveGlossyMaterials(const SceneDescription& scene, const SceneGeometry& geometry) {
   GlossyPixels out;
   const std::size_t count = geometry.meshes.size();
   out.materials.resize(count);
@@ -25,7 +38,6 @@ GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeome
   for (std::size_t i = 0; i < count; ++i) {
     const SceneMesh& sm = geometry.meshes[i];
     out.weight[i] = sm.albedo;
-    if (scene.samples != SpatialSamples::kCameraPixels) continue;
     const GlossyMaterialSettings* g = nullptr;
     std::string what;
     if (sm.is_ground) {
@@ -59,12 +71,12 @@ GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeome
       throw InputError(
           scene.file,
           what +
-              ": glossy pixels need `specular` proportional to `albedo` (both grey, or the "
-              "same hue): one row per pixel carries both lobes and one colour. A lobe coloured "
-              "unlike the diffuse part needs a row per colour channel (3× the rows, the "
-              "farm's time and the pack's bytes), which image runs do not build: make "
-              "`specular` proportional to `albedo`, or set brdf = \"lambert\" for diffuse "
-              "pixels");
+              ": a glossy mesh needs `specular` proportional to `albedo` (both grey, or the "
+              "same hue): one row per pixel (per vertex and term) carries both lobes and one "
+              "colour. A lobe coloured unlike the diffuse part needs a row per colour channel "
+              "(3× the rows, the farm's time and the pack's bytes), which prtfarm does not "
+              "build: make `specular` proportional to `albedo`, or set brdf = \"lambert\" for "
+              "a diffuse mesh");
     const double ks = 1.0 - kd;
     m.diffuse = {static_cast<float>(kd), static_cast<float>(kd), static_cast<float>(kd)};
     m.specular = {static_cast<float>(ks), static_cast<float>(ks), static_cast<float>(ks)};

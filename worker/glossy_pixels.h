@@ -33,6 +33,8 @@ struct GlossyPixels {
 // "lambert" and its specular is not 0. Throws InputError naming the scene file and the mesh
 // when specular is not proportional to albedo. For a vertex scene every mesh is diffuse.
 GlossyPixels ResolveGlossyPixels(const SceneDescription& scene, const SceneGeometry& geometry);
+// The same for any scene (a vertex run's glossy meshes, docs/glossy-transport.md).
+GlossyPixels ResolveGlossyMaterials(const SceneDescription& scene, const SceneGeometry& geometry);
 
 // Marks the samples of pixels that see a glossy mesh (SpatialSample::glossy_material = the mesh
 // index into GlossyPixels::materials, which GlossySampling::materials takes).

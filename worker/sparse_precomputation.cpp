@@ -254,8 +254,8 @@ class InProcessSteps final : public SparseSteps {
     const NeighborIndex index = IndexOf(dense);
     std::vector<double> weight(cand.size(), 0.0);
     tbb::parallel_for(std::size_t{0}, cand.size(), [&](std::size_t i) {
-      const std::vector<uint32_t> nb =
-          index.RadiusSearch(samples_[cand[i]].position, plan_.radius, plan_.max_neighbors);
+      const std::vector<uint32_t> nb = index.RadiusSearch(plan_.SearchPosition(samples_[cand[i]]),
+                                                          plan_.radius, plan_.max_neighbors);
       std::vector<const float*> rows;
       rows.reserve(nb.size());
       for (uint32_t d : nb) rows.push_back(low_[d].data());
@@ -277,7 +277,7 @@ class InProcessSteps final : public SparseSteps {
     // (48 KB each, read twice per vertex) come from cache instead of memory. The result does not
     // depend on the order.
     std::vector<Vec3> all_positions(N);
-    for (std::size_t s = 0; s < N; ++s) all_positions[s] = samples_[s].position;
+    for (std::size_t s = 0; s < N; ++s) all_positions[s] = plan_.SearchPosition(samples_[s]);
     std::vector<uint32_t> sparse_ids;
     for (uint32_t s : HilbertOrder(all_positions))
       if (!is_dense[s]) sparse_ids.push_back(s);
@@ -300,7 +300,8 @@ class InProcessSteps final : public SparseSteps {
       std::vector<SparseRowTask> tasks;
       for (std::size_t i = first; i < last; ++i) {
         const uint32_t s = sparse_ids[i];
-        nb[i - first] = index.RadiusSearch(samples_[s].position, plan_.radius, plan_.max_neighbors);
+        nb[i - first] = index.RadiusSearch(plan_.SearchPosition(samples_[s]), plan_.radius,
+                                           plan_.max_neighbors);
         for (uint32_t d : nb[i - first])
           nbs[i - first].push_back({out_ + static_cast<std::size_t>(d) * T_, vis_[d].data(),
                                     feat_[d].data(), samples_[d].normal});
@@ -339,7 +340,7 @@ class InProcessSteps final : public SparseSteps {
   NeighborIndex IndexOf(std::span<const uint32_t> dense) const {
     std::vector<Vec3> pts;
     pts.reserve(dense.size());
-    for (uint32_t d : dense) pts.push_back(samples_[d].position);
+    for (uint32_t d : dense) pts.push_back(plan_.SearchPosition(samples_[d]));
     return NeighborIndex(pts, dense);
   }
 

@@ -48,6 +48,14 @@ struct SparsePlan {
   uint64_t seed = 1;
   AngularOptions angular;
   SparseOptions sparse;
+  // Glossy vertex transport (docs/glossy-transport.md): the samples are the vertices once per
+  // term, and the method runs on each T_i separately (Huang & Ramamoorthi 2010 §3): term t's
+  // samples are searched for neighbours at position + t·term_offset·x̂, farther apart than any
+  // radius (setup sets it from the scene's size). 0: one term.
+  double term_offset = 0;
+  Vec3 SearchPosition(const SpatialSample& s) const {
+    return s.term == 0 ? s.position : s.position + Vec3{s.term * term_offset, 0, 0};
+  }
 };
 
 // The plan from the scene's [sparse] settings: radius relative to the scene's bounding-box

@@ -41,6 +41,10 @@ struct SampleFrame {
   // view towards the eye; nullptr for a diffuse sample.
   const Material* material = nullptr;
   ShadingFrame shading;
+  // A glossy vertex's term of the factorisation (GlossySampling::factors), else nullptr.
+  const BrdfFactors* factors = nullptr;
+  int term = 0;
+  FactorFrame factor_frame;
   OcclusionRay ray{};  // origin, tnear, tfar filled; direction per ray
   uint64_t key = 0;    // RowKey(seed, sample index)
   // A supersampled pixel (SampleFootprints): its sub-samples' frames and cumulative λ; empty
@@ -159,13 +163,24 @@ struct TransportSampler::Impl {
     f.ray.tfar = std::numeric_limits<float>::infinity();
     f.key = RowKey(options.seed, sample_index);
     if (sample.glossy_material != kDiffuseSample) {
-      if (sample.glossy_material >= glossy.materials.size()) {
+      if (!glossy.factors && sample.glossy_material >= glossy.materials.size()) {
         throw std::out_of_range("TransportSampler: sample " + std::to_string(sample_index) +
                                 " names glossy material " + std::to_string(sample.glossy_material) +
                                 " of " + std::to_string(glossy.materials.size()));
       }
-      f.material = &glossy.materials[sample.glossy_material];
-      f.shading = MakeShadingFrame(f.normal, glossy.eye - sample.position);
+      if (glossy.factors) {
+        if (sample.glossy_material >= glossy.factors->factors.size() ||
+            sample.term >= glossy.factors->terms)
+          throw std::out_of_range("TransportSampler: sample " + std::to_string(sample_index) +
+                                  " names factors " + std::to_string(sample.glossy_material) +
+                                  " term " + std::to_string(sample.term));
+        f.factors = &glossy.factors->factors[sample.glossy_material];
+        f.term = sample.term;
+        f.factor_frame = MakeFactorFrame(f.normal);
+      } else {
+        f.material = &glossy.materials[sample.glossy_material];
+        f.shading = MakeShadingFrame(f.normal, glossy.eye - sample.position);
+      }
     }
     return f;
   }
@@ -386,8 +401,11 @@ struct TransportSampler::Impl {
         ray.direction[1] = dir[i][1];
         ray.direction[2] = dir[i][2];
         // Diffuse: Ω_s·cos (the 1/π comes at Flush). Glossy pixel: Ω_s·(k_d·cos + π·k_s·f_s·cos).
+        // Glossy vertex term: Ω_s·π·f_term(ω).
         b.weight[b.count] =
-            p.material == nullptr
+            p.factors != nullptr ? omega[s0 + i] * std::numbers::pi *
+                                       p.factors->F(p.term, p.factor_frame.ToLocal(unit[i]))
+            : p.material == nullptr
                 ? omega[s0 + i] * c
                 : omega[s0 + i] * (p.material->diffuse[0] * c +
                                    std::numbers::pi * p.material->specular[0] *

@@ -16,6 +16,7 @@
 #include <span>
 #include <vector>
 
+#include "formats/glossy_factors.h"
 #include "runtime/brdf.h"
 #include "vocabulary/cubemap.h"
 #include "vocabulary/scene.h"
@@ -41,6 +42,11 @@ struct SpatialSample {
   // A glossy camera pixel (docs/image-relighting.md, "Glossy pixels"): the index of its material
   // in GlossySampling::materials; kDiffuseSample for every other sample.
   uint32_t glossy_material = 0xFFFFFFFFu;
+  // Glossy vertex transport (docs/glossy-transport.md): with GlossySampling::factors, a sample
+  // with glossy_material = i is one term of the BRDF in-out factorisation, its row
+  // T_term(x, ω) = ∫ V·f_term(ω) dω with factors->factors[i]; the run's rows are the vertices
+  // once per term (term-major). The sparse method keeps each term's neighbours in its own term.
+  uint8_t term = 0;
 };
 inline constexpr uint32_t kDiffuseSample = 0xFFFFFFFFu;
 
@@ -67,9 +73,14 @@ struct TransportSamplerOptions {
 // rays_per_texel jittered directions and a lobe narrower than a texel is under-resolved
 // (docs/image-relighting.md measures it). The unoccluded estimate (ComputeUnoccludedTexels)
 // and the variance carry the same weights.
+// Glossy vertex transport (docs/glossy-transport.md): with `factors` set, glossy_material
+// indexes factors->factors instead and the ray weight Ω_s·cos/π becomes Ω_s·f_term(ω), f looked
+// up in the vertex's factor frame (formats/glossy_factors.h); f_term carries the cosine and
+// may be negative (terms after the first). The horizon rules are unchanged (f = 0 below it).
 struct GlossySampling {
   std::vector<Material> materials;
   Vec3 eye{0, 0, 0};
+  std::shared_ptr<const GlossyFactorTable> factors{};
 };
 
 // Supersampled camera pixels (docs/image-relighting.md, "Supersampling"): the surface

@@ -127,17 +127,29 @@ def f64_to_f32(raw):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("run", help="a finished image run folder (prt-farm --out)")
+    p.add_argument("run", help="a finished run folder (prt-farm --out): an image run, or a "
+                   "vertex run rendered from its scene's [camera]")
     p.add_argument("--out", required=True, help="folder for scene.json and the mesh files")
     a = p.parse_args()
     os.makedirs(a.out, exist_ok=True)
 
     meshes, bounds = read_geometry(os.path.join(a.run, "geometry.prtg"))
     image_path = os.path.join(a.run, "image.prti")
-    if not os.path.exists(image_path):
-        sys.exit(f"{a.run}: no image.prti; is this an image run (samples = \"camera\")?")
-    camera, pixel_mesh = read_image(image_path)
     scene = parse_toml(os.path.join(a.run, "scene.toml"))
+    vertex_run = not os.path.exists(image_path)
+    if vertex_run:
+        # A vertex run (glossy vertex transport, docs/glossy-transport.md): prt-view renders the
+        # pack from the scene's [camera] (defaults of vocabulary/scene.h); the pixels' meshes
+        # come from Cycles' index pass (run.sh writes pixel_mesh.bin from it after the first
+        # render), so the placeholder here says "every pixel on mesh 0".
+        c = scene.get("camera", {})
+        camera = dict(eye=list(c.get("eye", [0.0, 1.0, 4.0])),
+                      target=list(c.get("target", [0.0, 0.5, 0.0])),
+                      up=list(c.get("up", [0.0, 1.0, 0.0])), fov_deg=c.get("fov", 40.0),
+                      width=c.get("width", 640), height=c.get("height", 480))
+        pixel_mesh = bytes(4 * camera["width"] * camera["height"])
+    else:
+        camera, pixel_mesh = read_image(image_path)
     tables = {t.get("name", f"mesh{i}"): t for i, t in enumerate(scene.get("mesh", []))}
 
     out_meshes = []
@@ -159,7 +171,7 @@ def main():
     desc = dict(source=os.path.abspath(a.run), coordinates="prtfarm world (+Y up)",
                 camera=camera, meshes=out_meshes, bounds=list(bounds),
                 cubemap_n=scene.get("scene", {}).get("n", 32),
-                bounces=sampling.get("bounces", 0),
+                bounces=sampling.get("bounces", 0), vertex_run=vertex_run,
                 supersample=scene.get("camera", {}).get("supersample", 1))
     with open(os.path.join(a.out, "scene.json"), "w") as f:
         json.dump(desc, f, indent=1)

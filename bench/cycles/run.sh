@@ -6,6 +6,8 @@
 #   bench/cycles/run.sh BUILD_DIR OUT_DIR
 #
 # Each case is "name|scene|cycles diffuse bounces|cycles glossy bounces|pixel"
+# A vertex run's scene (glossy vertex transport, docs/glossy-transport.md) is rendered by
+# prt-view from its [camera]; its pixels' meshes come from Cycles' index pass.
 # (pixel: centre = one ray through the pixel centre, box = the pixel's footprint)
 # (PRT_CAMERA_CASES, space-separated, replaces the list). Per case: prt-farm (2 ranks) farms the
 # image scene, prt-pack packs it, bench/cycles/export_scene.py writes the run's own world-space
@@ -51,7 +53,7 @@ if ! command -v blender >/dev/null 2>&1 || ! "$py" -c 'import numpy' 2>/dev/null
   $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq blender python3-numpy
 fi
 mkdir -p "$dir"
-: > "$dir/results.list"
+[ -n "${PRT_CAMERA_APPEND:-}" ] || : > "$dir/results.list"  # PRT_CAMERA_APPEND=1: add to the table
 for spec in "${cases[@]}"; do
   name="" scene="" dbounce="" gbounce="" pixel=""
   IFS='|' read -r name scene dbounce gbounce pixel <<< "$spec"
@@ -82,6 +84,17 @@ for spec in "${cases[@]}"; do
         --glossy-bounces "$gbounce" --pixel "$pixel" "${index[@]}" > "$render.log" 2>&1 ||
         { tail -20 "$render.log"; echo "render_camera.py failed: $render.log" >&2; exit 1; }
       [ -f "$render.log" ] && grep 'render_camera.py:' "$render.log" || true
+      # A vertex run (glossy vertex transport): the pixels' meshes from Cycles' index pass.
+      if [ "$seed" = 1 ] && grep -q '"vertex_run": true' "$cdir/cycles/scene.json"; then
+        "$py" - "$cdir/cycles/index.exr" "$cdir/cycles/pixel_mesh.bin" "$ROOT/bench/cycles" <<'PY'
+import sys
+sys.path.insert(0, sys.argv[3])
+import numpy as np, exrio
+idx = np.rint(exrio.read_rgb(sys.argv[1])[:, :, 0]).astype(np.int64) - 1
+idx[idx < 0] = 0xFFFFFFFF
+idx.astype("<u4").tofile(sys.argv[2])
+PY
+      fi
     done
     "$py" "$ROOT/bench/cycles/compare.py" --prt "$cdir/$env-prt.exr" \
       --cycles "$cdir/cycles/$env-s1-n$samples-$pixel.exr" "$cdir/cycles/$env-s2-n$samples-$pixel.exr" \

@@ -387,12 +387,15 @@ function tick() {
       orbitMs = performance.now() - t;
       stats.lastOrbitMs = orbitMs;
       if (app.orbiting) ++app.orbiting.frames;
-      if (!glossy) app.needsRender = true;  // a diffuse pack's radiance does not change
+      // A diffuse pack's radiance does not change; a glossy vertex pack's terms are combined
+      // for the new eye by the next relight.
+      if (!glossy && !(app.pack.brdfTerms > 1)) app.needsRender = true;
     }
     // A glossy pack relights when the view or the lighting changed (each frame is whole); a
     // diffuse one while PBI frames remain or the lighting is dragged.
     const relight = glossy ? rotate || orbit || app.framesLeft > 0
-                           : rotate || app.framesLeft > 0 || app.dragging;
+                           : rotate || app.framesLeft > 0 || app.dragging ||
+                               (orbit && app.pack.brdfTerms > 1);
     if (relight) {
       const t0 = performance.now();
       if (rotate) {

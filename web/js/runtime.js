@@ -43,6 +43,9 @@ export class Pack {
     // A glossy pack: visibility, relit towards the eye by triple products (docs/runtime.md,
     // "Glossy packs"); its frames depend on the view, not on a term budget.
     this.isGlossy = M._prt_runtime_is_glossy(this.rt) !== 0;
+    // A glossy vertex pack (docs/glossy-transport.md): m BRDF terms per vertex, relit like a
+    // diffuse pack and combined for the eye, so an orbit step relights (the m-term sum).
+    this.brdfTerms = M._prt_runtime_brdf_terms(this.rt);
     this.triangles = M._prt_runtime_triangle_count(this.rt);
     this.cubemapSize = M._prt_runtime_cubemap_size(this.rt);
     this.coefficients = M._prt_runtime_coefficient_count(this.rt);
