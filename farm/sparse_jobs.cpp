@@ -438,24 +438,36 @@ void ComputeSparseRows(SparseJobWork& job, ByteReader& r, SparseJobResult& res) 
   const std::size_t slots = CombinationSlots(job.plan);
   res.combination.assign(vertices.size() * slots * 2, 0);
   for (std::size_t i = 0; i < vertices.size() * slots; ++i) res.combination[2 * i] = kNoSample;
-  tbb::parallel_for(std::size_t{0}, vertices.size(), [&](std::size_t i) {
-    std::vector<DenseNeighbor> nbs;
-    for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
-      const std::size_t u = nb[k];
-      nbs.push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T,
-                     job.samples[union_ids[u]].normal});
+  // Batches of consecutive vertices (the job's are in Morton order and share most of their
+  // neighbours; ReconstructSparseRows reads the neighbours' rows once per batch). A vertex's row
+  // does not depend on its batch.
+  const std::size_t batches = (vertices.size() + kSparseRowBatch - 1) / kSparseRowBatch;
+  tbb::parallel_for(std::size_t{0}, batches, [&](std::size_t bi) {
+    const std::size_t first = bi * kSparseRowBatch;
+    const std::size_t last = std::min(vertices.size(), first + kSparseRowBatch);
+    std::vector<std::vector<DenseNeighbor>> nbs(last - first);
+    std::vector<std::vector<NeighborWeight>> weights(last - first);
+    std::vector<SparseRowTask> tasks;
+    for (std::size_t i = first; i < last; ++i) {
+      for (uint32_t k = offsets[i]; k < offsets[i + 1]; ++k) {
+        const std::size_t u = nb[k];
+        nbs[i - first].push_back({tr.data() + u * T, vis.data() + u * T, feat.data() + u * T,
+                                  job.samples[union_ids[u]].normal});
+      }
+      tasks.push_back({&job.samples[vertices[i]], vertices[i], nbs[i - first], out.data() + i * T,
+                       job.with_variance ? variance.data() + i * T : nullptr, &weights[i - first]});
     }
     SparseStats st;
-    std::vector<NeighborWeight> weights;
-    const SparseOutcome o = ReconstructSparseRow(
-        job.sampler, job.samples[vertices[i]], vertices[i], nbs, job.plan.sparse, solvers.local(),
-        out.data() + i * T, st, job.with_variance ? variance.data() + i * T : nullptr, &weights);
-    res.outcomes[i] = static_cast<uint8_t>(o);
-    if (o == SparseOutcome::kReconstructed) {
+    ReconstructSparseRows(job.sampler, tasks, job.plan.sparse, solvers.local(), st);
+    for (std::size_t i = first; i < last; ++i) {
+      const SparseOutcome o = tasks[i - first].outcome;
+      res.outcomes[i] = static_cast<uint8_t>(o);
+      if (o != SparseOutcome::kReconstructed) continue;
+      const std::vector<NeighborWeight>& w = weights[i - first];
       uint32_t* rec = res.combination.data() + i * slots * 2;
-      for (std::size_t w = 0; w < weights.size() && w < slots; ++w) {
-        rec[2 * w] = union_ids[nb[offsets[i] + weights[w].neighbor]];
-        rec[2 * w + 1] = std::bit_cast<uint32_t>(weights[w].alpha);
+      for (std::size_t x = 0; x < w.size() && x < slots; ++x) {
+        rec[2 * x] = union_ids[nb[offsets[i] + w[x].neighbor]];
+        rec[2 * x + 1] = std::bit_cast<uint32_t>(w[x].alpha);
       }
     }
     std::lock_guard lock(mutex);

@@ -31,6 +31,12 @@ CubemapLayout::CubemapLayout(int n) : n_(n) {
           FaceRectSolidAngle(-1 + h * x, -1 + h * (x + 1), -1 + h * y, -1 + h * (y + 1));
     }
   }
+  corners_.resize(static_cast<std::size_t>(6) * (n + 1) * (n + 1));
+  for (int f = 0; f < 6; ++f)
+    for (int y = 0; y <= n; ++y)
+      for (int x = 0; x <= n; ++x)
+        corners_[(static_cast<std::size_t>(f) * (n + 1) + y) * (n + 1) + x] =
+            FacePoint(f, -1 + h * x, -1 + h * y);
   vector_irradiance_.resize(texel_count());
   for (int f = 0; f < 6; ++f) {
     for (int y = 0; y < n; ++y) {
@@ -63,24 +69,23 @@ const std::vector<Vec3>& CubemapLayout::TexelVectorIrradiance() const {
 std::size_t CubemapLayout::AboveHorizonMask(const Vec3& nrm, uint8_t* mask,
                                             uint8_t* fully_above) const {
   const int n = n_;
-  const double h = 2.0 / n;
-  std::vector<double> dots(static_cast<std::size_t>(n + 1) * (n + 1));
+  const std::size_t corners = static_cast<std::size_t>(n + 1) * (n + 1);
+  thread_local std::vector<double> dots;
+  dots.resize(corners);
   std::size_t count = 0;
   for (int f = 0; f < 6; ++f) {
-    for (int y = 0; y <= n; ++y)
-      for (int x = 0; x <= n; ++x)
-        dots[static_cast<std::size_t>(y) * (n + 1) + x] =
-            Dot(FacePoint(f, -1 + h * x, -1 + h * y), nrm);
+    const Vec3* p = corners_.data() + static_cast<std::size_t>(f) * corners;
+    for (std::size_t i = 0; i < corners; ++i) dots[i] = Dot(p[i], nrm);
     for (int y = 0; y < n; ++y) {
       for (int x = 0; x < n; ++x) {
         const double* r0 = &dots[static_cast<std::size_t>(y) * (n + 1) + x];
         const double* r1 = r0 + (n + 1);
-        const bool any = r0[0] > 0 || r0[1] > 0 || r1[0] > 0 || r1[1] > 0;
+        // Bitwise, not short-circuit: the same answer without a branch per corner.
+        const int a = (r0[0] > 0) + (r0[1] > 0) + (r1[0] > 0) + (r1[1] > 0);
         const std::size_t j = Index(f, x, y);
-        mask[j] = any ? 1 : 0;
-        count += any;
-        if (fully_above != nullptr)
-          fully_above[j] = (r0[0] > 0 && r0[1] > 0 && r1[0] > 0 && r1[1] > 0) ? 1 : 0;
+        mask[j] = a > 0 ? 1 : 0;
+        count += a > 0;
+        if (fully_above != nullptr) fully_above[j] = a == 4 ? 1 : 0;
       }
     }
   }
@@ -146,12 +151,11 @@ std::size_t CubemapLayout::TexelOf(const Vec3& d) const {
 
 bool CubemapLayout::TexelAboveHorizon(std::size_t index, const Vec3& nrm) const {
   const TexelCoord c = Coord(index);
-  const double h = 2.0 / n_;
-  for (int k = 0; k < 4; ++k) {
-    const Vec3 p = FacePoint(c.face, -1 + h * (c.x + (k & 1)), -1 + h * (c.y + (k >> 1)));
-    if (Dot(p, nrm) > 0) return true;
-  }
-  return false;
+  const std::size_t side = static_cast<std::size_t>(n_) + 1;
+  const Vec3* p = corners_.data() + (static_cast<std::size_t>(c.face) * side + c.y) * side + c.x;
+  // The corners (x, y), (x+1, y), (x, y+1), (x+1, y+1): FacePoint's values, precomputed.
+  return Dot(p[0], nrm) > 0 || Dot(p[1], nrm) > 0 || Dot(p[side], nrm) > 0 ||
+         Dot(p[side + 1], nrm) > 0;
 }
 
 }  // namespace prt

@@ -93,6 +93,9 @@ class CubemapLayout {
   int n_;
   std::vector<double> solid_angle_;      // one face; every face has the same texel solid angles
   std::vector<Vec3> vector_irradiance_;  // all faces
+  // FacePoint of every texel corner, face by face, (n+1)² each: AboveHorizonMask's dot products
+  // (one per corner and normal) without rebuilding the points for every sparse vertex.
+  std::vector<Vec3> corners_;
 };
 
 // Solid angle subtended on the unit sphere by the face rectangle [u0,u1]×[v0,v1] at distance 1.

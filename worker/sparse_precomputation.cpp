@@ -288,30 +288,44 @@ class InProcessSteps final : public SparseSteps {
       return L1Solver(o);
     });
     std::size_t done = 0;
-    tbb::parallel_for(std::size_t{0}, sparse_ids.size(), [&](std::size_t i) {
-      const uint32_t s = sparse_ids[i];
-      const std::vector<uint32_t> nb =
-          index.RadiusSearch(plan_.SearchPosition(samples_[s]), plan_.radius, plan_.max_neighbors);
-      std::vector<DenseNeighbor> nbs;
-      nbs.reserve(nb.size());
-      for (uint32_t d : nb)
-        nbs.push_back({out_ + static_cast<std::size_t>(d) * T_, vis_[d].data(), feat_[d].data(),
-                       samples_[d].normal});
+    // Batches of consecutive vertices along the curve: ReconstructSparseRows reads their shared
+    // neighbours' rows once per batch; a vertex's row does not depend on its batch.
+    const std::size_t batches = (sparse_ids.size() + kSparseRowBatch - 1) / kSparseRowBatch;
+    tbb::parallel_for(std::size_t{0}, batches, [&](std::size_t bi) {
+      const std::size_t first = bi * kSparseRowBatch;
+      const std::size_t last = std::min(sparse_ids.size(), first + kSparseRowBatch);
+      std::vector<std::vector<uint32_t>> nb(last - first);
+      std::vector<std::vector<DenseNeighbor>> nbs(last - first);
+      std::vector<std::vector<NeighborWeight>> w(last - first);
+      std::vector<SparseRowTask> tasks;
+      for (std::size_t i = first; i < last; ++i) {
+        const uint32_t s = sparse_ids[i];
+        nb[i - first] = index.RadiusSearch(plan_.SearchPosition(samples_[s]), plan_.radius,
+                                           plan_.max_neighbors);
+        for (uint32_t d : nb[i - first])
+          nbs[i - first].push_back({out_ + static_cast<std::size_t>(d) * T_, vis_[d].data(),
+                                    feat_[d].data(), samples_[d].normal});
+        tasks.push_back({&samples_[s], s, nbs[i - first], out_ + static_cast<std::size_t>(s) * T_,
+                         nullptr, &w[i - first]});
+      }
       SparseStats st;
-      thread_local std::vector<NeighborWeight> w;
-      const SparseOutcome o =
-          ReconstructSparseRow(sampler_, samples_[s], s, nbs, plan_.sparse, solvers.local(),
-                               out_ + static_cast<std::size_t>(s) * T_, st, nullptr, &w);
-      if (o != SparseOutcome::kReconstructed) {
-        fallback[s] = 1;
-      } else {
-        std::vector<SampleWeight>& c = report_.combination[s];
-        c.clear();
-        for (const NeighborWeight& x : w) c.push_back({nb[x.neighbor], x.alpha});
+      ReconstructSparseRows(sampler_, tasks, plan_.sparse, solvers.local(), st);
+      for (std::size_t i = first; i < last; ++i) {
+        const uint32_t s = sparse_ids[i];
+        if (tasks[i - first].outcome != SparseOutcome::kReconstructed) {
+          fallback[s] = 1;
+        } else {
+          std::vector<SampleWeight>& c = report_.combination[s];
+          c.clear();
+          for (const NeighborWeight& x : w[i - first])
+            c.push_back({nb[i - first][x.neighbor], x.alpha});
+        }
       }
       std::lock_guard<std::mutex> lock(stats_mutex_);
       report_.sparse_stats += st;
-      if (progress_ && (++done % 1024 == 0 || done == sparse_ids.size()))
+      const std::size_t before = done;
+      done += last - first;
+      if (progress_ && (done / 1024 != before / 1024 || done == sparse_ids.size()))
         progress_(step.c_str(), done, sparse_ids.size());
     });
     report_.seconds_sparse += Now() - t0;

@@ -117,4 +117,25 @@ SparseOutcome ReconstructSparseRow(const TransportSampler& sampler, const Spatia
                                    SparseStats& stats, float* variance = nullptr,
                                    std::vector<NeighborWeight>* weights = nullptr);
 
+// One vertex of a batch for ReconstructSparseRows: ReconstructSparseRow's arguments, and its
+// outcome.
+struct SparseRowTask {
+  const SpatialSample* sample = nullptr;
+  uint64_t sample_index = 0;
+  std::span<const DenseNeighbor> neighbors;
+  float* row = nullptr;
+  float* variance = nullptr;                       // optional
+  std::vector<NeighborWeight>* weights = nullptr;  // optional
+  SparseOutcome outcome = SparseOutcome::kReconstructed;
+};
+
+// ReconstructSparseRow for each task, with the same results bit for bit, whatever the batch (a
+// vertex's row depends on its own task only). Consecutive vertices along a space-filling curve
+// share most of their dense neighbours; a batch of them reads the neighbours' rows for the
+// feature statistics about once instead of once per vertex (docs/sparse-precomputation.md,
+// "The reconstruction's own cost"). kSparseRowBatch is the batch the callers use.
+inline constexpr std::size_t kSparseRowBatch = 16;
+void ReconstructSparseRows(const TransportSampler& sampler, std::span<SparseRowTask> tasks,
+                           const SparseOptions& options, L1Solver& solver, SparseStats& stats);
+
 }  // namespace prt
