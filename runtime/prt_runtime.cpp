@@ -137,6 +137,10 @@ struct prt_runtime {
 
   // The last whole frame (prt_runtime_relight): shaded radiance in the session's order.
   std::vector<float> frame_rgb;
+  // A glossy vertex pack: the last relight's radiance of every term (terms × samples), which
+  // prt_runtime_reshade combines again for a new eye without relighting.
+  prt::SampleRadiance frame_terms_radiance;
+  bool has_frame_terms = false;
   bool incremental_frame = false;
   // The prepared frame (prt_runtime_prepare), applied range by range: its lighting terms
   // (exact, NWA) into frame_radiance, or an incremental step of BI / PBI.
@@ -348,6 +352,10 @@ void ComputeFrame(prt_runtime& rt, unsigned terms) {
     }
   }
   rt.frame_rgb = s.Shade(radiance, rt.eye);  // a glossy vertex pack: its terms for the eye
+  if (s.terms() > 1) {
+    rt.frame_terms_radiance = std::move(radiance);
+    rt.has_frame_terms = true;
+  }
 }
 
 // Makes (or restarts) the incremental relighter of the mode for a budget of `terms`.
@@ -883,6 +891,22 @@ int prt_runtime_relight(prt_runtime* rt, unsigned terms, float* out_rgb, size_t 
   });
 }
 
+int prt_runtime_reshade(prt_runtime* rt, float* out_rgb, size_t out_samples) {
+  return Guard("prt_runtime_reshade", [&] {
+    RequireHandle(rt);
+    Require(out_rgb != nullptr, "out_rgb is NULL");
+    Require(out_samples == rt->samples(), "room for " + std::to_string(out_samples) +
+                                              " samples, the pack has " +
+                                              std::to_string(rt->samples()));
+    if (!rt->session || rt->session->terms() <= 1)
+      throw StateError(rt->name + ": prt_runtime_reshade needs a glossy vertex pack (BRDF terms)");
+    if (!rt->has_frame_terms)
+      throw StateError(rt->name + ": no frame to reshade yet (call prt_runtime_relight first)");
+    rt->frame_rgb = rt->session->Shade(rt->frame_terms_radiance, rt->eye);
+    CopyOut(*rt, 0, rt->samples(), out_rgb);
+  });
+}
+
 void prt_runtime_set_task_runner(prt_runtime_task_runner run, void* user, unsigned concurrency) {
   g_runner = {run, user};
   prt::ParallelBackend b;
@@ -922,7 +946,8 @@ size_t prt_runtime_memory_bytes(const prt_runtime* rt) {
   if (rt != nullptr && rt->glossy) return GlossyMemoryBytes(*rt);
   if (rt == nullptr || !rt->session) return 0;
   std::size_t bytes = rt->session->memory_bytes();
-  bytes += sizeof(float) * (rt->env.r.size() * 3 + rt->frame_rgb.size());
+  bytes += sizeof(float) * (rt->env.r.size() * 3 + rt->frame_rgb.size()) +
+           sizeof(double) * 3 * rt->frame_terms_radiance.size();
   bytes += sizeof(double) * 3 * rt->lighting.size();
   if (rt->periodic) bytes += rt->periodic->memory_bytes();
   if (rt->reduced) bytes += sizeof(float) * 3 * rt->reduced->PixelCount();

@@ -110,6 +110,11 @@ int prt_runtime_is_glossy(const prt_runtime* rt);
  * lighting the relight after an orbit step costs little more than the sum. 1 for any other
  * pack with a transport, 0 for a triple-product glossy pack. */
 unsigned prt_runtime_brdf_terms(const prt_runtime* rt);
+/* A glossy vertex pack (prt_runtime_brdf_terms > 1): the last relight's terms combined again for
+ * the current eye (prt_runtime_set_eye), into out_rgb (out_samples = prt_runtime_sample_count,
+ * the current order), without relighting: what a camera move costs (the m-term sum per vertex).
+ * PRT_RUNTIME_ERROR_STATE for any other pack or before the first relight. */
+int prt_runtime_reshade(prt_runtime* rt, float* out_rgb, size_t out_samples);
 /* Colour channels of the transport (1, or 3 with coloured interreflection); 0 for a glossy
  * pack. */
 unsigned prt_runtime_transport_channels(const prt_runtime* rt);

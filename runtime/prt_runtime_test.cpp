@@ -620,6 +620,19 @@ TEST(RuntimeGlossyTerms, TheEyeMovesTheGlossyVerticesOnly) {
       box_moved += v < 8 && std::abs(a[3 * v + c] - b[3 * v + c]) > 1e-6f ? 1 : 0;
     }
   EXPECT_GT(box_moved, 0);
+  // Reshade: the last frame's terms for a new eye, without relighting, equal a relight there.
+  std::vector<float> c(3 * n), d(3 * n);
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, eye), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_reshade(h.rt, c.data(), n), PRT_RUNTIME_OK) << message();
+  for (std::size_t k = 0; k < 3 * n; ++k) ASSERT_EQ(c[k], a[k]) << k;
+  ASSERT_EQ(prt_runtime_set_eye(h.rt, other), PRT_RUNTIME_OK);
+  ASSERT_EQ(prt_runtime_reshade(h.rt, d.data(), n), PRT_RUNTIME_OK);
+  for (std::size_t k = 0; k < 3 * n; ++k) ASSERT_EQ(d[k], b[k]) << k;
+  Handle diffuse(Pack("adaptive4d"));
+  ASSERT_NE(diffuse.rt, nullptr);
+  EXPECT_EQ(prt_runtime_brdf_terms(diffuse.rt), 1u);
+  std::vector<float> e(3 * prt_runtime_sample_count(diffuse.rt));
+  EXPECT_EQ(prt_runtime_reshade(diffuse.rt, e.data(), e.size() / 3), PRT_RUNTIME_ERROR_STATE);
   EXPECT_EQ(prt_runtime_prepare(h.rt, 100), PRT_RUNTIME_ERROR_STATE);
   EXPECT_NE(message().find("glossy vertex pack"), std::string::npos) << message();
 }

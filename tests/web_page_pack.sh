@@ -34,6 +34,11 @@ cmp -s "$work/web_bunny.prtpack" "$work/corrupt.prtpack" && { echo "corrupt copy
 "$pack" pack "$work/run-glossy" --out "$work/web_glossy.prtpack"
 "$view" "$work/web_glossy.prtpack" --env "$work/sunrise.hdr" --exposure 0.45 \
   --out "$work/prt-view-glossy.png" --quiet
+# A glossy vertex pack (BRDF terms: runtime/fuzz_corpus/glossy_terms.prtpack, next to IMAGE_PACK)
+# and prt-view's exact image of it from its camera.
+cp "$(dirname "$image_pack")/glossy_terms.prtpack" "$work/web_terms.prtpack"
+"$view" "$work/web_terms.prtpack" --env "$work/sunrise.hdr" --exact --exposure 0.45 \
+  --out "$work/prt-view-terms.png" --quiet
 # A map cut short in its scanlines.
 head -c 100000 "$work/sunrise.hdr" >"$work/truncated.hdr"
 echo "web_page_pack: $work/web_bunny.prtpack ($size bytes), sunrise.hdr, prt-view.png, prt-view-image.png, corrupt.prtpack, truncated.hdr, web_glossy.prtpack, prt-view-glossy.png"

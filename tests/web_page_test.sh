@@ -25,4 +25,5 @@ exec node "$src/web/test/page_test.mjs" --site "$site" --pack "$work/web_bunny.p
   --env "$work/sunrise.hdr" --reference "$work/prt-view.png" --exposure 0.45 \
   --corrupt "$work/corrupt.prtpack" --bad-env "$work/truncated.hdr" --image-pack "$image_pack" \
   --image-reference "$work/prt-view-image.png" --glossy-pack "$work/web_glossy.prtpack" \
-  --glossy-reference "$work/prt-view-glossy.png" --prt-view "$view" --out-dir "$out"
+  --glossy-reference "$work/prt-view-glossy.png" --terms-pack "$work/web_terms.prtpack" \
+  --terms-reference "$work/prt-view-terms.png" --prt-view "$view" --out-dir "$out"

@@ -3,7 +3,8 @@
 // Dragging rotates the environment: preview lighting and PBI frames of `budget` terms while it
 // moves, frames until PBI has converged when it stops, then nothing until the next change.
 // Dragging with the right button orbits the camera about its target: a diffuse pack is only
-// drawn again, a glossy pack (prt_runtime_is_glossy) is relit towards the new eye.
+// drawn again, a glossy pack (prt_runtime_is_glossy) is relit towards the new eye, a glossy vertex
+// pack (BRDF terms) has its last frame's terms combined again for it (prt_runtime_reshade).
 // Figures are kept in window.prtStats and shown in #stats; window.prtPage has the test hooks.
 import {loadRuntimeModule, Pack} from './runtime.js';
 import {parseRadianceHdr} from './hdr.js';
@@ -394,8 +395,10 @@ function tick() {
     // A glossy pack relights when the view or the lighting changed (each frame is whole); a
     // diffuse one while PBI frames remain or the lighting is dragged.
     const relight = glossy ? rotate || orbit || app.framesLeft > 0
-                           : rotate || app.framesLeft > 0 || app.dragging ||
-                               (orbit && app.pack.brdfTerms > 1);
+                           : rotate || app.framesLeft > 0 || app.dragging;
+    // A glossy vertex pack's orbit step under still lighting: its terms combined again for the
+    // new eye (prt_runtime_reshade), no relight.
+    const reshade = !relight && orbit && app.pack.brdfTerms > 1;
     if (relight) {
       const t0 = performance.now();
       if (rotate) {
@@ -419,6 +422,16 @@ function tick() {
       stats.lastFrameAt = t3;
       stats.converged = !app.dragging && app.framesLeft === 0;
       stats.preview = app.preview;
+      app.needsRender = false;
+      updateStatsText();
+    } else if (reshade) {
+      const t0 = performance.now();
+      app.view.setRadiance(app.pack.reshade());
+      const t1 = performance.now();
+      app.view.render();
+      const t2 = performance.now();
+      recordFrame({terms: 0, rotateMs: 0, relightMs: t1 - t0, drawMs: t2 - t1,
+                   totalMs: t2 - t0 + orbitMs, preview: app.preview, orbit, glossy});
       app.needsRender = false;
       updateStatsText();
     } else if (app.needsRender) {

@@ -182,6 +182,13 @@ export class Pack {
     return M.HEAPF32.subarray(this.outPtr >> 2, (this.outPtr >> 2) + 3 * this.samples);
   }
 
+  // A glossy vertex pack: the last relight's terms combined for the current eye (no relight).
+  reshade() {
+    const M = this.M;
+    this.check(M._prt_runtime_reshade(this.rt, this.outPtr, this.samples), 'reshade');
+    return M.HEAPF32.subarray(this.outPtr >> 2, (this.outPtr >> 2) + 3 * this.samples);
+  }
+
   memoryBytes() {
     return this.M._prt_runtime_memory_bytes(this.rt);
   }

@@ -24,6 +24,7 @@
 //     [--reference prt-view.png --exposure E --corrupt C.prtpack --out-dir DIR]
 //     [--image-pack I.prtpack --image-reference prt-view-image.png] [--bad-env TRUNCATED.hdr]
 //     [--glossy-pack G.prtpack --glossy-reference prt-view-glossy.png --prt-view PRT_VIEW]
+//     [--terms-pack T.prtpack --terms-reference prt-view-terms.png]
 //     [--measure [--screenshot PATH]]
 import {execFileSync} from 'node:child_process';
 import {createServer} from 'node:http';
@@ -162,6 +163,7 @@ async function main() {
   mkdirSync(a.outDir, {recursive: true});
   const files = {'/data/pack.prtpack': resolve(a.pack), '/data/env.hdr': resolve(a.env)};
   if (a.glossyPack) files['/data/glossy.prtpack'] = resolve(a.glossyPack);
+  if (a.termsPack) files['/data/terms.prtpack'] = resolve(a.termsPack);
   if (a.corrupt) files['/data/corrupt.prtpack'] = resolve(a.corrupt);
   if (a.badEnv) files['/data/truncated.hdr'] = resolve(a.badEnv);
   const server = await serve(resolve(a.site), files);
@@ -329,6 +331,47 @@ async function main() {
               'the image pack matches prt-view within the tolerance');
       }
       await p.close();
+    }
+
+    // (g) a glossy vertex pack (BRDF terms, docs/glossy-transport.md): prt-view's image from its
+    // camera, then an orbit step combines the terms again for the new eye (prt_runtime_reshade,
+    // no relight) and matches prt-view towards that eye.
+    if (a.termsPack) {
+      const t = await openPage(browser, `${base}/index.html?pack=/data/terms.prtpack` +
+                                            `&env=/data/env.hdr&exposure=${a.exposure}`, log);
+      const ts = await t.evaluate(() => window.prtStats);
+      check(ts.state === 'ready' && !ts.isGlossy,
+            `the page opens the glossy vertex pack (${ts.state}${ts.error ? `: ${ts.error}` : ''})`);
+      if (ts.state === 'ready') {
+        const tshot = join(a.outDir, 'terms.png');
+        await (await t.$('#gl')).screenshot({path: tshot});
+        if (a.termsReference)
+          await compareWithPrtView(t, tshot, a.termsReference, 'glossy terms, the pack\'s camera',
+                                   check);
+        const r0 = await t.evaluate(() => window.prtPage.radiance());
+        const n0 = ts.frames.length;
+        await drag(t, 8, 30, 'right', 0.08);
+        await settle(t);
+        const to = await t.evaluate(() => window.prtStats);
+        const steps = to.frames.slice(n0 - to.frames.length).filter((f) => f.orbit);
+        const r1 = await t.evaluate(() => window.prtPage.radiance());
+        const change = relativeChange(r1, r0);
+        console.log(`glossy terms orbit: ${steps.length} frames to ${to.orbitDeg.toFixed(1)}°, ` +
+                    `radiance changed by ${(100 * change).toFixed(2)} % of its max`);
+        check(steps.length > 0 && steps.every((f) => f.relightMs >= 0 && Number.isFinite(f.totalMs)),
+              'an orbit step recombines the glossy vertex pack\'s terms');
+        check(change > 1e-3, 'the glossy vertex radiance follows the eye');
+        if (a.prtView && a.termsReference) {
+          const oshot = join(a.outDir, 'terms-orbit.png');
+          await (await t.$('#gl')).screenshot({path: oshot});
+          const ref = join(a.outDir, 'prt-view-terms-orbit.png');
+          const spec = [...to.eye, ...to.target].map((x) => x.toPrecision(9)).join(',');
+          execFileSync(a.prtView, [resolve(a.termsPack), '--env', resolve(a.env), '--exposure',
+                                   a.exposure, '--exact', '--camera', spec, '--out', ref, '--quiet']);
+          await compareWithPrtView(t, oshot, ref, 'glossy terms, orbited', check);
+        }
+      }
+      await t.close();
     }
 
     // (f) a glossy pack: prt-view's image from its camera, then an orbit step relights it.
