@@ -158,6 +158,31 @@ async function compareWithPrtView(page, shot, reference, what, check) {
         `${what}: ≥ ${100 * kPixelFraction} % of mesh pixels within ${kPixelTolerance}/255`);
 }
 
+// An orbit step (a right-button drag across the canvas): the stats after it, its orbit frames
+// and how much the radiance changed (relativeChange).
+async function orbitStep(page, before) {
+  const r0 = await page.evaluate(() => window.prtPage.radiance());
+  const n0 = before.frames.length;
+  await drag(page, 8, 30, 'right', 0.08);
+  await settle(page);
+  const after = await page.evaluate(() => window.prtStats);
+  const steps = after.frames.slice(n0 - after.frames.length).filter((f) => f.orbit);
+  const r1 = await page.evaluate(() => window.prtPage.radiance());
+  return {after, steps, change: relativeChange(r1, r0)};
+}
+
+// The page's view after an orbit step against prt-view's of `pack` towards the page's new eye
+// (files `<name>-orbit.png` and `prt-view-<name>-orbit.png` in the output folder).
+async function compareOrbitWithPrtView(a, page, after, pack, name, label, viewArgs, check) {
+  const shot = join(a.outDir, `${name}-orbit.png`);
+  await (await page.$('#gl')).screenshot({path: shot});
+  const ref = join(a.outDir, `prt-view-${name}-orbit.png`);
+  const spec = [...after.eye, ...after.target].map((x) => x.toPrecision(9)).join(',');
+  execFileSync(a.prtView, [resolve(pack), '--env', resolve(a.env), '--exposure', a.exposure,
+                           ...viewArgs, '--camera', spec, '--out', ref, '--quiet']);
+  await compareWithPrtView(page, shot, ref, `${label}, orbited`, check);
+}
+
 async function main() {
   const a = parseArgs(process.argv);
   mkdirSync(a.outDir, {recursive: true});
@@ -348,28 +373,15 @@ async function main() {
         if (a.termsReference)
           await compareWithPrtView(t, tshot, a.termsReference, 'glossy terms, the pack\'s camera',
                                    check);
-        const r0 = await t.evaluate(() => window.prtPage.radiance());
-        const n0 = ts.frames.length;
-        await drag(t, 8, 30, 'right', 0.08);
-        await settle(t);
-        const to = await t.evaluate(() => window.prtStats);
-        const steps = to.frames.slice(n0 - to.frames.length).filter((f) => f.orbit);
-        const r1 = await t.evaluate(() => window.prtPage.radiance());
-        const change = relativeChange(r1, r0);
+        const {after: to, steps, change} = await orbitStep(t, ts);
         console.log(`glossy terms orbit: ${steps.length} frames to ${to.orbitDeg.toFixed(1)}°, ` +
                     `radiance changed by ${(100 * change).toFixed(2)} % of its max`);
         check(steps.length > 0 && steps.every((f) => f.relightMs >= 0 && Number.isFinite(f.totalMs)),
               'an orbit step recombines the glossy vertex pack\'s terms');
         check(change > 1e-3, 'the glossy vertex radiance follows the eye');
-        if (a.prtView && a.termsReference) {
-          const oshot = join(a.outDir, 'terms-orbit.png');
-          await (await t.$('#gl')).screenshot({path: oshot});
-          const ref = join(a.outDir, 'prt-view-terms-orbit.png');
-          const spec = [...to.eye, ...to.target].map((x) => x.toPrecision(9)).join(',');
-          execFileSync(a.prtView, [resolve(a.termsPack), '--env', resolve(a.env), '--exposure',
-                                   a.exposure, '--exact', '--camera', spec, '--out', ref, '--quiet']);
-          await compareWithPrtView(t, oshot, ref, 'glossy terms, orbited', check);
-        }
+        if (a.prtView && a.termsReference)
+          await compareOrbitWithPrtView(a, t, to, a.termsPack, 'terms', 'glossy terms', ['--exact'],
+                                        check);
       }
       await t.close();
     }
@@ -388,14 +400,8 @@ async function main() {
           await compareWithPrtView(g, gshot, a.glossyReference, 'glossy, the pack\'s camera',
                                    check);
         }
-        const r0 = await g.evaluate(() => window.prtPage.radiance());
-        const n0 = gs.frames.length;
-        await drag(g, 8, 30, 'right', 0.08);
-        await settle(g);
-        const go = await g.evaluate(() => window.prtStats);
-        const steps = go.frames.slice(n0 - go.frames.length).filter((f) => f.orbit && f.glossy);
-        const r1 = await g.evaluate(() => window.prtPage.radiance());
-        const change = relativeChange(r1, r0);
+        const {after: go, steps: orbit, change} = await orbitStep(g, gs);
+        const steps = orbit.filter((f) => f.glossy);
         const med = (xs) => [...xs].sort((p, q) => p - q)[xs.length >> 1];
         console.log(`glossy orbit: ${steps.length} frames to ${go.orbitDeg.toFixed(1)}°, frame ` +
                     `median ${steps.length ? med(steps.map((f) => f.totalMs)).toFixed(2) : '–'} ms ` +
@@ -406,15 +412,8 @@ async function main() {
         check(change > 1e-3, 'the glossy radiance follows the eye');
         const text = await g.$eval('#stats', (e) => e.textContent);
         check(/glossy frame\s+[\d.]+ ms/.test(text), 'the glossy frame time in the #stats text');
-        if (a.prtView && a.glossyReference) {
-          const oshot = join(a.outDir, 'glossy-orbit.png');
-          await (await g.$('#gl')).screenshot({path: oshot});
-          const ref = join(a.outDir, 'prt-view-glossy-orbit.png');
-          const spec = [...go.eye, ...go.target].map((x) => x.toPrecision(9)).join(',');
-          execFileSync(a.prtView, [resolve(a.glossyPack), '--env', resolve(a.env), '--exposure',
-                                   a.exposure, '--camera', spec, '--out', ref, '--quiet']);
-          await compareWithPrtView(g, oshot, ref, 'glossy, orbited', check);
-        }
+        if (a.prtView && a.glossyReference)
+          await compareOrbitWithPrtView(a, g, go, a.glossyPack, 'glossy', 'glossy', [], check);
         const bench = await g.evaluate(() => window.prtPage.glossyBenchmark({frames: 10}));
         console.log(`glossy steps in the page: ${JSON.stringify(bench)}`);
       }
