@@ -57,6 +57,7 @@ int SplitPipelineError(const std::string& run, const std::string& pack,
                        const prt::SceneDescription& scene, const prt::SceneGeometry& geometry,
                        const prt::EmbreeScene& embree,
                        const std::vector<prt::SpatialSample>& picked,
+                       const std::vector<uint32_t>& index,
                        const std::vector<prt::CubemapRgb>& lights,
                        const std::vector<std::string>& envs) {
   using namespace prt;
@@ -74,13 +75,6 @@ int SplitPipelineError(const std::string& run, const std::string& pack,
   so.seed = 7;
   const TransportSampler exact(embree, n, so, GlossySampling{{m}, eye});
   const auto session = RelightSession::Open(pack);
-  std::vector<uint32_t> index;  // the picked vertices' global indices (bunny = mesh 0)
-  for (const SpatialSample& p : picked)
-    for (std::size_t v = 0; v < geometry.meshes[0].mesh.positions.size(); ++v)
-      if (geometry.meshes[0].mesh.positions[v] == p.position) {
-        index.push_back(static_cast<uint32_t>(v));
-        break;
-      }
   std::printf("%-10s %14s %14s   (relative RMS vs the exact BRDF row, %zu vertices)\n", "env",
               "farm rows", "pack", index.size());
   for (std::size_t e = 0; e < lights.size(); ++e) {
@@ -148,10 +142,15 @@ int main(int argc, char** argv) {
   const int n = 32;
   // Camera-facing bunny vertices (mesh 0), drawn by a fixed seed.
   std::vector<SpatialSample> picked;
+  std::vector<uint32_t> picked_index;  // their vertex indices (mesh 0 comes first)
   const std::size_t bunny = geometry.meshes[0].mesh.positions.size();
   for (uint64_t k = 0; picked.size() < static_cast<std::size_t>(vertices) && k < 100 * bunny; ++k) {
-    const SpatialSample& s = all[SplitMix64(k + 17) % bunny];
-    if (Dot(s.normal, eye - s.position) > 0.1 * Length(eye - s.position)) picked.push_back(s);
+    const uint64_t v = SplitMix64(k + 17) % bunny;
+    const SpatialSample& s = all[v];
+    if (Dot(s.normal, eye - s.position) > 0.1 * Length(eye - s.position)) {
+      picked.push_back(s);
+      picked_index.push_back(static_cast<uint32_t>(v));
+    }
   }
   std::vector<CubemapRgb> lights;
   for (const std::string& e : envs)
@@ -159,7 +158,8 @@ int main(int argc, char** argv) {
         ReadEnvironment(std::string(PRT_DATA_DIR) + "/envmaps/" + e + ".exr"), n));
   std::filesystem::create_directories(out);
   if (!run.empty())
-    return SplitPipelineError(run, pack, scene, geometry, embree, picked, lights, envs);
+    return SplitPipelineError(run, pack, scene, geometry, embree, picked, picked_index, lights,
+                              envs);
   std::ofstream csv(out + "/table.csv");
   csv << "roughness,terms,environment,relative_rms,factorisation_error\n";
   std::printf("%-6s %-5s %-10s %10s %12s\n", "r", "m", "env", "rel RMS", "factor err");
@@ -180,14 +180,11 @@ int main(int argc, char** argv) {
     table->terms = kMaxTerms;
     table->mesh_factor = {0};
     table->mesh_weight = {Rgb{1, 1, 1}};
-    table->factors.push_back(FactorBrdf(m, fo));
+    std::vector<double> trunc;  // the SVD's truncation error, m = 1…16
+    table->factors.push_back(FactorBrdf(m, fo, &trunc));
+    // The first t of the 16 terms are the t-term factorisation (one SVD serves every t).
     std::vector<double> factor_error(kMaxTerms + 1, 0);
-    for (int t : {1, 2, 4, 8, 16}) {
-      FactorisationOptions o = fo;
-      o.terms = t;
-      factor_error[t] = FactorBrdf(m, o).relative_error;
-    }
-    const std::vector<double> trunc = TruncationErrors(m, fo, 16);
+    for (int t : {1, 2, 4, 8, 16}) factor_error[t] = LookupError(m, table->factors[0], t, fo);
     std::printf("r = %.2f truncation error (SVD grid) m = 1/2/4/8/16: %.1f/%.1f/%.1f/%.1f/%.1f%%\n",
                 r, 100 * trunc[0], 100 * trunc[1], 100 * trunc[3], 100 * trunc[7], 100 * trunc[15]);
     const TransportSampler exact(embree, n, so, GlossySampling{{m}, eye});
@@ -274,7 +271,8 @@ int main(int argc, char** argv) {
         char key[32];
         std::snprintf(key, sizeof key, "%g", r);
         for (const auto& f : rowsv)
-          if (std::abs(std::stod(f[0]) - r) < 1e-9 && f[2] == e) series << f[1] << " " << f[3] << "\n";
+          if (std::abs(std::stod(f[0]) - r) < 1e-9 && f[2] == e)
+            series << f[1] << " " << f[3] << "\n";
         series << "\n\n";
         g << (block ? ", " : "") << "'" << out << "/series.dat' index " << block
           << " with linespoints title 'r = " << key << ", " << e << "'";

@@ -678,12 +678,14 @@ void ResolveGlossyTerms(FarmContext& ctx, const SceneDescription& scene,
   FactorisationOptions fo;
   fo.terms = scene.glossy.terms;
   const double t0 = FarmNow();
-  const GlossyFactorTable table = FactorGlossyMeshes(glossy, fo);
+  std::vector<std::vector<double>> truncation;  // per factor, from the same SVD
+  const GlossyFactorTable table = FactorGlossyMeshes(glossy, fo, &truncation);
   nlohmann::json meshes = nlohmann::json::array();
   for (std::size_t i = 0; i < glossy.glossy.size(); ++i) {
     if (!glossy.glossy[i]) continue;
     const BrdfFactors& f = table.factors[table.mesh_factor[i]];
-    const std::vector<double> trunc = TruncationErrors(glossy.materials[i], fo, 8);
+    std::vector<double> trunc = truncation[table.mesh_factor[i]];
+    trunc.resize(8, 0.0);  // m = 1…8 in the report (the SVD gives up to 16)
     spdlog::info(
         "glossy mesh '{}' ({}): {} BRDF terms, factorisation error {:.1f}% (truncation "
         "m=1/2/4/8: {:.1f}/{:.1f}/{:.1f}/{:.1f}%)",

@@ -139,8 +139,7 @@ struct prt_runtime {
   std::vector<float> frame_rgb;
   // A glossy vertex pack: the last relight's radiance of every term (terms × samples), which
   // prt_runtime_reshade combines again for a new eye without relighting.
-  prt::SampleRadiance frame_terms_radiance;
-  bool has_frame_terms = false;
+  prt::SampleRadiance frame_terms_radiance;  // empty until the first relight
   bool incremental_frame = false;
   // The prepared frame (prt_runtime_prepare), applied range by range: its lighting terms
   // (exact, NWA) into frame_radiance, or an incremental step of BI / PBI.
@@ -352,10 +351,7 @@ void ComputeFrame(prt_runtime& rt, unsigned terms) {
     }
   }
   rt.frame_rgb = s.Shade(radiance, rt.eye);  // a glossy vertex pack: its terms for the eye
-  if (s.terms() > 1) {
-    rt.frame_terms_radiance = std::move(radiance);
-    rt.has_frame_terms = true;
-  }
+  if (s.terms() > 1) rt.frame_terms_radiance = std::move(radiance);
 }
 
 // Makes (or restarts) the incremental relighter of the mode for a budget of `terms`.
@@ -900,7 +896,7 @@ int prt_runtime_reshade(prt_runtime* rt, float* out_rgb, size_t out_samples) {
                                               std::to_string(rt->samples()));
     if (!rt->session || rt->session->terms() <= 1)
       throw StateError(rt->name + ": prt_runtime_reshade needs a glossy vertex pack (BRDF terms)");
-    if (!rt->has_frame_terms)
+    if (rt->frame_terms_radiance.size() == 0)
       throw StateError(rt->name + ": no frame to reshade yet (call prt_runtime_relight first)");
     rt->frame_rgb = rt->session->Shade(rt->frame_terms_radiance, rt->eye);
     CopyOut(*rt, 0, rt->samples(), out_rgb);

@@ -95,7 +95,6 @@ void RelightSession::Load(const pack::PackReader& reader, const std::string& pac
   }
   const CompressedTransportHeader& h =
       s->cpca_transport_ ? s->cpca_transport_->header : s->compressed_->header;
-  s->eye_ = s->camera_.eye;
   // channels × V rows, channel-major (formats/compressed_transport.h); a glossy pack's terms
   // × V (one channel).
   if (s->glossy_ && h.channels != 1)
@@ -226,7 +225,7 @@ SampleRadiance RelightSession::RelightExact(const WaveletLighting& lighting) con
 }
 
 std::vector<float> RelightSession::Shade(const SampleRadiance& radiance) const {
-  return Shade(radiance, eye_);
+  return Shade(radiance, camera_.eye);
 }
 
 std::vector<float> RelightSession::Shade(const SampleRadiance& radiance, const Vec3& eye) const {

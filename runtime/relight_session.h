@@ -97,9 +97,6 @@ class RelightSession {
   // t·sample_count() + p, the session's order in every term), and Shade combines them with the
   // view: B(x) = w ⊙ Σ_t g_t(ω_o(x))·(T_t·L)(x), ω_o = eye − x in x's factor frame (Eq. 3).
   const GlossyFactorTable* glossy() const { return glossy_ ? &*glossy_ : nullptr; }
-  // The eye the glossy terms are combined for (the pack's camera eye until SetEye).
-  const Vec3& eye() const { return eye_; }
-  void SetEye(const Vec3& eye) { eye_ = eye; }
   // Rows of the transport per sample and channel: the BRDF terms of a glossy pack, else 1.
   std::size_t terms() const { return glossy_ ? static_cast<std::size_t>(glossy_->terms) : 1; }
   // Σ_t g_t(ω_o)·radiance[t·V + p] per sample p (the identity for a pack without terms; a
@@ -126,7 +123,7 @@ class RelightSession {
   // Throws NumericalError naming the pack and the pack's sample number when a colour is not a
   // finite float.
   std::vector<float> Shade(const SampleRadiance& radiance) const;
-  // The same with a glossy pack's terms combined for `eye` instead of eye().
+  // The same with a glossy pack's terms combined for `eye` instead of the camera's eye.
   std::vector<float> Shade(const SampleRadiance& radiance, const Vec3& eye) const;
 
  protected:
@@ -151,7 +148,6 @@ class RelightSession {
   std::optional<GlossyFactorTable> glossy_;
   std::vector<uint32_t> sample_factor_;  // glossy packs: per session sample, factors or diffuse
   std::vector<FactorFrame> frames_;      // glossy packs: per session sample
-  Vec3 eye_{0, 0, 0};
   std::vector<Vec3> positions_;
   std::vector<std::array<uint32_t, 3>> triangles_;
   std::vector<uint32_t> pack_sample_;       // session position → pack sample

@@ -60,6 +60,18 @@ void Decompose(const Eigen::MatrixXd& M, Eigen::VectorXd& values, Eigen::MatrixX
   vectors = eig.eigenvectors().rowwise().reverse();
 }
 
+// ‖M − M_m‖_F / ‖M‖_F for m = 1…max_terms from the eigenvalues σ² of M·Mᵀ (descending).
+std::vector<double> Truncation(const Eigen::VectorXd& values, int max_terms) {
+  const double total = std::max(values.sum(), 1e-300);
+  std::vector<double> out;
+  double kept = 0;
+  for (int m = 1; m <= max_terms && m <= values.size(); ++m) {
+    kept += std::max(0.0, values[m - 1]);
+    out.push_back(std::sqrt(std::max(0.0, total - kept) / total));
+  }
+  return out;
+}
+
 }  // namespace
 
 std::string DescribeMaterial(const Material& m) {
@@ -85,23 +97,18 @@ std::vector<double> TruncationErrors(const Material& material, const Factorisati
   Eigen::VectorXd values;
   Eigen::MatrixXd vectors;
   Decompose(M, values, vectors);
-  const double total = std::max(values.sum(), 1e-300);
-  std::vector<double> out;
-  double kept = 0;
-  for (int m = 1; m <= max_terms && m <= values.size(); ++m) {
-    kept += std::max(0.0, values[m - 1]);
-    out.push_back(std::sqrt(std::max(0.0, total - kept) / total));
-  }
-  return out;
+  return Truncation(values, max_terms);
 }
 
-BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& options) {
+BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& options,
+                       std::vector<double>* truncation) {
   CheckOptions(options);
   const std::vector<Vec3> views = GridDirections(options.view_n);
   const Eigen::MatrixXd M = Tabulate(material, views, GridDirections(options.svd_light_n));
   Eigen::VectorXd values;
   Eigen::MatrixXd vectors;
   Decompose(M, values, vectors);
+  if (truncation != nullptr) *truncation = Truncation(values, 16);
 
   BrdfFactors out;
   out.terms = options.terms;
@@ -124,7 +131,15 @@ BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& opt
       out.f[i * fine.size() + l] = static_cast<float>(v[l]);
   }
 
-  // The error of what is looked up, at random direction pairs off the grids.
+  out.relative_error = LookupError(material, out, options.terms, options);
+  return out;
+}
+
+double LookupError(const Material& material, const BrdfFactors& factors, int terms,
+                   const FactorisationOptions& options) {
+  if (terms < 1 || terms > factors.terms)
+    throw std::invalid_argument("LookupError: terms outside 1…" + std::to_string(factors.terms));
+  // At random direction pairs off the grids.
   uint64_t state = 0x474C4F5353595345ull;
   auto uniform = [&]() { return static_cast<double>(SplitMix64(++state) >> 11) * 0x1p-53; };
   std::vector<Vec3> cv(options.check_views), cl(options.check_lights);
@@ -133,13 +148,13 @@ BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& opt
   std::vector<double> err(cv.size()), norm(cv.size());
   ParallelFor(cv.size(), [&](std::size_t o) {
     const ShadingFrame f = MakeShadingFrame({0, 0, 1}, cv[o]);
-    std::vector<float> g(options.terms);
-    out.GAll(cv[o], g.data());
+    std::vector<float> g(factors.terms);
+    factors.GAll(cv[o], g.data());
     double e = 0, n = 0;
     for (const Vec3& w : cl) {
       const double exact = CosineWeighted(material, f, w);
       double approx = 0;
-      for (int i = 0; i < options.terms; ++i) approx += g[i] * out.F(i, w);
+      for (int i = 0; i < terms; ++i) approx += g[i] * factors.F(i, w);
       e += (exact - approx) * (exact - approx);
       n += exact * exact;
     }
@@ -148,12 +163,12 @@ BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& opt
   });
   double e = 0, n = 0;
   for (std::size_t o = 0; o < cv.size(); ++o) e += err[o], n += norm[o];
-  out.relative_error = n > 0 ? std::sqrt(e / n) : 0.0;
-  return out;
+  return n > 0 ? std::sqrt(e / n) : 0.0;
 }
 
 GlossyFactorTable FactorGlossyMeshes(const GlossyPixels& glossy,
-                                     const FactorisationOptions& options) {
+                                     const FactorisationOptions& options,
+                                     std::vector<std::vector<double>>* truncation) {
   GlossyFactorTable t;
   if (!glossy.any()) return t;
   t.terms = options.terms;
@@ -164,7 +179,9 @@ GlossyFactorTable FactorGlossyMeshes(const GlossyPixels& glossy,
       continue;
     }
     t.mesh_factor.push_back(static_cast<uint32_t>(t.factors.size()));
-    t.factors.push_back(FactorBrdf(glossy.materials[m], options));
+    std::vector<double> errors;
+    t.factors.push_back(FactorBrdf(glossy.materials[m], options, &errors));
+    if (truncation != nullptr) truncation->push_back(std::move(errors));
   }
   return t;
 }

@@ -38,9 +38,17 @@ struct FactorisationOptions {
 // The material's diffuse[0] and specular[0] are k_d and k_s (GlossyPixels' convention: the
 // colour is the mesh weight w). relative_error is the error of what the sampler and the
 // runtime evaluate, Σ_i G_i·F_i through the tables' bilinear lookups, against ρ̃ at random
-// directions: ‖ρ̃ − Σ G F‖ / ‖ρ̃‖ over the check pairs. Throws std::invalid_argument on terms
-// outside 1…16 or grids outside 2…512.
-BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& options);
+// directions: ‖ρ̃ − Σ G F‖ / ‖ρ̃‖ over the check pairs (LookupError). Throws
+// std::invalid_argument on terms outside 1…16 or grids outside 2…512. `truncation`, when given,
+// receives TruncationErrors(material, options, 16) from the same SVD.
+BrdfFactors FactorBrdf(const Material& material, const FactorisationOptions& options,
+                       std::vector<double>* truncation = nullptr);
+
+// The lookup error of the first `terms` (1…factors.terms) of `factors`: the truncated SVD's
+// leading terms are the best m-term factorisation for every m, so one factorisation with m = 16
+// answers every smaller m. The check directions come from options.check_views/check_lights.
+double LookupError(const Material& material, const BrdfFactors& factors, int terms,
+                   const FactorisationOptions& options);
 
 // The truncation error alone, ‖M − M_m‖_F / ‖M‖_F on the SVD grid, for m = 1…max_terms
 // (index m − 1): how fast the factorisation converges (bench and report).
@@ -49,9 +57,11 @@ std::vector<double> TruncationErrors(const Material& material, const Factorisati
 
 // The factor table of a vertex run (docs/glossy-transport.md): one BrdfFactors per glossy mesh
 // of `glossy` (ResolveGlossyMaterials; its materials carry k_d and k_s), every mesh's weight w.
-// Empty (terms 0) when no mesh is glossy.
+// Empty (terms 0) when no mesh is glossy. `truncation`, when given, receives each factor's
+// truncation errors (m = 1…16, FactorBrdf's), in factor order.
 GlossyFactorTable FactorGlossyMeshes(const GlossyPixels& glossy,
-                                     const FactorisationOptions& options);
+                                     const FactorisationOptions& options,
+                                     std::vector<std::vector<double>>* truncation = nullptr);
 
 // A vertex run's samples with terms: the vertices once per term, term-major (sample t·V + v is
 // vertex v's term t). A glossy mesh's vertex names its factors and term; a diffuse mesh's vertex
